@@ -1,0 +1,1 @@
+"""Analytic BRDF models as pure Dr.Jit functions."""
