@@ -6,9 +6,14 @@ sets the default Mitsuba variant (``cuda_ad_rgb`` with a GPU, else
 ``phong``, ``cooktorrance``, ``ward`` and ``lafortune`` in it.
 """
 
+import sys as _sys
+
 from . import llvm as _llvm
 
+_drjit_came_first = "drjit" in _sys.modules
 _llvm.configure()
+if _drjit_came_first:
+    _llvm.check_loaded()
 
 from .variant import default_variant, set_variant  # noqa: E402
 

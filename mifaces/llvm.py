@@ -101,3 +101,31 @@ def configure() -> str | None:
     if path is not None:
         os.environ[ENV_VAR] = path
     return path
+
+
+def loaded_libllvm() -> str | None:
+    """Path of the libLLVM mapped into this process, if any (Linux only)."""
+    try:
+        with open("/proc/self/maps") as maps:
+            for line in maps:
+                if "libLLVM" in line:
+                    return line.split()[-1]
+    except OSError:
+        pass
+    return None
+
+
+def check_loaded() -> None:
+    """Fail clearly if Dr.Jit already loaded an LLVM that crashes it.
+
+    Dr.Jit reads ``DRJIT_LIBLLVM_PATH`` when it is imported, so importing
+    ``drjit`` or ``mitsuba`` before ``mifaces`` can load the system LLVM 15.
+    """
+    path = loaded_libllvm()
+    version = _major_version(path) if path else None
+    if version is not None and version < MIN_VERSION:
+        better = find_libllvm()
+        fix = (f"set {ENV_VAR}={better} in the environment" if better else INSTALL_HINT)
+        raise ImportError(
+            f"Dr.Jit was imported before mifaces and loaded {path} (LLVM {version}), which "
+            f"crashes Dr.Jit's LLVM backend. Import mifaces before drjit and mitsuba, or {fix}.")

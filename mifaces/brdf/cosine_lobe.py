@@ -1,0 +1,30 @@
+"""Sampling a cosine-power lobe cos^n β around an axis (Phong, Lafortune).
+
+The density is p(wo) = (n + 1)/(2π) · cos^n β for β, the angle between wo
+and the unit ``axis``, below 90° (Lafortune & Willems 1994, sec. 3.3; Walter's
+"Notes on the Ward BRDF" use the same inversion).
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from .model import power
+
+
+def sample(axis, exponent, sample2):
+    """A direction with density (n+1)/(2π) cos^n β around ``axis``.
+
+    cos β = u^(1/(n+1)), φ = 2π v.
+    """
+    cos_beta = dr.power(dr.maximum(sample2.x, 1e-30), 1.0 / (exponent + 1.0))
+    sin_beta = dr.safe_sqrt(1.0 - cos_beta * cos_beta)
+    sin_phi, cos_phi = dr.sincos(dr.two_pi * sample2.y)
+    local = mi.Vector3f(sin_beta * cos_phi, sin_beta * sin_phi, cos_beta)
+    return mi.Frame3f(axis).to_world(local)
+
+
+def pdf(axis, exponent, wo):
+    """Density of :func:`sample` at ``wo`` (per unit solid angle)."""
+    return (exponent + 1.0) * dr.inv_two_pi * power(dr.dot(axis, wo), exponent)

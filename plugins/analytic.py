@@ -1,0 +1,211 @@
+"""A Mitsuba BSDF around one of the analytic models of :mod:`mifaces.brdf`.
+
+The plugin reads the model's options and parameters from the scene's
+properties, exposes every parameter through ``traverse`` (differentiable),
+evaluates the model's formulas (the same functions the fitters call) and
+samples a mixture of the model's glossy lobe(s) and the cosine-weighted
+diffuse lobe. It is one-sided: zero unless both directions are above the
+surface (wrap it in ``twosided`` for both sides). ``eval`` returns
+f(wi, wo) · cos θo, Mitsuba's convention.
+
+A part whose weight is zero and not being differentiated (a black
+``diffuse_reflectance``, a zero ``specular_reflectance``, a Lafortune lobe
+with zero coefficients) is left out: it is not evaluated, not sampled and its
+flag is not set.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from mifaces.brdf.model import DIFFUSE, BRDFModel, mean
+
+
+def _texture_is_zero(texture) -> bool:
+    """True if ``texture`` is black everywhere and none of its parameters is
+    being differentiated."""
+    if any(dr.grad_enabled(v) for _, v in mi.traverse(texture).items()):
+        return False
+    return float(dr.max(texture.max())) == 0.0
+
+
+def _value_is_zero(value) -> bool:
+    return not dr.grad_enabled(value) and bool(dr.all(value == 0, axis=None))
+
+
+def plugin_docstring(model: BRDFModel, summary: str, example: str) -> str:
+    """Plugin documentation: summary, the model's formula and sources (from
+    its module), a parameter table built from the model's parameters, and an
+    XML example."""
+    import sys
+
+    rows = [f"    {p.name:<22} {p.kind:<6} default {p.default:<8g} {p.doc}" for p in model.parameters()]
+    opts = [f"    {k:<22} string one of {', '.join(v)} (default {v[0]})"
+            for k, v in getattr(type(model), "OPTIONS", {}).items()]
+    formula = sys.modules[type(model).__module__].__doc__ or ""
+    return (f"{summary}\n\n{formula.strip()}\n\nParameters (XML / mi.traverse names)\n"
+            + "\n".join(opts + rows) + f"\n\nExample::\n\n{example}\n")
+
+
+class AnalyticBSDF(mi.BSDF):
+    """Base class; subclasses set :meth:`make_model`."""
+
+    #: Default of ``diffuse_reflectance`` when the scene gives none.
+    DIFFUSE_DEFAULT = 0.5
+
+    @classmethod
+    def make_model(cls, props: mi.Properties) -> BRDFModel:
+        """The model with the options given in ``props``."""
+        raise NotImplementedError
+
+    def __init__(self, props: mi.Properties):
+        super().__init__(props)
+        self.model = self.make_model(props)
+        for key in self.model.options:
+            props.mark_queried(key) if props.has_property(key) else None
+        self.diffuse = props.get_texture(DIFFUSE.name, self.DIFFUSE_DEFAULT)
+        self.values = {}
+        for p in self.model.specular_parameters():
+            value = props.get(p.name, p.default)
+            if isinstance(value, mi.Object):
+                raise ValueError(f"{type(self).__name__}: parameter {p.name!r} must be a "
+                                 f"{'colour' if p.kind == 'rgb' else 'number'}, not a texture")
+            if p.kind == "rgb":
+                self.values[p.name] = mi.Color3f(value)
+            else:
+                if not isinstance(value, (int, float)):
+                    raise ValueError(f"{type(self).__name__}: parameter {p.name!r} must be a number, got {value!r}")
+                # Scalar variants box numbers so that mi.traverse can update them.
+                self.values[p.name] = mi.Float(value) if dr.is_jit_v(mi.Float) else dr.scalar.Array1f(value)
+        self.parameters_changed()
+
+    # -- parameters -------------------------------------------------------
+    def traverse(self, callback):
+        callback.put(DIFFUSE.name, self.diffuse, mi.ParamFlags.Differentiable)
+        for name, value in self.values.items():
+            callback.put(name, value, mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys=None):
+        for value in self.values.values():
+            dr.make_opaque(value)
+        self.has_diffuse = not _texture_is_zero(self.diffuse)
+        self.has_specular = self._specular_active()
+        components = []
+        if self.has_specular:
+            components.append(mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide)
+        if self.has_diffuse:
+            components.append(mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide)
+        self.m_components = [int(c) for c in components]
+        flags = 0
+        for c in components:
+            flags |= int(c)
+        self.m_flags = flags
+
+    def _specular_active(self) -> bool:
+        """Whether the glossy part has non-zero weight; models with several
+        lobes override this to drop the zero ones."""
+        weight = self.values.get("specular_reflectance")
+        return weight is None or not _value_is_zero(weight)
+
+    def _component_index(self, part: str) -> int:
+        return (0 if part == "specular" else int(self.has_specular))
+
+    def _parts(self, ctx):
+        """(diffuse, specular) parts enabled by the scene and by ``ctx``."""
+        diffuse = self.has_diffuse and ctx.is_enabled(mi.BSDFFlags.DiffuseReflection,
+                                                      self._component_index("diffuse"))
+        specular = self.has_specular and ctx.is_enabled(mi.BSDFFlags.GlossyReflection,
+                                                        self._component_index("specular"))
+        return diffuse, specular
+
+    def _params(self, si, active):
+        params = {k: v[0] if isinstance(v, dr.scalar.Array1f) else v for k, v in self.values.items()}
+        if self.has_diffuse:
+            params[DIFFUSE.name] = self.diffuse.eval(si, active)
+        return params
+
+    # -- evaluation and sampling -----------------------------------------
+    def _specular_probability(self, wi, params, diffuse, specular):
+        if not specular:
+            return 0.0
+        if not diffuse:
+            return 1.0
+        ws = dr.maximum(self.model.specular_weight(wi, params), 0.0)
+        wd = mean(params[DIFFUSE.name])
+        total = ws + wd
+        return dr.select(total > 0, ws / dr.maximum(total, 1e-30), 0.5)
+
+    def _eval_pdf(self, wi, wo, params, diffuse, specular):
+        f = self.model.eval(wi, wo, params, diffuse=diffuse, specular=specular)
+        cos_o = dr.maximum(wo.z, 0.0)
+        p_spec = self._specular_probability(wi, params, diffuse, specular)
+        pdf = 0.0
+        if specular:
+            pdf = p_spec * self.model.pdf_specular(wi, wo, params)
+        if diffuse:
+            pdf = pdf + (1.0 - p_spec) * mi.warp.square_to_cosine_hemisphere_pdf(wo)
+        valid = (wi.z > 0) & (wo.z > 0)
+        return dr.select(valid, f * cos_o, 0.0), dr.select(valid, pdf, 0.0)
+
+    def eval(self, ctx, si, wo, active=True):
+        diffuse, specular = self._parts(ctx)
+        if not (diffuse or specular):
+            return mi.Color3f(0.0)
+        f, _ = self._eval_pdf(si.wi, wo, self._params(si, active), diffuse, specular)
+        return dr.select(active, f, 0.0)
+
+    def pdf(self, ctx, si, wo, active=True):
+        diffuse, specular = self._parts(ctx)
+        if not (diffuse or specular):
+            return mi.Float(0.0)
+        _, pdf = self._eval_pdf(si.wi, wo, self._params(si, active), diffuse, specular)
+        return dr.select(active, pdf, 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        diffuse, specular = self._parts(ctx)
+        if not (diffuse or specular):
+            return mi.Color3f(0.0), mi.Float(0.0)
+        f, pdf = self._eval_pdf(si.wi, wo, self._params(si, active), diffuse, specular)
+        return dr.select(active, f, 0.0), dr.select(active, pdf, 0.0)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        wi = si.wi
+        diffuse, specular = self._parts(ctx)
+        bs = dr.zeros(mi.BSDFSample3f)
+        if not (diffuse or specular):
+            return bs, mi.Color3f(0.0)
+        params = self._params(si, active)
+        p_spec = self._specular_probability(wi, params, diffuse, specular)
+        if specular and diffuse:
+            chose_specular = sample1 < p_spec
+            u = dr.select(chose_specular, sample1 / dr.maximum(p_spec, 1e-30),
+                          (sample1 - p_spec) / dr.maximum(1.0 - p_spec, 1e-30))
+            wo = dr.select(chose_specular,
+                           self.model.sample_specular(wi, u, sample2, params),
+                           mi.warp.square_to_cosine_hemisphere(sample2))
+        elif specular:
+            chose_specular = True
+            wo = self.model.sample_specular(wi, sample1, sample2, params)
+        else:
+            chose_specular = False
+            wo = mi.warp.square_to_cosine_hemisphere(sample2)
+        f, pdf = self._eval_pdf(wi, wo, params, diffuse, specular)
+        active = active & (wi.z > 0) & (wo.z > 0) & (pdf > 0)
+        bs.wo = wo
+        bs.pdf = dr.select(active, pdf, 0.0)
+        bs.eta = 1.0
+        glossy, lambert = mi.UInt32(+mi.BSDFFlags.GlossyReflection), mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+        bs.sampled_type = dr.select(chose_specular, glossy, lambert)
+        bs.sampled_component = dr.select(chose_specular, mi.UInt32(self._component_index("specular")),
+                                         mi.UInt32(self._component_index("diffuse")))
+        weight = f / dr.maximum(pdf, 1e-30)
+        return bs, dr.select(active, weight, 0.0)
+
+    def eval_diffuse_reflectance(self, si, active=True):
+        return self.diffuse.eval(si, active) if self.has_diffuse else mi.Color3f(0.0)
+
+    def to_string(self):
+        lines = [f"  {DIFFUSE.name} = {self.diffuse}"]
+        lines += [f"  {k} = {v}" for k, v in self.values.items()]
+        return f"{type(self).__name__}[\n  model = {self.model!r},\n" + ",\n".join(lines) + "\n]"
