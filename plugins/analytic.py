@@ -23,11 +23,11 @@ from mifaces.brdf.model import DIFFUSE, BRDFModel, mean
 
 
 def _texture_is_zero(texture) -> bool:
-    """True if ``texture`` is black everywhere and none of its parameters is
-    being differentiated."""
+    """True if the (non-negative) reflectance ``texture`` is black everywhere
+    and none of its parameters is being differentiated."""
     if any(dr.grad_enabled(v) for _, v in mi.traverse(texture).items()):
         return False
-    return float(dr.max(texture.max())) == 0.0
+    return bool(dr.all(texture.mean() == 0, axis=None))
 
 
 def _value_is_zero(value) -> bool:
@@ -48,8 +48,14 @@ def plugin_docstring(model: BRDFModel, summary: str, example: str) -> str:
             + "\n".join(opts + rows) + f"\n\nExample::\n\n{example}\n")
 
 
-class AnalyticBSDF(mi.BSDF):
-    """Base class; subclasses set :meth:`make_model`."""
+class AnalyticBSDF:
+    """The plugin's behaviour; subclasses set :meth:`make_model`.
+
+    Mitsuba's ``BSDF`` base class differs per variant, so this class holds
+    the behaviour only; :func:`mifaces.plugins.plugin_class` builds the
+    registered class on the current variant's ``mi.BSDF`` from it. Methods
+    therefore call base classes explicitly, not through ``super()``.
+    """
 
     #: Default of ``diffuse_reflectance`` when the scene gives none.
     DIFFUSE_DEFAULT = 0.5
@@ -60,7 +66,7 @@ class AnalyticBSDF(mi.BSDF):
         raise NotImplementedError
 
     def __init__(self, props: mi.Properties):
-        super().__init__(props)
+        mi.BSDF.__init__(self, props)
         self.model = self.make_model(props)
         for key in self.model.options:
             props.mark_queried(key) if props.has_property(key) else None

@@ -24,7 +24,7 @@ class LafortuneBSDF(AnalyticBSDF):
 
     def __init__(self, props):
         self.all_lobes = None
-        super().__init__(props)
+        AnalyticBSDF.__init__(self, props)
 
     def _specular_active(self) -> bool:
         # Evaluate only the lobes whose coefficients are not all zero.

@@ -47,7 +47,7 @@ class CookTorrance(BRDFModel):
     def specular(self, wi, wo, params):
         m = params["roughness"]
         h = microfacet.half_vector(wi, wo)
-        d = microfacet.beckmann_d(h.z, m)
+        d = microfacet.beckmann_d(h, m)
         if self.geometry == "vcavity":
             g = microfacet.vcavity_g(wi, wo, h)
         else:
@@ -66,4 +66,4 @@ class CookTorrance(BRDFModel):
 
     def pdf_specular(self, wi, wo, params):
         h = microfacet.half_vector(wi, wo)
-        return microfacet.reflected_pdf(microfacet.beckmann_pdf_h(h.z, params["roughness"]), wo, h)
+        return microfacet.reflected_pdf(microfacet.beckmann_pdf_h(h, params["roughness"]), wo, h)

@@ -27,20 +27,21 @@ def half_vector(wi, wo):
     return dr.select(length > 1e-12, h / dr.maximum(length, 1e-12), mi.Vector3f(0, 0, 1))
 
 
-def beckmann_log_slope(cos_h, alpha):
+def beckmann_log_slope(h, alpha):
     """-tan²θh / α², the logarithm of the Gaussian slope term shared by
-    Beckmann and Ward, with cos θh clamped to 1e-4 (tan²θh <= 1e8).
+    Beckmann and Ward, for the unit half vector ``h``.
 
-    The models work with logarithms so that neither the value nor its
-    gradient meets a denominator that under- or overflows in float32 (the
+    tan²θh is computed as (h.x² + h.y²)/h.z², not from cos θh (1 - cos² loses
+    all precision near the peak of a sharp lobe in float32), with h.z clamped
+    to 1e-4. The models work with logarithms so that neither the value nor
+    its gradient meets a denominator that under- or overflows in float32 (the
     derivative of 1/(π α² cos⁴θh) does, for α = 1e-3 and cos θh = 1e-4)."""
     alpha = dr.maximum(alpha, MIN_ROUGHNESS)
-    c = dr.maximum(cos_h, _MIN_COS_H)
-    c2 = c * c
-    return -((1.0 - c2) / c2) / (alpha * alpha)
+    c = dr.maximum(h.z, _MIN_COS_H)
+    return -((h.x * h.x + h.y * h.y) / (c * c)) / (alpha * alpha)
 
 
-def beckmann_d(cos_h, alpha):
+def beckmann_d(h, alpha):
     """Beckmann normal distribution (Beckmann & Spizzichino 1963; Cook &
     Torrance 1982, eq. 3; Walter et al. 2007, eq. 25):
 
@@ -50,14 +51,14 @@ def beckmann_d(cos_h, alpha):
     0 for θh >= 90°.
     """
     alpha = dr.maximum(alpha, MIN_ROUGHNESS)
-    c = dr.maximum(cos_h, _MIN_COS_H)
-    log_d = beckmann_log_slope(cos_h, alpha) - dr.log(dr.pi * alpha * alpha) - 4.0 * dr.log(c)
-    return dr.select(cos_h > 0, dr.exp(log_d), 0.0)
+    c = dr.maximum(h.z, _MIN_COS_H)
+    log_d = beckmann_log_slope(h, alpha) - dr.log(dr.pi * alpha * alpha) - 4.0 * dr.log(c)
+    return dr.select(h.z > 0, dr.exp(log_d), 0.0)
 
 
-def beckmann_pdf_h(cos_h, alpha):
+def beckmann_pdf_h(h, alpha):
     """Density of half vectors sampled from D(h) cos θh (per solid angle of h)."""
-    return beckmann_d(cos_h, alpha) * dr.maximum(cos_h, 0.0)
+    return beckmann_d(h, alpha) * dr.maximum(h.z, 0.0)
 
 
 def reflected_pdf(pdf_h, wo, h):
@@ -89,7 +90,7 @@ def smith_g1(v, h, alpha):
     """
     alpha = dr.maximum(alpha, MIN_ROUGHNESS)
     cos_v = v.z
-    sin_v = dr.safe_sqrt(1.0 - cos_v * cos_v)
+    sin_v = dr.sqrt(v.x * v.x + v.y * v.y)  # not sqrt(1 - cos²): precise near the normal
     a = safe_divide(cos_v, alpha * sin_v)
     a = dr.minimum(dr.maximum(a, 0.0), 1.6)
     g = (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a)

@@ -52,7 +52,7 @@ class Ward(BRDFModel):
             hh = dr.maximum(2.0 + 2.0 * dr.dot(wi, wo), 1e-12)
             log_norm = (-dr.log(dr.pi) - log_a2 - dr.log(hh)
                         - 4.0 * dr.log(dr.maximum(h.z, 1e-4)))
-        lobe = dr.select(h.z > 0, dr.exp(log_norm + microfacet.beckmann_log_slope(h.z, alpha)), 0.0)
+        lobe = dr.select(h.z > 0, dr.exp(log_norm + microfacet.beckmann_log_slope(h, alpha)), 0.0)
         return mi.Color3f(params["specular_reflectance"]) * lobe
 
     def specular_weight(self, wi, params):
@@ -63,4 +63,4 @@ class Ward(BRDFModel):
 
     def pdf_specular(self, wi, wo, params):
         h = microfacet.half_vector(wi, wo)
-        return microfacet.reflected_pdf(microfacet.beckmann_pdf_h(h.z, params["alpha"]), wo, h)
+        return microfacet.reflected_pdf(microfacet.beckmann_pdf_h(h, params["alpha"]), wo, h)
