@@ -68,8 +68,6 @@ class AnalyticBSDF:
     def __init__(self, props: mi.Properties):
         mi.BSDF.__init__(self, props)
         self.model = self.make_model(props)
-        for key in self.model.options:
-            props.mark_queried(key) if props.has_property(key) else None
         self.diffuse = props.get_texture(DIFFUSE.name, self.DIFFUSE_DEFAULT)
         self.values = {}
         for p in self.model.specular_parameters():
