@@ -19,7 +19,7 @@ import drjit as dr
 import mitsuba as mi
 
 from . import microfacet
-from .model import COS_EPSILON, BRDFModel, Parameter, mean
+from .model import BRDFModel, COS_EPSILON, Parameter, dot, mean
 
 
 class CookTorrance(BRDFModel):
@@ -52,7 +52,7 @@ class CookTorrance(BRDFModel):
             g = microfacet.vcavity_g(wi, wo, h)
         else:
             g = microfacet.smith_g(wi, wo, h, m)
-        f = self.fresnel_term(dr.dot(wi, h), params.get("eta", 1.4))
+        f = self.fresnel_term(dot(wi, h), params.get("eta", 1.4))
         cos_i = dr.maximum(wi.z, COS_EPSILON)
         cos_o = dr.maximum(wo.z, COS_EPSILON)
         return mi.Color3f(params["specular_reflectance"]) * (d * f * g / (4.0 * cos_i * cos_o))

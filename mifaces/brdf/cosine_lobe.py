@@ -10,7 +10,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .model import power
+from .model import dot, power
 
 
 def sample(axis, exponent, sample2):
@@ -27,4 +27,4 @@ def sample(axis, exponent, sample2):
 
 def pdf(axis, exponent, wo):
     """Density of :func:`sample` at ``wo`` (per unit solid angle)."""
-    return (exponent + 1.0) * dr.inv_two_pi * power(dr.dot(axis, wo), exponent)
+    return (exponent + 1.0) * dr.inv_two_pi * power(dot(axis, wo), exponent)

@@ -25,7 +25,7 @@ import drjit as dr
 import mitsuba as mi
 
 from . import cosine_lobe
-from .model import BRDFModel, Parameter, mean, power
+from .model import BRDFModel, Parameter, dot, mean, power
 
 #: Largest lobe albedo estimate used to weight sampling (keeps weights finite).
 _MAX_WEIGHT = 1e4
@@ -62,7 +62,7 @@ class Lafortune(BRDFModel):
 
     def _lobe(self, j, params):
         cxy, cz, n = lobe_names(j)
-        return mi.Color3f(params[cxy]), mi.Color3f(params[cz]), params[n]
+        return params[cxy], params[cz], params[n]
 
     def specular(self, wi, wo, params):
         xy = wi.x * wo.x + wi.y * wo.y
@@ -70,13 +70,14 @@ class Lafortune(BRDFModel):
         value = mi.Color3f(0.0)
         for j in self.lobes:
             cxy, cz, n = self._lobe(j, params)
+            # grey coefficients stay scalar: one power instead of three
             value += power(cxy * xy + cz * zz, n)
         return value
 
     def _axis_and_weight(self, j, wi, params):
         cxy, cz, n = self._lobe(j, params)
         s = mi.Vector3f(mean(cxy) * wi.x, mean(cxy) * wi.y, mean(cz) * wi.z)
-        length = dr.norm(s)
+        length = dr.sqrt(dot(s, s))
         axis = dr.select(length > 1e-12, s / dr.maximum(length, 1e-12), mi.Vector3f(0, 0, 1))
         log_weight = n * dr.log(dr.maximum(length, 1e-30)) + dr.log(dr.two_pi / (n + 2.0))
         weight = dr.exp(dr.minimum(log_weight, dr.log(_MAX_WEIGHT)))

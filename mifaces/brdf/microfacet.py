@@ -12,7 +12,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .model import COS_EPSILON, safe_divide
+from .model import COS_EPSILON, dot, exp_flushed, safe_divide
 
 #: Smallest roughness the formulas accept; smaller values are clamped.
 MIN_ROUGHNESS = 1e-4
@@ -23,7 +23,7 @@ _MIN_COS_H = 1e-4
 def half_vector(wi, wo):
     """Unit half vector of ``wi`` and ``wo``; (0, 0, 1) where they cancel."""
     h = wi + wo
-    length = dr.norm(h)
+    length = dr.sqrt(dot(h, h))
     return dr.select(length > 1e-12, h / dr.maximum(length, 1e-12), mi.Vector3f(0, 0, 1))
 
 
@@ -53,7 +53,7 @@ def beckmann_d(h, alpha):
     alpha = dr.maximum(alpha, MIN_ROUGHNESS)
     c = dr.maximum(h.z, _MIN_COS_H)
     log_d = beckmann_log_slope(h, alpha) - dr.log(dr.pi * alpha * alpha) - 4.0 * dr.log(c)
-    return dr.select(h.z > 0, dr.exp(log_d), 0.0)
+    return dr.select(h.z > 0, exp_flushed(log_d), 0.0)
 
 
 def beckmann_pdf_h(h, alpha):
@@ -64,7 +64,7 @@ def beckmann_pdf_h(h, alpha):
 def reflected_pdf(pdf_h, wo, h):
     """Density of wo = reflect(wi, h) given the density of h: pdf_h / (4 |wo·h|)
     (Walter et al. 2007, eq. 14)."""
-    return safe_divide(pdf_h, 4.0 * dr.abs(dr.dot(wo, h)))
+    return safe_divide(pdf_h, 4.0 * dr.abs(dot(wo, h)))
 
 
 def sample_beckmann(wi, sample2, alpha):
@@ -95,7 +95,7 @@ def smith_g1(v, h, alpha):
     a = dr.minimum(dr.maximum(a, 0.0), 1.6)
     g = (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a)
     g = dr.select(a >= 1.6, 1.0, g)
-    return dr.select(dr.dot(v, h) * cos_v > 0, g, 0.0)
+    return dr.select(dot(v, h) * cos_v > 0, g, 0.0)
 
 
 def smith_g(wi, wo, h, alpha):
@@ -110,8 +110,8 @@ def vcavity_g(wi, wo, h):
         G = min(1, 2 (n·h)(n·wo) / (wo·h), 2 (n·h)(n·wi) / (wi·h)).
     """
     nh = h.z
-    g_o = safe_divide(2.0 * nh * wo.z, dr.dot(wo, h))
-    g_i = safe_divide(2.0 * nh * wi.z, dr.dot(wi, h))
+    g_o = safe_divide(2.0 * nh * wo.z, dot(wo, h))
+    g_i = safe_divide(2.0 * nh * wi.z, dot(wi, h))
     return dr.maximum(dr.minimum(dr.minimum(1.0, g_o), g_i), 0.0)
 
 

@@ -21,7 +21,7 @@ import drjit as dr
 import mitsuba as mi
 
 from . import microfacet
-from .model import COS_EPSILON, BRDFModel, Parameter, mean
+from .model import BRDFModel, COS_EPSILON, Parameter, dot, exp_flushed, mean
 
 
 class Ward(BRDFModel):
@@ -49,10 +49,10 @@ class Ward(BRDFModel):
             log_norm = -dr.log(4.0 * dr.pi) - log_a2 - log_cos_i - log_cos_o
         else:
             # (H·H)/(H·n)^4 = 1 / (|H|² cos⁴θh) with |H|² = 2 + 2 wi·wo.
-            hh = dr.maximum(2.0 + 2.0 * dr.dot(wi, wo), 1e-12)
+            hh = dr.maximum(2.0 + 2.0 * dot(wi, wo), 1e-12)
             log_norm = (-dr.log(dr.pi) - log_a2 - dr.log(hh)
                         - 4.0 * dr.log(dr.maximum(h.z, 1e-4)))
-        lobe = dr.select(h.z > 0, dr.exp(log_norm + microfacet.beckmann_log_slope(h, alpha)), 0.0)
+        lobe = dr.select(h.z > 0, exp_flushed(log_norm + microfacet.beckmann_log_slope(h, alpha)), 0.0)
         return mi.Color3f(params["specular_reflectance"]) * lobe
 
     def specular_weight(self, wi, params):
