@@ -1,0 +1,354 @@
+"""Fitting an analytic BRDF model to reflectance samples (paper sec. 5.1-5.2).
+
+For one region, minimise the weighted error of eq. 8,
+
+    E(a) = ½ Σ_s |r_s - π f_a(l̂_s, v̂_s)|² / σ_s²,
+
+where r is the reflectance scaled so that a white Lambertian target has
+r = 1 (so the model predicts π f; f without cosine, see
+:mod:`mifaces.brdf.model`) and σ the confidence of eq. 9/10. The model is
+evaluated by the same Dr.Jit functions the plugins use; its Jacobian comes
+from Dr.Jit's forward mode, one pass per free parameter; the steps are
+Levenberg-Marquardt (:mod:`mifaces.levenberg_marquardt`) on random subsets
+of growing size, each stage starting from the previous result (the paper's
+hierarchy). Parameters are kept in their valid ranges by reparameterisation:
+p = lo + (hi - lo)·sigmoid(x), or its logarithmic form for parameters that
+span decades (roughness, α, exponents).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import asdict, dataclass, field
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from . import brdf as brdf_models
+from .brdf.model import BRDFModel, Parameter
+from .levenberg_marquardt import CONVERGED, levenberg_marquardt
+
+#: Parameters held fixed unless the caller frees them: the index of
+#: refraction trades off against the lobe scale; skin's is known (≈ 1.4).
+DEFAULT_FIXED = {"cooktorrance": {"eta": 1.4}}
+
+
+@dataclass(frozen=True)
+class _Free:
+    name: str
+    channel: int | None  # colour channel of an RGB parameter, or None
+    lower: float
+    upper: float
+    log: bool
+
+
+def _is_log(p: Parameter) -> bool:
+    return p.lower > 0 and p.upper / p.lower >= 100
+
+
+class ParameterSpace:
+    """The free parameters of a model and their map to an unconstrained vector.
+
+    Parameters
+    ----------
+    model : BRDFModel
+    fixed : dict, optional
+        Parameter name -> value held constant (floats or RGB triples).
+    bounds : dict, optional
+        Parameter name -> (lower, upper) narrowing the model's valid range.
+    """
+
+    def __init__(self, model: BRDFModel, fixed: dict | None = None, bounds: dict | None = None):
+        self.model = model
+        self.fixed = dict(fixed or {})
+        bounds = bounds or {}
+        unknown = (set(self.fixed) | set(bounds)) - {p.name for p in model.parameters()}
+        if unknown:
+            raise ValueError(f"{model.name}: no parameter(s) {sorted(unknown)}")
+        self.free: list[_Free] = []
+        for p in model.parameters():
+            if p.name in self.fixed:
+                continue
+            lo, hi = bounds.get(p.name, (p.lower, p.upper))
+            channels = (0, 1, 2) if p.kind == "rgb" else (None,)
+            self.free += [_Free(p.name, c, lo, hi, _is_log(p)) for c in channels]
+
+    def __len__(self) -> int:
+        return len(self.free)
+
+    def _forward(self, x, f: _Free, sigmoid, log, exp):
+        s = sigmoid(x)
+        if f.log:
+            return exp(log(f.lower) + (log(f.upper) - log(f.lower)) * s)
+        return f.lower + (f.upper - f.lower) * s
+
+    def values(self, x: np.ndarray) -> dict:
+        """Parameter values (floats, or lists of three) for the vector ``x``."""
+        out = {k: (list(map(float, v)) if np.ndim(v) else float(v)) for k, v in self.fixed.items()}
+        sig = lambda t: 1.0 / (1.0 + np.exp(-t))  # noqa: E731
+        for xi, f in zip(x, self.free):
+            v = float(self._forward(xi, f, sig, np.log, np.exp))
+            if f.channel is None:
+                out[f.name] = v
+            else:
+                out.setdefault(f.name, [0.0, 0.0, 0.0])[f.channel] = v
+        return out
+
+    def vector(self, values: dict) -> np.ndarray:
+        """The unconstrained vector whose :meth:`values` are ``values``
+        (clipped just inside the bounds)."""
+        x = []
+        for f in self.free:
+            v = values[f.name]
+            v = float(v[f.channel] if f.channel is not None and np.ndim(v) else v)
+            if f.log:
+                t = (np.log(v) - np.log(f.lower)) / (np.log(f.upper) - np.log(f.lower))
+            else:
+                t = (v - f.lower) / (f.upper - f.lower)
+            t = float(np.clip(t, 1e-6, 1 - 1e-6))
+            x.append(np.log(t / (1 - t)))
+        return np.array(x)
+
+    def drjit_params(self, u: list) -> dict:
+        """Model parameters as Dr.Jit values from the free variables ``u``
+        (differentiable)."""
+        out = {}
+        for k, v in self.fixed.items():
+            out[k] = mi.Color3f(*v) if np.ndim(v) else mi.Float(v)
+        rgb = {}
+        for ui, f in zip(u, self.free):
+            v = self._forward(ui, f, lambda t: 1.0 / (1.0 + dr.exp(-t)), dr.log, dr.exp)
+            if f.channel is None:
+                out[f.name] = v
+            else:
+                rgb.setdefault(f.name, [None, None, None])[f.channel] = v
+        for name, (r, g, b) in rgb.items():
+            out[name] = mi.Color3f(r, g, b)
+        return out
+
+
+def conservative_start(model: BRDFModel, reflectance: np.ndarray) -> dict:
+    """A start far from any sharp minimum: the diffuse albedo at the 40th
+    percentile of the observed reflectance (highlights lie above it), a weak
+    glossy lobe of medium width."""
+    diffuse = np.clip(np.percentile(reflectance, 40, axis=0), 0.01, 0.95)
+    start = {"diffuse_reflectance": list(map(float, diffuse))}
+    for p in model.specular_parameters():
+        if p.name == "specular_reflectance":
+            start[p.name] = [1.0] * 3 if model.name == "cooktorrance" else [0.05] * 3
+        elif p.name in ("roughness", "alpha"):
+            start[p.name] = 0.3
+        elif p.name == "eta":
+            start[p.name] = 1.4
+        elif p.name.startswith("exponent"):
+            start[p.name] = 10.0 if p.name == "exponent" else 3.0
+        elif p.name.startswith("cxy"):
+            start[p.name] = [-0.75] * 3 if p.name == "cxy" else [-0.5] * 3
+        elif p.name.startswith("cz"):
+            start[p.name] = [0.75] * 3 if p.name == "cz" else [0.5] * 3
+    return start
+
+
+@dataclass
+class Schedule:
+    """The hierarchy of random subsets: ``first`` samples, then ``growth``
+    times more per stage until all are used; at most ``iterations`` LM
+    iterations per stage and ``final_iterations`` on the full set."""
+
+    first: int = 2000
+    growth: int = 4
+    iterations: int = 20
+    final_iterations: int = 100
+    #: relative loss decrease that ends a stage before the last
+    stage_ftol: float = 1e-4
+
+    def sizes(self, n: int) -> list[int]:
+        sizes, k = [], max(1, self.first)
+        while k < n:
+            sizes.append(k)
+            k *= self.growth
+        return sizes + [n]
+
+
+#: One LM stage over all samples.
+FULL_DATA = Schedule(first=1 << 62)
+
+
+@dataclass
+class RegionFit:
+    """The fitted BRDF of one region, and how the fit went."""
+
+    model: str
+    options: dict
+    params: dict
+    loss: float
+    samples: int
+    seconds: float
+    status: str
+    reason: str
+    iterations: int
+    history: list = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["history"] = [[round(t, 6), float(e)] for t, e in self.history]
+        return d
+
+
+class _Problem:
+    """Residuals (r - π f)/σ of one set of samples, evaluated with Dr.Jit."""
+
+    def __init__(self, model, space, light, view, reflectance, sigma):
+        self.model, self.space = model, space
+        self.wi = mi.Vector3f(np.ascontiguousarray(light.T, dtype=np.float32))
+        self.wo = mi.Vector3f(np.ascontiguousarray(view.T, dtype=np.float32))
+        self.r = mi.Color3f(np.ascontiguousarray(reflectance.T, dtype=np.float32))
+        self.w = mi.Float(np.ascontiguousarray(1.0 / sigma, dtype=np.float32))
+        self.n = len(sigma)
+
+    def _residuals(self, u):
+        params = self.space.drjit_params(u)
+        return (self.r - dr.pi * self.model.eval(self.wi, self.wo, params)) * self.w
+
+    def loss(self, x) -> float:
+        # opaque scalars: the kernel is compiled once and reused every iteration
+        res = self._residuals([dr.opaque(mi.Float, float(v)) for v in x])
+        value = 0.5 * dr.sum(dr.square(res.x) + dr.square(res.y) + dr.square(res.z))
+        return float(value[0] if dr.is_array_v(value) else value)
+
+    def residuals_and_jacobian(self, x):
+        u = [dr.opaque(mi.Float, float(v)) for v in x]
+        dr.enable_grad(u)
+        res = self._residuals(u)
+        dr.eval(res)
+        r = np.array(dr.detach(res)).ravel()
+        jac = np.empty((r.size, len(u)), dtype=np.float32)
+        for k, uk in enumerate(u):
+            dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
+            jac[:, k] = np.array(dr.grad(res)).ravel()
+            dr.clear_grad(res)
+        return r, jac
+
+
+def validate_samples(light, view, reflectance, sigma) -> None:
+    """Shapes agree and nothing is NaN; raises ValueError naming the array."""
+    n = len(sigma)
+    for name, a, shape in [("light", light, (n, 3)), ("view", view, (n, 3)),
+                           ("reflectance", reflectance, (n, 3)), ("sigma", sigma, (n,))]:
+        if np.shape(a) != shape:
+            raise ValueError(f"{name} must have shape {shape}, got {np.shape(a)}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} contains {np.count_nonzero(~np.isfinite(a))} NaN or infinite values")
+    if np.any(sigma <= 0):
+        raise ValueError("sigma must be positive (it is a confidence scale, 1/weight)")
+
+
+def min_samples(model: BRDFModel, fixed: dict | None = None) -> int:
+    """Fewest samples a region needs for its own fit: 10 per free parameter."""
+    return 10 * len(ParameterSpace(model, fixed))
+
+
+def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start: dict | None = None,
+               fixed: dict | None = None, bounds: dict | None = None, schedule: Schedule | None = None,
+               seed: int = 0, ftol: float = 1e-7) -> RegionFit:
+    """Fit ``model`` to one region's samples by hierarchical Levenberg-Marquardt.
+
+    Parameters
+    ----------
+    model : BRDFModel or str
+        A model from :mod:`mifaces.brdf`, or its name with default options.
+    light, view : ndarray (N, 3)
+        l̂ and v̂ in the local shading frame (z = normal).
+    reflectance : ndarray (N, 3)
+        r, scaled so that a white Lambertian target is 1 (r = π f).
+    sigma : ndarray (N,)
+        Confidence σ of each sample (eq. 9/10); weights are 1/σ².
+    start : dict, optional
+        Initial values; by default :func:`conservative_start`.
+    fixed, bounds : dict, optional
+        See :class:`ParameterSpace`; ``fixed`` defaults to
+        :data:`DEFAULT_FIXED` for the model.
+    schedule : Schedule, optional
+        The subset hierarchy; :data:`FULL_DATA` fits all samples at once.
+    seed : int
+        Seed of the random subsets.
+
+    Returns
+    -------
+    RegionFit
+        Parameters, the loss E of eq. 8 on all samples, status and history.
+    """
+    t0 = time.perf_counter()
+    model = brdf_models.model(model) if isinstance(model, str) else model
+    light, view = np.asarray(light, np.float32), np.asarray(view, np.float32)
+    reflectance, sigma = np.asarray(reflectance, np.float32), np.asarray(sigma, np.float32)
+    validate_samples(light, view, reflectance, sigma)
+    fixed = DEFAULT_FIXED.get(model.name, {}) if fixed is None else fixed
+    space = ParameterSpace(model, fixed, bounds)
+    if len(sigma) < len(space):
+        raise ValueError(f"{model.name} has {len(space)} free parameters but only {len(sigma)} samples were given")
+    start = {**conservative_start(model, reflectance), **(start or {})}
+    x = space.vector(start)
+    schedule = schedule or Schedule()
+    order = np.random.default_rng(seed).permutation(len(sigma))
+    history, iterations, result = [], 0, None
+    sizes = schedule.sizes(len(sigma))
+    for stage, size in enumerate(sizes):
+        idx = np.sort(order[:size])
+        problem = _Problem(model, space, light[idx], view[idx], reflectance[idx], sigma[idx])
+        last = stage == len(sizes) - 1
+        result = levenberg_marquardt(problem.residuals_and_jacobian, problem.loss, x,
+                                     max_iterations=schedule.final_iterations if last else schedule.iterations,
+                                     ftol=ftol if last else max(ftol, schedule.stage_ftol), clock_start=t0)
+        x = result.x
+        iterations += result.iterations
+        history += [(t, e * len(sigma) / size) for t, e in result.history]  # scaled to the full set
+    return RegionFit(model=model.name, options=dict(model.options), params=space.values(x), loss=result.loss,
+                     samples=len(sigma), seconds=time.perf_counter() - t0, status=result.status,
+                     reason=result.reason, iterations=iterations, history=history)
+
+
+def prior_fit(model: BRDFModel, params: dict, samples: int, reason: str) -> RegionFit:
+    """A region's BRDF taken from elsewhere (a neighbour, the defaults)."""
+    return RegionFit(model=model.name, options=dict(model.options), params=params, loss=float("nan"),
+                     samples=samples, seconds=0.0, status="prior", reason=reason, iterations=0)
+
+
+def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region, region_names: dict,
+                neighbours: dict | None = None, **options) -> dict[str, RegionFit]:
+    """Fit ``model`` separately in every region (paper sec. 4.4, 5.2).
+
+    ``region`` gives each sample's label, ``region_names`` label -> name.
+    A region with fewer than :func:`min_samples` samples gets a warning and
+    the parameters of its first fitted neighbour in ``neighbours`` (name ->
+    names), else of ``skin``, else the model's defaults; its status is
+    ``'prior'``. Regions without samples are not fitted either.
+    """
+    model = brdf_models.model(model) if isinstance(model, str) else model
+    region = np.asarray(region)
+    fixed = options.get("fixed")
+    needed = min_samples(model, DEFAULT_FIXED.get(model.name, {}) if fixed is None else fixed)
+    counts = {name: int(np.count_nonzero(region == label)) for label, name in region_names.items()}
+    fits: dict[str, RegionFit] = {}
+    for label, name in region_names.items():
+        if counts[name] >= needed:
+            mask = region == label
+            fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask], **options)
+    for label, name in region_names.items():
+        if name in fits:
+            continue
+        donors = list((neighbours or {}).get(name, [])) + ["skin"]
+        donor = next((d for d in donors if d in fits), None)
+        params = fits[donor].params if donor else {**model.defaults(), **DEFAULT_FIXED.get(model.name, {})}
+        source = f"the fit of {donor!r}" if donor else "the model's defaults"
+        reason = f"{counts[name]} samples, fewer than the {needed} a {model.name} fit needs: {source}"
+        if counts[name] > 0:
+            warnings.warn(f"region {name!r}: {reason}", stacklevel=2)
+        fits[name] = prior_fit(model, params, counts[name], reason)
+    return fits
+
+
+__all__ = ["ParameterSpace", "Schedule", "FULL_DATA", "RegionFit", "fit_region", "fit_regions",
+           "conservative_start", "min_samples", "CONVERGED"]

@@ -1,0 +1,154 @@
+"""Levenberg-Marquardt for small dense least-squares problems.
+
+Minimises E(x) = ½ Σ r_i(x)² over a parameter vector x of a few dozen
+entries at most, with the residuals and their Jacobian supplied by the
+caller (mifaces computes them with Dr.Jit). The step solves
+
+    (JᵀJ + λ diag(JᵀJ)) δ = -Jᵀr
+
+(Marquardt's scaling, Press et al., *Numerical Recipes*, sec. 15.5, the
+method the paper uses), in float64 on the normal equations. λ shrinks by 3
+after an accepted step and grows by 4 after a rejected one.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+#: Convergence statuses a fit may end with.
+CONVERGED = "converged"
+MAX_ITERATIONS = "max_iterations"
+STALLED = "stalled"
+
+
+@dataclass
+class LMResult:
+    """Outcome of :func:`levenberg_marquardt`.
+
+    Attributes
+    ----------
+    x : ndarray
+        Final parameters.
+    loss : float
+        E(x) = ½ Σ r².
+    status : str
+        ``'converged'`` (a tolerance was met, or no step lowers the loss any
+        more at the precision of the residuals), ``'max_iterations'``, or
+        ``'stalled'`` (the loss is not finite at the trial steps: a broken
+        problem).
+    reason : str
+        Which test ended the run, in words.
+    iterations : int
+        Jacobian evaluations.
+    history : list of (seconds, loss)
+        Loss after each accepted step, with the wall time since the start.
+    """
+
+    x: np.ndarray
+    loss: float
+    status: str
+    reason: str
+    iterations: int
+    evaluations: int
+    history: list = field(default_factory=list)
+
+
+def normal_equations(residuals: np.ndarray, jacobian: np.ndarray):
+    """JᵀJ and Jᵀr, as float64 (P, P) and (P,) arrays. The products run in
+    the precision of J (float32 BLAS for millions of rows: the step needs
+    only a few digits; the loss that accepts or rejects it is exact)."""
+    jtj = (jacobian.T @ jacobian).astype(np.float64)
+    jtr = (jacobian.T @ residuals.astype(jacobian.dtype)).astype(np.float64)
+    return jtj, jtr
+
+
+def levenberg_marquardt(
+    residuals_and_jacobian: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    loss: Callable[[np.ndarray], float],
+    x0: np.ndarray,
+    max_iterations: int = 100,
+    ftol: float = 1e-10,
+    xtol: float = 1e-10,
+    gtol: float = 1e-12,
+    lambda0: float = 1e-3,
+    clock_start: float | None = None,
+) -> LMResult:
+    """Minimise ½ Σ r(x)².
+
+    Parameters
+    ----------
+    residuals_and_jacobian : callable
+        x -> (r of shape (M,), J of shape (M, P)).
+    loss : callable
+        x -> ½ Σ r(x)², cheaper than the above (no Jacobian); used to test
+        trial steps. May return inf/nan for an invalid x (the step is then
+        rejected).
+    x0 : ndarray of shape (P,)
+    max_iterations : int
+        Jacobian evaluations allowed.
+    ftol : float
+        Stop when an accepted step lowers the loss by less than ftol·loss.
+    xtol : float
+        Stop when |δ| < xtol (|x| + xtol).
+    gtol : float
+        Stop when max |Jᵀr| < gtol · max(loss, tiny) (a stationary point).
+    lambda0 : float
+        Initial damping, relative to max diag(JᵀJ).
+    clock_start : float, optional
+        ``time.perf_counter()`` value the history's times count from.
+    """
+    start = time.perf_counter() if clock_start is None else clock_start
+    x = np.asarray(x0, dtype=np.float64).copy()
+    r, jac = residuals_and_jacobian(x)
+    current = 0.5 * float(np.dot(r.astype(np.float64), r.astype(np.float64)))
+    jtj, jtr = normal_equations(r, jac)
+    history = [(time.perf_counter() - start, current)]
+    lam = lambda0 * max(float(np.max(np.diag(jtj))), 1e-30)
+    iterations, evaluations = 1, 1
+    status, reason = MAX_ITERATIONS, f"{max_iterations} iterations"
+    if not np.isfinite(current):
+        return LMResult(x, current, STALLED, "loss is not finite at the start", 1, 1, history)
+    while iterations < max_iterations:
+        if np.max(np.abs(jtr)) <= gtol * max(current, 1e-300):
+            status, reason = CONVERGED, "gradient vanished"
+            break
+        diag = np.maximum(np.diag(jtj), 1e-30 * max(1.0, np.max(np.diag(jtj))))
+        try:
+            delta = np.linalg.solve(jtj + lam * np.diag(diag), -jtr)
+        except np.linalg.LinAlgError:
+            delta = None
+        if delta is not None and np.all(np.isfinite(delta)):
+            predicted = -float(jtr @ delta) - 0.5 * float(delta @ jtj @ delta)
+            if predicted <= ftol * current and lam <= lambda0 * max(float(np.max(np.diag(jtj))), 1e-30):
+                status, reason = CONVERGED, "predicted loss decrease below ftol"
+                break
+        trial = float("inf") if delta is None or not np.all(np.isfinite(delta)) else loss(x + delta)
+        evaluations += 1
+        if np.isfinite(trial) and trial < current:
+            x = x + delta
+            decrease = current - trial
+            current = trial
+            lam = max(lam / 3.0, 1e-30)
+            r, jac = residuals_and_jacobian(x)
+            jtj, jtr = normal_equations(r, jac)
+            iterations += 1
+            history.append((time.perf_counter() - start, current))
+            if decrease <= ftol * current:
+                status, reason = CONVERGED, "relative loss decrease below ftol"
+                break
+            if np.linalg.norm(delta) <= xtol * (np.linalg.norm(x) + xtol):
+                status, reason = CONVERGED, "step below xtol"
+                break
+        else:
+            lam *= 4.0
+            if lam > 1e16 * max(1.0, float(np.max(np.diag(jtj)))):
+                if np.isfinite(trial):
+                    status, reason = CONVERGED, "no step lowers the loss at the residuals' precision"
+                else:
+                    status, reason = STALLED, "the loss is not finite near the current parameters"
+                break
+    return LMResult(x, current, status, reason, iterations, evaluations, history)

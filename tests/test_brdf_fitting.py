@@ -1,0 +1,176 @@
+"""Fitting BRDF models to reflectance samples (mifaces.brdf_fitting)."""
+
+from __future__ import annotations
+
+import warnings
+
+import mitsuba as mi
+import numpy as np
+import pytest
+import scipy.optimize
+
+from mifaces import brdf
+from mifaces.brdf_fitting import (FULL_DATA, ParameterSpace, Schedule, fit_region, fit_regions,
+                                  min_samples)
+from mifaces.levenberg_marquardt import CONVERGED, levenberg_marquardt
+
+TRUTH = {
+    "phong": ({}, {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [0.12, 0.1, 0.09],
+                   "exponent": 40.0}),
+    "cooktorrance": ({}, {"diffuse_reflectance": [0.55, 0.38, 0.3], "specular_reflectance": [2.0, 1.8, 1.7],
+                          "roughness": 0.25, "eta": 1.4}),
+    "ward": ({}, {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [0.08, 0.07, 0.07],
+                  "alpha": 0.2}),
+    "lafortune": ({"lobes": 1}, {"diffuse_reflectance": [0.5, 0.35, 0.3], "cxy": [-0.9, -0.88, -0.87],
+                                 "cz": [0.9, 0.89, 0.88], "exponent": 20.0}),
+}
+
+
+def hemisphere(rng, n, min_cos=0.1):
+    v = rng.normal(size=(4 * n, 3))
+    v[:, 2] = np.abs(v[:, 2])
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    return v[v[:, 2] > min_cos][:n]
+
+
+def synthetic_samples(model, params, n, seed=0, noise=0.0):
+    """Reflectance samples r = π f (+ relative noise) with σ from eq. 9."""
+    rng = np.random.default_rng(seed)
+    light, view = hemisphere(rng, n), hemisphere(rng, n)
+    p = {k: (mi.Color3f(*v) if isinstance(v, list) else mi.Float(v)) for k, v in params.items()}
+    f = np.array(model.eval(mi.Vector3f(light.T.astype(np.float32)), mi.Vector3f(view.T.astype(np.float32)), p)).T
+    r = np.pi * f * (1 + noise * rng.normal(size=f.shape))
+    sigma = 1.0 / (light[:, 2] ** 2 * view[:, 2])
+    return light, view, r, sigma
+
+
+def relative_errors(fitted, truth):
+    return {k: float(np.max(np.abs(np.array(fitted[k]) - np.array(v)) / np.abs(np.array(v)))) for k, v in truth.items()}
+
+
+@pytest.mark.parametrize("schedule", [Schedule(first=1000), FULL_DATA], ids=["hierarchical", "full"])
+@pytest.mark.parametrize("name", sorted(TRUTH))
+def test_noise_free_samples_recover_parameters(jit_variant, name, schedule):
+    options, truth = TRUTH[name]
+    model = brdf.model(name, **options)
+    light, view, r, sigma = synthetic_samples(model, truth, 20000)
+    fit = fit_region(model, light, view, r, sigma, schedule=schedule)
+    errors = relative_errors(fit.params, truth)
+    assert fit.status == CONVERGED, fit.reason
+    assert max(errors.values()) < 1e-3, errors
+    assert fit.samples == len(sigma) and fit.loss < 1e-6 and fit.seconds > 0
+    assert all(np.isfinite(e) for _, e in fit.history)
+
+
+def test_two_lafortune_lobes_from_a_nearby_start(jit_variant):
+    truth = {"diffuse_reflectance": [0.45, 0.3, 0.25], "cxy": [-0.92] * 3, "cz": [0.92] * 3, "exponent": 30.0,
+             "cxy_2": [0.35] * 3, "cz_2": [0.45] * 3, "exponent_2": 2.0}
+    model = brdf.model("lafortune", lobes=2)
+    light, view, r, sigma = synthetic_samples(model, truth, 30000, seed=3)
+    start = {k: (list(np.array(v) * 1.05) if isinstance(v, list) else v * 1.1) for k, v in truth.items()}
+    fit = fit_region(model, light, view, r, sigma, start=start, schedule=FULL_DATA)
+    assert max(relative_errors(fit.params, truth).values()) < 1e-3
+
+
+def test_noisy_samples_reach_the_scipy_minimum(jit_variant):
+    """With noise, the fit reaches the loss scipy's Levenberg-Marquardt
+    reaches on the same residuals (within 0.1 %)."""
+    model = brdf.model("cooktorrance")
+    light, view, r, sigma = synthetic_samples(model, TRUTH["cooktorrance"][1], 5000, seed=2, noise=0.05)
+    fit = fit_region(model, light, view, r, sigma)
+    space = ParameterSpace(model, {"eta": 1.4})
+    wi, wo = mi.Vector3f(light.T.astype(np.float32)), mi.Vector3f(view.T.astype(np.float32))
+
+    def residuals(x):
+        values = space.values(x)
+        p = {k: (mi.Color3f(*v) if isinstance(v, list) else mi.Float(v)) for k, v in values.items()}
+        f = np.array(model.eval(wi, wo, p)).T
+        return ((r - np.pi * f) / sigma[:, None]).ravel().astype(np.float64)
+
+    x0 = space.vector({**TRUTH["cooktorrance"][1], "roughness": 0.35})
+    ref = scipy.optimize.least_squares(residuals, x0, method="lm")
+    assert fit.loss <= ref.cost * 1.001, (fit.loss, ref.cost)
+
+
+def test_parameter_space_round_trip_and_bounds():
+    model = brdf.model("cooktorrance")
+    space = ParameterSpace(model, {"eta": 1.4}, bounds={"roughness": (0.01, 0.8)})
+    assert len(space) == 7
+    values = {"diffuse_reflectance": [0.2, 0.3, 0.4], "specular_reflectance": [1.0, 2.0, 3.0], "roughness": 0.05}
+    back = space.values(space.vector(values))
+    for k, v in values.items():
+        np.testing.assert_allclose(back[k], v, rtol=1e-9)
+    assert back["eta"] == 1.4
+    extreme = space.values(np.array([40.0, -40, 40, 40, -40, 40, 40]))
+    assert 0.01 <= extreme["roughness"] <= 0.8
+    assert all(0 <= c <= 1 for c in extreme["diffuse_reflectance"])
+    with pytest.raises(ValueError, match="no parameter"):
+        ParameterSpace(model, {"alpha": 0.1})
+
+
+def test_levenberg_marquardt_matches_scipy_on_exponential_decay():
+    t = np.linspace(0, 4, 200)
+    y = 2.5 * np.exp(-1.3 * t) + 0.4 + 0.01 * np.random.default_rng(0).normal(size=t.size)
+
+    def res(x):
+        return x[0] * np.exp(-x[1] * t) + x[2] - y
+
+    def res_jac(x):
+        e = np.exp(-x[1] * t)
+        return res(x), np.stack([e, -x[0] * t * e, np.ones_like(t)], axis=1)
+
+    ours = levenberg_marquardt(res_jac, lambda x: 0.5 * float(res(x) @ res(x)), np.array([1.0, 0.5, 0.0]))
+    ref = scipy.optimize.least_squares(res, [1.0, 0.5, 0.0], method="lm")
+    assert ours.status == CONVERGED
+    np.testing.assert_allclose(ours.x, ref.x, rtol=1e-5)
+    assert abs(ours.loss - ref.cost) <= 1e-9 * ref.cost + 1e-12
+
+
+def test_levenberg_marquardt_reports_a_broken_problem():
+    def res_jac(x):
+        return np.array([np.nan, 1.0]), np.ones((2, 1))
+
+    result = levenberg_marquardt(res_jac, lambda x: float("nan"), np.array([0.0]))
+    assert result.status != CONVERGED
+
+
+def test_regions_with_too_few_samples_take_a_neighbours_fit(jit_variant):
+    model = brdf.model("ward")
+    light, view, r, sigma = synthetic_samples(model, TRUTH["ward"][1], 6000, seed=4)
+    region = np.zeros(len(sigma), dtype=int)
+    region[:20] = 1  # lips: 20 samples
+    names = {0: "skin", 1: "lips", 2: "eyebrows"}  # eyebrows: none
+    with pytest.warns(UserWarning, match="region 'lips': 20 samples"):
+        fits = fit_regions(model, light, view, r, sigma, region, names, neighbours={"lips": ["skin"]},
+                           schedule=FULL_DATA)
+    assert fits["skin"].status == CONVERGED
+    assert fits["lips"].status == "prior" and fits["lips"].params == fits["skin"].params
+    assert fits["eyebrows"].status == "prior" and fits["eyebrows"].samples == 0
+    assert min_samples(model) == 10 * 7  # diffuse RGB, specular RGB, alpha
+
+
+def test_bad_samples_are_named(jit_variant):
+    model = brdf.model("phong")
+    light, view, r, sigma = synthetic_samples(model, TRUTH["phong"][1], 100)
+    r[5, 1] = np.nan
+    with pytest.raises(ValueError, match="reflectance contains 1 NaN"):
+        fit_region(model, light, view, r, sigma)
+    with pytest.raises(ValueError, match="light must have shape"):
+        fit_region(model, light[:50], view, r, sigma)
+    with pytest.raises(ValueError, match="only 3 samples"):
+        fit_region(model, light[:3], view[:3], r[:3], sigma[:3])
+
+
+def test_fitting_reuses_compiled_kernels(jit_variant):
+    """Parameters enter the kernels as opaque values: after the first
+    iterations, further iterations compile nothing new."""
+    import drjit as dr
+
+    model = brdf.model("phong")
+    light, view, r, sigma = synthetic_samples(model, TRUTH["phong"][1], 3000, seed=5)
+    fit_region(model, light, view, r, sigma, schedule=FULL_DATA)  # warm the cache
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        dr.kernel_history()
+        fit_region(model, light, view, r, sigma, start={"exponent": 25.0}, schedule=FULL_DATA)
+        history = dr.kernel_history([dr.KernelType.JIT])
+    assert history and all(k["cache_hit"] for k in history), [k for k in history if not k["cache_hit"]][:2]
