@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from mifaces import brdf
+from mifaces.brdf import albedo
 
 # Every model configuration the plugins offer.
 CONFIGS = (
@@ -121,25 +122,7 @@ SAMPLES = 1 << 16
 
 
 def glossy_albedo(model, cases):
-    """Albedo of the glossy part for a list of (cos θi, params) cases.
-
-    Returns (estimate, standard error) arrays of shape (len(cases),), the
-    channel mean (all coefficients here are grey)."""
-    k = len(cases)
-    case = dr.arange(mi.UInt32, k * SAMPLES) // SAMPLES
-    sampler = mi.PCG32(size=k * SAMPLES, initstate=dr.arange(mi.UInt64, k * SAMPLES))
-    u1, u2 = sampler.next_float32(), mi.Point2f(sampler.next_float32(), sampler.next_float32())
-    cos_i = dr.gather(mi.Float, mi.Float([c for c, _ in cases]), case)
-    wi = mi.Vector3f(dr.safe_sqrt(1 - cos_i * cos_i), 0, cos_i)
-    params = {}
-    for p in model.specular_parameters():
-        params[p.name] = dr.gather(mi.Float, mi.Float([float(c[1][p.name]) for c in cases]), case)
-    wo = model.sample_specular(wi, u1, u2, params)
-    pdf = model.pdf_specular(wi, wo, params)
-    f = model.eval(wi, wo, params, diffuse=False)
-    value = dr.select((pdf > 0) & (wo.z > 0), dr.mean(f) * wo.z / pdf, 0.0)
-    v = np.array(value).reshape(k, SAMPLES)
-    return v.mean(axis=1), v.std(axis=1) / np.sqrt(SAMPLES)
+    return albedo.glossy_albedo(model, cases, SAMPLES)
 
 
 def energy_cases(model):
