@@ -15,6 +15,7 @@ _llvm.configure()
 if _drjit_came_first:
     _llvm.check_loaded()
 
+from .model import MorphableModel, load_model  # noqa: E402
 from .variant import default_variant, set_variant  # noqa: E402
 
 __version__ = "0.1.0"

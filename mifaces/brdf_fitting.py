@@ -189,11 +189,13 @@ class RegionFit:
     status: str
     reason: str
     iterations: int
+    #: (seconds, loss, samples): after each accepted step, the loss on the
+    #: stage's subset scaled to the full set, and the subset's size
     history: list = field(default_factory=list)
 
     def to_json(self) -> dict:
         d = asdict(self)
-        d["history"] = [[round(t, 6), float(e)] for t, e in self.history]
+        d["history"] = [[round(t, 6), float(e), int(n)] for t, e, n in self.history]
         return d
 
 
@@ -252,7 +254,7 @@ def min_samples(model: BRDFModel, fixed: dict | None = None) -> int:
 
 def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start: dict | None = None,
                fixed: dict | None = None, bounds: dict | None = None, schedule: Schedule | None = None,
-               seed: int = 0, ftol: float = 1e-7) -> RegionFit:
+               seed: int = 0, ftol: float = 1e-7, trace: list | None = None) -> RegionFit:
     """Fit ``model`` to one region's samples by hierarchical Levenberg-Marquardt.
 
     Parameters
@@ -274,6 +276,9 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         The subset hierarchy; :data:`FULL_DATA` fits all samples at once.
     seed : int
         Seed of the random subsets.
+    trace : list, optional
+        If given, receives (seconds, parameter values) after every accepted
+        step, for reports that evaluate the full-data loss along the way.
 
     Returns
     -------
@@ -304,7 +309,9 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
                                      ftol=ftol if last else max(ftol, schedule.stage_ftol), clock_start=t0)
         x = result.x
         iterations += result.iterations
-        history += [(t, e * len(sigma) / size) for t, e in result.history]  # scaled to the full set
+        history += [(t, e * len(sigma) / size, size) for t, e, _ in result.history]
+        if trace is not None:
+            trace += [(t, space.values(xs)) for t, _, xs in result.history]
     return RegionFit(model=model.name, options=dict(model.options), params=space.values(x), loss=result.loss,
                      samples=len(sigma), seconds=time.perf_counter() - t0, status=result.status,
                      reason=result.reason, iterations=iterations, history=history)

@@ -44,8 +44,9 @@ class LMResult:
         Which test ended the run, in words.
     iterations : int
         Jacobian evaluations.
-    history : list of (seconds, loss)
-        Loss after each accepted step, with the wall time since the start.
+    history : list of (seconds, loss, x)
+        Loss and parameters after each accepted step, with the wall time
+        since the start.
     """
 
     x: np.ndarray
@@ -106,7 +107,7 @@ def levenberg_marquardt(
     r, jac = residuals_and_jacobian(x)
     current = 0.5 * float(np.dot(r.astype(np.float64), r.astype(np.float64)))
     jtj, jtr = normal_equations(r, jac)
-    history = [(time.perf_counter() - start, current)]
+    history = [(time.perf_counter() - start, current, x.copy())]
     lam = lambda0 * max(float(np.max(np.diag(jtj))), 1e-30)
     iterations, evaluations = 1, 1
     status, reason = MAX_ITERATIONS, f"{max_iterations} iterations"
@@ -136,7 +137,7 @@ def levenberg_marquardt(
             r, jac = residuals_and_jacobian(x)
             jtj, jtr = normal_equations(r, jac)
             iterations += 1
-            history.append((time.perf_counter() - start, current))
+            history.append((time.perf_counter() - start, current, x.copy()))
             if decrease <= ftol * current:
                 status, reason = CONVERGED, "relative loss decrease below ftol"
                 break

@@ -59,7 +59,7 @@ def test_noise_free_samples_recover_parameters(jit_variant, name, schedule):
     assert fit.status == CONVERGED, fit.reason
     assert max(errors.values()) < 1e-3, errors
     assert fit.samples == len(sigma) and fit.loss < 1e-6 and fit.seconds > 0
-    assert all(np.isfinite(e) for _, e in fit.history)
+    assert all(np.isfinite(e) for _, e, _ in fit.history)
 
 
 def test_two_lafortune_lobes_from_a_nearby_start(jit_variant):

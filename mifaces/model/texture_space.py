@@ -1,0 +1,135 @@
+"""The common parameterization: rasterizing a mesh into texture space.
+
+Texture space is the unit square of ``(u, v)`` texture coordinates, sampled
+by an image of ``height x width`` texels; texel ``(row, col)`` has its centre
+at ``u = (col + 0.5) / width``, ``v = (row + 0.5) / height`` (``v = 0`` is
+the top row, Mitsuba's convention). Rasterizing tells, for every texel, which
+triangle of the face covers it and where (barycentric coordinates): the
+correspondence that carries each image into the common domain (paper
+section 4.2, 4.3) and that gives every region of the region map its
+triangles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TexelCoverage:
+    """Which triangle covers each texel of a texture-space image.
+
+    Attributes
+    ----------
+    triangle : (H, W) int32
+        Index of the covering triangle, -1 where none covers the texel.
+    barycentric : (H, W, 3) float32
+        Barycentric coordinates of the texel centre in that triangle (zero
+        where uncovered).
+    count : (H, W) int32
+        How many triangles cover the texel centre: 1 inside a face whose
+        parameterization is injective, more where triangles overlap in
+        texture space.
+    """
+
+    triangle: np.ndarray
+    barycentric: np.ndarray
+    count: np.ndarray
+
+    @property
+    def covered(self) -> np.ndarray:
+        """(H, W) bool: texels that some triangle covers."""
+        return self.count > 0
+
+
+def rasterize(uv: np.ndarray, triangles: np.ndarray, shape: tuple[int, int], chunk: int = 4_000_000
+              ) -> TexelCoverage:
+    """Rasterize the triangles of a mesh in texture space.
+
+    A texel belongs to a triangle when its centre lies inside the triangle or
+    on an edge shared in the top-left sense (the half-open rule of GPU
+    rasterizers), so that two triangles meeting along an edge never both
+    claim a texel on it and ``count`` counts true overlaps only.
+
+    Parameters
+    ----------
+    uv : (N, 2) array
+        Per-vertex texture coordinates.
+    triangles : (T, 3) int array
+        Vertex indices; both windings in texture space are accepted.
+    shape : (int, int)
+        ``(height, width)`` of the texture image.
+    chunk : int
+        Number of (triangle, texel) candidate pairs processed at once (memory).
+
+    Returns
+    -------
+    TexelCoverage
+    """
+    height, width = int(shape[0]), int(shape[1])
+    if height < 1 or width < 1:
+        raise ValueError(f"shape must be two positive ints (height, width), got {shape}")
+    uv = np.asarray(uv, dtype=np.float64)
+    tri = np.asarray(triangles).astype(np.int64)
+    if uv.ndim != 2 or uv.shape[1] != 2:
+        raise ValueError(f"uv must have shape (N, 2), got {uv.shape}")
+    # Texel-centre coordinates: x = u * W - 0.5, y = v * H - 0.5.
+    px = uv[:, 0] * width - 0.5
+    py = uv[:, 1] * height - 0.5
+    x = px[tri]
+    y = py[tri]
+    area = (x[:, 1] - x[:, 0]) * (y[:, 2] - y[:, 0]) - (x[:, 2] - x[:, 0]) * (y[:, 1] - y[:, 0])
+    keep = np.abs(area) > 1e-12
+    # Orient every triangle counter-clockwise in (x, y) for the edge tests.
+    flip = area < 0
+    x[flip] = x[flip][:, [0, 2, 1]]
+    y[flip] = y[flip][:, [0, 2, 1]]
+    area = np.abs(area)
+    x0 = np.clip(np.ceil(x.min(axis=1)), 0, width - 1).astype(np.int64)
+    x1 = np.clip(np.floor(x.max(axis=1)), -1, width - 1).astype(np.int64)
+    y0 = np.clip(np.ceil(y.min(axis=1)), 0, height - 1).astype(np.int64)
+    y1 = np.clip(np.floor(y.max(axis=1)), -1, height - 1).astype(np.int64)
+    nx = np.maximum(x1 - x0 + 1, 0)
+    ny = np.maximum(y1 - y0 + 1, 0)
+    n = np.where(keep, nx * ny, 0)
+
+    triangle = np.full(height * width, -1, dtype=np.int32)
+    bary = np.zeros((height * width, 3), dtype=np.float32)
+    count = np.zeros(height * width, dtype=np.int64)
+    # Split the triangles so that each batch has about `chunk` candidates.
+    ends = np.cumsum(n)
+    start_tri = 0
+    while start_tri < len(tri):
+        stop = int(np.searchsorted(ends, (ends[start_tri - 1] if start_tri else 0) + chunk, side="right"))
+        stop = max(stop, start_tri + 1)
+        sel = np.arange(start_tri, min(stop, len(tri)))
+        start_tri = min(stop, len(tri))
+        ns = n[sel]
+        if ns.sum() == 0:
+            continue
+        t_id = np.repeat(sel, ns)
+        offset = np.arange(ns.sum()) - np.repeat(np.cumsum(ns) - ns, ns)
+        cx = x0[t_id] + offset % nx[t_id]
+        cy = y0[t_id] + offset // nx[t_id]
+        tx, ty = x[t_id], y[t_id]
+        w = np.empty((len(t_id), 3))
+        inside = np.ones(len(t_id), dtype=bool)
+        for k in range(3):  # edge opposite vertex k: from a to b
+            a, b = (k + 1) % 3, (k + 2) % 3
+            ex, ey = tx[:, b] - tx[:, a], ty[:, b] - ty[:, a]
+            e = ex * (cy - ty[:, a]) - ey * (cx - tx[:, a])
+            # Top-left rule (y down, counter-clockwise in x-right/y-down means
+            # positive e inside): include the edge only for top or left edges.
+            top_left = (ey < 0) | ((ey == 0) & (ex > 0))
+            inside &= (e > 0) | ((e == 0) & top_left)
+            w[:, k] = e
+        w /= area[t_id][:, None]
+        w[flip[t_id]] = w[flip[t_id]][:, [0, 2, 1]]  # back to the mesh's vertex order
+        texel = cy[inside] * width + cx[inside]
+        np.add.at(count, texel, 1)
+        triangle[texel] = t_id[inside]
+        bary[texel] = w[inside]
+    return TexelCoverage(triangle.reshape(height, width), bary.reshape(height, width, 3),
+                         count.reshape(height, width).astype(np.int32))
