@@ -90,12 +90,12 @@ def exp_flushed(x):
 
 
 def power(base, exponent):
-    """``max(base, 0) ** exponent`` = exp(n log base), whose value and
+    """``max(base, 0) ** exponent`` = 2^(n log2 base), whose value and
     gradient stay finite for base -> 0 and exponents from 1 to 1e5 (the
     unused branch is fed 1), flushed to 0 below float32's normal range."""
-    positive = base > 0
-    safe = dr.select(positive, base, 1.0)
-    return dr.select(positive, exp_flushed(exponent * dr.log(safe)), 0.0)
+    safe = dr.select(base > 0, base, 1.0)
+    x = exponent * dr.log2(safe)
+    return dr.select((base > 0) & (x > -126.0), dr.exp2(dr.maximum(x, -126.0)), 0.0)
 
 
 def mean(value):
