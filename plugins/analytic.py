@@ -152,26 +152,19 @@ class AnalyticBSDF:
         valid = (wi.z > 0) & (wo.z > 0)
         return dr.select(valid, f * cos_o, 0.0), dr.select(valid, pdf, 0.0)
 
-    def eval(self, ctx, si, wo, active=True):
-        diffuse, specular = self._parts(ctx)
-        if not (diffuse or specular):
-            return mi.Color3f(0.0)
-        f, _ = self._eval_pdf(si.wi, wo, self._params(si, active), diffuse, specular)
-        return dr.select(active, f, 0.0)
-
-    def pdf(self, ctx, si, wo, active=True):
-        diffuse, specular = self._parts(ctx)
-        if not (diffuse or specular):
-            return mi.Float(0.0)
-        _, pdf = self._eval_pdf(si.wi, wo, self._params(si, active), diffuse, specular)
-        return dr.select(active, pdf, 0.0)
-
     def eval_pdf(self, ctx, si, wo, active=True):
         diffuse, specular = self._parts(ctx)
         if not (diffuse or specular):
             return mi.Color3f(0.0), mi.Float(0.0)
         f, pdf = self._eval_pdf(si.wi, wo, self._params(si, active), diffuse, specular)
         return dr.select(active, f, 0.0), dr.select(active, pdf, 0.0)
+
+    # What eval or pdf leaves unused, the JIT variants drop from the traced kernel.
+    def eval(self, ctx, si, wo, active=True):
+        return self.eval_pdf(ctx, si, wo, active)[0]
+
+    def pdf(self, ctx, si, wo, active=True):
+        return self.eval_pdf(ctx, si, wo, active)[1]
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         wi = si.wi
