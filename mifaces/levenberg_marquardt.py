@@ -59,11 +59,20 @@ class LMResult:
 
 
 def normal_equations(residuals: np.ndarray, jacobian: np.ndarray):
-    """JᵀJ and Jᵀr, as float64 (P, P) and (P,) arrays. The products run in
-    the precision of J (float32 BLAS for millions of rows: the step needs
-    only a few digits; the loss that accepts or rejects it is exact)."""
-    jtj = (jacobian.T @ jacobian).astype(np.float64)
-    jtr = (jacobian.T @ residuals.astype(jacobian.dtype)).astype(np.float64)
+    """JᵀJ and Jᵀr, as float64 (P, P) and (P,) arrays.
+
+    The products run in the precision of J (float32 BLAS for millions of
+    rows: the step needs only a few digits; the loss that accepts or rejects
+    it is exact), on columns scaled to a largest entry of 1 so that sharp
+    lobes, whose derivatives reach 1e17, cannot overflow the sums."""
+    scale = np.max(np.abs(jacobian), axis=0).astype(np.float64)
+    scale[~(scale > 0) | ~np.isfinite(scale)] = 1.0
+    scaled = jacobian / scale.astype(jacobian.dtype)
+    r = residuals.astype(jacobian.dtype)
+    r_scale = float(np.max(np.abs(r))) if r.size else 1.0
+    r_scale = r_scale if np.isfinite(r_scale) and r_scale > 0 else 1.0
+    jtj = (scaled.T @ scaled).astype(np.float64) * np.outer(scale, scale)
+    jtr = (scaled.T @ (r / np.float32(r_scale))).astype(np.float64) * scale * r_scale
     return jtj, jtr
 
 
@@ -98,7 +107,8 @@ def levenberg_marquardt(
     gtol : float
         Stop when max |Jᵀr| < gtol · max(loss, tiny) (a stationary point).
     lambda0 : float
-        Initial damping, relative to max diag(JᵀJ).
+        Initial damping λ; dimensionless, as the damping term λ diag(JᵀJ)
+        scales with each parameter's own curvature.
     clock_start : float, optional
         ``time.perf_counter()`` value the history's times count from.
     """
@@ -108,12 +118,16 @@ def levenberg_marquardt(
     current = 0.5 * float(np.dot(r.astype(np.float64), r.astype(np.float64)))
     jtj, jtr = normal_equations(r, jac)
     history = [(time.perf_counter() - start, current, x.copy())]
-    lam = lambda0 * max(float(np.max(np.diag(jtj))), 1e-30)
+    lam = lambda0
     iterations, evaluations = 1, 1
     status, reason = MAX_ITERATIONS, f"{max_iterations} iterations"
     if not np.isfinite(current):
         return LMResult(x, current, STALLED, "loss is not finite at the start", 1, 1, history)
+    rejections = 0
     while iterations < max_iterations:
+        if not (np.all(np.isfinite(jtj)) and np.all(np.isfinite(jtr))):
+            status, reason = STALLED, "the Jacobian is not finite at the current parameters"
+            break
         if np.max(np.abs(jtr)) <= gtol * max(current, 1e-300):
             status, reason = CONVERGED, "gradient vanished"
             break
@@ -124,12 +138,13 @@ def levenberg_marquardt(
             delta = None
         if delta is not None and np.all(np.isfinite(delta)):
             predicted = -float(jtr @ delta) - 0.5 * float(delta @ jtj @ delta)
-            if predicted <= ftol * current and lam <= lambda0 * max(float(np.max(np.diag(jtj))), 1e-30):
+            if predicted <= ftol * current and lam <= lambda0:
                 status, reason = CONVERGED, "predicted loss decrease below ftol"
                 break
         trial = float("inf") if delta is None or not np.all(np.isfinite(delta)) else loss(x + delta)
         evaluations += 1
         if np.isfinite(trial) and trial < current:
+            rejections = 0
             x = x + delta
             decrease = current - trial
             current = trial
@@ -146,7 +161,8 @@ def levenberg_marquardt(
                 break
         else:
             lam *= 4.0
-            if lam > 1e16 * max(1.0, float(np.max(np.diag(jtj)))):
+            rejections += 1
+            if rejections > 60 or lam > 1e16:
                 if np.isfinite(trial):
                     status, reason = CONVERGED, "no step lowers the loss at the residuals' precision"
                 else:

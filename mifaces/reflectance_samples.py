@@ -87,6 +87,14 @@ def confidence_with_distance(light_z, view_z, distance, dmax):
         return dmax / (np.minimum(distance, dmax) * np.square(light_z) * np.asarray(view_z, np.float64))
 
 
+def unsaturated(pixels, saturation: float = 1.0, margin: float = 0.98):
+    """Pixels whose every channel stays below ``margin · saturation``: a
+    clipped channel no longer measures the radiance, so its sample is
+    dropped rather than fitted. ``pixels`` is (..., 3) in the camera's
+    linear units, ``saturation`` the level at which the sensor clips."""
+    return np.all(np.asarray(pixels) < margin * saturation, axis=-1)
+
+
 def valid_samples(light_z, view_z, lit, visible, erosion: int = 1, min_cosine: float = MIN_COSINE):
     """Texels that give a usable sample (sec. 4.3).
 

@@ -71,3 +71,10 @@ def test_valid_samples_drop_shadow_grazing_and_borders():
     assert mask[5:15, 7:14].all()
     unchanged = valid_samples(light_z, view_z, lit, visible, erosion=0)
     assert unchanged[1:, 5].all() and not unchanged[:, 4].any()
+
+
+def test_saturated_pixels_are_dropped():
+    from mifaces.reflectance_samples import unsaturated
+
+    pixels = np.array([[0.2, 0.3, 0.4], [0.2, 0.99, 0.4], [1.0, 1.0, 1.0], [0.5, 0.97, 0.1]])
+    np.testing.assert_array_equal(unsaturated(pixels, 1.0), [True, False, False, True])
