@@ -21,6 +21,8 @@ compare r with π f(l̂, v̂).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.ndimage
 
@@ -118,3 +120,224 @@ def valid_samples(light_z, view_z, lit, visible, erosion: int = 1, min_cosine: f
     if erosion > 0:
         mask = skimage.morphology.erosion(mask, skimage.morphology.disk(erosion))
     return mask
+
+
+# ---------------------------------------------------------------------------
+# Resampling a photograph into the common texture parameterization (sec. 4.3)
+
+@dataclass
+class ReflectanceSamples:
+    """Reflectance samples of one or more measurements, in texture space.
+
+    Attributes
+    ----------
+    light, view : (N, 3) float32
+        l̂ and v̂ in the local shading frame (tangent along +u, normal z).
+    reflectance : (N, 3) float32
+        r, 1 for a white Lambertian target (r = π f).
+    sigma : (N,) float32
+        Confidence of eq. 10 (weights are 1/σ²).
+    texel : (N,) int32
+        Flat texel index row · R + column.
+    measurement : (N,) int16
+        Index into ``measurement_names``.
+    resolution : int
+        R of the R × R texture.
+    measurement_names : tuple of str
+    """
+
+    light: np.ndarray
+    view: np.ndarray
+    reflectance: np.ndarray
+    sigma: np.ndarray
+    texel: np.ndarray
+    measurement: np.ndarray
+    resolution: int
+    measurement_names: tuple = ()
+
+    def __len__(self) -> int:
+        return len(self.sigma)
+
+    def region(self, region_map: np.ndarray) -> np.ndarray:
+        """Region label of each sample from an (R, R) region map."""
+        if region_map.shape != (self.resolution, self.resolution):
+            raise ValueError(f"region map of shape {region_map.shape} does not match the samples' "
+                             f"{self.resolution}x{self.resolution} texture")
+        return region_map.ravel()[self.texel]
+
+    @staticmethod
+    def concatenate(parts: list[ReflectanceSamples]) -> ReflectanceSamples:
+        """One set from several (same resolution); measurement indices follow
+        the order of ``parts``."""
+        if not parts:
+            raise ValueError("no reflectance samples to concatenate")
+        if len({p.resolution for p in parts}) != 1:
+            raise ValueError("reflectance samples of different texture resolutions cannot be combined")
+        names, offsets = [], []
+        for p in parts:
+            offsets.append(len(names))
+            names += list(p.measurement_names)
+        return ReflectanceSamples(
+            *(np.concatenate([getattr(p, k) for p in parts]) for k in ("light", "view", "reflectance", "sigma", "texel")),
+            measurement=np.concatenate([p.measurement + o for p, o in zip(parts, offsets)]).astype(np.int16),
+            resolution=parts[0].resolution, measurement_names=tuple(names))
+
+    def save(self, path) -> None:
+        """Write as a compressed ``.npz``, atomically."""
+        from .files import atomic_path
+
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as f:
+                np.savez_compressed(f, light=self.light, view=self.view, reflectance=self.reflectance,
+                                    sigma=self.sigma, texel=self.texel, measurement=self.measurement,
+                                    resolution=self.resolution, measurement_names=np.array(self.measurement_names))
+
+    @staticmethod
+    def load(path) -> ReflectanceSamples:
+        with np.load(path) as d:
+            return ReflectanceSamples(d["light"], d["view"], d["reflectance"], d["sigma"], d["texel"],
+                                      d["measurement"], int(d["resolution"]),
+                                      tuple(str(n) for n in d["measurement_names"]))
+
+
+@dataclass
+class TexelGeometry:
+    """Surface point and local frame of every covered texel of one mesh.
+
+    ``texel`` are flat indices; ``position`` etc. are (M, 3) in the mesh's
+    frame (world, mm); (tangent, bitangent, normal) is right-handed."""
+
+    texel: np.ndarray
+    position: np.ndarray
+    tangent: np.ndarray
+    bitangent: np.ndarray
+    normal: np.ndarray
+
+
+def texel_geometry(vertices, triangles, uv, coverage) -> TexelGeometry:
+    """Interpolate positions and the per-vertex shading frames of
+    :func:`mifaces.model.geometry.tangent_frames` at the texel centres that
+    ``coverage`` (:func:`mifaces.model.texture_space.rasterize`) finds."""
+    from .model.geometry import tangent_frames
+
+    vertices = np.asarray(vertices, np.float64)
+    triangles = np.asarray(triangles, np.int64)
+    tangent, _, normal = (np.asarray(a, np.float64) for a in tangent_frames(vertices, triangles, uv))
+    texel = np.flatnonzero(coverage.triangle.ravel() >= 0)
+    tri = triangles[coverage.triangle.ravel()[texel]]
+    bary = coverage.barycentric.reshape(-1, 3)[texel].astype(np.float64)
+
+    def interpolate(a):
+        return np.einsum("mk,mkc->mc", bary, a[tri])
+
+    n = interpolate(normal)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    t = interpolate(tangent)
+    t -= n * np.sum(t * n, axis=1, keepdims=True)
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-30)
+    return TexelGeometry(texel=texel.astype(np.int32), position=interpolate(vertices), tangent=t,
+                         bitangent=np.cross(n, t), normal=n)
+
+
+def _unoccluded(scene, origin, target, normal, offset: float) -> np.ndarray:
+    """True where the segment from ``origin`` (pushed ``offset`` along the
+    normal) to ``target`` hits nothing in ``scene``."""
+    import drjit as dr
+    import mitsuba as mi
+
+    if len(origin) == 0:
+        return np.zeros(0, bool)
+    start = origin + offset * normal
+    d = target - start
+    dist = np.linalg.norm(d, axis=1)
+    d = d / np.maximum(dist, 1e-30)[:, None]
+    ray = mi.Ray3f(mi.Point3f(start.T.astype(np.float32)), mi.Vector3f(d.T.astype(np.float32)))
+    ray.maxt = mi.Float((dist * (1 - 1e-4)).astype(np.float32))
+    hit = scene.ray_test(ray)
+    return ~np.array(hit, dtype=bool) if dr.is_jit_v(mi.Float) else np.array([not hit])
+
+
+def measurement_samples(camera, light_position, intensity, pixels, vertices, triangles, uv, coverage, *,
+                        saturated=None, scale: float = np.pi, erosion: int = 1, min_cosine: float = MIN_COSINE,
+                        name: str = "", offset: float | None = None) -> ReflectanceSamples:
+    """Reflectance samples of one photograph (paper sec. 4.3, 5.3).
+
+    Parameters
+    ----------
+    camera : mifaces.capture.Camera
+        Calibrated camera (world frame in mm, OpenCV pixel conventions).
+    light_position : (3,) world position of the point light, mm.
+    intensity : (3,) its radiant intensity, in the units of ``pixels``·mm².
+    pixels : (H, W, 3) linear radiance image.
+    vertices : (V, 3) the face in world coordinates for this measurement.
+    triangles, uv : the model's triangles and texture coordinates.
+    coverage : :class:`mifaces.model.texture_space.TexelCoverage` of ``uv`` at R × R.
+    saturated : (H, W) bool, optional; saturated pixels give no sample.
+    scale : float
+        Scale of eq. 4 (π: a white Lambertian target has r = 1).
+    erosion : int
+        Texels eroded from the borders of the valid region.
+
+    Returns
+    -------
+    ReflectanceSamples
+        Valid texels only: visible from the camera, not in cast shadow, not
+        grazing, inside the image, unsaturated; σ by eq. 10.
+    """
+    import mitsuba as mi
+    import scipy.ndimage as ndi
+
+    from .model.mesh import mitsuba_mesh
+
+    pixels = np.asarray(pixels, np.float32)
+    if pixels.shape != (camera.height, camera.width, 3):
+        raise ValueError(f"image of shape {pixels.shape} does not match the camera's "
+                         f"{camera.height}x{camera.width}x3")
+    if not np.all(np.isfinite(pixels)):
+        raise ValueError(f"image contains {np.count_nonzero(~np.isfinite(pixels))} NaN or infinite values")
+    resolution = coverage.triangle.shape[0]
+    geo = texel_geometry(vertices, triangles, uv, coverage)
+    p, n = geo.position, geo.normal
+    size = float(np.ptp(np.asarray(vertices), axis=0).max())
+    offset = 1e-4 * size if offset is None else offset
+    scene = mi.load_dict({"type": "scene", "face": mitsuba_mesh(vertices, triangles, uv)})
+    to_camera = camera.position[None, :] - p
+    to_light = np.asarray(light_position, np.float64)[None, :] - p
+    dist_light = np.linalg.norm(to_light, axis=1)
+    l_world = to_light / dist_light[:, None]
+    v_world = to_camera / np.linalg.norm(to_camera, axis=1, keepdims=True)
+    cos_l, cos_v = np.sum(l_world * n, 1), np.sum(v_world * n, 1)
+    front = (cos_l > 0) & (cos_v > 0)
+    visible, lit = np.zeros(len(p), bool), np.zeros(len(p), bool)
+    visible[front] = _unoccluded(scene, p[front], np.broadcast_to(camera.position, p[front].shape), n[front], offset)
+    lit[front] = _unoccluded(scene, p[front], np.broadcast_to(light_position, p[front].shape), n[front], offset)
+    # the photograph at each texel's projection (bilinear; pixel centres at integers)
+    xy = camera.project(p)
+    inside = (xy[:, 0] >= 0) & (xy[:, 0] <= camera.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= camera.height - 1)
+    coords = [xy[:, 1], xy[:, 0]]
+    radiance = np.stack([ndi.map_coordinates(pixels[..., c], coords, order=1, mode="nearest")
+                         for c in range(3)], axis=1)
+    ok = inside
+    if saturated is not None:
+        near = ndi.binary_dilation(np.asarray(saturated, bool))  # bilinear taps touch the neighbours
+        ok &= ~ndi.map_coordinates(near.astype(np.uint8), coords, order=0, mode="nearest").astype(bool)
+    r = reflectance(radiance, dist_light, intensity, cos_l, scale)
+
+    def image(values, fill):
+        out = np.full(resolution * resolution, fill, dtype=np.asarray(values).dtype)
+        out[geo.texel] = values
+        return out.reshape(resolution, resolution)
+
+    valid = valid_samples(image(cos_l, 0.0), image(cos_v, 0.0), image(lit & ok, False),
+                          image(visible & np.all(np.isfinite(r), axis=1), False), erosion, min_cosine)
+    keep = valid.ravel()[geo.texel]
+    distance = distance_to_missing(valid).ravel()[geo.texel[keep]]
+    frame = np.stack([geo.tangent[keep], geo.bitangent[keep], n[keep]], axis=1)  # (M, 3 axes, 3)
+    light_local = np.einsum("mij,mj->mi", frame, l_world[keep])
+    view_local = np.einsum("mij,mj->mi", frame, v_world[keep])
+    sigma = confidence_with_distance(light_local[:, 2], view_local[:, 2], distance, d_max(resolution))
+    m = int(keep.sum())
+    return ReflectanceSamples(light=light_local.astype(np.float32), view=view_local.astype(np.float32),
+                              reflectance=r[keep].astype(np.float32), sigma=sigma.astype(np.float32),
+                              texel=geo.texel[keep].astype(np.int32), measurement=np.zeros(m, np.int16),
+                              resolution=resolution, measurement_names=(name,))

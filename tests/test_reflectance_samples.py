@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from mifaces.reflectance_samples import (MIN_COSINE, confidence, confidence_with_distance, d_max,
                                          distance_to_missing, reflectance, valid_samples)
@@ -78,3 +79,133 @@ def test_saturated_pixels_are_dropped():
 
     pixels = np.array([[0.2, 0.3, 0.4], [0.2, 0.99, 0.4], [1.0, 1.0, 1.0], [0.5, 0.97, 0.1]])
     np.testing.assert_array_equal(unsaturated(pixels, 1.0), [True, False, False, True])
+
+
+# ---------------------------------------------------------------------------
+# Resampling a rendered photograph into texture space
+
+def spherical_cap(n=96, radius=80.0, centre_z=260.0, half=50.0):
+    """A cap of a sphere facing a camera at the origin (looking along +z),
+    as a grid mesh with uv = ((x + half), (y + half)) / (2 half)."""
+    u = np.linspace(0, 1, n)
+    uu, vv = np.meshgrid(u, u)
+    x, y = (uu - 0.5) * 2 * half, (vv - 0.5) * 2 * half
+    z = centre_z - np.sqrt(radius ** 2 - x ** 2 - y ** 2)
+    vertices = np.stack([x, y, z], -1).reshape(-1, 3)
+    uv = np.stack([uu, vv], -1).reshape(-1, 2)
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    # counter-clockwise seen from the camera: normals (b - a) x (c - a) towards -z
+    triangles = np.concatenate([np.stack([a, c, b], 1), np.stack([b, c, d], 1)])
+    return vertices, triangles, uv
+
+
+def render_photo(camera, vertices, triangles, uv, light, intensity, bsdf, spp=64):
+    import mitsuba as mi
+
+    from mifaces.model.mesh import mitsuba_mesh
+
+    fov = np.degrees(2 * np.arctan(camera.width / (2 * camera.fx)))
+    scene = mi.load_dict({
+        "type": "scene", "integrator": {"type": "direct"},
+        "sensor": {"type": "perspective", "fov": fov, "fov_axis": "x",
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=[0, 0, 1], up=[0, -1, 0]),
+                   "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
+                            "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": spp}},
+        "light": {"type": "point", "position": list(map(float, light)),
+                  "intensity": {"type": "rgb", "value": list(map(float, intensity))}},
+        "face": mitsuba_mesh(vertices, triangles, uv, bsdf=bsdf)})
+    return np.array(mi.render(scene), dtype=np.float32)
+
+
+def test_resampled_reflectance_matches_the_brdf(jit_variant):
+    """Render a surface of known BRDF, resample the picture into texture
+    space: every sample's reflectance is π f(l̂, v̂) of that BRDF."""
+    import mitsuba as mi
+
+    from mifaces import brdf
+    from mifaces.capture import Camera
+    from mifaces.model.texture_space import rasterize
+    from mifaces.reflectance_samples import measurement_samples
+
+    camera = Camera(width=160, height=160, fx=230.0, fy=230.0, cx=79.5, cy=79.5)
+    vertices, triangles, uv = spherical_cap()
+    light, intensity = np.array([-120.0, -90.0, 20.0]), np.array([3e4, 2.5e4, 2e4])
+    params = {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [1.5] * 3, "roughness": 0.35}
+    bsdf = {"type": "cooktorrance", "diffuse_reflectance": {"type": "rgb", "value": params["diffuse_reflectance"]},
+            "specular_reflectance": 1.5, "roughness": 0.35}
+    photo = render_photo(camera, vertices, triangles, uv, light, intensity, bsdf)
+    coverage = rasterize(uv, triangles, (128, 128))
+    samples = measurement_samples(camera, light, intensity, photo, vertices, triangles, uv, coverage, name="m0")
+    assert len(samples) > 0.5 * 128 * 128
+    assert np.all(np.isfinite(samples.sigma)) and np.all(samples.sigma >= 1)
+    assert np.all(samples.light[:, 2] > 0.17) and np.all(samples.view[:, 2] > 0.17)
+    model = brdf.model("cooktorrance")
+    p = {"diffuse_reflectance": mi.Color3f(*params["diffuse_reflectance"]), "specular_reflectance": 1.5,
+         "roughness": 0.35, "eta": 1.4}
+    expected = np.pi * np.array(model.eval(mi.Vector3f(samples.light.T), mi.Vector3f(samples.view.T), p)).T
+    rel = np.abs(samples.reflectance - expected) / expected
+    assert np.median(rel) < 0.01, np.median(rel)
+    assert np.percentile(rel, 95) < 0.05, np.percentile(rel, 95)
+
+
+def test_shadowed_and_hidden_texels_give_no_sample(jit_variant):
+    """A light behind the surface lights nothing; texels outside the image
+    give nothing either."""
+    from mifaces.capture import Camera
+    from mifaces.model.texture_space import rasterize
+    from mifaces.reflectance_samples import measurement_samples
+
+    camera = Camera(width=64, height=64, fx=60.0, fy=60.0, cx=31.5, cy=31.5)
+    vertices, triangles, uv = spherical_cap(n=40)
+    coverage = rasterize(uv, triangles, (48, 48))
+    photo = np.full((64, 64, 3), 0.1, np.float32)
+    behind = measurement_samples(camera, np.array([0.0, 0.0, 600.0]), np.ones(3), photo, vertices, triangles, uv,
+                                 coverage)
+    assert len(behind) == 0
+    narrow = Camera(width=64, height=64, fx=400.0, fy=400.0, cx=31.5, cy=31.5)  # sees only the middle
+    middle = measurement_samples(narrow, np.array([0.0, -50.0, 0.0]), np.ones(3), photo, vertices, triangles, uv,
+                                 coverage)
+    full = measurement_samples(camera, np.array([0.0, -50.0, 0.0]), np.ones(3), photo, vertices, triangles, uv,
+                               coverage)
+    assert 0 < len(middle) < 0.5 * len(full)
+
+
+def test_bad_photographs_are_named(jit_variant):
+    from mifaces.capture import Camera
+    from mifaces.model.texture_space import rasterize
+    from mifaces.reflectance_samples import measurement_samples
+
+    camera = Camera(width=64, height=64, fx=60.0, fy=60.0, cx=31.5, cy=31.5)
+    vertices, triangles, uv = spherical_cap(n=20)
+    coverage = rasterize(uv, triangles, (16, 16))
+    with pytest.raises(ValueError, match="does not match the camera"):
+        measurement_samples(camera, np.zeros(3), np.ones(3), np.zeros((32, 64, 3)), vertices, triangles, uv, coverage)
+    photo = np.zeros((64, 64, 3), np.float32)
+    photo[3, 4, 1] = np.nan
+    with pytest.raises(ValueError, match="1 NaN"):
+        measurement_samples(camera, np.zeros(3), np.ones(3), photo, vertices, triangles, uv, coverage)
+
+
+def test_samples_round_trip_and_concatenate(tmp_path):
+    from mifaces.reflectance_samples import ReflectanceSamples
+
+    rng = np.random.default_rng(0)
+
+    def part(n, name):
+        return ReflectanceSamples(rng.normal(size=(n, 3)).astype(np.float32), rng.normal(size=(n, 3)).astype(np.float32),
+                                  rng.uniform(size=(n, 3)).astype(np.float32), rng.uniform(1, 2, n).astype(np.float32),
+                                  rng.integers(0, 64, n).astype(np.int32), np.zeros(n, np.int16), 8, (name,))
+
+    both = ReflectanceSamples.concatenate([part(5, "a"), part(7, "b")])
+    assert len(both) == 12 and both.measurement_names == ("a", "b")
+    assert both.measurement.tolist() == [0] * 5 + [1] * 7
+    both.save(tmp_path / "s.npz")
+    back = ReflectanceSamples.load(tmp_path / "s.npz")
+    np.testing.assert_array_equal(back.reflectance, both.reflectance)
+    assert back.measurement_names == ("a", "b") and back.resolution == 8
+    region_map = np.arange(64).reshape(8, 8)
+    np.testing.assert_array_equal(both.region(region_map), both.texel)
+    with pytest.raises(ValueError, match="does not match"):
+        both.region(np.zeros((4, 4)))
