@@ -31,8 +31,10 @@ from .brdf.model import BRDFModel, Parameter
 from .levenberg_marquardt import CONVERGED, levenberg_marquardt
 
 #: Parameters held fixed unless the caller frees them: the index of
-#: refraction trades off against the lobe scale; skin's is known (≈ 1.4).
-DEFAULT_FIXED = {"cooktorrance": {"eta": 1.4}}
+#: refraction trades off against the lobe scale, and skin's is known:
+#: η = 1.38 (Weyrich et al., "Analysis of human faces using a
+#: measurement-based skin reflectance model", SIGGRAPH 2006, sec. 5).
+DEFAULT_FIXED = {"cooktorrance": {"eta": 1.38}}
 
 
 @dataclass(frozen=True)
@@ -141,7 +143,7 @@ def conservative_start(model: BRDFModel, reflectance: np.ndarray) -> dict:
         elif p.name in ("roughness", "alpha"):
             start[p.name] = 0.3
         elif p.name == "eta":
-            start[p.name] = 1.4
+            start[p.name] = 1.38
         elif p.name.startswith("exponent"):
             start[p.name] = 10.0 if p.name == "exponent" else 3.0
         elif p.name.startswith("cxy"):
@@ -398,30 +400,42 @@ def prior_fit(model: BRDFModel, params: dict, samples: int, reason: str) -> Regi
                      samples=samples, seconds=0.0, status="prior", reason=reason, iterations=0)
 
 
+#: Where a region without enough samples borrows its BRDF from, in order
+#: (``skin`` is always the last resort).
+NEIGHBOURS = {"lips": ["skin"], "nostrils": ["skin"], "beard": ["skin"], "eyes": ["skin"],
+              "eyebrows": ["hair", "beard"], "hair": ["eyebrows", "beard"]}
+
+
 def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region, region_names: dict,
-                neighbours: dict | None = None, **options) -> dict[str, RegionFit]:
+                neighbours: dict | None = None, progress: bool = False, **options) -> dict[str, RegionFit]:
     """Fit ``model`` separately in every region (paper sec. 4.4, 5.2).
 
     ``region`` gives each sample's label, ``region_names`` label -> name.
     A region with fewer than :func:`min_samples` samples gets a warning and
     the parameters of its first fitted neighbour in ``neighbours`` (name ->
-    names), else of ``skin``, else the model's defaults; its status is
-    ``'prior'``. Regions without samples are not fitted either.
+    names; default :data:`NEIGHBOURS`), else of ``skin``, else the model's
+    defaults; its status is ``'prior'``. Regions without samples are not
+    fitted either. ``progress`` shows a bar over the regions fitted.
     """
+    from tqdm import tqdm
+
     model = brdf_models.model(model) if isinstance(model, str) else model
+    neighbours = NEIGHBOURS if neighbours is None else neighbours
     region = np.asarray(region)
     fixed = options.get("fixed")
     needed = min_samples(model, DEFAULT_FIXED.get(model.name, {}) if fixed is None else fixed)
     counts = {name: int(np.count_nonzero(region == label)) for label, name in region_names.items()}
     fits: dict[str, RegionFit] = {}
-    for label, name in region_names.items():
-        if counts[name] >= needed:
-            mask = region == label
-            fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask], **options)
+    fitted = [(label, name) for label, name in region_names.items() if counts[name] >= needed]
+    bar = tqdm(fitted, desc=f"fitting {model.name}", unit="region", disable=not progress)
+    for label, name in bar:
+        bar.set_postfix_str(f"{name}: {counts[name]} samples")
+        mask = region == label
+        fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask], **options)
     for label, name in region_names.items():
         if name in fits:
             continue
-        donors = list((neighbours or {}).get(name, [])) + ["skin"]
+        donors = list(neighbours.get(name, [])) + ["skin"]
         donor = next((d for d in donors if d in fits), None)
         params = fits[donor].params if donor else {**model.defaults(), **DEFAULT_FIXED.get(model.name, {})}
         source = f"the fit of {donor!r}" if donor else "the model's defaults"
@@ -433,4 +447,4 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
 
 
 __all__ = ["ParameterSpace", "Schedule", "FULL_DATA", "RegionFit", "fit_region", "fit_regions",
-           "conservative_start", "min_samples", "CONVERGED"]
+           "conservative_start", "min_samples", "NEIGHBOURS", "CONVERGED"]

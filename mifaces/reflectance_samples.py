@@ -341,3 +341,75 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
                               reflectance=r[keep].astype(np.float32), sigma=sigma.astype(np.float32),
                               texel=geo.texel[keep].astype(np.int32), measurement=np.zeros(m, np.int16),
                               resolution=resolution, measurement_names=(name,))
+
+
+def capture_samples(capture, geometry, face_model, resolution: int = 512, *, measurements=None,
+                    erosion: int = 1, min_cosine: float = MIN_COSINE, progress: bool = True) -> ReflectanceSamples:
+    """Reflectance samples of every measurement of a capture (sec. 4.3).
+
+    Parameters
+    ----------
+    capture : mifaces.capture.Capture
+        The photographs, their lights and the white target. Each point-light
+        photograph is turned into reflectance by eq. 4 with the scale the
+        white target gives (:meth:`~mifaces.capture.WhiteTarget.reflectance_scale`);
+        its saturated pixels give no sample.
+    geometry : mapping
+        Measurement name -> (V, 3) vertices of ``face_model``'s topology in
+        the capture's world frame (mm): fitted shapes, or the simulator's
+        ground truth.
+    face_model : mifaces.model.MorphableModel
+        Supplies the triangles and the common texture parameterization.
+    resolution : int
+        R of the R × R texture the samples live in (the paper used 1000).
+    measurements : sequence of str, optional
+        The measurements to use (default: all that ``geometry`` has).
+
+    Returns
+    -------
+    ReflectanceSamples
+        All measurements' samples, in the order of ``capture.measurements``.
+
+    Raises
+    ------
+    ValueError
+        A measurement without geometry, geometry of another model (wrong
+        vertex count), an uncalibrated light.
+    """
+    from tqdm import tqdm
+
+    from .model.texture_space import rasterize
+
+    if resolution < 8:
+        raise ValueError(f"texture resolution must be at least 8, got {resolution}")
+    names = [m.name for m in capture.measurements]
+    wanted = list(measurements) if measurements is not None else [n for n in names if n in geometry]
+    unknown = [n for n in wanted if n not in names]
+    if unknown:
+        raise ValueError(f"no measurement(s) {unknown} in the capture; it has {names}")
+    missing = [n for n in wanted if n not in geometry]
+    if missing:
+        raise ValueError(f"no geometry for measurement(s) {missing}")
+    if not wanted:
+        raise ValueError(f"the geometry names none of the capture's measurements {names}")
+    shape = (face_model.vertex_count, 3)
+    for name in wanted:
+        if np.shape(geometry[name]) != shape:
+            raise ValueError(f"geometry of measurement {name!r} has shape {np.shape(geometry[name])}, but the "
+                             f"face model {face_model.name!r} has {shape[0]} vertices: geometry of another model?")
+        if not np.all(np.isfinite(geometry[name])):
+            raise ValueError(f"geometry of measurement {name!r} has NaN or infinite vertices")
+    coverage = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
+    scale = capture.white_target.reflectance_scale()
+    parts = []
+    chosen = [m for m in capture.measurements if m.name in wanted]
+    for m in tqdm(chosen, desc="reflectance samples", unit="photo", disable=not progress):
+        light = capture.light(m.light)
+        if light.position is None:
+            raise ValueError(f"measurement {m.name!r}: light {light.name!r} has no position "
+                             "(load the capture with calibrate=True)")
+        parts.append(measurement_samples(capture.camera, light.position, light.intensity, m.image.pixels,
+                                         geometry[m.name], face_model.triangles, face_model.uv, coverage,
+                                         saturated=m.image.saturated, scale=scale, erosion=erosion,
+                                         min_cosine=min_cosine, name=m.name))
+    return ReflectanceSamples.concatenate(parts)

@@ -135,3 +135,12 @@ def region_map_from_landmarks(uv: np.ndarray, triangles: np.ndarray, landmarks: 
             ellipse = centre + np.stack([ru * np.cos(angle), rv * np.sin(angle)], axis=1)
             _fill_polygon(image, REGIONS["nostrils"], ellipse, covered)
     return image
+
+
+def texel_regions(region_map: np.ndarray, resolution: int) -> np.ndarray:
+    """The region map resampled to an R × R texture (nearest label at each
+    texel centre ((col + ½)/R, (row + ½)/R)), for labelling reflectance
+    samples by their flat texel index row · R + col."""
+    centres = (np.arange(resolution) + 0.5) / resolution
+    u, v = np.meshgrid(centres, centres)
+    return lookup(region_map, np.stack([u.ravel(), v.ravel()], axis=1)).reshape(resolution, resolution)

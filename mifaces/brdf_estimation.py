@@ -1,0 +1,351 @@
+"""BRDF estimation from a capture: the stage from photographs and face
+geometry to fitted BRDFs (paper sec. 4.3-5.3).
+
+:func:`fit_brdf` chains the steps:
+
+1. per measurement, the photograph resampled into the model's common texture
+   parameterization and turned into weighted reflectance samples
+   (:func:`mifaces.reflectance_samples.capture_samples`: eq. 4, 9, 10, shadow
+   and grazing-angle masks);
+2. each sample labelled with the a-priori material region of its texel
+   (:func:`mifaces.model.regions.texel_regions`);
+3. one BRDF model fitted per region by hierarchical Levenberg-Marquardt
+   (:func:`mifaces.brdf_fitting.fit_regions`; a region with too few samples
+   borrows a neighbour's fit, a region with none is not evaluated);
+4. the diffuse albedo refitted per texel with the glossy part fixed
+   (:func:`mifaces.diffuse_refinement.refine_diffuse`).
+
+:func:`write_estimate` writes the result atomically: ``brdf.json`` in the
+layout of the simulator's ``--brdf-params`` (so a fitted BRDF can be put on
+another face: ``mifaces simulate --brdf-params brdf.json``), with per region
+the fit's loss, sample count, time and status under ``"fit"``; the albedo map
+``albedo.exr`` (linear, row 0 at v = 0) and a PNG preview; and ``scene.xml``,
+a Mitsuba scene that renders the fitted face with the plugins as the camera
+saw it in the first measurement (meshes in ``meshes/``).
+
+The face geometry per measurement is an input: the simulator's ground truth
+(``geometry="ground-truth"``), the shapes written by ``mifaces fit-shape``,
+or any mapping from measurement name to world-space vertices.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import brdf as brdf_models
+from .brdf_fitting import RegionFit, Schedule, fit_regions
+from .capture import GROUND_TRUTH, Capture, load_capture
+from .diffuse_refinement import DiffuseMap, refine_diffuse
+from .files import atomic_path, atomic_write, write_exr, write_json, write_png
+from .model import MorphableModel, load_model
+from .model.regions import REGIONS, regions_present, texel_regions
+from .reflectance_samples import ReflectanceSamples, capture_samples
+
+#: Fit statistics stored per region under ``brdf.json``'s ``"fit"``.
+FIT_KEYS = ("diffuse_reflectance", "loss", "samples", "seconds", "status", "reason", "iterations")
+
+
+@dataclass
+class BRDFEstimate:
+    """Fitted BRDFs of one capture.
+
+    Attributes
+    ----------
+    model : str
+        Plugin name (``phong``, ``cooktorrance``, ``ward``, ``lafortune``).
+    options : dict
+        The model's options (e.g. ``{"lobes": 2}`` for Lafortune).
+    fits : dict
+        Region name -> :class:`~mifaces.brdf_fitting.RegionFit`.
+    albedo : DiffuseMap
+        Per-texel diffuse albedo after refinement (sec. 5.3).
+    region_map : (R, R) uint8
+        Region label per texel of the albedo map.
+    samples : int
+        Reflectance samples used.
+    measurements : tuple of str
+    seconds : dict
+        Wall time of each step: ``samples``, ``fit``, ``refine``, ``total``.
+    """
+
+    model: str
+    options: dict
+    fits: dict[str, RegionFit]
+    albedo: DiffuseMap
+    region_map: np.ndarray
+    samples: int
+    measurements: tuple[str, ...]
+    seconds: dict = field(default_factory=dict)
+
+    @property
+    def resolution(self) -> int:
+        return int(self.region_map.shape[0])
+
+    def regions(self) -> dict[str, dict]:
+        """Region -> the plugin's glossy parameters (no diffuse: that is the albedo map)."""
+        return {name: {k: v for k, v in fit.params.items() if k != "diffuse_reflectance"}
+                for name, fit in self.fits.items()}
+
+    def to_json(self) -> dict:
+        """The ``brdf.json`` document."""
+        options = {k: v for k, v in self.options.items()}
+        return {"model": self.model, "options": options, "regions": self.regions(),
+                "fit": {name: {k: (fit.params.get(k) if k == "diffuse_reflectance" else getattr(fit, k))
+                               for k in FIT_KEYS} for name, fit in self.fits.items()},
+                "samples": int(self.samples), "resolution": self.resolution,
+                "measurements": list(self.measurements), "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
+                "albedo": "albedo.exr"}
+
+
+def _face_model(source) -> MorphableModel:
+    if isinstance(source, MorphableModel):
+        return source
+    if str(source) == "builtin" or Path(source).is_file():
+        return load_model(source)
+    raise ValueError(f"cannot load the face model {str(source)!r}: pass face_model= (a model file or 'builtin')")
+
+
+def load_geometry(capture: Capture, geometry="ground-truth", face_model=None
+                  ) -> tuple[MorphableModel, dict[str, np.ndarray]]:
+    """The face model and per-measurement world-space vertices to sample with.
+
+    Parameters
+    ----------
+    capture : Capture
+    geometry : ``'ground-truth'``, path or mapping
+        ``'ground-truth'``: the simulator's ``ground_truth/`` of this capture.
+        A path: a folder written by ``mifaces fit-shape``. A mapping:
+        measurement name -> (V, 3) vertices in the capture's world frame (mm).
+    face_model : MorphableModel, path or ``'builtin'``, optional
+        The model the shapes belong to; default: the one the ground truth or
+        the fitted shapes name.
+    """
+    if isinstance(geometry, dict):
+        return _face_model(face_model or "builtin"), {k: np.asarray(v, np.float64) for k, v in geometry.items()}
+    if str(geometry) == "ground-truth":
+        info_path = capture.path / GROUND_TRUTH / "scene.json"
+        if not info_path.is_file():
+            raise FileNotFoundError(f"{capture.path} has no {GROUND_TRUTH}/scene.json (only simulated captures "
+                                    "have ground truth): give fitted shapes instead")
+        info = json.loads(info_path.read_text())
+        model = _face_model(face_model or info.get("model_source", info.get("model", "builtin")))
+        shapes = {m["name"]: np.load(info_path.parent / m["shape"]).astype(np.float64)
+                  for m in info["measurements"]}
+        return model, shapes
+    from .shape_estimation import load_fitted_shapes, shapes_model_source
+
+    path = Path(geometry)
+    if not path.exists():
+        raise FileNotFoundError(f"geometry folder not found: {path} (expected the output of mifaces fit-shape, "
+                                "or 'ground-truth')")
+    model = _face_model(face_model or shapes_model_source(path))
+    return model, load_fitted_shapes(path, capture)
+
+
+def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
+             resolution: int = 512, lobes: int = 1, options: dict | None = None, fixed: dict | None = None,
+             schedule: Schedule | None = None, samples: ReflectanceSamples | None = None, out=None,
+             seed: int = 0, progress: bool = True) -> BRDFEstimate:
+    """Fit a BRDF model per region to the photographs of a capture.
+
+    Parameters
+    ----------
+    capture : Capture or path
+    model : str
+        ``phong``, ``cooktorrance``, ``ward`` or ``lafortune``.
+    geometry : ``'ground-truth'``, path or mapping
+        Per-measurement face geometry (see :func:`load_geometry`).
+    face_model : MorphableModel or path, optional
+    resolution : int
+        R of the R × R texture space (the paper used 1000).
+    lobes : int
+        Lafortune lobes.
+    options : dict, optional
+        Further model options (``fresnel=``, ``normalization=``, …).
+    fixed : dict, optional
+        Parameters held fixed (default: :data:`mifaces.brdf_fitting.DEFAULT_FIXED`).
+    schedule : Schedule, optional
+        The LM subset hierarchy.
+    samples : ReflectanceSamples, optional
+        Samples computed before (skips step 1; must match ``resolution``).
+    out : path, optional
+        Write the result there (:func:`write_estimate`).
+
+    Returns
+    -------
+    BRDFEstimate
+    """
+    t0 = time.perf_counter()
+    capture = capture if isinstance(capture, Capture) else load_capture(capture)
+    options = dict(options or {})
+    if model == "lafortune" and lobes != 1:
+        options["lobes"] = int(lobes)
+    elif lobes != 1:
+        raise ValueError(f"lobes={lobes}: only the lafortune model has several lobes")
+    brdf = brdf_models.model(model, **options)
+    face, shapes = load_geometry(capture, geometry, face_model)
+    if samples is None:
+        samples = capture_samples(capture, shapes, face, resolution, progress=progress)
+    elif samples.resolution != resolution:
+        raise ValueError(f"the samples are at resolution {samples.resolution}, not {resolution}")
+    if len(samples) == 0:
+        raise ValueError("no valid reflectance samples: every texel is hidden, shadowed, grazing or saturated")
+    t_samples = time.perf_counter()
+    region_map = texel_regions(face.region_map, resolution)
+    label = samples.region(region_map)
+    names = {REGIONS[n]: n for n in regions_present(face.region_map)}
+    on_face = np.isin(label, list(names))
+    light, view, r, sigma, texel, label = (a[on_face] for a in (samples.light, samples.view, samples.reflectance,
+                                                                samples.sigma, samples.texel, label))
+    fits = fit_regions(brdf, light, view, r, sigma, label, names, progress=progress, fixed=fixed,
+                       schedule=schedule, seed=seed)
+    t_fit = time.perf_counter()
+    by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
+    albedo = refine_diffuse(brdf, by_label, light, view, r, sigma, texel, label, region_map)
+    t_end = time.perf_counter()
+    estimate = BRDFEstimate(model=brdf.name, options=dict(options), fits=fits, albedo=albedo,
+                            region_map=region_map, samples=int(on_face.sum()),
+                            measurements=tuple(samples.measurement_names),
+                            seconds={"samples": t_samples - t0, "fit": t_fit - t_samples, "refine": t_end - t_fit,
+                                     "total": t_end - t0})
+    if out is not None:
+        first = next(m for m in capture.measurements if m.name == estimate.measurements[0])
+        write_estimate(estimate, out, face, shapes[first.name], capture, first.light)
+    return estimate
+
+
+# --------------------------------------------------------------------------------------------
+# Output
+# --------------------------------------------------------------------------------------------
+def _value(kind: str, value) -> ET.Element:
+    if kind == "rgb":
+        v = np.broadcast_to(np.asarray(value, np.float64), 3)
+        return ET.Element("rgb", value=", ".join(f"{x:.9g}" for x in v))
+    if kind == "string":
+        return ET.Element("string", value=str(value))
+    return ET.Element("float", value=f"{float(value):.9g}")
+
+
+def scene_xml(estimate: BRDFEstimate, camera, light_position, intensity, meshes: dict[str, str],
+              albedo: str = "albedo.exr", spp: int = 64) -> str:
+    """A Mitsuba scene (XML text) of the fitted face: one ``ply`` shape per
+    region with its fitted plugin BSDF over the albedo map, the capture's
+    camera, a point light, and the path tracer (shadows, interreflection)."""
+    from .simulate import _mitsuba_sensor
+
+    model = brdf_models.model(estimate.model, **estimate.options)
+    kinds = {p.name: p.kind for p in model.specular_parameters()}
+    sensor = _mitsuba_sensor(camera, spp)
+    root = ET.Element("scene", version="3.0.0")
+    ET.SubElement(root, "default", name="spp", value=str(spp))
+    integrator = ET.SubElement(root, "integrator", type="path")
+    ET.SubElement(integrator, "integer", name="max_depth", value="4")
+    s = ET.SubElement(root, "sensor", type="perspective", id="camera")
+    for key in ("fov", "principal_point_offset_x", "principal_point_offset_y", "near_clip", "far_clip"):
+        ET.SubElement(s, "float", name=key, value=f"{sensor[key]:.9g}")
+    ET.SubElement(s, "string", name="fov_axis", value=sensor["fov_axis"])
+    matrix = np.asarray(sensor["to_world"].matrix, np.float64).reshape(4, 4)
+    ET.SubElement(ET.SubElement(s, "transform", name="to_world"), "matrix",
+                  value=" ".join(f"{x:.12g}" for x in matrix.ravel()))
+    ET.SubElement(ET.SubElement(s, "sampler", type="independent"), "integer", name="sample_count", value="$spp")
+    film = ET.SubElement(s, "film", type="hdrfilm")
+    ET.SubElement(film, "integer", name="width", value=str(camera.width))
+    ET.SubElement(film, "integer", name="height", value=str(camera.height))
+    ET.SubElement(film, "string", name="pixel_format", value="rgb")
+    ET.SubElement(ET.SubElement(film, "rfilter", type="gaussian"), "float", name="stddev", value="0.5")
+    emitter = ET.SubElement(root, "emitter", type="point", id="light")
+    ET.SubElement(emitter, "point", name="position", value=", ".join(f"{x:.9g}" for x in light_position))
+    e = _value("rgb", intensity)
+    e.set("name", "intensity")
+    emitter.append(e)
+    texture = ET.SubElement(root, "texture", type="bitmap", id="albedo")
+    ET.SubElement(texture, "string", name="filename", value=albedo)
+    ET.SubElement(texture, "boolean", name="raw", value="true")
+    ET.SubElement(texture, "string", name="filter_type", value="bilinear")
+    ET.SubElement(texture, "string", name="wrap_mode", value="clamp")
+    regions = estimate.regions()
+    for name, filename in meshes.items():
+        shape = ET.SubElement(root, "shape", type="ply", id=f"face_{name}")
+        ET.SubElement(shape, "string", name="filename", value=filename)
+        bsdf = ET.SubElement(shape, "bsdf", type=estimate.model)
+        ET.SubElement(bsdf, "ref", id="albedo", name="diffuse_reflectance")
+        for key, value in model.options.items():
+            if key != "lobes":
+                bsdf.append(ET.Element("string", name=key, value=str(value)))
+        for key, value in regions[name].items():
+            el = _value(kinds.get(key, "float"), value)
+            el.set("name", key)
+            bsdf.append(el)
+    ET.indent(root, space="    ")
+    header = ("<!-- The face as fitted by mifaces fit-brdf: per-region "
+              f"{estimate.model} BSDFs over the refined albedo map, seen by the capture's camera under the light "
+              "of its first measurement. Render: mitsuba.load_file(path, spp=N) after `import mifaces` "
+              "(which registers the plugins). Units: mm. -->\n")
+    return header + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def write_estimate(estimate: BRDFEstimate, out, face_model: MorphableModel, vertices: np.ndarray,
+                   capture: Capture, light: str) -> dict[str, Path]:
+    """Write ``brdf.json``, ``albedo.exr`` (+ ``albedo.png``), ``meshes/*.ply``
+    and ``scene.xml`` into folder ``out``, each atomically; ``scene.xml``
+    last, so a scene never names a file not yet written.
+
+    ``vertices`` (world frame) is the geometry the scene shows, lit by the
+    capture's light ``light``.
+    """
+    from .model.mesh import mitsuba_mesh
+    from .model.regions import lookup
+
+    out = Path(out)
+    paths = {"brdf": out / "brdf.json", "albedo": out / "albedo.exr", "preview": out / "albedo.png",
+             "scene": out / "scene.xml"}
+    write_json(paths["brdf"], estimate.to_json())
+    write_exr(paths["albedo"], estimate.albedo.albedo)
+    write_png(paths["preview"], estimate.albedo.albedo)
+    # one mesh per region with a fit, triangles labelled at their uv centroid
+    labels = lookup(face_model.region_map, face_model.uv[face_model.triangles].mean(axis=1))
+    normals = face_model.vertex_normals(np.asarray(vertices, np.float32))
+    meshes = {}
+    for name in estimate.fits:
+        tri = face_model.triangles[labels == REGIONS[name]]
+        if len(tri) == 0:
+            continue
+        used, inverse = np.unique(tri, return_inverse=True)
+        mesh = mitsuba_mesh(np.asarray(vertices)[used], inverse.reshape(-1, 3), face_model.uv[used],
+                            normals=normals[used], name=name)
+        rel = f"meshes/{name}.ply"
+        with atomic_path(out / rel) as tmp:
+            mesh.write_ply(str(tmp))
+        meshes[name] = rel
+    lamp = capture.light(light)
+    text = scene_xml(estimate, capture.camera, lamp.position, lamp.intensity, meshes)
+    with atomic_write(paths["scene"], "w") as f:
+        f.write(text)
+    return paths
+
+
+def load_estimate(path) -> dict:
+    """Read a ``brdf.json`` (path to it or its folder) and the albedo map beside it:
+    the JSON document with ``"albedo"`` replaced by the (R, R, 3) array."""
+    from .files import read_exr
+
+    path = Path(path)
+    path = path / "brdf.json" if path.is_dir() else path
+    if not path.is_file():
+        raise FileNotFoundError(f"no brdf.json at {path}")
+    data = json.loads(path.read_text())
+    for key in ("model", "regions"):
+        if key not in data:
+            raise ValueError(f"{path}: not a brdf.json, no {key!r}")
+    albedo = path.parent / data.get("albedo", "albedo.exr")
+    data["albedo"] = read_exr(albedo) if albedo.is_file() else None
+    return data
+
+
+__all__ = ["BRDFEstimate", "fit_brdf", "load_geometry", "write_estimate", "scene_xml", "load_estimate"]
