@@ -46,6 +46,7 @@ from .files import atomic_path, atomic_write, write_exr, write_json, write_png
 from .model import MorphableModel, load_model
 from .model.regions import REGIONS, regions_present, texel_regions
 from .reflectance_samples import ReflectanceSamples, capture_samples
+from .simulate import face_shapes
 
 #: Fit statistics stored per region under ``brdf.json``'s ``"fit"``.
 FIT_KEYS = ("diffuse_reflectance", "loss", "samples", "seconds", "status", "reason", "iterations")
@@ -150,8 +151,8 @@ def load_geometry(capture: Capture, geometry="ground-truth", face_model=None
 
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
              resolution: int = 512, lobes: int = 1, options: dict | None = None, fixed: dict | None = None,
-             schedule: Schedule | None = None, samples: ReflectanceSamples | None = None, out=None,
-             seed: int = 0, progress: bool = True) -> BRDFEstimate:
+             schedule: Schedule | None = None, samples: ReflectanceSamples | None = None, measurements=None,
+             out=None, seed: int = 0, progress: bool = True) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture.
 
     Parameters
@@ -174,6 +175,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         The LM subset hierarchy.
     samples : ReflectanceSamples, optional
         Samples computed before (skips step 1; must match ``resolution``).
+    measurements : sequence of str, optional
+        Fit to these measurements only (default: all with geometry).
     out : path, optional
         Write the result there (:func:`write_estimate`).
 
@@ -191,7 +194,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     brdf = brdf_models.model(model, **options)
     face, shapes = load_geometry(capture, geometry, face_model)
     if samples is None:
-        samples = capture_samples(capture, shapes, face, resolution, progress=progress)
+        samples = capture_samples(capture, shapes, face, resolution, measurements=measurements, progress=progress)
     elif samples.resolution != resolution:
         raise ValueError(f"the samples are at resolution {samples.resolution}, not {resolution}")
     if len(samples) == 0:
@@ -270,8 +273,9 @@ def scene_xml(estimate: BRDFEstimate, camera, light_position, intensity, meshes:
     ET.SubElement(texture, "string", name="filter_type", value="bilinear")
     ET.SubElement(texture, "string", name="wrap_mode", value="clamp")
     regions = estimate.regions()
-    for name, filename in meshes.items():
-        shape = ET.SubElement(root, "shape", type="ply", id=f"face_{name}")
+    for key, filename in meshes.items():
+        name = key.removeprefix("face_").rsplit("_", 1)[0]  # face_<region>_<label>
+        shape = ET.SubElement(root, "shape", type="ply", id=key)
         ET.SubElement(shape, "string", name="filename", value=filename)
         bsdf = ET.SubElement(shape, "bsdf", type=estimate.model)
         ET.SubElement(bsdf, "ref", id="albedo", name="diffuse_reflectance")
@@ -299,35 +303,43 @@ def write_estimate(estimate: BRDFEstimate, out, face_model: MorphableModel, vert
     ``vertices`` (world frame) is the geometry the scene shows, lit by the
     capture's light ``light``.
     """
-    from .model.mesh import mitsuba_mesh
-    from .model.regions import lookup
-
     out = Path(out)
     paths = {"brdf": out / "brdf.json", "albedo": out / "albedo.exr", "preview": out / "albedo.png",
              "scene": out / "scene.xml"}
     write_json(paths["brdf"], estimate.to_json())
     write_exr(paths["albedo"], estimate.albedo.albedo)
     write_png(paths["preview"], estimate.albedo.albedo)
-    # one mesh per region with a fit, triangles labelled at their uv centroid
-    labels = lookup(face_model.region_map, face_model.uv[face_model.triangles].mean(axis=1))
-    normals = face_model.vertex_normals(np.asarray(vertices, np.float32))
     meshes = {}
-    for name in estimate.fits:
-        tri = face_model.triangles[labels == REGIONS[name]]
-        if len(tri) == 0:
-            continue
-        used, inverse = np.unique(tri, return_inverse=True)
-        mesh = mitsuba_mesh(np.asarray(vertices)[used], inverse.reshape(-1, 3), face_model.uv[used],
-                            normals=normals[used], name=name)
-        rel = f"meshes/{name}.ply"
+    for key, mesh in face_shapes(face_model, vertices, estimate.to_json()).items():
+        rel = f"meshes/{key}.ply"
         with atomic_path(out / rel) as tmp:
             mesh.write_ply(str(tmp))
-        meshes[name] = rel
+        meshes[key] = rel
     lamp = capture.light(light)
     text = scene_xml(estimate, capture.camera, lamp.position, lamp.intensity, meshes)
     with atomic_write(paths["scene"], "w") as f:
         f.write(text)
     return paths
+
+
+def render_estimate(estimate: BRDFEstimate, face_model: MorphableModel, vertices: np.ndarray, camera,
+                    light_position, intensity, spp: int = 64, seed: int = 0) -> np.ndarray:
+    """Render the fitted face (linear RGB, (H, W, 3)) on geometry ``vertices``
+    (world frame) seen by ``camera`` under a point light, with Mitsuba's path
+    tracer as the simulator renders photographs: for novel poses, novel lights
+    and comparisons with held-out photographs."""
+    import mitsuba as mi
+
+    from .simulate import _mitsuba_sensor
+
+    texture = mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(estimate.albedo.albedo), "raw": True,
+                            "filter_type": "bilinear", "wrap_mode": "clamp"})
+    scene = {"type": "scene", "integrator": {"type": "path", "max_depth": 4},
+             "sensor": _mitsuba_sensor(camera, spp),
+             "light": {"type": "point", "position": [float(x) for x in light_position],
+                       "intensity": {"type": "rgb", "value": [float(x) for x in np.broadcast_to(intensity, 3)]}},
+             **face_shapes(face_model, vertices, estimate.to_json(), texture)}
+    return np.array(mi.render(mi.load_dict(scene), spp=spp, seed=seed), dtype=np.float32)[..., :3]
 
 
 def load_estimate(path) -> dict:
@@ -348,4 +360,5 @@ def load_estimate(path) -> dict:
     return data
 
 
-__all__ = ["BRDFEstimate", "fit_brdf", "load_geometry", "write_estimate", "scene_xml", "load_estimate"]
+__all__ = ["BRDFEstimate", "fit_brdf", "load_geometry", "write_estimate", "scene_xml", "render_estimate",
+           "load_estimate"]

@@ -60,6 +60,13 @@ class ParameterSpace:
         Parameter name -> value held constant (floats or RGB triples).
     bounds : dict, optional
         Parameter name -> (lower, upper) narrowing the model's valid range.
+
+    Lafortune lobes are kept energy-bounded: the coefficients of lobe j lie
+    in [-c_max, c_max] with c_max = ((n_j + 2) / 2π)^{1/n_j}, so the lobe's
+    peak, at most max(|C_xy|, |C_z|)^n, stays below (n + 2)/2π and its albedo
+    estimate |s|^n 2π/(n + 2) below 1. Without it a lobe fitted to the
+    directions a capture observes may grow without limit towards those it
+    does not (the over-fitting Fuchs et al. 2005, sec. 6.1, report).
     """
 
     def __init__(self, model: BRDFModel, fixed: dict | None = None, bounds: dict | None = None):
@@ -69,11 +76,14 @@ class ParameterSpace:
         unknown = (set(self.fixed) | set(bounds)) - {p.name for p in model.parameters()}
         if unknown:
             raise ValueError(f"{model.name}: no parameter(s) {sorted(unknown)}")
+        self.coupled = _energy_coupled(model)
         self.free: list[_Free] = []
         for p in model.parameters():
             if p.name in self.fixed:
                 continue
             lo, hi = bounds.get(p.name, (p.lower, p.upper))
+            if p.name in self.coupled:
+                lo, hi = -1.0, 1.0  # a fraction of the energy bound c_max(n)
             channels = (0, 1, 2) if p.kind == "rgb" else (None,)
             self.free += [_Free(p.name, c, lo, hi, _is_log(p)) for c in channels]
 
@@ -96,6 +106,10 @@ class ParameterSpace:
                 out[f.name] = v
             else:
                 out.setdefault(f.name, [0.0, 0.0, 0.0])[f.channel] = v
+        for name, exponent in self.coupled.items():
+            if name not in self.fixed:
+                bound = float(energy_bound(out[exponent], np.log, np.exp))
+                out[name] = [v * bound for v in out[name]] if np.ndim(out[name]) else out[name] * bound
         return out
 
     def vector(self, values: dict) -> np.ndarray:
@@ -105,6 +119,8 @@ class ParameterSpace:
         for f in self.free:
             v = values[f.name]
             v = float(v[f.channel] if f.channel is not None and np.ndim(v) else v)
+            if f.name in self.coupled:
+                v /= float(energy_bound(float(values[self.coupled[f.name]]), np.log, np.exp))
             if f.log:
                 t = (np.log(v) - np.log(f.lower)) / (np.log(f.upper) - np.log(f.lower))
             else:
@@ -128,7 +144,29 @@ class ParameterSpace:
                 rgb.setdefault(f.name, [None, None, None])[f.channel] = v
         for name, (r, g, b) in rgb.items():
             out[name] = mi.Color3f(r, g, b)
+        for name, exponent in self.coupled.items():
+            if name not in self.fixed:
+                out[name] = out[name] * energy_bound(out[exponent], dr.log, dr.exp)
         return out
+
+
+def energy_bound(exponent, log, exp):
+    """c_max = ((n + 2) / 2π)^{1/n}: the largest Lafortune coefficient
+    magnitude whose lobe keeps an albedo estimate of at most 1."""
+    return exp(log((exponent + 2.0) / (2.0 * np.pi)) / exponent)
+
+
+def _energy_coupled(model: BRDFModel) -> dict:
+    """Lafortune coefficient name -> its lobe's exponent name (see :class:`ParameterSpace`)."""
+    if model.name != "lafortune":
+        return {}
+    from .brdf.lafortune import lobe_names
+
+    out = {}
+    for j in model.lobes:
+        cxy, cz, n = lobe_names(j)
+        out[cxy] = out[cz] = n
+    return out
 
 
 def conservative_start(model: BRDFModel, reflectance: np.ndarray) -> dict:

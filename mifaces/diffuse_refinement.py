@@ -9,6 +9,19 @@ the samples of one texel alone is then linear in ρ_d, with the closed form
 
 computed per colour channel for all texels at once. Texels without samples
 take their region's fitted albedo.
+
+**Shrinkage** (on by default; not in the paper). A texel seen once, at a
+grazing angle, gets an albedo as noisy as that one sample. Treating the
+texel albedos of a region as drawn around the region's albedo ρ_R with
+variance τ², and a sample's residual x_s = r_s - π f_s as the texel's albedo
+plus noise of variance s₀² σ_s², the posterior mean is
+
+    ρ_d(texel) = (Σ_s w_s x_s + λ ρ_R) / (Σ_s w_s + λ),   λ = s₀² / τ²,
+
+with s₀² estimated from the scatter of the samples within texels and τ² from
+the scatter of the texel means beyond that noise (empirical Bayes, per region
+and channel). Well-sampled texels keep their own value (Σ w ≫ λ); with
+noise-free samples s₀ = 0 and the closed form above is unchanged.
 """
 
 from __future__ import annotations
@@ -70,8 +83,31 @@ def specular_reflectance_factor(model, params_by_region: dict[int, dict], light,
     return np.pi * np.array(model.eval(wi, wo, params, diffuse=False)).T
 
 
+def shrinkage_weights(residual, w, texel, region, mean, total, counts, labels) -> dict:
+    """λ = s₀²/τ² per region label and channel (see the module docstring).
+
+    ``residual`` (N, 3) are the samples' x_s, ``mean`` (T, 3) the texels'
+    weighted means, ``total`` (T,) their Σ w, ``counts`` (T,) their sample
+    counts; all texel arrays are flat over the texture."""
+    lam = {}
+    deviation = residual - mean[texel]
+    for label in labels:
+        in_region = region == label
+        texels = np.unique(texel[in_region])
+        dof = int(np.sum(counts[texels] - 1))
+        multi = texels[counts[texels] >= 2]
+        if dof < 2 or len(multi) < 2:
+            lam[label] = np.zeros(3)  # nothing to estimate the noise from: no shrinkage
+            continue
+        s0 = np.sum(w[in_region, None] * np.square(deviation[in_region]), axis=0) / dof
+        between = np.var(mean[multi], axis=0) - s0 * np.mean(1.0 / total[multi])
+        tau = np.maximum(between, 1e-6 * np.maximum(np.mean(mean[multi], axis=0) ** 2, 1e-12))
+        lam[label] = s0 / tau
+    return lam
+
+
 def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflectance, sigma, texel, region,
-                   region_map: np.ndarray) -> DiffuseMap:
+                   region_map: np.ndarray, shrinkage: bool = True) -> DiffuseMap:
     """Refit ρ_d per texel with each region's glossy part fixed (sec. 5.3).
 
     Parameters
@@ -88,6 +124,10 @@ def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflec
         Region label of each sample.
     region_map : ndarray (R, R)
         Region label of every texel, for filling texels without samples.
+    shrinkage : bool
+        Pull sparsely sampled texels towards the region's albedo by the
+        empirical-Bayes weight λ (module docstring); False gives the paper's
+        plain per-texel least squares.
 
     Returns
     -------
@@ -108,6 +148,17 @@ def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflec
     residual = np.asarray(reflectance, np.float64) - specular
     for c in range(3):
         albedo[:, c] = np.bincount(texel, weights=w * residual[:, c], minlength=size) / np.maximum(total, 1e-300)
+    counts = np.bincount(texel, minlength=size)
+    region = np.asarray(region)
+    if shrinkage and len(texel):
+        texel_region = np.zeros(size, dtype=region.dtype)
+        texel_region[texel] = region  # a texel's samples share its region
+        lam = shrinkage_weights(residual, w, texel, region, albedo, total, counts, np.unique(region))
+        seen = np.flatnonzero(total > 0)
+        for label, weight in lam.items():
+            t = seen[texel_region[seen] == label]
+            prior = np.broadcast_to(np.asarray(params_by_region[label]["diffuse_reflectance"], np.float64), (3,))
+            albedo[t] = (total[t, None] * albedo[t] + weight * prior) / (total[t, None] + weight)
     empty = total <= 0
     labels = region_map.ravel()
     for label in np.unique(labels[empty]):
@@ -117,6 +168,5 @@ def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflec
         else:
             albedo[fill] = 0.0  # outside the face: no region, no BRDF
     r = region_map.shape[0]
-    counts = np.bincount(texel, minlength=size)
     return DiffuseMap(albedo=np.clip(albedo, 0.0, None).reshape(r, r, 3).astype(np.float32),
                       weight=total.reshape(r, r).astype(np.float32), samples=counts.reshape(r, r))

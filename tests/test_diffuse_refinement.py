@@ -10,8 +10,8 @@ from mifaces import brdf
 from mifaces.diffuse_refinement import refine_diffuse, specular_reflectance_factor
 
 REGIONS = {
-    1: {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [2.0] * 3, "roughness": 0.3, "eta": 1.4},
-    2: {"diffuse_reflectance": [0.6, 0.2, 0.2], "specular_reflectance": [4.0] * 3, "roughness": 0.15, "eta": 1.4},
+    1: {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [2.0] * 3, "roughness": 0.3, "eta": 1.38},
+    2: {"diffuse_reflectance": [0.6, 0.2, 0.2], "specular_reflectance": [4.0] * 3, "roughness": 0.15, "eta": 1.38},
 }
 
 
@@ -70,3 +70,41 @@ def test_bad_inputs_are_named(jit_variant):
         refine_diffuse(model, REGIONS, light, view, r, sigma, texel, np.full_like(region, 7), region_map)
     with pytest.raises(ValueError, match="texel indices"):
         refine_diffuse(model, REGIONS, light, view, r, sigma, texel + 10_000, region, region_map)
+
+
+def test_shrinkage_lowers_the_error_of_sparsely_sampled_texels(jit_variant):
+    """With noisy samples, texels seen once are pulled towards their region's
+    albedo; well-sampled texels barely move; without shrinkage the plain
+    per-texel mean is returned."""
+    model, region_map, albedo, observed, light, view, r, sigma, texel, region = samples_on_a_map(per_texel=1)
+    rng = np.random.default_rng(1)
+    # texel albedos scattered around their region's (τ = 0.03), samples with 5 % noise scaled by σ
+    regional = np.array([REGIONS[label]["diffuse_reflectance"] for label in region_map.ravel()[observed]])
+    true = albedo.reshape(-1, 3).copy()
+    true[observed] = regional + rng.normal(0, 0.03, regional.shape)
+    # every observed texel gets one sample; a quarter get eight more
+    many = observed[: observed.size // 4]
+    extra_t = np.repeat(many, 8)
+    lz = np.concatenate([light[:, 2], rng.uniform(0.3, 1.0, extra_t.size)])
+    texel = np.concatenate([texel, extra_t])
+    region = region_map.ravel()[texel]
+    light = np.concatenate([light, np.stack([np.sqrt(1 - lz[-extra_t.size:] ** 2), 0 * extra_t, lz[-extra_t.size:]], 1)])
+    view = np.concatenate([view, np.tile([0.0, 0.0, 1.0], (extra_t.size, 1))])
+    sigma = 1.0 / (light[:, 2] ** 2 * view[:, 2])
+    spec = specular_reflectance_factor(model, REGIONS, light, view, region)
+    r = true[texel] + spec + rng.normal(0, 0.05, (texel.size, 3)) * sigma[:, None] / sigma.mean()
+    plain = refine_diffuse(model, REGIONS, light, view, r, sigma, texel, region, region_map, shrinkage=False)
+    shrunk = refine_diffuse(model, REGIONS, light, view, r, sigma, texel, region, region_map)
+    once = np.setdiff1d(observed, many)
+
+    def rmse(result, where):
+        return np.sqrt(np.mean((result.albedo.reshape(-1, 3)[where] - true[where]) ** 2))
+
+    assert rmse(shrunk, once) < 0.8 * rmse(plain, once)
+    assert rmse(shrunk, many) < 1.05 * rmse(plain, many)
+    # the plain estimate is the weighted mean of each texel's residuals
+    w = 1 / sigma ** 2
+    t = many[0]
+    mask = texel == t
+    expected = (w[mask, None] * (r[mask] - spec[mask])).sum(0) / w[mask].sum()
+    np.testing.assert_allclose(plain.albedo.reshape(-1, 3)[t], np.clip(expected, 0, None), rtol=1e-5, atol=1e-6)

@@ -37,7 +37,7 @@ OUT = Path(__file__).resolve().parent / "results"
 TRUTH = {
     "phong": {"diffuse_reflectance": [0.52, 0.36, 0.29], "specular_reflectance": [0.09] * 3, "exponent": 35.0},
     "cooktorrance": {"diffuse_reflectance": [0.52, 0.36, 0.29], "specular_reflectance": [2.2] * 3,
-                     "roughness": 0.3, "eta": 1.4},
+                     "roughness": 0.3, "eta": 1.38},
     "ward": {"diffuse_reflectance": [0.52, 0.36, 0.29], "specular_reflectance": [0.07] * 3, "alpha": 0.25},
     "lafortune": {"diffuse_reflectance": [0.52, 0.36, 0.29], "cxy": [-0.92] * 3, "cz": [0.92] * 3,
                   "exponent": 18.0},
