@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from . import brdf as brdf_models
-from .brdf_fitting import RegionFit, Schedule, fit_regions
+from .brdf_fitting import REFRACTIVE_INDEX, RegionFit, Schedule, fit_regions
 from .capture import GROUND_TRUTH, Capture, load_capture
 from .diffuse_refinement import DiffuseMap, refine_diffuse
 from .files import atomic_path, atomic_write, write_exr, write_json, write_png
@@ -170,7 +170,9 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     options : dict, optional
         Further model options (``fresnel=``, ``normalization=``, …).
     fixed : dict, optional
-        Parameters held fixed (default: :data:`mifaces.brdf_fitting.DEFAULT_FIXED`).
+        Parameters held fixed in every region (default: Cook-Torrance's η
+        at each region's published value,
+        :data:`mifaces.brdf_fitting.REFRACTIVE_INDEX`).
     schedule : Schedule, optional
         The LM subset hierarchy.
     samples : ReflectanceSamples, optional
@@ -206,8 +208,11 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     on_face = np.isin(label, list(names))
     light, view, r, sigma, texel, label = (a[on_face] for a in (samples.light, samples.view, samples.reflectance,
                                                                 samples.sigma, samples.texel, label))
+    # Cook-Torrance's index of refraction is fixed per region at its published value unless given
+    per_region = ({name: {"eta": REFRACTIVE_INDEX[name]} for name in names.values() if name in REFRACTIVE_INDEX}
+                  if brdf.name == "cooktorrance" and (fixed is None or "eta" not in fixed) else None)
     fits = fit_regions(brdf, light, view, r, sigma, label, names, progress=progress, fixed=fixed,
-                       schedule=schedule, seed=seed)
+                       fixed_by_region=per_region, schedule=schedule, seed=seed)
     t_fit = time.perf_counter()
     by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
     albedo = refine_diffuse(brdf, by_label, light, view, r, sigma, texel, label, region_map)

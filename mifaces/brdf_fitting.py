@@ -35,6 +35,12 @@ from .levenberg_marquardt import CONVERGED, levenberg_marquardt
 #: η = 1.38 (Weyrich et al., "Analysis of human faces using a
 #: measurement-based skin reflectance model", SIGGRAPH 2006, sec. 5).
 DEFAULT_FIXED = {"cooktorrance": {"eta": 1.38}}
+#: Index of refraction per face region, for Cook-Torrance's Fresnel term:
+#: skin 1.38 (Weyrich et al. 2006); the cornea 1.376 (Le Grand's schematic
+#: eye; Atchison & Smith, "Optics of the Human Eye", 2000); hair keratin 1.55
+#: (Marschner et al., "Light scattering from human hair fibers", SIGGRAPH 2003).
+REFRACTIVE_INDEX = {"skin": 1.38, "lips": 1.38, "nostrils": 1.38, "beard": 1.38, "eyes": 1.376,
+                    "eyebrows": 1.55, "hair": 1.55}
 
 
 @dataclass(frozen=True)
@@ -445,7 +451,8 @@ NEIGHBOURS = {"lips": ["skin"], "nostrils": ["skin"], "beard": ["skin"], "eyes":
 
 
 def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region, region_names: dict,
-                neighbours: dict | None = None, progress: bool = False, **options) -> dict[str, RegionFit]:
+                neighbours: dict | None = None, progress: bool = False, fixed_by_region: dict | None = None,
+                **options) -> dict[str, RegionFit]:
     """Fit ``model`` separately in every region (paper sec. 4.4, 5.2).
 
     ``region`` gives each sample's label, ``region_names`` label -> name.
@@ -454,6 +461,8 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     names; default :data:`NEIGHBOURS`), else of ``skin``, else the model's
     defaults; its status is ``'prior'``. Regions without samples are not
     fitted either. ``progress`` shows a bar over the regions fitted.
+    ``fixed_by_region`` (name -> parameters) holds parameters fixed in one
+    region on top of ``fixed``.
     """
     from tqdm import tqdm
 
@@ -469,7 +478,11 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     for label, name in bar:
         bar.set_postfix_str(f"{name}: {counts[name]} samples")
         mask = region == label
-        fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask], **options)
+        region_options = dict(options)
+        if fixed_by_region and name in fixed_by_region:
+            base = DEFAULT_FIXED.get(model.name, {}) if fixed is None else fixed
+            region_options["fixed"] = {**base, **fixed_by_region[name]}
+        fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask], **region_options)
     for label, name in region_names.items():
         if name in fits:
             continue
@@ -485,4 +498,4 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
 
 
 __all__ = ["ParameterSpace", "Schedule", "FULL_DATA", "RegionFit", "fit_region", "fit_regions",
-           "conservative_start", "min_samples", "NEIGHBOURS", "CONVERGED"]
+           "conservative_start", "min_samples", "NEIGHBOURS", "REFRACTIVE_INDEX", "CONVERGED"]

@@ -38,6 +38,8 @@ def test_ground_truth_skin_is_recovered(capture_dir, estimate):
     truth = json.loads((capture_dir / "ground_truth" / "brdf.json").read_text())["regions"]["skin"]
     skin = result.fits["skin"]
     assert skin.status == "converged" and skin.samples > 5000
+    # η is held at each region's published value: skin's and hair keratin's
+    assert skin.params["eta"] == 1.38 and result.fits["hair"].params["eta"] == 1.55
     assert abs(skin.params["roughness"] / truth["roughness"] - 1) < 0.15
     np.testing.assert_allclose(skin.params["specular_reflectance"], truth["specular_reflectance"], rtol=0.15)
     # the refined albedo agrees with the ground truth map where there are samples
