@@ -139,14 +139,16 @@ def load_geometry(capture: Capture, geometry="ground-truth", face_model=None
         shapes = {m["name"]: np.load(info_path.parent / m["shape"]).astype(np.float64)
                   for m in info["measurements"]}
         return model, shapes
-    from .shape_estimation import load_fitted_shapes, shapes_model_source
+    from .shape_estimation import INDEX, load_fitted_shapes
 
     path = Path(geometry)
-    if not path.exists():
-        raise FileNotFoundError(f"geometry folder not found: {path} (expected the output of mifaces fit-shape, "
-                                "or 'ground-truth')")
-    model = _face_model(face_model or shapes_model_source(path))
-    return model, load_fitted_shapes(path, capture)
+    if not (path / INDEX).is_file():
+        raise FileNotFoundError(f"no fitted shapes at {path}: expected the folder mifaces fit-shape wrote "
+                                f"(with {INDEX}), or 'ground-truth'")
+    if face_model is None:
+        index = json.loads((path / INDEX).read_text())
+        face_model = index.get("model_source", index.get("model", "builtin"))
+    return _face_model(face_model), load_fitted_shapes(path, capture)
 
 
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,

@@ -17,7 +17,9 @@ sphere shows the light's reflection, a small highlight. Then, per sphere:
    outline of a sphere is an ellipse, not a circle, away from the image
    centre) and with lens distortion undone.
 2. **Find the highlight** (:func:`find_highlight`): the intensity-weighted
-   centroid of the brightest blob inside the sphere's image.
+   centroid of the brightest blob inside the sphere's image. A sphere whose
+   highlight is much fainter than the others' lies in another sphere's
+   shadow and is left out.
 3. **Reflect the camera ray** through the highlight at the sphere
    (:func:`reflected_ray`): hit point P, normal n = (P - C)/r, reflected
    direction d - 2 (d·n) n. The light lies on that ray.
@@ -83,12 +85,16 @@ class LightCalibration:
     position_camera : (3,) float64
         The same in camera coordinates.
     spheres : tuple of SphereDetection
+        The spheres the light was triangulated from.
     highlights_px : (S, 2) float64
         Highlight centroid per sphere (pixels).
     ray_origins, ray_directions : (S, 3) float64
         Reflected rays in camera coordinates (origins on the spheres).
     ray_distances : (S,) float64
         Distance of the light position from each ray, mm: the residual.
+    rejected : tuple of SphereDetection
+        Spheres found in the outline picture that show no highlight (in
+        another sphere's shadow), left out of the triangulation.
     """
 
     position: np.ndarray
@@ -98,6 +104,7 @@ class LightCalibration:
     ray_origins: np.ndarray
     ray_directions: np.ndarray
     ray_distances: np.ndarray
+    rejected: tuple[SphereDetection, ...] = ()
 
     @property
     def rms_residual(self) -> float:
@@ -202,12 +209,21 @@ def locate_spheres(outline: np.ndarray, camera: Camera, radius: float,
     return sorted(found, key=lambda s: s.center_px[0])
 
 
-def find_highlight(image: np.ndarray, sphere: SphereDetection, inner: float = 0.98) -> np.ndarray:
+def find_highlight(image: np.ndarray, sphere: SphereDetection, inner: float = 0.98) -> tuple[np.ndarray, float]:
     """Pixel position (x, y) of the light's reflection on ``sphere`` in a point-light picture.
 
     Within ``inner`` x the sphere's image radius, the pixels above half the
-    brightest one form blobs; the one holding the brightest pixel gives the
-    intensity-weighted centroid (pixel centres at integers).
+    brightest one form blobs; the one holding the brightest pixel, grown by
+    two pixels so that the blurred rim counts too, gives the centroid weighted
+    by the luminance above the sphere's dark level (pixel centres at integers).
+
+    Returns
+    -------
+    (position, peak) : ((2,) float64, float)
+        The centroid and the brightest luminance on the sphere: a sphere in
+        the shadow of another one shows no highlight, only a faint
+        reflection of the other's, and :func:`calibrate_light` drops it by
+        comparing peaks.
     """
     import scipy.ndimage as ndi
 
@@ -225,12 +241,12 @@ def find_highlight(image: np.ndarray, sphere: SphereDetection, inner: float = 0.
         raise CalibrationError(f"no highlight on the sphere at pixel ({cx:.1f}, {cy:.1f})")
     blobs, _ = ndi.label(window > 0.5 * peak)
     blob = blobs == blobs[np.unravel_index(np.argmax(window), window.shape)]
-    # weights: the blob dilated by one pixel, above the dark level, so the blurred rim counts too
-    blob = ndi.binary_dilation(blob, iterations=1) & disc
-    background = np.median(window[disc & ~ndi.binary_dilation(blob, iterations=3)]) if disc.sum() > blob.sum() + 10 else 0
+    blob = ndi.binary_dilation(blob, iterations=2) & disc
+    dark = disc & ~ndi.binary_dilation(blob, iterations=2)
+    background = np.median(window[dark]) if dark.sum() > 10 else 0.0
     weight = np.where(blob, np.clip(window - background, 0, None), 0.0)
     total = weight.sum()
-    return np.array([(weight * cols).sum() / total, (weight * rows).sum() / total])
+    return np.array([(weight * cols).sum() / total, (weight * rows).sum() / total]), float(peak)
 
 
 def reflected_ray(camera: Camera, sphere: SphereDetection, highlight_px) -> tuple[np.ndarray, np.ndarray]:
@@ -264,8 +280,8 @@ def closest_point(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
     return np.linalg.solve(a, b)
 
 
-def calibrate_light(spheres: SpherePictures, camera: Camera, expected_count: int | None = None
-                    ) -> LightCalibration:
+def calibrate_light(spheres: SpherePictures, camera: Camera, expected_count: int | None = None,
+                    min_highlight: float = 0.2) -> LightCalibration:
     """Light position from the two steel-sphere pictures of one light condition.
 
     Parameters
@@ -274,7 +290,12 @@ def calibrate_light(spheres: SpherePictures, camera: Camera, expected_count: int
         ``outline`` and ``highlight`` pictures and the sphere radius (mm).
     camera : Camera
     expected_count : int, optional
-        Raise if a different number of spheres is found.
+        Raise if a different number of spheres is found in the outline picture.
+    min_highlight : float
+        A sphere whose brightest pixel in the highlight picture is below this
+        fraction of the brightest sphere's shows no highlight (it lies in the
+        shadow of another sphere, or the reflection is hidden) and is left out
+        of the triangulation; it is listed in ``LightCalibration.rejected``.
 
     Returns
     -------
@@ -283,7 +304,7 @@ def calibrate_light(spheres: SpherePictures, camera: Camera, expected_count: int
     Raises
     ------
     CalibrationError
-        Fewer than two spheres found, no highlight, or parallel rays.
+        Fewer than two spheres found or with a highlight, or parallel rays.
     """
     found = locate_spheres(spheres.outline.pixels, camera, spheres.radius)
     if expected_count is not None and len(found) != expected_count:
@@ -292,9 +313,20 @@ def calibrate_light(spheres: SpherePictures, camera: Camera, expected_count: int
     if len(found) < 2:
         raise CalibrationError(f"found {len(found)} sphere(s) in {spheres.outline.path.name}; "
                                "triangulating the light needs at least two")
-    highlights, origins, directions = [], [], []
+    located = []
     for sphere in found:
-        h = find_highlight(spheres.highlight.pixels, sphere)
+        try:
+            located.append((sphere, *find_highlight(spheres.highlight.pixels, sphere)))
+        except CalibrationError:
+            located.append((sphere, None, 0.0))
+    brightest = max(peak for _, _, peak in located)
+    used = [(s, h) for s, h, peak in located if h is not None and peak >= min_highlight * brightest]
+    rejected = tuple(s for s, h, peak in located if h is None or peak < min_highlight * brightest)
+    if len(used) < 2:
+        raise CalibrationError(f"{len(used)} of the {len(found)} spheres show a highlight in "
+                               f"{spheres.highlight.path.name}; triangulating the light needs at least two")
+    highlights, origins, directions = [], [], []
+    for sphere, h in used:
         p, u = reflected_ray(camera, sphere, h)
         highlights.append(h)
         origins.append(p)
@@ -306,5 +338,5 @@ def calibrate_light(spheres: SpherePictures, camera: Camera, expected_count: int
     if np.any(along <= 0):
         raise CalibrationError("the triangulated light lies behind a sphere's reflected ray")
     distances = np.linalg.norm(offsets - along[:, None] * directions, axis=1)
-    return LightCalibration(camera.to_world(x), x, tuple(found), np.array(highlights), origins, directions,
-                            distances)
+    return LightCalibration(camera.to_world(x), x, tuple(s for s, _ in used), np.array(highlights), origins,
+                            directions, distances, rejected)

@@ -327,16 +327,16 @@ def decode(data: np.ndarray, transfer: str = "linear", gamma: float = 2.2) -> np
         The encoding curve: ``'srgb'`` is IEC 61966-2-1, inverted with
         colour-science's ``cctf_decoding``; ``'gamma'`` is ``v ** gamma``.
     """
+    if transfer == "srgb":
+        from .hdr import decode_srgb
+
+        return decode_srgb(data)
     if np.issubdtype(data.dtype, np.integer):
         values = data.astype(np.float64) / np.iinfo(data.dtype).max
     else:
         values = data.astype(np.float64)
     if transfer == "linear":
         out = values
-    elif transfer == "srgb":
-        from .hdr import decode_srgb
-
-        out = decode_srgb(values)
     elif transfer == "gamma":
         out = np.clip(values, 0.0, None) ** gamma
     else:

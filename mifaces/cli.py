@@ -33,3 +33,110 @@ def gallery(out_dir: str, spp: int, size: tuple[int, int]) -> None:
     result = render_gallery(out_dir, spp=spp, width=size[0], height=size[1])
     click.echo(f"rendered the gallery in {result['seconds']:.1f} s ({result['variant']}, {spp} spp)")
     click.echo(f"  {result['exr']}\n  {result['png']}")
+
+
+def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in value.lower().split("x"))
+    except ValueError:
+        raise click.BadParameter(f"must be WxH, e.g. 512x512, got {value!r}") from None
+    return width, height
+
+
+@main.command()
+@click.argument("out", type=click.Path(file_okay=False))
+@click.option("--model", "face_model", default="builtin", show_default=True,
+              help="Face model: 'builtin' or a model file (see mifaces.load_model).")
+@click.option("--brdf", "brdf_model", default="cooktorrance", show_default=True,
+              type=click.Choice(["phong", "cooktorrance", "ward", "lafortune"]), help="Ground-truth BRDF plugin.")
+@click.option("--brdf-params", type=click.Path(exists=True, dir_okay=False), default=None,
+              help='JSON overrides: {"model": ..., "regions": {region: {parameter: value}}} (docs/capture.md).')
+@click.option("--measurements", default=6, show_default=True, type=click.IntRange(1),
+              help="Number of measurements (three poses per light).")
+@click.option("--resolution", default="512x512", show_default=True, callback=_width_x_height,
+              help="Image size WxH.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0), help="Seed of everything random.")
+@click.option("--preset", type=click.Choice(["paper"]), default=None,
+              help="'paper': the paper's 22 measurements (overrides --measurements).")
+@click.option("--spp", default=64, show_default=True, type=click.IntRange(1), help="Samples per pixel.")
+@click.option("--companion", default="diffuse", show_default=True, type=click.Choice(["diffuse", "exposures", "both"]),
+              help="Companion of each point-light photograph.")
+def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None, measurements: int,
+             resolution: tuple[int, int], seed: int, preset: str | None, spp: int, companion: str) -> None:
+    """Simulate a capture session with ground truth into folder OUT (paper sec. 3)."""
+    import json
+
+    from .simulate import simulate as simulate_capture
+
+    overrides = None
+    if brdf_params is not None:
+        try:
+            with open(brdf_params) as f:
+                overrides = json.load(f)
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise click.BadParameter(f"{brdf_params} is not valid JSON: {e}", param_hint="--brdf-params") from None
+    try:
+        result = simulate_capture(out, model=face_model, brdf=brdf_model, brdf_params=overrides,
+                                  measurements=measurements, resolution=resolution, seed=seed, preset=preset,
+                                  spp=spp, companion=companion)
+    except ValueError as e:  # invalid options and BRDF parameters, named by the API
+        raise click.ClickException(str(e)) from None
+    click.echo(f"simulated {result.measurements} measurement{'s' * (result.measurements != 1)} under "
+               f"{result.lights} light{'s' * (result.lights != 1)} in {result.seconds:.1f} s "
+               f"({result.seconds_per_measurement:.1f} s per measurement)")
+    click.echo(f"  capture:      {result.path}\n  ground truth: {result.path / 'ground_truth'}")
+
+
+@main.command("fit-brdf")
+@click.argument("capture", type=click.Path(exists=True))
+@click.option("--model", "brdf_model", default="cooktorrance", show_default=True,
+              type=click.Choice(["phong", "cooktorrance", "ward", "lafortune"]), help="BRDF model to fit per region.")
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
+              help="Folder for brdf.json, albedo.exr and scene.xml.")
+@click.option("--geometry", default="ground-truth", show_default=True,
+              help="'ground-truth' (a simulated capture's) or the folder mifaces fit-shape wrote.")
+@click.option("--resolution", default=512, show_default=True, type=click.IntRange(8),
+              help="Texture-space resolution R (R x R texels).")
+@click.option("--lobes", default=1, show_default=True, type=click.IntRange(1), help="Lafortune lobes.")
+@click.option("--face-model", default=None, help="Face model of the geometry (default: the one it names).")
+def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolution: int, lobes: int,
+             face_model: str | None) -> None:
+    """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
+    from .brdf_estimation import fit_brdf as fit
+
+    estimate = fit(capture, brdf_model, geometry, face_model=face_model, resolution=resolution, lobes=lobes,
+                   out=out_dir)
+    click.echo(f"fitted {estimate.model} to {estimate.samples} samples of {len(estimate.measurements)} "
+               f"photographs in {estimate.seconds['total']:.1f} s")
+    for name, fit_ in estimate.fits.items():
+        params = ", ".join(f"{k}={_short(v)}" for k, v in fit_.params.items() if k != "diffuse_reflectance")
+        click.echo(f"  {name:9s} {fit_.samples:8d} samples  {fit_.status:10s} {params}")
+    click.echo(f"wrote {out_dir}/brdf.json, albedo.exr, scene.xml")
+
+
+def _short(value) -> str:
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
+    return f"{value:.4g}"
+
+
+@main.command()
+@click.argument("capture", required=False, type=click.Path(exists=True))
+@click.option("--out", "out_dir", default="out/measure", show_default=True, type=click.Path(file_okay=False),
+              help="Output folder (capture/, shapes/, brdf/<model>/, report.md/json/png).")
+@click.option("--model", "models", multiple=True, type=click.Choice(["phong", "cooktorrance", "ward", "lafortune"]),
+              help="BRDF model(s) to fit (default: all four).")
+@click.option("--geometry", default="fitted", show_default=True, type=click.Choice(["fitted", "ground-truth"]),
+              help="Fit the face model to each photograph, or use a simulated capture's true shapes.")
+@click.option("--resolution", default=512, show_default=True, type=click.IntRange(8), help="Texture resolution R.")
+def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int) -> None:
+    """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
+    from .pipeline import MODELS, measure as run
+
+    report = run(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution)
+    for model, entry in report["models"].items():
+        skin = entry["regions"].get("skin", {})
+        truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")
+        errors = f"  (vs ground truth: {', '.join(f'{k} {100 * v:.1f}%' for k, v in truth.items())})" if truth else ""
+        click.echo(f"{model:13s} skin: {', '.join(f'{k}={_short(v)}' for k, v in skin.items())}{errors}")
+    click.echo(f"done in {report['seconds']['total']:.0f} s; report: {out_dir}/report.md and report.png")

@@ -19,6 +19,7 @@ flagged saturated, at or above ``saturation``, or below ``dark`` get weight 0.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -28,13 +29,30 @@ import numpy as np
 def decode_srgb(codes: np.ndarray) -> np.ndarray:
     """8- or 16-bit sRGB codes (or floats in [0, 1]) to linear values in [0, 1].
 
-    Uses colour-science's ``cctf_decoding`` (IEC 61966-2-1:1999).
+    Uses colour-science's ``cctf_decoding`` (IEC 61966-2-1:1999); integer
+    codes go through a table of its values for every code.
     """
+    codes = np.asarray(codes)
+    if codes.dtype in (np.uint8, np.uint16):
+        return _srgb_table(codes.dtype.str)[codes]
+    if np.issubdtype(codes.dtype, np.integer):
+        raise ValueError(f"sRGB codes must be 8 or 16 bit (uint8, uint16) or floats, got {codes.dtype}")
+    return _decode_srgb(codes)
+
+
+def _decode_srgb(values) -> np.ndarray:
     import colour
 
-    codes = np.asarray(codes)
-    v = codes / np.iinfo(codes.dtype).max if np.issubdtype(codes.dtype, np.integer) else codes
-    return np.asarray(colour.cctf_decoding(np.clip(np.asarray(v, np.float64), 0.0, 1.0), function="sRGB"), np.float32)
+    return np.asarray(colour.cctf_decoding(np.clip(np.asarray(values, np.float64), 0.0, 1.0), function="sRGB"),
+                      np.float32)
+
+
+@functools.lru_cache(maxsize=None)
+def _srgb_table(dtype: str) -> np.ndarray:
+    top = np.iinfo(np.dtype(dtype)).max
+    table = _decode_srgb(np.arange(top + 1) / top)
+    table.flags.writeable = False
+    return table
 
 
 @dataclass(frozen=True, eq=False)

@@ -72,9 +72,13 @@ PRESETS = {"paper": {"measurements": 22}}
 CAMERA_DISTANCE = 1200.0
 FIELD_HEIGHT = 300.0
 LIGHT_DISTANCE = 1500.0
-#: Radius of the steel spheres and of the lamp's emitting sphere (mm).
+#: Radius of the steel spheres and of the lamp's emitting sphere (mm). The lamp is a sphere in the
+#: calibration pictures only (a point's mirror image has no area); its size makes the highlight a few
+#: pixels wide, which locates it to a few hundredths of a pixel.
 STEEL_SPHERE_RADIUS = 40.0
-LAMP_RADIUS = 60.0
+LAMP_RADIUS = 120.0
+#: Steel-sphere centres relative to the head centre (mm, world frame).
+SPHERE_OFFSETS = np.array([[-95.0, 95.0, 0.0], [95.0, 95.0, 0.0], [-95.0, -95.0, 0.0], [95.0, -95.0, 0.0]])
 #: Exposures: the white target at the light distance reads this fraction of full scale.
 WHITE_LEVEL = 0.5
 
@@ -138,7 +142,13 @@ def brdf_with_overrides(model: str, overrides: dict | None) -> dict:
     if overrides is not None:
         if not isinstance(overrides, dict):
             raise ValueError("BRDF parameters must be a JSON object with 'model' and 'regions'")
+        unknown = sorted(set(overrides) - {"model", "options", "regions"})
+        if unknown:
+            raise ValueError(f"unknown key(s) {unknown} in the BRDF parameters; the layout is "
+                             "{\"model\": ..., \"options\": {...}, \"regions\": {region: {parameter: value}}}")
         model = overrides.get("model", model)
+        if not isinstance(overrides.get("options", {}), dict):
+            raise ValueError("'options' in the BRDF parameters must be an object of plugin options")
     truth = default_brdf(model)
     if overrides is None:
         return truth
@@ -149,8 +159,8 @@ def brdf_with_overrides(model: str, overrides: dict | None) -> dict:
         raise ValueError("'regions' must map region names to parameter objects")
     for params in regions.values():
         for key in params if isinstance(params, dict) else ():
-            if key.startswith("exponent_"):
-                lobes = max(lobes, int(key.split("_")[1]))
+            if key.startswith("exponent_") and key.split("_", 1)[1].isdigit():
+                lobes = max(lobes, int(key.split("_", 1)[1]))
     if model == "lafortune" and lobes > 1:
         options["lobes"] = lobes
     instance = brdf.model(model, **options)
@@ -323,7 +333,7 @@ def _bsdf(truth: dict, region: str, texture) -> dict:
     options = dict(truth["options"])
     instance = brdf.model(model, **options)
     params = truth["regions"].get(region, truth["regions"]["skin"])
-    d = {"type": model, "diffuse_reflectance": texture}
+    d = {"type": model} if texture is None else {"type": model, "diffuse_reflectance": texture}
     for k, v in options.items():
         if k != "lobes":
             d[k] = v
@@ -333,12 +343,17 @@ def _bsdf(truth: dict, region: str, texture) -> dict:
     return d
 
 
-def _face_shapes(model, vertices: np.ndarray, truth: dict, texture, normals: np.ndarray) -> dict:
+def face_shapes(model, vertices: np.ndarray, truth: dict, texture=None, normals: np.ndarray | None = None) -> dict:
     """One Mitsuba mesh per region (triangles labelled by the region map at their uv centroid),
-    each with its region's BSDF; shading normals from the whole face so seams stay invisible."""
+    each with its region's BSDF from ``truth`` (the ``brdf.json`` layout) over the albedo
+    ``texture`` (the plugin's default diffuse if None); shading normals from the whole face
+    (``normals``, default the model's vertex normals of ``vertices``) so seams stay invisible.
+    Keys are ``face_<region>_<label>``."""
     from .model.mesh import mitsuba_mesh
     from .model.regions import REGIONS, lookup
 
+    vertices = np.asarray(vertices, np.float32)
+    normals = model.vertex_normals(vertices) if normals is None else normals
     names = {label: name for name, label in REGIONS.items()}
     centroids = model.uv[model.triangles].mean(axis=1)
     labels = lookup(model.region_map, centroids)
@@ -441,8 +456,8 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     camera = studio_camera(width, height, head)
     n_lights = math.ceil(measurements / 3)
     per_light = [3] * n_lights
-    for i in range(3 * n_lights - measurements):
-        per_light[-1 - i] -= 1
+    for i in range(3 * n_lights - measurements):  # the deficit (at most 2) from the last lights
+        per_light[-1 - i % n_lights] -= 1
     directions = light_directions(n_lights, rng)
     distances = LIGHT_DISTANCE * rng.uniform(0.9, 1.1, n_lights)
     light_positions = head + directions * distances[:, None]
@@ -450,9 +465,9 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     exposure = WHITE_LEVEL  # per unit exposure the white target at LIGHT_DISTANCE reads 1
     poses = [(0.0, 0.0, 0.0), (-25.0, 0.0, 0.0), (25.0, 0.0, 0.0)]
 
-    # steel spheres: placed around where the head is, all in the field of view
-    sphere_centers = head + np.array([[-95.0, 90.0, 60.0], [95.0, 95.0, -50.0], [-95.0, -90.0, -50.0],
-                                      [90.0, -85.0, 60.0]])
+    # steel spheres: around where the head is, all in the field of view, in one plane facing the camera
+    # so that for lights in front (azimuth within 70 degrees) none lies in another's shadow
+    sphere_centers = head + SPHERE_OFFSETS
     integrator = {"type": "path", "max_depth": 4, "hide_emitters": False}
     sensor = _mitsuba_sensor(camera, spp)
 
@@ -527,7 +542,7 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
             local = face_model.shape(coefficients["shape"], expression).astype(np.float64)
             vertices = (local - head) @ rotation.T + head + translation
             normals = face_model.vertex_normals(vertices.astype(np.float32))
-            shapes = _face_shapes(face_model, vertices.astype(np.float32), truth, texture, normals)
+            shapes = face_shapes(face_model, vertices.astype(np.float32), truth, texture, normals)
             point = {"light": {"type": "point", "position": light_positions[li].tolist(),
                                "intensity": _rgb(intensity)}}
             frame_seed += 1

@@ -1,0 +1,231 @@
+"""The whole pipeline, end to end: photographs → fitted shapes → reflectance
+samples → fitted BRDFs → renders and a report.
+
+:func:`measure` is the main job of ``mifaces measure``: given a capture (or,
+without one, a capture it simulates from the built-in face with ground
+truth), it fits the face model to every photograph (or takes the
+simulator's ground-truth shapes), fits each BRDF model per region, and
+writes a report: ``report.md`` and ``report.json`` with every region's
+parameters, losses, sample counts and times (and the errors against the
+ground truth where the capture has one), and ``report.png``, per model the
+first photograph, the fitted face rendered in its place, their difference,
+and the fitted face under a novel light.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .files import atomic_write, write_json
+
+#: Models ``measure`` fits unless told otherwise.
+MODELS = ("cooktorrance", "ward", "phong", "lafortune")
+
+
+def _ground_truth_errors(estimate, capture) -> dict | None:
+    """Relative errors of each region's glossy parameters and the albedo RMSE
+    against a simulated capture's ground truth (None for a real capture or
+    another model family)."""
+    from skimage.transform import resize
+
+    from .capture import GROUND_TRUTH
+    from .files import read_exr
+
+    folder = capture.path / GROUND_TRUTH
+    if not (folder / "brdf.json").is_file():
+        return None
+    truth = json.loads((folder / "brdf.json").read_text())
+    out = {"truth_model": truth["model"], "regions": {}}
+    if truth["model"] == estimate.model:
+        for name, fit in estimate.fits.items():
+            if fit.status == "prior" or name not in truth["regions"]:
+                continue
+            errors = {}
+            for key, value in truth["regions"][name].items():
+                t, f = np.asarray(value, float), np.asarray(fit.params.get(key, np.nan), float)
+                errors[key] = float(np.mean(np.abs(f - t) / np.abs(t)))
+            out["regions"][name] = errors
+    r = estimate.resolution
+    albedo = resize(read_exr(folder / "albedo.exr"), (r, r, 3), anti_aliasing=True, order=1)
+    seen = estimate.albedo.samples > 0
+    out["albedo_rmse"] = float(np.sqrt(np.mean((estimate.albedo.albedo[seen] - albedo[seen]) ** 2)))
+    return out
+
+
+def novel_light(capture, centre: np.ndarray) -> np.ndarray:
+    """A light position none of the measurements used: the mean direction of
+    the capture's lights from ``centre`` (the head, world frame) mirrored
+    left-right in the camera's view (or turned 40° sideways where it is
+    frontal), at their mean distance."""
+    offsets = np.array([light.position for light in capture.lights]) - centre
+    distance = float(np.mean(np.linalg.norm(offsets, axis=1)))
+    direction = capture.camera.rotation @ offsets.mean(axis=0)  # camera frame: x right
+    direction /= np.linalg.norm(direction)
+    if abs(direction[0]) > 0.15:
+        direction[0] = -direction[0]
+    else:
+        angle = np.radians(40.0)
+        direction = np.array([direction[0] * np.cos(angle) + direction[2] * np.sin(angle), direction[1],
+                              -direction[0] * np.sin(angle) + direction[2] * np.cos(angle)])
+    return centre + distance * (capture.camera.rotation.T @ direction)
+
+
+def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resolution: int = 512,
+            shape_iterations: float | None = None, spp: int = 64, progress: bool = True) -> dict:
+    """Measure the reflectance of the face in ``capture``, writing everything to ``out``.
+
+    Parameters
+    ----------
+    out : path
+        Output folder: ``capture/`` (when simulated), ``shapes/``,
+        ``brdf/<model>/``, ``report.{md,json,png}``.
+    capture : path or Capture, optional
+        A capture folder; without one, the default capture of
+        :func:`mifaces.simulate.simulate` (built-in face, Cook-Torrance
+        ground truth) is simulated first into ``out/capture``.
+    models : sequence of str
+        BRDF models to fit.
+    geometry : {'fitted', 'ground-truth'}
+        Fit the face model to every photograph (``mifaces fit-shape``), or use
+        a simulated capture's true shapes.
+    resolution : int
+        Texture resolution R of the reflectance samples.
+    shape_iterations : float, optional
+        Scale of the shape fitter's iteration schedule.
+    spp : int
+        Samples per pixel of the report's renders.
+
+    Returns
+    -------
+    dict
+        The report (also written as ``report.json``).
+    """
+    from .brdf_estimation import fit_brdf, load_geometry, render_estimate
+    from .capture import Capture, load_capture
+    from .reflectance_samples import capture_samples
+
+    t0 = time.perf_counter()
+    out = Path(out)
+    if geometry not in ("fitted", "ground-truth"):
+        raise ValueError(f"geometry must be 'fitted' or 'ground-truth', got {geometry!r}")
+    unknown = [m for m in models if m not in MODELS]
+    if unknown or not models:
+        raise ValueError(f"unknown BRDF model(s) {unknown}; choose from {list(MODELS)}")
+    timings = {}
+    if capture is None:
+        from .simulate import simulate
+
+        simulated = simulate(out / "capture", progress=progress)
+        timings["simulate"] = simulated.seconds
+        capture = out / "capture"
+    capture = capture if isinstance(capture, Capture) else load_capture(capture)
+    report = {"capture": str(capture.path), "measurements": len(capture.measurements), "geometry": geometry,
+              "resolution": resolution, "models": {}}
+    if geometry == "fitted":
+        from .shape_estimation import fit_shape
+
+        t = time.perf_counter()
+        fits = fit_shape(capture, out=out / "shapes", iterations=shape_iterations, progress=progress)
+        timings["fit_shape"] = time.perf_counter() - t
+        report["shapes"] = {f.name: {"status": f.status, "seconds": f.seconds} for f in fits}
+        face, shapes = load_geometry(capture, out / "shapes")
+    else:
+        face, shapes = load_geometry(capture, "ground-truth")
+    t = time.perf_counter()
+    samples = capture_samples(capture, shapes, face, resolution, progress=progress)
+    timings["reflectance_samples"] = time.perf_counter() - t
+    first = next(m for m in capture.measurements if m.name in shapes)
+    lamp = capture.light(first.light)
+    novel = novel_light(capture, np.asarray(shapes[first.name]).mean(axis=0))
+    panels = []
+    for model in models:
+        t = time.perf_counter()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
+                                out=out / "brdf" / model, progress=progress)
+        timings[f"fit_brdf_{model}"] = time.perf_counter() - t
+        entry = estimate.to_json()
+        entry["warnings"] = [str(w.message) for w in caught]
+        entry["ground_truth"] = _ground_truth_errors(estimate, capture)
+        rendered = render_estimate(estimate, face, shapes[first.name], capture.camera, lamp.position,
+                                   lamp.intensity, spp=spp)
+        relit = render_estimate(estimate, face, shapes[first.name], capture.camera, novel, lamp.intensity, spp=spp)
+        face_pixels = first.image.pixels.mean(axis=2) > 0.02 * first.image.pixels.max()
+        entry["image_relative_rmse"] = float(np.sqrt(np.mean((rendered[face_pixels] - first.image.pixels[face_pixels])
+                                                             ** 2)) / np.mean(first.image.pixels[face_pixels]))
+        report["models"][model] = entry
+        panels.append((model, first.image.pixels, rendered, relit))
+    timings["total"] = time.perf_counter() - t0
+    report["seconds"] = timings
+    report["novel_light_mm"] = novel.tolist()
+    write_json(out / "report.json", report)
+    _write_picture(out / "report.png", panels, first.name)
+    _write_markdown(out / "report.md", report, first.name)
+    return report
+
+
+def _write_picture(path: Path, panels, photo_name: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .files import atomic_path
+
+    def show(ax, image, title, scale):
+        ax.imshow(np.clip((np.clip(image * scale, 0, 1)) ** (1 / 2.2), 0, 1))
+        ax.set_title(title, fontsize=9)
+        ax.axis("off")
+
+    fig, axes = plt.subplots(len(panels), 4, figsize=(12, 3 * len(panels)), squeeze=False)
+    for row, (model, photo, rendered, relit) in zip(axes, panels):
+        scale = 0.8 / max(np.percentile(photo, 99.5), 1e-12)
+        show(row[0], photo, f"photograph {photo_name}", scale)
+        show(row[1], rendered, f"{model}: fitted, same light", scale)
+        show(row[2], 4 * np.abs(rendered - photo), "|difference| x 4", scale)
+        show(row[3], relit, f"{model}: novel light", scale)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
+    plt.close(fig)
+
+
+def _write_markdown(path: Path, report: dict, photo_name: str) -> None:
+    lines = [f"# mifaces measurement report", "",
+             f"Capture `{report['capture']}`: {report['measurements']} photographs, geometry {report['geometry']}, "
+             f"texture {report['resolution']}².", "", "![report](report.png)", "",
+             "| model | region | samples | status | parameters | loss | error vs ground truth |",
+             "|---|---|---|---|---|---|---|"]
+    for model, entry in report["models"].items():
+        truth = entry.get("ground_truth") or {}
+        for region, params in entry["regions"].items():
+            fit = entry["fit"][region]
+            text = ", ".join(f"{k} {_fmt(v)}" for k, v in params.items())
+            err = (truth.get("regions") or {}).get(region)
+            err_text = ", ".join(f"{k} {100 * v:.1f}%" for k, v in err.items()) if err else ""
+            lines.append(f"| {model} | {region} | {fit['samples']} | {fit['status']} | {text} | "
+                         f"{_fmt(fit['loss'])} | {err_text} |")
+    lines += ["", "| model | image RMSE (first photograph, relative) | albedo RMSE vs ground truth | fit time (s) |",
+              "|---|---|---|---|"]
+    for model, entry in report["models"].items():
+        truth = entry.get("ground_truth") or {}
+        albedo = f"{truth['albedo_rmse']:.4f}" if "albedo_rmse" in truth else ""
+        lines.append(f"| {model} | {100 * entry['image_relative_rmse']:.2f}% | {albedo} | "
+                     f"{report['seconds'][f'fit_brdf_{model}']:.1f} |")
+    lines += ["", "Times (s): " + ", ".join(f"{k} {v:.1f}" for k, v in report["seconds"].items()), ""]
+    with atomic_write(path, "w") as f:
+        f.write("\n".join(lines))
+
+
+def _fmt(value) -> str:
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(f"{v:.3g}" for v in value) + "]"
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
