@@ -7,8 +7,9 @@ geometry to fitted BRDFs (paper sec. 4.3-5.3).
    parameterization and turned into weighted reflectance samples
    (:func:`mifaces.reflectance_samples.capture_samples`: eq. 4, 9, 10, shadow
    and grazing-angle masks);
-2. each sample labelled with the a-priori material region of its texel
-   (:func:`mifaces.model.regions.texel_regions`);
+2. each sample labelled with the a-priori material region of its texel, as
+   the triangle covering it is labelled
+   (:func:`mifaces.model.regions.texel_regions_of_mesh`);
 3. one BRDF model fitted per region by hierarchical Levenberg-Marquardt
    (:func:`mifaces.brdf_fitting.fit_regions`; a region with too few samples
    borrows a neighbour's fit, a region with none is not evaluated);
@@ -44,7 +45,7 @@ from .capture import GROUND_TRUTH, Capture, load_capture
 from .diffuse_refinement import DiffuseMap, refine_diffuse
 from .files import atomic_path, atomic_write, write_exr, write_json, write_png
 from .model import MorphableModel, load_model
-from .model.regions import REGIONS, regions_present, texel_regions
+from .model.regions import REGIONS, regions_present, texel_regions_of_mesh
 from .reflectance_samples import ReflectanceSamples, capture_samples
 from .simulate import face_shapes
 
@@ -204,7 +205,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     if len(samples) == 0:
         raise ValueError("no valid reflectance samples: every texel is hidden, shadowed, grazing or saturated")
     t_samples = time.perf_counter()
-    region_map = texel_regions(face.region_map, resolution)
+    region_map = texel_regions_of_mesh(face.region_map, face.uv, face.triangles, resolution)
     label = samples.region(region_map)
     names = {REGIONS[n]: n for n in regions_present(face.region_map)}
     on_face = np.isin(label, list(names))

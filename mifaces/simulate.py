@@ -350,13 +350,12 @@ def face_shapes(model, vertices: np.ndarray, truth: dict, texture=None, normals:
     (``normals``, default the model's vertex normals of ``vertices``) so seams stay invisible.
     Keys are ``face_<region>_<label>``."""
     from .model.mesh import mitsuba_mesh
-    from .model.regions import REGIONS, lookup
+    from .model.regions import REGIONS, triangle_regions
 
     vertices = np.asarray(vertices, np.float32)
     normals = model.vertex_normals(vertices) if normals is None else normals
     names = {label: name for name, label in REGIONS.items()}
-    centroids = model.uv[model.triangles].mean(axis=1)
-    labels = lookup(model.region_map, centroids)
+    labels = triangle_regions(model.region_map, model.uv, model.triangles)
     shapes = {}
     for label in np.unique(labels):
         name = names.get(int(label), "skin")

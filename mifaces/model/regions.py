@@ -144,3 +144,23 @@ def texel_regions(region_map: np.ndarray, resolution: int) -> np.ndarray:
     centres = (np.arange(resolution) + 0.5) / resolution
     u, v = np.meshgrid(centres, centres)
     return lookup(region_map, np.stack([u.ravel(), v.ravel()], axis=1)).reshape(resolution, resolution)
+
+
+def triangle_regions(region_map: np.ndarray, uv: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Region label of each triangle: the region map at its uv centroid. The
+    rendered face (the simulator, ``fit-brdf``'s scene) gives each triangle
+    the material of its region."""
+    return lookup(region_map, np.asarray(uv)[np.asarray(triangles)].mean(axis=1))
+
+
+def texel_regions_of_mesh(region_map: np.ndarray, uv: np.ndarray, triangles: np.ndarray, resolution: int
+                          ) -> np.ndarray:
+    """Like :func:`texel_regions`, but each texel a triangle covers takes that
+    triangle's label (:func:`triangle_regions`), so samples are grouped exactly
+    as the rendered face assigns materials; uncovered texels keep the map's
+    label."""
+    labels = texel_regions(region_map, resolution)
+    coverage = rasterize(uv, triangles, (resolution, resolution))
+    covered = coverage.triangle >= 0
+    labels[covered] = triangle_regions(region_map, uv, triangles)[coverage.triangle[covered]]
+    return labels
