@@ -47,7 +47,7 @@ from .files import atomic_path, atomic_write, write_exr, write_json, write_png
 from .model import MorphableModel, load_model
 from .model.regions import REGIONS, regions_present, texel_regions_of_mesh
 from .reflectance_samples import ReflectanceSamples, capture_samples
-from .simulate import face_shapes
+from .render import face_shapes
 
 #: Fit statistics stored per region under ``brdf.json``'s ``"fit"``.
 FIT_KEYS = ("diffuse_reflectance", "loss", "samples", "seconds", "status", "reason", "iterations")
@@ -248,11 +248,11 @@ def scene_xml(estimate: BRDFEstimate, camera, light_position, intensity, meshes:
     """A Mitsuba scene (XML text) of the fitted face: one ``ply`` shape per
     region with its fitted plugin BSDF over the albedo map, the capture's
     camera, a point light, and the path tracer (shadows, interreflection)."""
-    from .simulate import _mitsuba_sensor
+    from .render import mitsuba_sensor
 
     model = brdf_models.model(estimate.model, **estimate.options)
     kinds = {p.name: p.kind for p in model.specular_parameters()}
-    sensor = _mitsuba_sensor(camera, spp)
+    sensor = mitsuba_sensor(camera, spp)
     root = ET.Element("scene", version="3.0.0")
     ET.SubElement(root, "default", name="spp", value=str(spp))
     integrator = ET.SubElement(root, "integrator", type="path")
@@ -331,23 +331,58 @@ def write_estimate(estimate: BRDFEstimate, out, face_model: MorphableModel, vert
 
 
 def render_estimate(estimate: BRDFEstimate, face_model: MorphableModel, vertices: np.ndarray, camera,
-                    light_position, intensity, spp: int = 64, seed: int = 0) -> np.ndarray:
+                    light_position=None, intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64,
+                    seed: int = 0) -> np.ndarray:
     """Render the fitted face (linear RGB, (H, W, 3)) on geometry ``vertices``
-    (world frame) seen by ``camera`` under a point light, with Mitsuba's path
-    tracer as the simulator renders photographs: for novel poses, novel lights
-    and comparisons with held-out photographs."""
-    import mitsuba as mi
+    (world frame) seen by ``camera``, under a point light and/or an
+    environment map, with Mitsuba's path tracer as the simulator renders
+    photographs (:func:`mifaces.render.render_face`): for novel poses, novel
+    lights and comparisons with held-out photographs."""
+    from .render import render_face
 
-    from .simulate import _mitsuba_sensor
+    return render_face(estimate.to_json(), estimate.albedo.albedo, face_model, vertices, camera, light_position,
+                       intensity, envmap, envmap_scale, spp, seed)
 
-    texture = mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(estimate.albedo.albedo), "raw": True,
-                            "filter_type": "bilinear", "wrap_mode": "clamp"})
-    scene = {"type": "scene", "integrator": {"type": "path", "max_depth": 4},
-             "sensor": _mitsuba_sensor(camera, spp),
-             "light": {"type": "point", "position": [float(x) for x in light_position],
-                       "intensity": {"type": "rgb", "value": [float(x) for x in np.broadcast_to(intensity, 3)]}},
-             **face_shapes(face_model, vertices, estimate.to_json(), texture)}
-    return np.array(mi.render(mi.load_dict(scene), spp=spp, seed=seed), dtype=np.float32)[..., :3]
+
+def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geometry="ground-truth",
+                  face_model=None, yaw: float = 0.0, light_position=None, envmap=None, envmap_scale: float = 1.0,
+                  spp: int = 64) -> dict[str, Path]:
+    """Render a fitted BRDF (a ``fit-brdf`` output folder) on a face of a capture,
+    in a novel pose and light, and write ``out``.exr / .png.
+
+    The BRDF may come from another face than the geometry: both share the
+    model's texture parameterization, so the albedo map and the regions move
+    with it (paper sec. 6). ``yaw`` turns the face about its vertical axis
+    (degrees, about its centre); the light is the measurement's point light
+    unless ``light_position`` (world, mm) or an ``envmap`` is given.
+    """
+    from .render import render_face, save_image
+
+    capture = capture if isinstance(capture, Capture) else load_capture(capture)
+    data = load_estimate(brdf_dir)
+    if data["albedo"] is None:
+        raise FileNotFoundError(f"{brdf_dir}: no albedo map beside brdf.json")
+    face, shapes = load_geometry(capture, geometry, face_model)
+    name = measurement or next(m.name for m in capture.measurements if m.name in shapes)
+    if name not in shapes:
+        raise ValueError(f"no geometry for measurement {name!r}; have {sorted(shapes)}")
+    if data["albedo"].shape[:2] != (data.get("resolution", data["albedo"].shape[0]),) * 2:
+        raise ValueError(f"{brdf_dir}: albedo map of shape {data['albedo'].shape} does not match brdf.json")
+    vertices = np.asarray(shapes[name], np.float64)
+    if yaw:
+        centre = vertices.mean(axis=0)
+        up = -capture.camera.rotation[1]  # the camera's up direction in the world frame
+        angle = np.radians(yaw)
+        k = np.array([[0, -up[2], up[1]], [up[2], 0, -up[0]], [-up[1], up[0], 0]])
+        rotation = np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k  # Rodrigues
+        vertices = (vertices - centre) @ rotation.T + centre
+    lamp = capture.light(next(m.light for m in capture.measurements if m.name == name))
+    intensity = lamp.intensity
+    if light_position is None and envmap is None:
+        light_position = lamp.position
+    image = render_face(data, data["albedo"], face, vertices, capture.camera, light_position,
+                        intensity if light_position is not None else None, envmap, envmap_scale, spp)
+    return save_image(image, out)
 
 
 def load_estimate(path) -> dict:
@@ -369,4 +404,4 @@ def load_estimate(path) -> dict:
 
 
 __all__ = ["BRDFEstimate", "fit_brdf", "load_geometry", "write_estimate", "scene_xml", "render_estimate",
-           "load_estimate"]
+           "render_fitted", "load_estimate"]

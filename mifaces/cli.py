@@ -140,3 +140,29 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
         errors = f"  (vs ground truth: {', '.join(f'{k} {100 * v:.1f}%' for k, v in truth.items())})" if truth else ""
         click.echo(f"{model:13s} skin: {', '.join(f'{k}={_short(v)}' for k, v in skin.items())}{errors}")
     click.echo(f"done in {report['seconds']['total']:.0f} s; report: {out_dir}/report.md and report.png")
+
+
+@main.command()
+@click.argument("brdf_dir", type=click.Path(exists=True, file_okay=False))
+@click.argument("capture", type=click.Path(exists=True))
+@click.option("--out", "out_stem", required=True, type=click.Path(dir_okay=False),
+              help="Output image path without suffix: writes OUT.exr and OUT.png.")
+@click.option("--measurement", default=None, help="Measurement whose face geometry to use (default: the first).")
+@click.option("--geometry", default="ground-truth", show_default=True,
+              help="'ground-truth' or the folder mifaces fit-shape wrote.")
+@click.option("--yaw", default=0.0, show_default=True, help="Turn the face by this many degrees (a novel pose).")
+@click.option("--light", "light_position", default=None, type=(float, float, float),
+              help="Point light position x y z (world, mm; default: the measurement's light).")
+@click.option("--envmap", default=None, type=click.Path(exists=True, dir_okay=False),
+              help="Light by this equirectangular environment map (EXR) instead.")
+@click.option("--envmap-scale", default=1.0, show_default=True, help="Scale of the environment map.")
+@click.option("--spp", default=64, show_default=True, type=click.IntRange(1), help="Samples per pixel.")
+def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, geometry: str, yaw: float,
+           light_position, envmap: str | None, envmap_scale: float, spp: int) -> None:
+    """Render the BRDF fitted in BRDF_DIR on a face of CAPTURE: novel poses, lights, environment maps, or
+    another person's face (BRDF transfer)."""
+    from .brdf_estimation import render_fitted
+
+    paths = render_fitted(brdf_dir, capture, out_stem, measurement, geometry, yaw=yaw,
+                          light_position=light_position, envmap=envmap, envmap_scale=envmap_scale, spp=spp)
+    click.echo(f"wrote {paths['exr']} and {paths['png']}")

@@ -53,6 +53,10 @@ import numpy as np
 
 from .capture import FORMAT, GROUND_TRUTH, MANIFEST, VERSION, Camera
 from .files import atomic_write, write_exr, write_json, write_png
+from .render import face_shapes, mitsuba_sensor, rgb as _rgb
+
+#: Kept for callers of the earlier private name.
+_mitsuba_sensor = mitsuba_sensor
 
 #: Cook–Torrance ground truth per region (see the module docstring for sources).
 COOK_TORRANCE_REGIONS: dict[str, dict] = {
@@ -236,27 +240,6 @@ def studio_camera(width: int, height: int, head: np.ndarray) -> Camera:
                   -rotation @ position)
 
 
-def _mitsuba_sensor(camera: Camera, spp: int) -> dict:
-    """A Mitsuba ``perspective`` sensor equal to ``camera`` (no distortion)."""
-    import mitsuba as mi
-
-    if np.any(camera.distortion):
-        raise ValueError("the simulator renders undistorted images only")
-    fov = 2 * math.degrees(math.atan(camera.height / 2 / camera.fy))
-    to_world = np.eye(4)
-    # Mitsuba's camera looks along +z with +y up and +x to the left of the image
-    to_world[:3, :3] = camera.rotation.T @ np.diag([-1.0, -1.0, 1.0])
-    to_world[:3, 3] = camera.position
-    return {"type": "perspective", "fov": fov, "fov_axis": "y",
-            "principal_point_offset_x": (camera.cx + 0.5 - camera.width / 2) / camera.width,
-            "principal_point_offset_y": (camera.cy + 0.5 - camera.height / 2) / camera.height,
-            "near_clip": 10.0, "far_clip": 1e5, "to_world": mi.ScalarTransform4f(to_world.tolist()),
-            "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
-                     # the optics' blur: a Gaussian point spread function of 0.5 px
-                     "rfilter": {"type": "gaussian", "stddev": 0.5}, "pixel_format": "rgb"},
-            "sampler": {"type": "independent", "sample_count": spp}}
-
-
 def camera_noise(values: np.ndarray, rng: np.random.Generator, full_well: float = 20000.0,
                  read_noise: float = 0.002) -> np.ndarray:
     """Sensor noise on linear values in full-scale units, clipped to [0, 1].
@@ -318,54 +301,6 @@ class SimulationResult:
     def seconds_per_measurement(self) -> float:
         """Mean time to render one measurement (point-light image and companions)."""
         return float(np.mean(self.render_seconds)) if self.render_seconds else float("nan")
-
-
-def _rgb(value) -> dict:
-    v = np.broadcast_to(np.asarray(value, np.float64), 3)
-    return {"type": "rgb", "value": [float(x) for x in v]}
-
-
-def _bsdf(truth: dict, region: str, texture) -> dict:
-    """The plugin dict of one region: its parameters over the albedo texture."""
-    from . import brdf
-
-    model = truth["model"]
-    options = dict(truth["options"])
-    instance = brdf.model(model, **options)
-    params = truth["regions"].get(region, truth["regions"]["skin"])
-    d = {"type": model} if texture is None else {"type": model, "diffuse_reflectance": texture}
-    for k, v in options.items():
-        if k != "lobes":
-            d[k] = v
-    kinds = {p.name: p.kind for p in instance.specular_parameters()}
-    for k, v in params.items():
-        d[k] = _rgb(v) if kinds.get(k) == "rgb" else float(v)
-    return d
-
-
-def face_shapes(model, vertices: np.ndarray, truth: dict, texture=None, normals: np.ndarray | None = None) -> dict:
-    """One Mitsuba mesh per region (triangles labelled by the region map at their uv centroid),
-    each with its region's BSDF from ``truth`` (the ``brdf.json`` layout) over the albedo
-    ``texture`` (the plugin's default diffuse if None); shading normals from the whole face
-    (``normals``, default the model's vertex normals of ``vertices``) so seams stay invisible.
-    Keys are ``face_<region>_<label>``."""
-    from .model.mesh import mitsuba_mesh
-    from .model.regions import REGIONS, triangle_regions
-
-    vertices = np.asarray(vertices, np.float32)
-    normals = model.vertex_normals(vertices) if normals is None else normals
-    names = {label: name for name, label in REGIONS.items()}
-    labels = triangle_regions(model.region_map, model.uv, model.triangles)
-    shapes = {}
-    for label in np.unique(labels):
-        name = names.get(int(label), "skin")
-        name = "skin" if name == "background" else name
-        tri = model.triangles[labels == label]
-        used, inverse = np.unique(tri, return_inverse=True)
-        shapes[f"face_{name}_{int(label)}"] = mitsuba_mesh(
-            vertices[used], inverse.reshape(-1, 3), model.uv[used], normals=normals[used],
-            bsdf=_bsdf(truth, name, texture), name=f"face_{name}")
-    return shapes
 
 
 def _render(scene_dict: dict, spp: int, seed: int) -> np.ndarray:
@@ -468,7 +403,7 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     # so that for lights in front (azimuth within 70 degrees) none lies in another's shadow
     sphere_centers = head + SPHERE_OFFSETS
     integrator = {"type": "path", "max_depth": 4, "hide_emitters": False}
-    sensor = _mitsuba_sensor(camera, spp)
+    sensor = mitsuba_sensor(camera, spp)
 
     def scene(shapes: dict, emitters: dict, spp_: int) -> dict:
         d = {"type": "scene", "integrator": integrator, "sensor": dict(sensor, sampler={"type": "independent",

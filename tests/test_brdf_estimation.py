@@ -167,3 +167,57 @@ def test_cli_fit_brdf(capture_dir, tmp_path):
     assert "fitted ward to" in result.output and "skin" in result.output
     data = json.loads((out / "brdf.json").read_text())
     assert data["model"] == "ward" and data["resolution"] == 48
+
+
+def test_render_under_an_environment_map(capture_dir, estimate):
+    """The fitted face under an environment map; a scene holds only the emitters it is given."""
+    import mifaces
+    from mifaces.brdf_estimation import load_geometry
+    from mifaces.capture import load_capture
+    from mifaces.render import face_scene, render_face
+
+    mifaces.set_variant("llvm_ad_rgb")
+    result, out = estimate
+    capture = load_capture(capture_dir)
+    model, shapes = load_geometry(capture)
+    args = (result.to_json(), result.albedo.albedo, model, shapes["m00"], capture.camera)
+    light = capture.light(capture.measurements[0].light)
+    point_only = face_scene(*args, light.position, light.intensity)
+    assert "light" in point_only and "environment" not in point_only
+    sky = np.ones((16, 32, 3), np.float32) * np.array([0.6, 0.7, 1.0], np.float32)
+    env_only = face_scene(*args, envmap=sky)
+    assert "environment" in env_only and "light" not in env_only
+    image = render_face(*args, envmap=sky, spp=4)
+    face = image.mean(axis=2) > 0
+    assert np.all(np.isfinite(image)) and face.mean() > 0.05
+    # a white sky on a face of albedo < 1: radiance below the sky's, bluish like the sky
+    assert image[face].mean() < 1.0 and image[face][:, 2].mean() > 0
+    with pytest.raises(ValueError, match="needs a light"):
+        render_face(*args)
+    with pytest.raises(FileNotFoundError, match="environment map not found"):
+        render_face(*args, envmap="/no/such.exr")
+
+
+def test_cli_render_novel_pose_and_transfer(capture_dir, estimate, tmp_path):
+    """mifaces render: the fitted BRDF on the same face turned 30°, and moved to another face."""
+    from click.testing import CliRunner
+
+    from mifaces.cli import main
+    from mifaces.files import read_exr
+    from mifaces.simulate import simulate
+
+    result, out = estimate
+    other = tmp_path / "other"
+    simulate(other, measurements=1, resolution=(96, 96), spp=4, albedo_resolution=64, seed=8, progress=False)
+    runner = CliRunner()
+    turned = runner.invoke(main, ["--variant", "llvm_ad_rgb", "render", str(out), str(capture_dir), "--out",
+                                  str(tmp_path / "turned"), "--yaw", "30", "--spp", "4"])
+    assert turned.exit_code == 0, turned.output
+    moved = runner.invoke(main, ["--variant", "llvm_ad_rgb", "render", str(out), str(other), "--out",
+                                 str(tmp_path / "moved"), "--spp", "4"])
+    assert moved.exit_code == 0, moved.output
+    a, b = read_exr(tmp_path / "turned.exr"), read_exr(tmp_path / "moved.exr")
+    assert a.shape == (256, 256, 3) and b.shape == (96, 96, 3)
+    assert np.all(np.isfinite(a)) and a.max() > 0 and b.max() > 0
+    missing = runner.invoke(main, ["render", str(tmp_path), str(capture_dir), "--out", str(tmp_path / "x")])
+    assert missing.exit_code != 0 and "no brdf.json" in str(missing.exception)

@@ -38,7 +38,8 @@ from mifaces.brdf_estimation import fit_brdf, load_geometry, render_estimate
 from mifaces.capture import load_capture
 from mifaces.files import read_exr, write_json
 from mifaces.model.regions import REGIONS
-from mifaces.simulate import face_shapes, simulate
+from mifaces.render import face_shapes, mitsuba_sensor
+from mifaces.simulate import simulate
 
 OUT = Path(__file__).resolve().parent / "results"
 MODELS = ["cooktorrance", "ward", "phong", "lafortune"]
@@ -161,7 +162,7 @@ def cross_family(work: Path, args) -> list[dict]:
 
     def truth_render(m, lamp):
         scene = {"type": "scene", "integrator": {"type": "path", "max_depth": 4},
-                 "sensor": mifaces.simulate._mitsuba_sensor(capture.camera, args.spp),
+                 "sensor": mitsuba_sensor(capture.camera, args.spp),
                  "light": {"type": "point", "position": lamp.position.tolist(),
                            "intensity": {"type": "rgb", "value": lamp.intensity.tolist()}},
                  **face_shapes(face, shapes[m.name], truth, texture)}
