@@ -433,9 +433,39 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         history += [(t, e * len(sigma) / size, size) for t, e, _ in result.history]
         if trace is not None:
             trace += [(t, space.values(xs)) for t, _, xs in result.history]
-    return RegionFit(model=model.name, options=dict(model.options), params=space.values(x), loss=result.loss,
+    params, loss, reason = space.values(x), result.loss, result.reason
+    if model.name == "lafortune" and len(model.lobes) > 1:
+        params, loss, pruned = prune_lobes(model, space, problem, params, loss)
+        if pruned:
+            reason += f"; lobe(s) {pruned} explained no sample and were set to zero"
+    return RegionFit(model=model.name, options=dict(model.options), params=params, loss=loss,
                      samples=len(sigma), seconds=time.perf_counter() - t0, status=result.status,
-                     reason=result.reason, iterations=iterations, history=history)
+                     reason=reason, iterations=iterations, history=history)
+
+
+def prune_lobes(model: BRDFModel, space: ParameterSpace, problem: _Problem, params: dict, loss: float,
+                rtol: float = 1e-4) -> tuple[dict, float, list[int]]:
+    """Zero the Lafortune lobes the samples do not need.
+
+    A lobe whose removal raises the loss by less than ``rtol`` (relative)
+    explains no sample: typically it has drifted to a sharp spike where no
+    sample lies, where it would only add a highlight no photograph showed.
+    Such lobes get C_xy = C_z = 0 (the plugin then leaves them out). Returns
+    the parameters, their loss and the numbers of the lobes removed.
+    """
+    from .brdf.lafortune import lobe_names
+
+    pruned = []
+    for j in model.lobes:
+        cxy, cz, _ = lobe_names(j)
+        if cxy in space.fixed or cz in space.fixed:
+            continue
+        trial = {**params, cxy: [0.0] * 3, cz: [0.0] * 3}
+        trial_loss = problem.loss(space.vector(trial))
+        if np.isfinite(trial_loss) and trial_loss <= loss * (1 + rtol):
+            params, loss = space.values(space.vector(trial)), min(loss, trial_loss)
+            pruned.append(j)
+    return params, loss, pruned
 
 
 def prior_fit(model: BRDFModel, params: dict, samples: int, reason: str) -> RegionFit:

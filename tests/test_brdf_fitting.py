@@ -210,3 +210,18 @@ def test_lafortune_lobes_stay_energy_bounded(jit_variant):
                                         q)).T
         peak = sum((fit.params[f"exponent{s}"] + 2) / 2 for s in ("", "_2")) + np.max(fit.params["diffuse_reflectance"])
         assert np.all(np.isfinite(f)) and f.max() <= peak
+
+
+def test_a_lafortune_lobe_that_explains_nothing_is_removed(jit_variant):
+    """One-lobe data fitted with two lobes, one started as a retro-reflective
+    spike where no sample lies: the spike is set to zero, the other lobe fits."""
+    truth = {"diffuse_reflectance": [0.45, 0.3, 0.25], "cxy": [-0.9] * 3, "cz": [0.9] * 3, "exponent": 15.0}
+    light, view, r, sigma = synthetic_samples(brdf.model("lafortune"), truth, 20000, seed=5)
+    model = brdf.model("lafortune", lobes=2)
+    start = {"cxy": [1.0] * 3, "cz": [1.0] * 3, "exponent": 9e4,
+             "cxy_2": [-0.88] * 3, "cz_2": [0.88] * 3, "exponent_2": 14.0}
+    fit = fit_region(model, light, view, r, sigma, start=start, schedule=FULL_DATA)
+    assert "set to zero" in fit.reason
+    assert fit.params["cxy"] == [0.0] * 3 and fit.params["cz"] == [0.0] * 3
+    np.testing.assert_allclose(fit.params["cz_2"], truth["cz"], rtol=1e-2)
+    np.testing.assert_allclose(fit.params["exponent_2"], truth["exponent"], rtol=1e-2)
