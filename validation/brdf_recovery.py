@@ -231,7 +231,7 @@ def plot(same: list[dict], cross: list[dict], path: Path) -> None:
     ax.set_title("cross family: Cook-Torrance truth")
     h1, l1 = ax.get_legend_handles_labels()
     h2, l2 = ax2.get_legend_handles_labels()
-    ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper left")
+    ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.22), ncol=3)
     fig.tight_layout()
     from mifaces.files import atomic_path
 
@@ -246,7 +246,12 @@ def main() -> None:
     parser.add_argument("--image", type=int, default=384, help="simulated image size")
     parser.add_argument("--spp", type=int, default=32)
     parser.add_argument("--quick", action="store_true", help="small images and textures (a smoke run)")
+    parser.add_argument("--replot", action="store_true", help="only redraw the figure from the saved JSON")
     args = parser.parse_args()
+    if args.replot:
+        saved = json.loads((OUT / "brdf_recovery.json").read_text())
+        plot(saved["same_family"], saved["cross_family"], OUT / "brdf_recovery.png")
+        return
     if args.quick:
         args.resolution, args.image, args.spp = 128, 160, 8
     with tempfile.TemporaryDirectory() as tmp:
