@@ -391,6 +391,20 @@ def read_image(path: str | os.PathLike, transfer: str = "linear", gamma: float =
 class _Problems(list):
     """Collects validation messages; each names where in the manifest it is."""
 
+    def objects(self, data, key: str, what: str):
+        """Yield ``(index, entry, where)`` for the objects of the non-empty list
+        ``data[key]``, recording a problem for a missing list or a non-object."""
+        entries = data.get(key)
+        if not isinstance(entries, list) or not entries:
+            self.append(f"{key}: need a non-empty list{what}")
+            return
+        for i, entry in enumerate(entries):
+            where = f"{key}[{i}]"
+            if not isinstance(entry, dict):
+                self.append(f"{where}: must be an object")
+                continue
+            yield i, entry, where
+
     def need(self, obj, key, where, kind=None):
         if not isinstance(obj, dict) or key not in obj:
             self.append(f"{where}: missing '{key}'")
@@ -614,15 +628,7 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True) -> Capture:
 
     # lights
     lights = []
-    entries = data.get("lights")
-    if not isinstance(entries, list) or not entries:
-        problems.append("lights: need a non-empty list of light conditions")
-        entries = []
-    for i, e in enumerate(entries):
-        where = f"lights[{i}]"
-        if not isinstance(e, dict):
-            problems.append(f"{where}: must be an object")
-            continue
+    for i, e, where in problems.objects(data, "lights", " of light conditions"):
         name = problems.need(e, "name", where, str)
         where = f"lights[{i}] ({name})" if name else where
         intensity = problems.vector(e, "intensity", where, 3, positive=True, scalar_ok=True)
@@ -646,15 +652,7 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True) -> Capture:
 
     # measurements
     measurements = []
-    entries = data.get("measurements")
-    if not isinstance(entries, list) or not entries:
-        problems.append("measurements: need a non-empty list")
-        entries = []
-    for i, e in enumerate(entries):
-        where = f"measurements[{i}]"
-        if not isinstance(e, dict):
-            problems.append(f"{where}: must be an object")
-            continue
+    for i, e, where in problems.objects(data, "measurements", ""):
         name = problems.need(e, "name", where, str) or f"#{i}"
         where = f"measurements[{i}] ({name})"
         light = problems.need(e, "light", where, str)
