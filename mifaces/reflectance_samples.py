@@ -144,6 +144,9 @@ class ReflectanceSamples:
     resolution : int
         R of the R × R texture.
     measurement_names : tuple of str
+    label : (N,) uint8 or None
+        Region label of each sample (:data:`mifaces.model.regions.REGIONS`),
+        from the face model's a-priori region map (sec. 4.4).
     """
 
     light: np.ndarray
@@ -154,6 +157,7 @@ class ReflectanceSamples:
     measurement: np.ndarray
     resolution: int
     measurement_names: tuple = ()
+    label: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.sigma)
@@ -177,10 +181,12 @@ class ReflectanceSamples:
         for p in parts:
             offsets.append(len(names))
             names += list(p.measurement_names)
+        labelled = all(p.label is not None for p in parts)
         return ReflectanceSamples(
             *(np.concatenate([getattr(p, k) for p in parts]) for k in ("light", "view", "reflectance", "sigma", "texel")),
             measurement=np.concatenate([p.measurement + o for p, o in zip(parts, offsets)]).astype(np.int16),
-            resolution=parts[0].resolution, measurement_names=tuple(names))
+            resolution=parts[0].resolution, measurement_names=tuple(names),
+            label=np.concatenate([p.label for p in parts]) if labelled else None)
 
     def save(self, path) -> None:
         """Write as a compressed ``.npz``, atomically."""
@@ -190,14 +196,16 @@ class ReflectanceSamples:
             with open(tmp, "wb") as f:
                 np.savez_compressed(f, light=self.light, view=self.view, reflectance=self.reflectance,
                                     sigma=self.sigma, texel=self.texel, measurement=self.measurement,
-                                    resolution=self.resolution, measurement_names=np.array(self.measurement_names))
+                                    resolution=self.resolution, measurement_names=np.array(self.measurement_names),
+                                    **({} if self.label is None else {"label": self.label}))
 
     @staticmethod
     def load(path) -> ReflectanceSamples:
         with np.load(path) as d:
             return ReflectanceSamples(d["light"], d["view"], d["reflectance"], d["sigma"], d["texel"],
                                       d["measurement"], int(d["resolution"]),
-                                      tuple(str(n) for n in d["measurement_names"]))
+                                      tuple(str(n) for n in d["measurement_names"]),
+                                      d["label"] if "label" in d.files else None)
 
 
 @dataclass
@@ -368,7 +376,8 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     Returns
     -------
     ReflectanceSamples
-        All measurements' samples, in the order of ``capture.measurements``.
+        All measurements' samples, in the order of ``capture.measurements``,
+        each labelled with the region of the triangle it lies on.
 
     Raises
     ------
@@ -378,6 +387,7 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     """
     from tqdm import tqdm
 
+    from .model.regions import texel_regions_of_mesh
     from .model.texture_space import rasterize
 
     if resolution < 8:
@@ -400,6 +410,8 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
         if not np.all(np.isfinite(geometry[name])):
             raise ValueError(f"geometry of measurement {name!r} has NaN or infinite vertices")
     coverage = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
+    region_map = texel_regions_of_mesh(face_model.region_map, face_model.uv, face_model.triangles, resolution,
+                                       coverage)
     scale = capture.white_target.reflectance_scale()
     parts = []
     chosen = [m for m in capture.measurements if m.name in wanted]
@@ -412,4 +424,6 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
                                          geometry[m.name], face_model.triangles, face_model.uv, coverage,
                                          saturated=m.image.saturated, scale=scale, erosion=erosion,
                                          min_cosine=min_cosine, name=m.name))
-    return ReflectanceSamples.concatenate(parts)
+    samples = ReflectanceSamples.concatenate(parts)
+    samples.label = samples.region(region_map).astype(np.uint8)
+    return samples

@@ -221,3 +221,26 @@ def test_cli_render_novel_pose_and_transfer(capture_dir, estimate, tmp_path):
     assert np.all(np.isfinite(a)) and a.max() > 0 and b.max() > 0
     missing = runner.invoke(main, ["render", str(tmp_path), str(capture_dir), "--out", str(tmp_path / "x")])
     assert missing.exit_code != 0 and "no brdf.json" in str(missing.exception)
+
+
+def test_samples_carry_their_region(capture_dir, tmp_path):
+    """Every sample is labelled with the region of the triangle it lies on,
+    and the label survives saving and concatenation."""
+    import mifaces
+    from mifaces.brdf_estimation import load_geometry
+    from mifaces.capture import load_capture
+    from mifaces.model.regions import REGIONS, texel_regions_of_mesh
+    from mifaces.reflectance_samples import ReflectanceSamples, capture_samples
+
+    mifaces.set_variant("llvm_ad_rgb")
+    capture = load_capture(capture_dir)
+    face, shapes = load_geometry(capture)
+    samples = capture_samples(capture, shapes, face, 64, progress=False)
+    expected = texel_regions_of_mesh(face.region_map, face.uv, face.triangles, 64).ravel()[samples.texel]
+    np.testing.assert_array_equal(samples.label, expected)
+    assert {REGIONS["skin"], REGIONS["hair"]} <= set(np.unique(samples.label).tolist())
+    samples.save(tmp_path / "s.npz")
+    back = ReflectanceSamples.load(tmp_path / "s.npz")
+    np.testing.assert_array_equal(back.label, samples.label)
+    both = ReflectanceSamples.concatenate([samples, back])
+    assert len(both.label) == 2 * len(samples)
