@@ -21,3 +21,16 @@ from .variant import default_variant, set_variant  # noqa: E402
 __version__ = "0.1.0"
 
 set_variant()
+
+#: The pipeline's stages, importable from the package (loaded on first use).
+_STAGES = {"load_capture": "capture", "simulate": "simulate", "fit_shape": "shape_estimation",
+           "load_fitted_shapes": "shape_estimation", "capture_samples": "reflectance_samples",
+           "fit_brdf": "brdf_estimation", "render_fitted": "brdf_estimation", "measure": "pipeline"}
+
+
+def __getattr__(name):
+    if name in _STAGES:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_STAGES[name]}", __name__), name)
+    raise AttributeError(f"module 'mifaces' has no attribute {name!r}")

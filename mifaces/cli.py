@@ -87,6 +87,33 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
     click.echo(f"  capture:      {result.path}\n  ground truth: {result.path / 'ground_truth'}")
 
 
+@main.command("fit-shape")
+@click.argument("capture", type=click.Path(exists=True))
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
+              help="Folder for <measurement>.npy/.json and shapes.json.")
+@click.option("--model", "face_model", default="builtin", show_default=True,
+              help="Face model: 'builtin' or a model file (Surrey npz/bin, Basel mat/h5).")
+@click.option("--measurements", multiple=True, help="Fit only these measurements (repeatable; default: all).")
+@click.option("--iterations", default=None, type=click.FloatRange(min=0.01),
+              help="Scale of the default iteration schedule (e.g. 0.25 for a quick fit).")
+@click.option("--no-diffuse", is_flag=True, help="Ignore the companion diffuse-light pictures.")
+@click.option("--fixed-focal", is_flag=True, help="Keep the calibrated focal length.")
+def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[str, ...], iterations: float | None,
+              no_diffuse: bool, fixed_focal: bool) -> None:
+    """Fit the face model to every photograph of CAPTURE (paper sec. 4.2)."""
+    from .shape_estimation import fit_shape as fit
+
+    fits = fit(capture, face_model, measurements=list(measurements) or None, out=out_dir, iterations=iterations,
+               progress=True, use_diffuse=not no_diffuse, fit_focal=not fixed_focal)
+    for f in fits:
+        click.echo(f"  {f.measurement}: {f.status:13s} landmarks {f.loss.get('feature_rms_px', float('nan')):.2f} px, "
+                   f"{f.seconds:.1f} s")
+    failed = [f.measurement for f in fits if f.status != "converged"]
+    click.echo(f"wrote {out_dir}/shapes.json")
+    if failed:
+        raise click.ClickException(f"{len(failed)} fit(s) did not converge: {', '.join(failed)} (see their .json)")
+
+
 @main.command("fit-brdf")
 @click.argument("capture", type=click.Path(exists=True))
 @click.option("--model", "brdf_model", default="cooktorrance", show_default=True,

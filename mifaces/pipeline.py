@@ -132,7 +132,8 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         t = time.perf_counter()
         fits = fit_shape(capture, out=out / "shapes", iterations=shape_iterations, progress=progress)
         timings["fit_shape"] = time.perf_counter() - t
-        report["shapes"] = {f.name: {"status": f.status, "seconds": f.seconds} for f in fits}
+        report["shapes"] = {f.measurement: {"status": f.status, "seconds": f.seconds,
+                                            "feature_rms_px": f.loss.get("feature_rms_px")} for f in fits}
         face, shapes = load_geometry(capture, out / "shapes")
     else:
         face, shapes = load_geometry(capture, "ground-truth")

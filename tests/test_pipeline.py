@@ -1,0 +1,80 @@
+"""The whole pipeline: capture -> fitted shapes -> BRDFs -> report, from the API and the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope="module")
+def capture_dir(tmp_path_factory):
+    import mifaces
+    from mifaces.simulate import simulate
+
+    mifaces.set_variant("llvm_ad_rgb")
+    out = tmp_path_factory.mktemp("pipeline") / "capture"
+    simulate(out, measurements=2, resolution=(256, 256), spp=8, albedo_resolution=128, seed=4, progress=False)
+    return out
+
+
+def test_measure_writes_a_report(capture_dir, tmp_path):
+    import mifaces
+    from mifaces.pipeline import measure
+
+    mifaces.set_variant("llvm_ad_rgb")
+    report = measure(tmp_path / "m", capture_dir, models=("cooktorrance", "phong"), geometry="ground-truth",
+                     resolution=64, spp=4, progress=False)
+    for name in ("report.json", "report.md", "report.png", "brdf/cooktorrance/brdf.json", "brdf/phong/scene.xml"):
+        assert (tmp_path / "m" / name).is_file(), name
+    saved = json.loads((tmp_path / "m" / "report.json").read_text())
+    assert set(saved["models"]) == {"cooktorrance", "phong"}
+    skin = saved["models"]["cooktorrance"]["ground_truth"]["regions"]["skin"]
+    assert skin["roughness"] < 0.3  # a 2-photograph, 64² fit: in the right range, not exact
+    for entry in saved["models"].values():
+        assert 0 < entry["image_relative_rmse"] < 0.5
+    assert "| cooktorrance | skin |" in (tmp_path / "m" / "report.md").read_text()
+    assert report["seconds"]["total"] > 0
+    with pytest.raises(ValueError, match="unknown BRDF model"):
+        measure(tmp_path / "x", capture_dir, models=("blinn",))
+    with pytest.raises(ValueError, match="geometry must be"):
+        measure(tmp_path / "x", capture_dir, geometry="guess")
+
+
+def test_novel_light_is_not_a_capture_light(capture_dir):
+    from mifaces.capture import load_capture
+    from mifaces.pipeline import novel_light
+
+    capture = load_capture(capture_dir)
+    centre = np.zeros(3)
+    light = novel_light(capture, centre)
+    for lamp in capture.lights:
+        cos = light @ lamp.position / (np.linalg.norm(light) * np.linalg.norm(lamp.position))
+        assert cos < np.cos(np.radians(10))
+    distances = [np.linalg.norm(lamp.position) for lamp in capture.lights]
+    assert np.linalg.norm(light) == pytest.approx(np.mean(distances), rel=0.3)
+
+
+def test_cli_fit_shape_then_fit_brdf_on_the_fitted_shape(capture_dir, tmp_path):
+    """fit-shape writes a shape that fit-brdf samples reflectance on."""
+    from click.testing import CliRunner
+
+    from mifaces.cli import main
+
+    runner = CliRunner()
+    shapes = tmp_path / "shapes"
+    result = runner.invoke(main, ["--variant", "llvm_ad_rgb", "fit-shape", str(capture_dir), "--out", str(shapes),
+                                  "--measurements", "m00", "--iterations", "0.25"])
+    assert result.exit_code == 0, result.output
+    assert "m00: converged" in result.output
+    index = json.loads((shapes / "shapes.json").read_text())
+    assert index["model_source"] == "builtin"
+    result = runner.invoke(main, ["--variant", "llvm_ad_rgb", "fit-brdf", str(capture_dir), "--model", "ward",
+                                  "--geometry", str(shapes), "--out", str(tmp_path / "brdf"), "--resolution", "48"])
+    assert result.exit_code == 0, result.output
+    data = json.loads((tmp_path / "brdf" / "brdf.json").read_text())
+    assert data["measurements"] == ["m00"] and data["fit"]["skin"]["samples"] > 100
+    missing = runner.invoke(main, ["fit-brdf", str(capture_dir), "--geometry", str(tmp_path), "--out",
+                                   str(tmp_path / "x")])
+    assert missing.exit_code != 0 and "no fitted shapes" in str(missing.exception)
