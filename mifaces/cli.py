@@ -12,8 +12,12 @@ import click
 @click.option("--variant", default=None, help="Mitsuba variant (default: cuda_ad_rgb with a GPU, else llvm_ad_rgb).")
 def main(variant: str | None) -> None:
     """Measure the reflectance of human faces from photographs."""
+    import warnings
+
     import mifaces
 
+    # warnings read as messages on the command line, not as source excerpts
+    warnings.formatwarning = lambda message, category, *args, **kwargs: f"warning: {message}\n"
     mifaces.set_variant(variant)
 
 
