@@ -30,3 +30,19 @@ def jit_variant(request):
     """Run the test in every available vectorised variant."""
     mifaces.set_variant(request.param)
     yield request.param
+
+
+@pytest.fixture(scope="session")
+def small_capture(tmp_path_factory):
+    """A factory: ``small_capture(name, **options)`` simulates a small capture
+    in the LLVM variant (:func:`mifaces.simulate.simulate` with ``options``)
+    and returns its folder."""
+    from mifaces.simulate import simulate
+
+    def make(name: str, **options):
+        mifaces.set_variant("llvm_ad_rgb")
+        out = tmp_path_factory.mktemp(name) / "capture"
+        simulate(out, progress=False, **options)
+        return out
+
+    return make

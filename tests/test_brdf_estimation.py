@@ -10,15 +10,9 @@ import pytest
 
 
 @pytest.fixture(scope="module")
-def capture_dir(tmp_path_factory):
+def capture_dir(small_capture):
     """A small simulated capture (Cook-Torrance ground truth), made once."""
-    import mifaces
-    from mifaces.simulate import simulate
-
-    mifaces.set_variant("llvm_ad_rgb")
-    out = tmp_path_factory.mktemp("capture") / "capture"
-    simulate(out, measurements=3, resolution=(256, 256), spp=16, albedo_resolution=256, seed=3, progress=False)
-    return out
+    return small_capture("capture", measurements=3, resolution=(256, 256), spp=16, albedo_resolution=256, seed=3)
 
 
 @pytest.fixture(scope="module")

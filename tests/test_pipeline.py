@@ -9,14 +9,8 @@ import pytest
 
 
 @pytest.fixture(scope="module")
-def capture_dir(tmp_path_factory):
-    import mifaces
-    from mifaces.simulate import simulate
-
-    mifaces.set_variant("llvm_ad_rgb")
-    out = tmp_path_factory.mktemp("pipeline") / "capture"
-    simulate(out, measurements=2, resolution=(256, 256), spp=8, albedo_resolution=128, seed=4, progress=False)
-    return out
+def capture_dir(small_capture):
+    return small_capture("pipeline", measurements=2, resolution=(256, 256), spp=8, albedo_resolution=128, seed=4)
 
 
 def test_measure_writes_a_report(capture_dir, tmp_path):
