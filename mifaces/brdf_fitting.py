@@ -30,6 +30,9 @@ from . import brdf as brdf_models
 from .brdf.model import BRDFModel, Parameter
 from .levenberg_marquardt import CONVERGED, levenberg_marquardt
 
+#: Status of a fit that converged with a parameter at the bound of its range.
+AT_BOUND = "at_bound"
+
 #: Parameters held fixed unless the caller frees them: the index of
 #: refraction trades off against the lobe scale, and skin's is known:
 #: η = 1.38 (Weyrich et al., "Analysis of human faces using a
@@ -117,6 +120,15 @@ class ParameterSpace:
                 bound = float(energy_bound(out[exponent], np.log, np.exp))
                 out[name] = [v * bound for v in out[name]] if np.ndim(out[name]) else out[name] * bound
         return out
+
+    def at_bounds(self, x: np.ndarray, margin: float = 1e-3) -> list[str]:
+        """Names of the free parameters that ``x`` puts within ``margin`` (a
+        fraction of their range, in the reparameterised scale) of their upper
+        bound, or of the energy bound for Lafortune coefficients. Lower bounds
+        are legitimate answers (no glossy lobe, a black albedo) and not listed."""
+        t = 0.5 * (1.0 + np.tanh(0.5 * np.asarray(x, np.float64)))
+        return [f.name if f.channel is None else f"{f.name}[{f.channel}]" for f, ti in zip(self.free, t)
+                if ti > 1 - margin or (f.name in self.coupled and ti < margin)]
 
     def vector(self, values: dict) -> np.ndarray:
         """The unconstrained vector whose :meth:`values` are ``values``
@@ -433,13 +445,17 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         history += [(t, e * len(sigma) / size, size) for t, e, _ in result.history]
         if trace is not None:
             trace += [(t, space.values(xs)) for t, _, xs in result.history]
-    params, loss, reason = space.values(x), result.loss, result.reason
+    params, loss, reason, status = space.values(x), result.loss, result.reason, result.status
+    bounded = space.at_bounds(x)
+    if bounded and status == CONVERGED:
+        # the best fit lies outside the valid range: the samples do not support this model there
+        status, reason = AT_BOUND, f"{reason}; at the bound of its range: {', '.join(bounded)}"
     if model.name == "lafortune" and len(model.lobes) > 1:
         params, loss, pruned = prune_lobes(model, space, problem, params, loss)
         if pruned:
             reason += f"; lobe(s) {pruned} explained no sample and were set to zero"
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=loss,
-                     samples=len(sigma), seconds=time.perf_counter() - t0, status=result.status,
+                     samples=len(sigma), seconds=time.perf_counter() - t0, status=status,
                      reason=reason, iterations=iterations, history=history)
 
 
@@ -513,11 +529,22 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
             base = DEFAULT_FIXED.get(model.name, {}) if fixed is None else fixed
             region_options["fixed"] = {**base, **fixed_by_region[name]}
         fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask], **region_options)
+    def donor_of(name):
+        donors = list(neighbours.get(name, [])) + ["skin"]
+        return next((d for d in donors if d != name and d in fits and fits[d].status != AT_BOUND), None)
+
+    # a region whose best fit lies at a bound of the valid range takes a neighbour's
+    # well-determined fit instead (skin, which has no neighbour, keeps its own)
+    for name in [n for n, fit in fits.items() if fit.status == AT_BOUND]:
+        donor = donor_of(name)
+        if donor is not None:
+            reason = f"its own fit ended {fits[name].reason.split('; ')[-1]}: the fit of {donor!r}"
+            warnings.warn(f"region {name!r}: {reason}", stacklevel=2)
+            fits[name] = prior_fit(model, fits[donor].params, counts[name], reason)
     for label, name in region_names.items():
         if name in fits:
             continue
-        donors = list(neighbours.get(name, [])) + ["skin"]
-        donor = next((d for d in donors if d in fits), None)
+        donor = donor_of(name)
         params = fits[donor].params if donor else {**model.defaults(), **DEFAULT_FIXED.get(model.name, {})}
         source = f"the fit of {donor!r}" if donor else "the model's defaults"
         reason = f"{counts[name]} samples, fewer than the {needed} a {model.name} fit needs: {source}"
@@ -528,4 +555,4 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
 
 
 __all__ = ["ParameterSpace", "Schedule", "FULL_DATA", "RegionFit", "fit_region", "fit_regions",
-           "conservative_start", "min_samples", "NEIGHBOURS", "REFRACTIVE_INDEX", "CONVERGED"]
+           "conservative_start", "min_samples", "NEIGHBOURS", "REFRACTIVE_INDEX", "CONVERGED", "AT_BOUND"]

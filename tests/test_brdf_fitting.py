@@ -225,3 +225,28 @@ def test_a_lafortune_lobe_that_explains_nothing_is_removed(jit_variant):
     assert fit.params["cxy"] == [0.0] * 3 and fit.params["cz"] == [0.0] * 3
     np.testing.assert_allclose(fit.params["cz_2"], truth["cz"], rtol=1e-2)
     np.testing.assert_allclose(fit.params["exponent_2"], truth["exponent"], rtol=1e-2)
+
+
+def test_a_fit_at_the_bound_of_its_range_is_flagged_and_replaced(jit_variant):
+    """Samples brighter than any Ward lobe within range: the fit says it ended
+    at the bound; in a region beside skin the neighbour's fit is used instead."""
+    from mifaces.brdf_fitting import AT_BOUND
+
+    model = brdf.model("ward")
+    skin = {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [0.05] * 3, "alpha": 0.3}
+    light, view, r, sigma = synthetic_samples(model, skin, 4000, seed=6)
+    # a "region" whose highlight needs a specular scale far above Ward's range
+    hot = {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [1.0] * 3, "alpha": 0.3}
+    l2, v2, r2, s2 = synthetic_samples(model, hot, 4000, seed=7)
+    r2 = r2 + 30.0 * (np.pi * np.array(model.eval(mi.Vector3f(l2.T.astype(np.float32)),
+                                                   mi.Vector3f(v2.T.astype(np.float32)),
+                                                   {k: (mi.Color3f(*v) if isinstance(v, list) else mi.Float(v))
+                                                    for k, v in hot.items()}, diffuse=False)).T)
+    alone = fit_region(model, l2, v2, r2, s2, schedule=FULL_DATA)
+    assert alone.status == AT_BOUND and "specular_reflectance" in alone.reason
+    region = np.repeat([1, 2], 4000)
+    with pytest.warns(UserWarning, match="at the bound"):
+        fits = fit_regions(model, np.concatenate([light, l2]), np.concatenate([view, v2]), np.concatenate([r, r2]),
+                           np.concatenate([sigma, s2]), region, {1: "skin", 2: "lips"}, schedule=FULL_DATA)
+    assert fits["skin"].status == "converged"
+    assert fits["lips"].status == "prior" and fits["lips"].params == fits["skin"].params
