@@ -124,11 +124,23 @@ class ParameterSpace:
     def at_bounds(self, x: np.ndarray, margin: float = 1e-3) -> list[str]:
         """Names of the free parameters that ``x`` puts within ``margin`` (a
         fraction of their range, in the reparameterised scale) of their upper
-        bound, or of the energy bound for Lafortune coefficients. Lower bounds
-        are legitimate answers (no glossy lobe, a black albedo) and not listed."""
+        bound, or Lafortune coefficients whose lobe is within 1 % of its energy
+        bound. Lower bounds are legitimate answers (no glossy lobe, a black
+        albedo) and not listed."""
         t = 0.5 * (1.0 + np.tanh(0.5 * np.asarray(x, np.float64)))
-        return [f.name if f.channel is None else f"{f.name}[{f.channel}]" for f, ti in zip(self.free, t)
-                if ti > 1 - margin or (f.name in self.coupled and ti < margin)]
+        values = self.values(x)
+        out = []
+        for f, ti in zip(self.free, t):
+            if f.name in self.coupled:
+                # a lobe at its energy bound: albedo estimate |C|^n 2π/(n+2) within 1 % of 1
+                n = float(values[self.coupled[f.name]])
+                ratio = abs(2.0 * ti - 1.0)
+                hit = n * np.log(max(ratio, 1e-300)) > np.log(0.99)
+            else:
+                hit = ti > 1 - margin
+            if hit:
+                out.append(f.name if f.channel is None else f"{f.name}[{f.channel}]")
+        return out
 
     def vector(self, values: dict) -> np.ndarray:
         """The unconstrained vector whose :meth:`values` are ``values``
