@@ -517,7 +517,10 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     A region with fewer than :func:`min_samples` samples gets a warning and
     the parameters of its first fitted neighbour in ``neighbours`` (name ->
     names; default :data:`NEIGHBOURS`), else of ``skin``, else the model's
-    defaults; its status is ``'prior'``. Regions without samples are not
+    defaults; its status is ``'prior'``. So does the glossy part of a region
+    with fewer than 10x that many samples whose own fit ended at a bound of
+    the parameters' range (status ``'at_bound'``); a larger region keeps such
+    a fit, with a warning. Regions without samples are not
     fitted either. ``progress`` shows a bar over the regions fitted.
     ``fixed_by_region`` (name -> parameters) holds parameters fixed in one
     region on top of ``fixed``.
@@ -533,26 +536,34 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     fits: dict[str, RegionFit] = {}
     fitted = [(label, name) for label, name in region_names.items() if counts[name] >= needed]
     bar = tqdm(fitted, desc=f"fitting {model.name}", unit="region", disable=not progress)
+    held = {}  # region name -> its fixed parameters
     for label, name in bar:
         bar.set_postfix_str(f"{name}: {counts[name]} samples")
         mask = region == label
         region_options = dict(options)
+        held[name] = DEFAULT_FIXED.get(model.name, {}) if fixed is None else fixed
         if fixed_by_region and name in fixed_by_region:
-            base = DEFAULT_FIXED.get(model.name, {}) if fixed is None else fixed
-            region_options["fixed"] = {**base, **fixed_by_region[name]}
+            held[name] = region_options["fixed"] = {**held[name], **fixed_by_region[name]}
         fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask], **region_options)
     def donor_of(name):
         donors = list(neighbours.get(name, [])) + ["skin"]
         return next((d for d in donors if d != name and d in fits and fits[d].status != AT_BOUND), None)
 
-    # a region whose best fit lies at a bound of the valid range takes a neighbour's
-    # well-determined fit instead (skin, which has no neighbour, keeps its own)
+    # A small region (fewer than 10x the samples a fit needs) whose best fit lies at a
+    # bound of the valid range is more likely fitting noise than showing a material
+    # the model cannot represent: it takes its neighbour's glossy part, keeping its own
+    # albedo. A large one keeps its own fit, flagged at_bound.
     for name in [n for n, fit in fits.items() if fit.status == AT_BOUND]:
         donor = donor_of(name)
-        if donor is not None:
-            reason = f"its own fit ended {fits[name].reason.split('; ')[-1]}: the fit of {donor!r}"
-            warnings.warn(f"region {name!r}: {reason}", stacklevel=2)
-            fits[name] = prior_fit(model, fits[donor].params, counts[name], reason)
+        if donor is None or counts[name] >= 10 * needed:
+            warnings.warn(f"region {name!r}: the fit ended {fits[name].reason.split('; ')[-1]}", stacklevel=2)
+            continue
+        borrowed = {**fits[donor].params, **held[name],
+                    "diffuse_reflectance": fits[name].params["diffuse_reflectance"]}
+        reason = (f"{counts[name]} samples, and its own fit ended {fits[name].reason.split('; ')[-1]}: "
+                  f"the glossy part of {donor!r}")
+        warnings.warn(f"region {name!r}: {reason}", stacklevel=2)
+        fits[name] = prior_fit(model, borrowed, counts[name], reason)
     for label, name in region_names.items():
         if name in fits:
             continue

@@ -229,24 +229,35 @@ def test_a_lafortune_lobe_that_explains_nothing_is_removed(jit_variant):
 
 def test_a_fit_at_the_bound_of_its_range_is_flagged_and_replaced(jit_variant):
     """Samples brighter than any Ward lobe within range: the fit says it ended
-    at the bound; in a region beside skin the neighbour's fit is used instead."""
+    at the bound. A small region beside skin then takes skin's glossy part
+    (keeping its own albedo); a large one keeps its own fit, with a warning."""
     from mifaces.brdf_fitting import AT_BOUND
 
     model = brdf.model("ward")
     skin = {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [0.05] * 3, "alpha": 0.3}
     light, view, r, sigma = synthetic_samples(model, skin, 4000, seed=6)
-    # a "region" whose highlight needs a specular scale far above Ward's range
-    hot = {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [1.0] * 3, "alpha": 0.3}
-    l2, v2, r2, s2 = synthetic_samples(model, hot, 4000, seed=7)
-    r2 = r2 + 30.0 * (np.pi * np.array(model.eval(mi.Vector3f(l2.T.astype(np.float32)),
-                                                   mi.Vector3f(v2.T.astype(np.float32)),
-                                                   {k: (mi.Color3f(*v) if isinstance(v, list) else mi.Float(v))
-                                                    for k, v in hot.items()}, diffuse=False)).T)
-    alone = fit_region(model, l2, v2, r2, s2, schedule=FULL_DATA)
+    hot = {"diffuse_reflectance": [0.6, 0.3, 0.3], "specular_reflectance": [1.0] * 3, "alpha": 0.3}
+
+    def hot_samples(n, seed):
+        l2, v2, r2, s2 = synthetic_samples(model, hot, n, seed=seed)
+        p = {k: (mi.Color3f(*v) if isinstance(v, list) else mi.Float(v)) for k, v in hot.items()}
+        lobe = np.pi * np.array(model.eval(mi.Vector3f(l2.T.astype(np.float32)), mi.Vector3f(v2.T.astype(np.float32)),
+                                           p, diffuse=False)).T
+        return l2, v2, r2 + 30.0 * lobe, s2  # a lobe far above Ward's range of ρ_s <= 1
+
+    alone = fit_region(model, *hot_samples(4000, 7), schedule=FULL_DATA)
     assert alone.status == AT_BOUND and "specular_reflectance" in alone.reason
-    region = np.repeat([1, 2], 4000)
-    with pytest.warns(UserWarning, match="at the bound"):
-        fits = fit_regions(model, np.concatenate([light, l2]), np.concatenate([view, v2]), np.concatenate([r, r2]),
-                           np.concatenate([sigma, s2]), region, {1: "skin", 2: "lips"}, schedule=FULL_DATA)
-    assert fits["skin"].status == "converged"
-    assert fits["lips"].status == "prior" and fits["lips"].params == fits["skin"].params
+    for n, replaced in ((300, True), (4000, False)):
+        l2, v2, r2, s2 = hot_samples(n, 7)
+        region = np.repeat([1, 2], [4000, n])
+        with pytest.warns(UserWarning, match="at the bound"):
+            fits = fit_regions(model, np.concatenate([light, l2]), np.concatenate([view, v2]),
+                               np.concatenate([r, r2]), np.concatenate([sigma, s2]), region, {1: "skin", 2: "lips"},
+                               schedule=FULL_DATA)
+        assert fits["skin"].status == "converged"
+        if replaced:
+            assert fits["lips"].status == "prior"
+            assert fits["lips"].params["alpha"] == fits["skin"].params["alpha"]
+            assert fits["lips"].params["diffuse_reflectance"] != fits["skin"].params["diffuse_reflectance"]
+        else:
+            assert fits["lips"].status == AT_BOUND
