@@ -105,14 +105,6 @@ class BRDFEstimate:
                 "albedo": "albedo.exr"}
 
 
-def _face_model(source) -> MorphableModel:
-    if isinstance(source, MorphableModel):
-        return source
-    if str(source) == "builtin" or Path(source).is_file():
-        return load_model(source)
-    raise ValueError(f"cannot load the face model {str(source)!r}: pass face_model= (a model file or 'builtin')")
-
-
 def load_geometry(capture: Capture, geometry="ground-truth", face_model=None
                   ) -> tuple[MorphableModel, dict[str, np.ndarray]]:
     """The face model and per-measurement world-space vertices to sample with.
@@ -129,14 +121,14 @@ def load_geometry(capture: Capture, geometry="ground-truth", face_model=None
         the fitted shapes name.
     """
     if isinstance(geometry, dict):
-        return _face_model(face_model or "builtin"), {k: np.asarray(v, np.float64) for k, v in geometry.items()}
+        return load_model(face_model or "builtin"), {k: np.asarray(v, np.float64) for k, v in geometry.items()}
     if str(geometry) == "ground-truth":
         info_path = capture.path / GROUND_TRUTH / "scene.json"
         if not info_path.is_file():
             raise FileNotFoundError(f"{capture.path} has no {GROUND_TRUTH}/scene.json (only simulated captures "
                                     "have ground truth): give fitted shapes instead")
         info = json.loads(info_path.read_text())
-        model = _face_model(face_model or info.get("model_source", info.get("model", "builtin")))
+        model = load_model(face_model or info.get("model_source", info.get("model", "builtin")))
         shapes = {m["name"]: np.load(info_path.parent / m["shape"]).astype(np.float64)
                   for m in info["measurements"]}
         return model, shapes
@@ -149,7 +141,7 @@ def load_geometry(capture: Capture, geometry="ground-truth", face_model=None
     if face_model is None:
         index = json.loads((path / INDEX).read_text())
         face_model = index.get("model_source", index.get("model", "builtin"))
-    return _face_model(face_model), load_fitted_shapes(path, capture)
+    return load_model(face_model), load_fitted_shapes(path, capture)
 
 
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
@@ -366,23 +358,62 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     name = measurement or next(m.name for m in capture.measurements if m.name in shapes)
     if name not in shapes:
         raise ValueError(f"no geometry for measurement {name!r}; have {sorted(shapes)}")
-    if data["albedo"].shape[:2] != (data.get("resolution", data["albedo"].shape[0]),) * 2:
-        raise ValueError(f"{brdf_dir}: albedo map of shape {data['albedo'].shape} does not match brdf.json")
+    albedo = data["albedo"]
+    if albedo.ndim != 3 or albedo.shape[0] != albedo.shape[1]:
+        raise ValueError(f"{brdf_dir}: the albedo map must be a square RGB image, got shape {albedo.shape}")
     vertices = np.asarray(shapes[name], np.float64)
     if yaw:
-        centre = vertices.mean(axis=0)
+        from scipy.spatial.transform import Rotation
+
         up = -capture.camera.rotation[1]  # the camera's up direction in the world frame
-        angle = np.radians(yaw)
-        k = np.array([[0, -up[2], up[1]], [up[2], 0, -up[0]], [-up[1], up[0], 0]])
-        rotation = np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k  # Rodrigues
-        vertices = (vertices - centre) @ rotation.T + centre
+        centre = vertices.mean(axis=0)
+        vertices = Rotation.from_rotvec(np.radians(yaw) * up).apply(vertices - centre) + centre
     lamp = capture.light(next(m.light for m in capture.measurements if m.name == name))
-    intensity = lamp.intensity
     if light_position is None and envmap is None:
         light_position = lamp.position
-    image = render_face(data, data["albedo"], face, vertices, capture.camera, light_position,
-                        intensity if light_position is not None else None, envmap, envmap_scale, spp)
+    image = render_face(data, albedo, face, vertices, capture.camera, light_position,
+                        None if light_position is None else lamp.intensity, envmap, envmap_scale, spp)
     return save_image(image, out)
+
+
+def ground_truth_errors(estimate: BRDFEstimate, capture) -> dict | None:
+    """How far a fit is from a simulated capture's ground truth (``ground_truth/``).
+
+    Returns None for a capture without ground truth, else ``{"truth_model",
+    "regions": {region: {parameter: relative error, mean over channels}},
+    "albedo": {...}}``. Parameter errors are given where the truth is the
+    same model, for the regions fitted on their own samples (η, held at its
+    published value, is left out); the albedo errors, RMSE and mean error of
+    the refined map against the truth's (downsampled to the fit's
+    resolution), on texels with samples and on all face texels, always.
+    """
+    from skimage.transform import resize
+
+    from .files import read_exr
+
+    folder = Path(capture.path if isinstance(capture, Capture) else capture) / GROUND_TRUTH
+    if not (folder / "brdf.json").is_file():
+        return None
+    truth = json.loads((folder / "brdf.json").read_text())
+    regions = {}
+    if truth["model"] == estimate.model:
+        for name, fit in estimate.fits.items():
+            if fit.status == "prior" or name not in truth["regions"]:
+                continue
+            regions[name] = {key: float(np.mean(np.abs(np.asarray(fit.params[key], float) - np.asarray(value, float))
+                                                / np.abs(np.asarray(value, float))))
+                             for key, value in truth["regions"][name].items() if key != "eta"}
+    r = estimate.resolution
+    error = estimate.albedo.albedo - resize(read_exr(folder / "albedo.exr"), (r, r, 3), anti_aliasing=True, order=1)
+    seen = estimate.albedo.samples > 0
+    face = estimate.region_map > 0
+    skin = seen & (estimate.region_map == REGIONS["skin"])
+    albedo = {"rmse_sampled": float(np.sqrt(np.mean(error[seen] ** 2))),
+              "rmse_face": float(np.sqrt(np.mean(error[face] ** 2))),
+              "skin_rmse_sampled": float(np.sqrt(np.mean(error[skin] ** 2))),
+              "bias_sampled": float(error[seen].mean()), "texels_sampled": int(seen.sum()),
+              "texels_face": int(face.sum())}
+    return {"truth_model": truth["model"], "regions": regions, "albedo": albedo}
 
 
 def load_estimate(path) -> dict:
@@ -404,4 +435,4 @@ def load_estimate(path) -> dict:
 
 
 __all__ = ["BRDFEstimate", "fit_brdf", "load_geometry", "write_estimate", "scene_xml", "render_estimate",
-           "render_fitted", "load_estimate"]
+           "render_fitted", "ground_truth_errors", "load_estimate"]

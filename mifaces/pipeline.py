@@ -14,7 +14,6 @@ and the fitted face under a novel light.
 
 from __future__ import annotations
 
-import json
 import time
 import warnings
 from pathlib import Path
@@ -25,36 +24,6 @@ from .files import atomic_write, write_json
 
 #: Models ``measure`` fits unless told otherwise.
 MODELS = ("cooktorrance", "ward", "phong", "lafortune")
-
-
-def _ground_truth_errors(estimate, capture) -> dict | None:
-    """Relative errors of each region's glossy parameters and the albedo RMSE
-    against a simulated capture's ground truth (None for a real capture or
-    another model family)."""
-    from skimage.transform import resize
-
-    from .capture import GROUND_TRUTH
-    from .files import read_exr
-
-    folder = capture.path / GROUND_TRUTH
-    if not (folder / "brdf.json").is_file():
-        return None
-    truth = json.loads((folder / "brdf.json").read_text())
-    out = {"truth_model": truth["model"], "regions": {}}
-    if truth["model"] == estimate.model:
-        for name, fit in estimate.fits.items():
-            if fit.status == "prior" or name not in truth["regions"]:
-                continue
-            errors = {}
-            for key, value in truth["regions"][name].items():
-                t, f = np.asarray(value, float), np.asarray(fit.params.get(key, np.nan), float)
-                errors[key] = float(np.mean(np.abs(f - t) / np.abs(t)))
-            out["regions"][name] = errors
-    r = estimate.resolution
-    albedo = resize(read_exr(folder / "albedo.exr"), (r, r, 3), anti_aliasing=True, order=1)
-    seen = estimate.albedo.samples > 0
-    out["albedo_rmse"] = float(np.sqrt(np.mean((estimate.albedo.albedo[seen] - albedo[seen]) ** 2)))
-    return out
 
 
 def novel_light(capture, centre: np.ndarray) -> np.ndarray:
@@ -105,7 +74,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     dict
         The report (also written as ``report.json``).
     """
-    from .brdf_estimation import fit_brdf, load_geometry, render_estimate
+    from .brdf_estimation import fit_brdf, ground_truth_errors, load_geometry, render_estimate
     from .capture import Capture, load_capture
     from .reflectance_samples import capture_samples
 
@@ -153,7 +122,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         timings[f"fit_brdf_{model}"] = time.perf_counter() - t
         entry = estimate.to_json()
         entry["warnings"] = [str(w.message) for w in caught]
-        entry["ground_truth"] = _ground_truth_errors(estimate, capture)
+        entry["ground_truth"] = ground_truth_errors(estimate, capture)
         rendered = render_estimate(estimate, face, shapes[first.name], capture.camera, lamp.position,
                                    lamp.intensity, spp=spp)
         relit = render_estimate(estimate, face, shapes[first.name], capture.camera, novel, lamp.intensity, spp=spp)
@@ -198,7 +167,7 @@ def _write_picture(path: Path, panels, photo_name: str) -> None:
 
 
 def _write_markdown(path: Path, report: dict, photo_name: str) -> None:
-    lines = [f"# mifaces measurement report", "",
+    lines = ["# mifaces measurement report", "",
              f"Capture `{report['capture']}`: {report['measurements']} photographs, geometry {report['geometry']}, "
              f"texture {report['resolution']}².", "", "![report](report.png)", "",
              "| model | region | samples | status | parameters | loss | error vs ground truth |",
@@ -216,7 +185,7 @@ def _write_markdown(path: Path, report: dict, photo_name: str) -> None:
               "|---|---|---|---|"]
     for model, entry in report["models"].items():
         truth = entry.get("ground_truth") or {}
-        albedo = f"{truth['albedo_rmse']:.4f}" if "albedo_rmse" in truth else ""
+        albedo = f"{truth['albedo']['rmse_sampled']:.4f}" if "albedo" in truth else ""
         lines.append(f"| {model} | {100 * entry['image_relative_rmse']:.2f}% | {albedo} | "
                      f"{report['seconds'][f'fit_brdf_{model}']:.1f} |")
     lines += ["", "Times (s): " + ", ".join(f"{k} {v:.1f}" for k, v in report["seconds"].items()), ""]

@@ -8,7 +8,6 @@ import math
 import os
 from pathlib import Path
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 from tqdm import tqdm

@@ -77,6 +77,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .model import load_model
+from .simulate import rotation_matrix
+
 #: Statuses a fit may end with.
 CONVERGED = "converged"
 DIVERGED = "diverged"
@@ -245,16 +248,6 @@ class ShapeFit:
 # --------------------------------------------------------------------------------------------
 # Geometry helpers (numpy)
 # --------------------------------------------------------------------------------------------
-def rotation_matrix(yaw: float, pitch: float, roll: float) -> np.ndarray:
-    """``R_y(yaw) R_x(pitch) R_z(roll)``, angles in radians (the simulator's convention)."""
-    cy, sy, cp, sp, cr, sr = math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch), math.cos(roll), \
-        math.sin(roll)
-    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    rx = np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]])
-    rz = np.array([[cr, -sr, 0], [sr, cr, 0], [0, 0, 1]])
-    return ry @ rx @ rz
-
-
 def light_direction(elevation: float, azimuth: float) -> np.ndarray:
     """Unit direction towards the light in camera space for two angles (radians):
     (0, 0) points at the camera, positive elevation up, positive azimuth to the image's right."""
@@ -755,7 +748,7 @@ class _Fitter:
         return (local - self.centre) @ self.rotation(theta).T + theta[L["translation"]]
 
     def rotation(self, theta: np.ndarray) -> np.ndarray:
-        return FRONTAL @ rotation_matrix(*theta[self.layout["rotation"]])
+        return FRONTAL @ rotation_matrix(*np.degrees(theta[self.layout["rotation"]]))
 
     def update_visibility(self, theta: np.ndarray):
         """Camera visibility of the samples and cast shadows of the directed light, by ray casting
@@ -917,12 +910,6 @@ def _load(capture):
     return capture if isinstance(capture, Capture) else load_capture(capture)
 
 
-def _model(model):
-    from .model import MorphableModel, load_model
-
-    return model if isinstance(model, MorphableModel) else load_model(model)
-
-
 def fit_measurement(measurement, camera, model="builtin", light_position=None, schedule: Schedule | None = None,
                     weights: Weights | None = None, use_diffuse: bool = True, use_point: bool = True,
                     fit_focal: bool = True, initial_color=None, seed: int = 0, max_feature_error: float = 4.0,
@@ -978,7 +965,7 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
     from tqdm import tqdm
 
     t0 = time.perf_counter()
-    model = _model(model)
+    model = load_model(model)
     schedule = schedule or Schedule()
     weights = weights or Weights()
     targets = feature_targets(measurement, model)
@@ -1123,7 +1110,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None, iterations:
     capture = _load(capture)
     source = model if not hasattr(model, "shape_mean") else (
         model.metadata["source"] if Path(str(model.metadata.get("source", ""))).is_file() else model.name)
-    model = _model(model)
+    model = load_model(model)
     if isinstance(iterations, Schedule):
         schedule = iterations
     else:

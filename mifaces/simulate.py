@@ -55,9 +55,6 @@ from .capture import FORMAT, GROUND_TRUTH, MANIFEST, VERSION, Camera
 from .files import atomic_write, write_exr, write_json, write_png
 from .render import face_shapes, mitsuba_sensor, rgb as _rgb
 
-#: Kept for callers of the earlier private name.
-_mitsuba_sensor = mitsuba_sensor
-
 #: Cook–Torrance ground truth per region (see the module docstring for sources).
 COOK_TORRANCE_REGIONS: dict[str, dict] = {
     "skin": {"specular_reflectance": [1.0, 1.0, 1.0], "roughness": 0.35, "eta": 1.38},
@@ -356,7 +353,7 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     import mitsuba as mi
     from tqdm import tqdm
 
-    from .model import MorphableModel, load_model
+    from .model import load_model
     from .model.landmarks import FEATURE_POINTS
 
     t_start = time.perf_counter()
@@ -372,7 +369,7 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     if width < 16 or height < 16:
         raise ValueError(f"resolution must be at least 16x16, got {width}x{height}")
     out = Path(out)
-    face_model = model if isinstance(model, MorphableModel) else load_model(model)
+    face_model = load_model(model)
     truth = brdf_with_overrides(brdf, brdf_params)
     rng = np.random.default_rng(seed)
 

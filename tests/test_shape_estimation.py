@@ -24,7 +24,8 @@ from mifaces import shape_estimation as se
 from mifaces.capture import Camera, Capture, Image, Light, Measurement, WhiteTarget
 from mifaces.model.landmarks import FEATURE_POINTS
 from mifaces.model.mesh import mitsuba_mesh
-from mifaces.simulate import _mitsuba_sensor, rotation_matrix
+from mifaces.render import mitsuba_sensor
+from mifaces.simulate import rotation_matrix
 
 SIZE = 128
 #: A short coarse-to-fine schedule: these tests check recovery, not the last digit.
@@ -67,7 +68,7 @@ def render(model, camera, vertices, light_towards=(0.25, -0.35, -0.9), spp=16):
     mesh = mitsuba_mesh(vertices, model.triangles, model.uv, albedo=albedo)
     light = np.asarray(light_towards, np.float64)
     light /= np.linalg.norm(light)
-    sensor = _mitsuba_sensor(camera, spp)
+    sensor = mitsuba_sensor(camera, spp)
     sensor["film"]["rfilter"] = {"type": "box"}
     base = {"type": "scene", "integrator": {"type": "direct"}, "sensor": sensor, "face": mesh}
     point = dict(base, light={"type": "directional", "direction": (-light).tolist(),

@@ -34,7 +34,7 @@ import numpy as np
 from skimage.transform import resize
 
 from mifaces import brdf
-from mifaces.brdf_estimation import fit_brdf, load_geometry, render_estimate
+from mifaces.brdf_estimation import fit_brdf, ground_truth_errors, load_geometry, render_estimate
 from mifaces.capture import load_capture
 from mifaces.files import read_exr, write_json
 from mifaces.model.regions import REGIONS
@@ -45,33 +45,6 @@ OUT = Path(__file__).resolve().parent / "results"
 MODELS = ["cooktorrance", "ward", "phong", "lafortune"]
 #: Regions reported (the others have too few samples to say much).
 REPORTED = ("skin", "beard", "hair", "lips", "eyebrows")
-
-
-def albedo_errors(estimate, capture_dir: Path) -> dict:
-    """RMSE and mean error of the refined albedo against the ground-truth map
-    (downsampled to the estimate's resolution), on texels with samples and on
-    all face texels."""
-    r = estimate.resolution
-    truth = resize(read_exr(capture_dir / "ground_truth" / "albedo.exr"), (r, r, 3), anti_aliasing=True, order=1)
-    error = estimate.albedo.albedo - truth
-    seen = estimate.albedo.samples > 0
-    face = estimate.region_map > 0
-    return {"rmse_sampled": float(np.sqrt(np.mean(error[seen] ** 2))),
-            "rmse_face": float(np.sqrt(np.mean(error[face] ** 2))),
-            "bias_sampled": float(error[seen].mean()), "texels_sampled": int(seen.sum()),
-            "texels_face": int(face.sum()),
-            "skin_rmse_sampled": float(np.sqrt(np.mean(error[seen & (estimate.region_map == REGIONS["skin"])] ** 2)))}
-
-
-def parameter_errors(fitted: dict, truth: dict) -> dict:
-    """Relative error of each glossy parameter (mean over channels)."""
-    out = {}
-    for key, value in truth.items():
-        if key == "eta":
-            continue
-        t, f = np.asarray(value, float), np.asarray(fitted[key], float)
-        out[key] = float(np.mean(np.abs(f - t) / np.abs(t)))
-    return out
 
 
 def same_family(work: Path, args) -> list[dict]:
@@ -86,13 +59,14 @@ def same_family(work: Path, args) -> list[dict]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             estimate = fit_brdf(capture_dir, model, resolution=args.resolution, progress=False)
+        errors = ground_truth_errors(estimate, capture_dir)
         row = {"model": model, "simulation_seconds": t_sim, "fit_seconds": estimate.seconds,
-               "samples": estimate.samples, "albedo": albedo_errors(estimate, capture_dir), "regions": {}}
+               "samples": estimate.samples, "albedo": errors["albedo"], "regions": {}}
         light, view = hemisphere_directions()
         for region in REPORTED:
             fit = estimate.fits.get(region)
-            if fit is None or fit.status == "prior":
-                continue
+            if region not in errors["regions"]:
+                continue  # not fitted on its own samples
             # the glossy parts compared over the hemisphere (θ <= 80°): parameters can trade off
             # (Lafortune's C and n) while the BRDF stays the same
             black = {"diffuse_reflectance": [0.0] * 3}
@@ -101,7 +75,7 @@ def same_family(work: Path, args) -> list[dict]:
             glossy_error = float(np.sqrt(np.mean((fit_glossy - true_glossy) ** 2) / np.mean(true_glossy ** 2)))
             row["regions"][region] = {"samples": fit.samples, "status": fit.status,
                                       "glossy_relative_rmse": glossy_error,
-                                      "relative_error": parameter_errors(fit.params, truth["regions"][region]),
+                                      "relative_error": errors["regions"][region],
                                       "fitted": {k: v for k, v in fit.params.items() if k != "diffuse_reflectance"},
                                       "truth": truth["regions"][region]}
         rows.append(row)

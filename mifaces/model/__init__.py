@@ -18,13 +18,13 @@ from .regions import REGIONS
 __all__ = ["MorphableModel", "ModelFormatError", "REGIONS", "load_model"]
 
 
-def load_model(source: str | os.PathLike = "builtin", **kwargs) -> MorphableModel:
+def load_model(source: str | os.PathLike | MorphableModel = "builtin", **kwargs) -> MorphableModel:
     """Load a morphable model.
 
     Parameters
     ----------
-    source : str or path
-        ``'builtin'`` for the generated default model (built on first use,
+    source : str, path or MorphableModel
+        A model is returned as it is. ``'builtin'`` for the generated default model (built on first use,
         then cached), or a model file, recognised by its suffix and content:
         ``.npz`` (a mifaces model, or the Surrey Face Model's npz layout),
         ``.bin`` (eos, needs ``eos-py``), ``.mat`` (Basel 2009), ``.h5``
@@ -41,6 +41,8 @@ def load_model(source: str | os.PathLike = "builtin", **kwargs) -> MorphableMode
     >>> model = load_model("builtin")
     >>> vertices = model.shape(model.random_coefficients(1)["shape"])
     """
+    if isinstance(source, MorphableModel):
+        return source
     if str(source) == "builtin":
         from .builtin import load_builtin
 
