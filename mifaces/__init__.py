@@ -22,15 +22,11 @@ __version__ = "0.1.0"
 
 set_variant()
 
-#: The pipeline's stages, importable from the package (loaded on first use).
-_STAGES = {"load_capture": "capture", "simulate": "simulate", "fit_shape": "shape_estimation",
-           "load_fitted_shapes": "shape_estimation", "capture_samples": "reflectance_samples",
-           "fit_brdf": "brdf_estimation", "render_fitted": "brdf_estimation", "measure": "pipeline"}
+from .capture import load_capture  # noqa: E402
+from .pipeline import measure  # noqa: E402
+from .reflectance import capture_samples, fit_brdf, render_fitted  # noqa: E402
+from .shape import fit_shape, load_fitted_shapes  # noqa: E402
+from .studio import simulate  # noqa: E402
 
-
-def __getattr__(name):
-    if name in _STAGES:
-        import importlib
-
-        return getattr(importlib.import_module(f".{_STAGES[name]}", __name__), name)
-    raise AttributeError(f"module 'mifaces' has no attribute {name!r}")
+__all__ = ["MorphableModel", "load_model", "default_variant", "set_variant", "load_capture", "simulate",
+           "fit_shape", "load_fitted_shapes", "capture_samples", "fit_brdf", "render_fitted", "measure"]

@@ -70,7 +70,7 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
     """Simulate a capture session with ground truth into folder OUT (paper sec. 3)."""
     import json
 
-    from .simulate import simulate as simulate_capture
+    from .studio.simulate import simulate as simulate_capture
 
     overrides = None
     if brdf_params is not None:
@@ -105,7 +105,7 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
 def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[str, ...], iterations: float | None,
               no_diffuse: bool, fixed_focal: bool) -> None:
     """Fit the face model to every photograph of CAPTURE (paper sec. 4.2)."""
-    from .shape_estimation import fit_shape as fit
+    from .shape.fit import fit_shape as fit
 
     fits = fit(capture, face_model, measurements=list(measurements) or None, out=out_dir, iterations=iterations,
                progress=True, use_diffuse=not no_diffuse, fit_focal=not fixed_focal)
@@ -133,7 +133,7 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
 def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolution: int, lobes: int,
              face_model: str | None) -> None:
     """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
-    from .brdf_estimation import fit_brdf as fit
+    from .reflectance.estimate import fit_brdf as fit
 
     estimate = fit(capture, brdf_model, geometry, face_model=face_model, resolution=resolution, lobes=lobes,
                    out=out_dir)
@@ -192,7 +192,7 @@ def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, 
            light_position, envmap: str | None, envmap_scale: float, spp: int) -> None:
     """Render the BRDF fitted in BRDF_DIR on a face of CAPTURE: novel poses, lights, environment maps, or
     another person's face (BRDF transfer)."""
-    from .brdf_estimation import render_fitted
+    from .reflectance.estimate import render_fitted
 
     paths = render_fitted(brdf_dir, capture, out_stem, measurement, geometry, yaw=yaw,
                           light_position=light_position, envmap=envmap, envmap_scale=envmap_scale, spp=spp)

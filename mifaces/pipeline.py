@@ -55,7 +55,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         ``brdf/<model>/``, ``report.{md,json,png}``.
     capture : path or Capture, optional
         A capture folder; without one, the default capture of
-        :func:`mifaces.simulate.simulate` (built-in face, Cook-Torrance
+        :func:`mifaces.studio.simulate.simulate` (built-in face, Cook-Torrance
         ground truth) is simulated first into ``out/capture``.
     models : sequence of str
         BRDF models to fit.
@@ -74,9 +74,9 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     dict
         The report (also written as ``report.json``).
     """
-    from .brdf_estimation import fit_brdf, ground_truth_errors, load_geometry, render_estimate
+    from .reflectance.estimate import fit_brdf, ground_truth_errors, load_geometry, render_estimate
     from .capture import Capture, load_capture
-    from .reflectance_samples import capture_samples
+    from .reflectance.samples import capture_samples
 
     t0 = time.perf_counter()
     out = Path(out)
@@ -87,7 +87,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         raise ValueError(f"unknown BRDF model(s) {unknown}; choose from {list(MODELS)}")
     timings = {}
     if capture is None:
-        from .simulate import simulate
+        from .studio.simulate import simulate
 
         simulated = simulate(out / "capture", progress=progress)
         timings["simulate"] = simulated.seconds
@@ -96,7 +96,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     report = {"capture": str(capture.path), "measurements": len(capture.measurements), "geometry": geometry,
               "resolution": resolution, "models": {}}
     if geometry == "fitted":
-        from .shape_estimation import fit_shape
+        from .shape.fit import fit_shape
 
         t = time.perf_counter()
         fits = fit_shape(capture, out=out / "shapes", iterations=shape_iterations, progress=progress)

@@ -35,9 +35,9 @@ def jit_variant(request):
 @pytest.fixture(scope="session")
 def small_capture(tmp_path_factory):
     """A factory: ``small_capture(name, **options)`` simulates a small capture
-    in the LLVM variant (:func:`mifaces.simulate.simulate` with ``options``)
+    in the LLVM variant (:func:`mifaces.studio.simulate.simulate` with ``options``)
     and returns its folder."""
-    from mifaces.simulate import simulate
+    from mifaces.studio.simulate import simulate
 
     def make(name: str, **options):
         mifaces.set_variant("llvm_ad_rgb")

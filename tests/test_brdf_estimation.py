@@ -18,7 +18,7 @@ def capture_dir(small_capture):
 @pytest.fixture(scope="module")
 def estimate(capture_dir, tmp_path_factory):
     import mifaces
-    from mifaces.brdf_estimation import fit_brdf
+    from mifaces.reflectance.estimate import fit_brdf
 
     mifaces.set_variant("llvm_ad_rgb")
     out = tmp_path_factory.mktemp("fit") / "fit"
@@ -49,8 +49,8 @@ def test_ground_truth_skin_is_recovered(capture_dir, estimate):
 
 
 def test_outputs_are_written_and_reload(capture_dir, estimate):
-    from mifaces.brdf_estimation import load_estimate
-    from mifaces.simulate import brdf_with_overrides
+    from mifaces.reflectance.estimate import load_estimate
+    from mifaces.studio.truth import brdf_with_overrides
 
     result, out = estimate
     for name in ("brdf.json", "albedo.exr", "albedo.png", "scene.xml", "meshes/face_skin_1.ply"):
@@ -88,7 +88,7 @@ def test_scene_renders_the_first_photograph(capture_dir, estimate):
     assert np.median(relative) < 0.1
     assert abs(rendered[face].sum() / photo[face].sum() - 1) < 0.05
     # the same face rendered from memory: the API agrees with the XML
-    from mifaces.brdf_estimation import load_geometry, render_estimate
+    from mifaces.reflectance.estimate import load_geometry, render_estimate
 
     model, shapes = load_geometry(capture)
     light = capture.light(first.light)
@@ -99,11 +99,11 @@ def test_scene_renders_the_first_photograph(capture_dir, estimate):
 
 def test_other_models_and_lobes(capture_dir, tmp_path):
     import mifaces
-    from mifaces.brdf_estimation import fit_brdf
-    from mifaces.brdf_fitting import Schedule
+    from mifaces.reflectance.estimate import fit_brdf
+    from mifaces.reflectance.fitting import Schedule
     from mifaces.capture import load_capture
-    from mifaces.reflectance_samples import capture_samples
-    from mifaces.brdf_estimation import load_geometry
+    from mifaces.reflectance.samples import capture_samples
+    from mifaces.reflectance.estimate import load_geometry
 
     mifaces.set_variant("llvm_ad_rgb")
     capture = load_capture(capture_dir)
@@ -127,9 +127,9 @@ def test_other_models_and_lobes(capture_dir, tmp_path):
 
 def test_bad_geometry_is_named(capture_dir, tmp_path):
     import mifaces
-    from mifaces.brdf_estimation import fit_brdf, load_geometry
+    from mifaces.reflectance.estimate import fit_brdf, load_geometry
     from mifaces.capture import load_capture
-    from mifaces.reflectance_samples import capture_samples
+    from mifaces.reflectance.samples import capture_samples
 
     mifaces.set_variant("llvm_ad_rgb")
     capture = load_capture(capture_dir)
@@ -166,7 +166,7 @@ def test_cli_fit_brdf(capture_dir, tmp_path):
 def test_render_under_an_environment_map(capture_dir, estimate):
     """The fitted face under an environment map; a scene holds only the emitters it is given."""
     import mifaces
-    from mifaces.brdf_estimation import load_geometry
+    from mifaces.reflectance.estimate import load_geometry
     from mifaces.capture import load_capture
     from mifaces.render import face_scene, render_face
 
@@ -198,7 +198,7 @@ def test_cli_render_novel_pose_and_transfer(capture_dir, estimate, tmp_path):
 
     from mifaces.cli import main
     from mifaces.files import read_exr
-    from mifaces.simulate import simulate
+    from mifaces.studio.simulate import simulate
 
     result, out = estimate
     other = tmp_path / "other"
@@ -221,10 +221,10 @@ def test_samples_carry_their_region(capture_dir, tmp_path):
     """Every sample is labelled with the region of the triangle it lies on,
     and the label survives saving and concatenation."""
     import mifaces
-    from mifaces.brdf_estimation import load_geometry
+    from mifaces.reflectance.estimate import load_geometry
     from mifaces.capture import load_capture
     from mifaces.model.regions import REGIONS, texel_regions_of_mesh
-    from mifaces.reflectance_samples import ReflectanceSamples, capture_samples
+    from mifaces.reflectance.samples import ReflectanceSamples, capture_samples
 
     mifaces.set_variant("llvm_ad_rgb")
     capture = load_capture(capture_dir)

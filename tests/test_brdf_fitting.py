@@ -1,4 +1,4 @@
-"""Fitting BRDF models to reflectance samples (mifaces.brdf_fitting)."""
+"""Fitting BRDF models to reflectance samples (mifaces.reflectance.fitting)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import pytest
 import scipy.optimize
 
 from mifaces import brdf
-from mifaces.brdf_fitting import (FULL_DATA, ParameterSpace, Schedule, fit_region, fit_regions,
+from mifaces.reflectance.fitting import (FULL_DATA, ParameterSpace, Schedule, fit_region, fit_regions,
                                   min_samples)
-from mifaces.levenberg_marquardt import CONVERGED, levenberg_marquardt
+from mifaces.reflectance.levenberg_marquardt import CONVERGED, levenberg_marquardt
 
 TRUTH = {
     "phong": ({}, {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [0.12, 0.1, 0.09],
@@ -183,7 +183,7 @@ def test_lafortune_lobes_stay_energy_bounded(jit_variant):
     """Lafortune fitted to a Fresnel-brightened Cook-Torrance seen only away
     from grazing angles: every lobe keeps |C| <= ((n+2)/2π)^(1/n), so the
     fitted BRDF stays finite and bounded where no sample constrains it."""
-    from mifaces.brdf_fitting import energy_bound
+    from mifaces.reflectance.fitting import energy_bound
 
     truth = brdf.model("cooktorrance")
     params = {"diffuse_reflectance": [0.45, 0.3, 0.25], "specular_reflectance": [1.0] * 3, "roughness": 0.35,
@@ -231,7 +231,7 @@ def test_a_fit_at_the_bound_of_its_range_is_flagged_and_replaced(jit_variant):
     """Samples brighter than any Ward lobe within range: the fit says it ended
     at the bound. A small region beside skin then takes skin's glossy part
     (keeping its own albedo); a large one keeps its own fit, with a warning."""
-    from mifaces.brdf_fitting import AT_BOUND
+    from mifaces.reflectance.fitting import AT_BOUND
 
     model = brdf.model("ward")
     skin = {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [0.05] * 3, "alpha": 0.3}

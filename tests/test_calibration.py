@@ -14,10 +14,10 @@ import json
 import numpy as np
 import pytest
 
-from mifaces.calibration import (CalibrationError, SphereDetection, calibrate_light, closest_point,
+from mifaces.capture.calibration import (CalibrationError, SphereDetection, calibrate_light, closest_point,
                                  fit_sphere_cone, reflected_ray)
 from mifaces.capture import GROUND_TRUTH, load_capture
-from mifaces.simulate import STEEL_SPHERE_RADIUS, studio_camera
+from mifaces.studio.simulate import STEEL_SPHERE_RADIUS, studio_camera
 from test_simulate import studio  # noqa: F401  (the shared session fixture)
 
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from mifaces.capture import GROUND_TRUTH, load_capture
-from mifaces.hdr import decode_srgb, merge_exposures, merge_series, scale_to_white
+from mifaces.capture.hdr import decode_srgb, merge_exposures, merge_series, scale_to_white
 from test_simulate import studio  # noqa: F401  (the shared session fixture)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mifaces.reflectance_samples import (MIN_COSINE, confidence, confidence_with_distance, d_max,
+from mifaces.reflectance.samples import (MIN_COSINE, confidence, confidence_with_distance, d_max,
                                          distance_to_missing, reflectance, valid_samples)
 
 
@@ -75,7 +75,7 @@ def test_valid_samples_drop_shadow_grazing_and_borders():
 
 
 def test_saturated_pixels_are_dropped():
-    from mifaces.reflectance_samples import unsaturated
+    from mifaces.reflectance.samples import unsaturated
 
     pixels = np.array([[0.2, 0.3, 0.4], [0.2, 0.99, 0.4], [1.0, 1.0, 1.0], [0.5, 0.97, 0.1]])
     np.testing.assert_array_equal(unsaturated(pixels, 1.0), [True, False, False, True])
@@ -127,7 +127,7 @@ def test_resampled_reflectance_matches_the_brdf(jit_variant):
     from mifaces import brdf
     from mifaces.capture import Camera
     from mifaces.model.texture_space import rasterize
-    from mifaces.reflectance_samples import measurement_samples
+    from mifaces.reflectance.samples import measurement_samples
 
     camera = Camera(width=160, height=160, fx=230.0, fy=230.0, cx=79.5, cy=79.5)
     vertices, triangles, uv = spherical_cap()
@@ -155,7 +155,7 @@ def test_shadowed_and_hidden_texels_give_no_sample(jit_variant):
     give nothing either."""
     from mifaces.capture import Camera
     from mifaces.model.texture_space import rasterize
-    from mifaces.reflectance_samples import measurement_samples
+    from mifaces.reflectance.samples import measurement_samples
 
     camera = Camera(width=64, height=64, fx=60.0, fy=60.0, cx=31.5, cy=31.5)
     vertices, triangles, uv = spherical_cap(n=40)
@@ -175,7 +175,7 @@ def test_shadowed_and_hidden_texels_give_no_sample(jit_variant):
 def test_bad_photographs_are_named(jit_variant):
     from mifaces.capture import Camera
     from mifaces.model.texture_space import rasterize
-    from mifaces.reflectance_samples import measurement_samples
+    from mifaces.reflectance.samples import measurement_samples
 
     camera = Camera(width=64, height=64, fx=60.0, fy=60.0, cx=31.5, cy=31.5)
     vertices, triangles, uv = spherical_cap(n=20)
@@ -189,7 +189,7 @@ def test_bad_photographs_are_named(jit_variant):
 
 
 def test_samples_round_trip_and_concatenate(tmp_path):
-    from mifaces.reflectance_samples import ReflectanceSamples
+    from mifaces.reflectance.samples import ReflectanceSamples
 
     rng = np.random.default_rng(0)
 

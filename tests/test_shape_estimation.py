@@ -1,4 +1,4 @@
-"""Tests of mifaces.shape_estimation (paper sec. 4.2).
+"""Tests of mifaces.shape.fit (paper sec. 4.2).
 
 The photographs are rendered here with Mitsuba's own path tracer (``direct``
 integrator: a diffuse face under a directional light, and under a constant
@@ -20,12 +20,12 @@ import mifaces  # noqa: F401  (before drjit/mitsuba)
 import drjit as dr
 import mitsuba as mi
 
-from mifaces import shape_estimation as se
+from mifaces.shape import fit as se
 from mifaces.capture import Camera, Capture, Image, Light, Measurement, WhiteTarget
 from mifaces.model.landmarks import FEATURE_POINTS
 from mifaces.model.mesh import mitsuba_mesh
 from mifaces.render import mitsuba_sensor
-from mifaces.simulate import rotation_matrix
+from mifaces.model.geometry import rotation_matrix
 
 SIZE = 128
 #: A short coarse-to-fine schedule: these tests check recovery, not the last digit.

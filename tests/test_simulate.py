@@ -1,8 +1,8 @@
 """The simulated photo studio: capture folder, ground truth, BRDF overrides, reproducibility, CLI.
 
 The session fixture :func:`studio` simulates one small capture that the
-tests of :mod:`mifaces.capture`, :mod:`mifaces.calibration` and
-:mod:`mifaces.hdr` share (they import it from here). 384x384 pixels keep the
+tests of :mod:`mifaces.capture`, :mod:`mifaces.capture.calibration` and
+:mod:`mifaces.capture.hdr` share (they import it from here). 384x384 pixels keep the
 steel spheres about 50 pixels wide, enough to locate the light to well within
 1 % of its distance; 2 samples per pixel and a 128-texel albedo map keep it
 at about 10 s.
@@ -21,7 +21,8 @@ import mifaces  # noqa: F401  # isort: skip
 from conftest import JIT_VARIANTS
 from mifaces.capture import GROUND_TRUTH, IMAGE_SUFFIXES, MANIFEST, load_capture, read_image
 from mifaces.files import read_exr
-from mifaces.simulate import (COOK_TORRANCE_REGIONS, LIGHT_DISTANCE, brdf_with_overrides, default_brdf,
+from mifaces.studio.truth import COOK_TORRANCE_REGIONS, brdf_with_overrides, default_brdf
+from mifaces.studio.simulate import (LIGHT_DISTANCE,
                               simulate, studio_camera)
 
 #: The shared capture: two lights with two poses each, both companions.

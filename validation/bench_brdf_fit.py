@@ -28,7 +28,7 @@ import numpy as np
 import scipy.optimize
 
 from mifaces import brdf
-from mifaces.brdf_fitting import (DEFAULT_FIXED, FULL_DATA, ParameterSpace, Schedule, _Problem,
+from mifaces.reflectance.fitting import (DEFAULT_FIXED, FULL_DATA, ParameterSpace, Schedule, _Problem,
                                   fit_region, linear_start)
 from mifaces.files import atomic_path, write_json
 

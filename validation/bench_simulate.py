@@ -1,6 +1,6 @@
 """Simulation time per measurement, and the light-calibration error of the simulated studio.
 
-Two runs of :func:`mifaces.simulate.simulate` with its defaults (512x512
+Two runs of :func:`mifaces.studio.simulate.simulate` with its defaults (512x512
 pixels, 64 samples per pixel, a diffuse-light companion per measurement,
 1024-texel albedo map):
 
@@ -40,7 +40,7 @@ import numpy as np
 
 from mifaces.capture import GROUND_TRUTH, load_capture
 from mifaces.files import atomic_path, read_exr, write_json
-from mifaces.simulate import PRESETS, simulate
+from mifaces.studio.simulate import PRESETS, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "validation" / "results"

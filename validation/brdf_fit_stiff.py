@@ -29,9 +29,9 @@ import mitsuba as mi
 import numpy as np
 
 from mifaces import brdf
-from mifaces.brdf_fitting import fit_region, fit_regions
+from mifaces.reflectance.fitting import fit_region, fit_regions
 from mifaces.files import write_json
-from mifaces.reflectance_samples import unsaturated
+from mifaces.reflectance.samples import unsaturated
 
 OUT = Path(__file__).resolve().parent / "results"
 SKIN = [0.52, 0.36, 0.29]

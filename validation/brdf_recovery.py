@@ -1,7 +1,7 @@
 """BRDF estimation on simulated captures: is the ground truth recovered?
 
 1. **Same family.** For each model, simulate a capture whose ground truth is
-   that model (:func:`mifaces.simulate.default_brdf`), fit the same model
+   that model (:func:`mifaces.studio.truth.default_brdf`), fit the same model
    with the ground-truth geometry, and report per region the relative error
    of every glossy parameter and the albedo RMSE against the ground-truth map.
 2. **Cross family.** Simulate with Cook-Torrance, hold out the last light
@@ -34,12 +34,12 @@ import numpy as np
 from skimage.transform import resize
 
 from mifaces import brdf
-from mifaces.brdf_estimation import fit_brdf, ground_truth_errors, load_geometry, render_estimate
+from mifaces.reflectance.estimate import fit_brdf, ground_truth_errors, load_geometry, render_estimate
 from mifaces.capture import load_capture
 from mifaces.files import read_exr, write_json
 from mifaces.model.regions import REGIONS
 from mifaces.render import face_shapes, mitsuba_sensor
-from mifaces.simulate import simulate
+from mifaces.studio.simulate import simulate
 
 OUT = Path(__file__).resolve().parent / "results"
 MODELS = ["cooktorrance", "ward", "phong", "lafortune"]

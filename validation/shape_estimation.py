@@ -1,9 +1,9 @@
 """Shape estimation on simulated captures, against ground truth and against eos.
 
 For the default simulated capture (built-in model, 512 x 512, 6 measurements,
-``mifaces.simulate.simulate`` defaults) and the same capture simulated with
+``mifaces.studio.simulate.simulate`` defaults) and the same capture simulated with
 the Surrey Face Model (``../shared/models/sfm_3448``), every measurement is
-fitted with :func:`mifaces.shape_estimation.fit_shape` (paper sec. 4.2) and
+fitted with :func:`mifaces.shape.fit.fit_shape` (paper sec. 4.2) and
 with eos's landmark-only fit (``eos.fitting.fit_shape_and_pose`` with the
 SFM, its expression blendshapes, landmark mapper and contours: the peer
 baseline, given the same feature points). Reported per measurement and on
@@ -32,7 +32,7 @@ for a like-for-like comparison. "mean face" is the model's mean shape at
 the true pose: what a fit that gets the pose exactly and learns nothing
 about the shape would score.
 
-Then the BRDF estimation (``mifaces.brdf_estimation.fit_brdf``, Cook-Torrance,
+Then the BRDF estimation (``mifaces.reflectance.estimate.fit_brdf``, Cook-Torrance,
 256 x 256 texture) on the fitted shapes instead of the true ones: how much the
 per-region parameter errors and the albedo error grow. Last, the error against
 run time of one measurement (m00 of the default capture) for several
@@ -55,7 +55,7 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 import numpy as np
 from scipy.spatial import cKDTree
 
-from mifaces import shape_estimation as se
+from mifaces.shape import fit as se
 from mifaces.capture import load_capture
 from mifaces.files import atomic_path, write_json
 from mifaces.model.landmarks import FEATURE_POINTS
@@ -72,7 +72,7 @@ TARGET_LANDMARK_PX = 2.0
 # Ground truth and metrics
 # --------------------------------------------------------------------------------------------
 def ensure_capture(path: Path, **kw) -> Path:
-    from mifaces.simulate import simulate
+    from mifaces.studio.simulate import simulate
 
     if not (path / "capture.json").is_file():
         print(f"simulating {path} {kw}", flush=True)
@@ -283,14 +283,14 @@ def sweep(path: Path, model_source, factors, name="m00") -> list[dict]:
 
 
 def brdf_growth(path: Path, fits: Path, model_source, resolution: int = 256) -> dict:
-    """Cook-Torrance fits (``mifaces.brdf_estimation.fit_brdf``) with the true and with the fitted
+    """Cook-Torrance fits (``mifaces.reflectance.estimate.fit_brdf``) with the true and with the fitted
     shapes: per region the relative errors of rho_s (mean over RGB) and roughness against the
     simulator's truth, and the RMSE of the refined albedo against the true albedo map."""
     import warnings
 
     from skimage.transform import resize
 
-    from mifaces.brdf_estimation import fit_brdf
+    from mifaces.reflectance.estimate import fit_brdf
     from mifaces.files import read_exr
 
     capture = load_capture(path)

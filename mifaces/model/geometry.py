@@ -96,3 +96,12 @@ def tangent_frames(vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-30)
     bitangent = np.cross(normal, tangent)
     return tangent.astype(np.float32), bitangent.astype(np.float32), normal.astype(np.float32)
+
+
+def rotation_matrix(yaw: float, pitch: float, roll: float) -> np.ndarray:
+    """R = R_y(yaw) R_x(pitch) R_z(roll), angles in degrees (world y up, face along +z)."""
+    y, p, r = np.radians([yaw, pitch, roll])
+    ry = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
+    rx = np.array([[1, 0, 0], [0, np.cos(p), -np.sin(p)], [0, np.sin(p), np.cos(p)]])
+    rz = np.array([[np.cos(r), -np.sin(r), 0], [np.sin(r), np.cos(r), 0], [0, 0, 1]])
+    return ry @ rx @ rz

@@ -36,7 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .capture import Camera, SpherePictures
+from .camera import Camera
+from .types import SpherePictures
 
 #: Smallest sphere image we try to locate (radius in pixels).
 MIN_SPHERE_RADIUS_PX = 4.0
@@ -127,7 +128,7 @@ def fit_sphere_cone(rays: np.ndarray, radius: float) -> tuple[np.ndarray, float]
     w, *_ = np.linalg.lstsq(rays, np.ones(len(rays)), rcond=None)
     norm = np.linalg.norm(w)
     axis, cos_a = w / norm, 1.0 / norm
-    if not 0.0 < cos_a < 1.0:
+    if not 0.0 < cos_a < 1.0 - 1e-9:  # a cone of (numerically) zero angle is no sphere
         raise CalibrationError(f"the outline does not look like a sphere (cos α = {cos_a:.4f})")
     sin_a = np.sqrt(1.0 - cos_a * cos_a)
     rms = float(np.sqrt(np.mean((rays @ axis - cos_a) ** 2)))

@@ -9,7 +9,7 @@ r = 1 (so the model predicts π f; f without cosine, see
 :mod:`mifaces.brdf.model`) and σ the confidence of eq. 9/10. The model is
 evaluated by the same Dr.Jit functions the plugins use; its Jacobian comes
 from Dr.Jit's forward mode, one pass per free parameter; the steps are
-Levenberg-Marquardt (:mod:`mifaces.levenberg_marquardt`) on random subsets
+Levenberg-Marquardt (:mod:`mifaces.reflectance.levenberg_marquardt`) on random subsets
 of growing size, each stage starting from the previous result (the paper's
 hierarchy). Parameters are kept in their valid ranges by reparameterisation:
 p = lo + (hi - lo)·sigmoid(x), or its logarithmic form for parameters that
@@ -26,8 +26,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import brdf as brdf_models
-from .brdf.model import BRDFModel, Parameter
+from .. import brdf as brdf_models
+from ..brdf.model import BRDFModel, Parameter
 from .levenberg_marquardt import CONVERGED, levenberg_marquardt
 
 #: Status of a fit that converged with a parameter at the bound of its range.
@@ -190,7 +190,7 @@ def _energy_coupled(model: BRDFModel) -> dict:
     """Lafortune coefficient name -> its lobe's exponent name (see :class:`ParameterSpace`)."""
     if model.name != "lafortune":
         return {}
-    from .brdf.lafortune import lobe_names
+    from ..brdf.lafortune import lobe_names
 
     out = {}
     for j in model.lobes:
@@ -481,7 +481,7 @@ def prune_lobes(model: BRDFModel, space: ParameterSpace, problem: _Problem, para
     Such lobes get C_xy = C_z = 0 (the plugin then leaves them out). Returns
     the parameters, their loss and the numbers of the lobes removed.
     """
-    from .brdf.lafortune import lobe_names
+    from ..brdf.lafortune import lobe_names
 
     pruned = []
     for j in model.lobes:

@@ -77,8 +77,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .model import load_model
-from .simulate import rotation_matrix
+from ..model import load_model
+from ..model.geometry import rotation_matrix
 
 #: Statuses a fit may end with.
 CONVERGED = "converged"
@@ -281,7 +281,7 @@ def metric_distances(distances, model) -> list[tuple[int, int, float]]:
     ``distances`` holds :class:`mifaces.capture.Distance` values (or ``(start, end, mm)``
     tuples) between named feature points; those whose points the model lacks are skipped.
     """
-    from .model.landmarks import FEATURE_POINTS
+    from ..model.landmarks import FEATURE_POINTS
 
     ibug = model.ibug_landmarks
     out = []
@@ -324,7 +324,7 @@ def feature_targets(measurement, model) -> tuple[list[str], np.ndarray, np.ndarr
         If the measurement has fewer than 6 feature points, names one outside
         :data:`~mifaces.model.landmarks.FEATURE_POINTS`, or one the model does not define.
     """
-    from .model.landmarks import FEATURE_POINTS
+    from ..model.landmarks import FEATURE_POINTS
 
     points = dict(getattr(measurement, "feature_points", None) or {})
     name = getattr(measurement, "name", "?")
@@ -755,8 +755,8 @@ class _Fitter:
         against the current full mesh (``Scene.ray_test``)."""
         import drjit as dr
 
-        from .model.geometry import vertex_normals
-        from .model.mesh import mitsuba_mesh
+        from ..model.geometry import vertex_normals
+        from ..model.mesh import mitsuba_mesh
 
         mi, L = self.mi, self.layout
         verts = self.vertices_camera(theta)
@@ -799,7 +799,7 @@ class _Fitter:
         at every front-facing vertex, over the start's ambient and gain; the rest take their mean."""
         import scipy.ndimage as ndi
 
-        from .model.geometry import vertex_normals
+        from ..model.geometry import vertex_normals
 
         L, cam = self.layout, self.camera
         verts = self.vertices_camera(theta)
@@ -905,7 +905,7 @@ class _Fitter:
 # Public API
 # --------------------------------------------------------------------------------------------
 def _load(capture):
-    from .capture import Capture, load_capture
+    from ..capture import Capture, load_capture
 
     return capture if isinstance(capture, Capture) else load_capture(capture)
 
@@ -1150,7 +1150,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None, iterations:
 def write_fit(out, fit: ShapeFit, model) -> None:
     """Write ``<name>.json`` and, if converged, ``<name>.npy`` (camera-space vertices) atomically.
     A diverged fit's stale ``.npy`` from an earlier run is removed, so it is never read as a success."""
-    from .files import atomic_write, write_json
+    from ..files import atomic_write, write_json
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -1174,7 +1174,7 @@ def write_fit(out, fit: ShapeFit, model) -> None:
 def write_index(out, capture, model, fits: list[ShapeFit], reference=None, model_source=None) -> None:
     """Write ``shapes.json``: the capture, the model (``model_source``: what
     :func:`mifaces.load_model` loads it from), the camera and per measurement its status."""
-    from .files import write_json
+    from ..files import write_json
 
     out = Path(out)
     index = {"format": "mifaces-shapes", "version": 1, "capture": str(capture.path), "model": model.name,
@@ -1217,7 +1217,7 @@ def load_fitted_shapes(path, capture=None) -> dict[str, np.ndarray]:
     """
     import json
 
-    from .capture import Camera
+    from ..capture import Camera
 
     path = Path(path)
     index_path = path / INDEX

@@ -5,16 +5,16 @@ geometry to fitted BRDFs (paper sec. 4.3-5.3).
 
 1. per measurement, the photograph resampled into the model's common texture
    parameterization and turned into weighted reflectance samples
-   (:func:`mifaces.reflectance_samples.capture_samples`: eq. 4, 9, 10, shadow
+   (:func:`mifaces.reflectance.samples.capture_samples`: eq. 4, 9, 10, shadow
    and grazing-angle masks);
 2. each sample labelled with the a-priori material region of its texel, as
    the triangle covering it is labelled
    (:func:`mifaces.model.regions.texel_regions_of_mesh`);
 3. one BRDF model fitted per region by hierarchical Levenberg-Marquardt
-   (:func:`mifaces.brdf_fitting.fit_regions`; a region with too few samples
+   (:func:`mifaces.reflectance.fitting.fit_regions`; a region with too few samples
    borrows a neighbour's fit, a region with none is not evaluated);
 4. the diffuse albedo refitted per texel with the glossy part fixed
-   (:func:`mifaces.diffuse_refinement.refine_diffuse`).
+   (:func:`mifaces.reflectance.diffuse.refine_diffuse`).
 
 :func:`write_estimate` writes the result atomically: ``brdf.json`` in the
 layout of the simulator's ``--brdf-params`` (so a fitted BRDF can be put on
@@ -39,15 +39,15 @@ from pathlib import Path
 
 import numpy as np
 
-from . import brdf as brdf_models
-from .brdf_fitting import REFRACTIVE_INDEX, RegionFit, Schedule, fit_regions
-from .capture import GROUND_TRUTH, Capture, load_capture
-from .diffuse_refinement import DiffuseMap, refine_diffuse
-from .files import atomic_path, atomic_write, write_exr, write_json, write_png
-from .model import MorphableModel, load_model
-from .model.regions import REGIONS, regions_present, texel_regions_of_mesh
-from .reflectance_samples import ReflectanceSamples, capture_samples
-from .render import face_shapes
+from .. import brdf as brdf_models
+from .fitting import REFRACTIVE_INDEX, RegionFit, Schedule, fit_regions
+from ..capture import GROUND_TRUTH, Capture, load_capture
+from .diffuse import DiffuseMap, refine_diffuse
+from ..files import atomic_path, atomic_write, write_exr, write_json, write_png
+from ..model import MorphableModel, load_model
+from ..model.regions import REGIONS, regions_present, texel_regions_of_mesh
+from .samples import ReflectanceSamples, capture_samples
+from ..render import face_shapes
 
 #: Fit statistics stored per region under ``brdf.json``'s ``"fit"``.
 FIT_KEYS = ("diffuse_reflectance", "loss", "samples", "seconds", "status", "reason", "iterations")
@@ -64,7 +64,7 @@ class BRDFEstimate:
     options : dict
         The model's options (e.g. ``{"lobes": 2}`` for Lafortune).
     fits : dict
-        Region name -> :class:`~mifaces.brdf_fitting.RegionFit`.
+        Region name -> :class:`~mifaces.reflectance.fitting.RegionFit`.
     albedo : DiffuseMap
         Per-texel diffuse albedo after refinement (sec. 5.3).
     region_map : (R, R) uint8
@@ -132,7 +132,7 @@ def load_geometry(capture: Capture, geometry="ground-truth", face_model=None
         shapes = {m["name"]: np.load(info_path.parent / m["shape"]).astype(np.float64)
                   for m in info["measurements"]}
         return model, shapes
-    from .shape_estimation import INDEX, load_fitted_shapes
+    from ..shape.fit import INDEX, load_fitted_shapes
 
     path = Path(geometry)
     if not (path / INDEX).is_file():
@@ -167,7 +167,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     fixed : dict, optional
         Parameters held fixed in every region (default: Cook-Torrance's η
         at each region's published value,
-        :data:`mifaces.brdf_fitting.REFRACTIVE_INDEX`).
+        :data:`mifaces.reflectance.fitting.REFRACTIVE_INDEX`).
     schedule : Schedule, optional
         The LM subset hierarchy.
     samples : ReflectanceSamples, optional
@@ -240,7 +240,7 @@ def scene_xml(estimate: BRDFEstimate, camera, light_position, intensity, meshes:
     """A Mitsuba scene (XML text) of the fitted face: one ``ply`` shape per
     region with its fitted plugin BSDF over the albedo map, the capture's
     camera, a point light, and the path tracer (shadows, interreflection)."""
-    from .render import mitsuba_sensor
+    from ..render import mitsuba_sensor
 
     model = brdf_models.model(estimate.model, **estimate.options)
     kinds = {p.name: p.kind for p in model.specular_parameters()}
@@ -330,7 +330,7 @@ def render_estimate(estimate: BRDFEstimate, face_model: MorphableModel, vertices
     environment map, with Mitsuba's path tracer as the simulator renders
     photographs (:func:`mifaces.render.render_face`): for novel poses, novel
     lights and comparisons with held-out photographs."""
-    from .render import render_face
+    from ..render import render_face
 
     return render_face(estimate.to_json(), estimate.albedo.albedo, face_model, vertices, camera, light_position,
                        intensity, envmap, envmap_scale, spp, seed)
@@ -348,7 +348,7 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     (degrees, about its centre); the light is the measurement's point light
     unless ``light_position`` (world, mm) or an ``envmap`` is given.
     """
-    from .render import render_face, save_image
+    from ..render import render_face, save_image
 
     capture = capture if isinstance(capture, Capture) else load_capture(capture)
     data = load_estimate(brdf_dir)
@@ -389,7 +389,7 @@ def ground_truth_errors(estimate: BRDFEstimate, capture) -> dict | None:
     """
     from skimage.transform import resize
 
-    from .files import read_exr
+    from ..files import read_exr
 
     folder = Path(capture.path if isinstance(capture, Capture) else capture) / GROUND_TRUTH
     if not (folder / "brdf.json").is_file():
@@ -419,7 +419,7 @@ def ground_truth_errors(estimate: BRDFEstimate, capture) -> dict | None:
 def load_estimate(path) -> dict:
     """Read a ``brdf.json`` (path to it or its folder) and the albedo map beside it:
     the JSON document with ``"albedo"`` replaced by the (R, R, 3) array."""
-    from .files import read_exr
+    from ..files import read_exr
 
     path = Path(path)
     path = path / "brdf.json" if path.is_dir() else path

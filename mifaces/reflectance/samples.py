@@ -190,7 +190,7 @@ class ReflectanceSamples:
 
     def save(self, path) -> None:
         """Write as a compressed ``.npz``, atomically."""
-        from .files import atomic_path
+        from ..files import atomic_path
 
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
@@ -226,7 +226,7 @@ def texel_geometry(vertices, triangles, uv, coverage) -> TexelGeometry:
     """Interpolate positions and the per-vertex shading frames of
     :func:`mifaces.model.geometry.tangent_frames` at the texel centres that
     ``coverage`` (:func:`mifaces.model.texture_space.rasterize`) finds."""
-    from .model.geometry import tangent_frames
+    from ..model.geometry import tangent_frames
 
     vertices = np.asarray(vertices, np.float64)
     triangles = np.asarray(triangles, np.int64)
@@ -295,7 +295,7 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
     import mitsuba as mi
     import scipy.ndimage as ndi
 
-    from .model.mesh import mitsuba_mesh
+    from ..model.mesh import mitsuba_mesh
 
     pixels = np.asarray(pixels, np.float32)
     if pixels.shape != (camera.height, camera.width, 3):
@@ -387,8 +387,8 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     """
     from tqdm import tqdm
 
-    from .model.regions import texel_regions_of_mesh
-    from .model.texture_space import rasterize
+    from ..model.regions import texel_regions_of_mesh
+    from ..model.texture_space import rasterize
 
     if resolution < 8:
         raise ValueError(f"texture resolution must be at least 8, got {resolution}")

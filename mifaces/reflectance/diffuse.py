@@ -32,7 +32,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import brdf as brdf_models
+from .. import brdf as brdf_models
 
 
 @dataclass

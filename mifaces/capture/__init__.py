@@ -1,0 +1,37 @@
+"""Captures: the photographs of one measurement session and their calibration.
+
+A capture is a folder with a JSON manifest, ``capture.json``, and the images it
+names (paper sec. 3; the format is documented in ``docs/capture.md``). It
+holds the calibrated camera, the light conditions (a light position and
+intensity, or the two steel-sphere pictures to compute the position from),
+and per measurement the point-light image, its companion diffuse-light image
+or exposure series, and named feature points; plus three metric distances on
+the face and the value of the white calibration target.
+
+:func:`load_capture` reads and validates a capture and returns a
+:class:`Capture`, a plain dataclass of arrays. Every problem found is named
+in one :class:`CaptureError`. A ``ground_truth/`` subfolder (written by the
+simulator) is never read.
+
+Conventions
+-----------
+* Lengths in millimetres, in the capture's **world frame**.
+* The camera follows OpenCV: pixel ``(x, y)`` = (column, row) with the
+  centre of the top-left pixel at ``(0, 0)``; camera axes x right, y down,
+  z forward; intrinsics ``fx, fy, cx, cy``; distortion coefficients
+  ``k1, k2, p1, p2[, k3[, k4, k5, k6]]``; pose as ``rotation`` R and
+  ``translation`` t with ``x_camera = R x_world + t``.
+* Images are returned as float32 (H, W, 3) **linear** values divided by
+  their exposure, so images taken with different exposures compare directly.
+"""
+
+
+from .camera import Camera
+from .images import decode, read_image
+from .loader import load_capture
+from .types import (FEATURE_POINT_RANGE, FORMAT, GROUND_TRUTH, IMAGE_SUFFIXES, MANIFEST, TRANSFERS, VERSION,
+                    Capture, CaptureError, Distance, Image, Light, Measurement, SpherePictures, WhiteTarget)
+
+__all__ = ["Camera", "Capture", "CaptureError", "Distance", "Image", "Light", "Measurement", "SpherePictures",
+           "WhiteTarget", "decode", "read_image", "load_capture", "MANIFEST", "FORMAT", "VERSION", "GROUND_TRUTH",
+           "FEATURE_POINT_RANGE", "TRANSFERS", "IMAGE_SUFFIXES"]

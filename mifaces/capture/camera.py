@@ -1,0 +1,108 @@
+"""The calibrated camera of a capture, in OpenCV conventions (see
+:mod:`mifaces.capture` for the frames and units)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A calibrated pinhole camera with lens distortion, in OpenCV conventions.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size in pixels.
+    fx, fy, cx, cy : float
+        Focal lengths and principal point in pixels (pixel centres at integers).
+    distortion : (D,) float64
+        OpenCV coefficients ``k1, k2, p1, p2[, k3[, k4, k5, k6]]`` (D = 0, 4, 5 or 8).
+    rotation : (3, 3) float64
+        R of ``x_camera = R x_world + t``.
+    translation : (3,) float64
+        t of that relation, in mm.
+    """
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    distortion: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """The 3x3 intrinsic matrix K."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def position(self) -> np.ndarray:
+        """Centre of projection in world coordinates, ``-R^T t``."""
+        return -self.rotation.T @ self.translation
+
+    def to_camera(self, points) -> np.ndarray:
+        """World points (..., 3) to camera coordinates."""
+        return np.asarray(points, np.float64) @ self.rotation.T + self.translation
+
+    def to_world(self, points) -> np.ndarray:
+        """Camera points (..., 3) to world coordinates."""
+        return (np.asarray(points, np.float64) - self.translation) @ self.rotation
+
+    def _coefficients(self) -> np.ndarray:
+        d = np.zeros(8)
+        d[:len(self.distortion)] = self.distortion
+        return d
+
+    def distort(self, xy) -> np.ndarray:
+        """Apply lens distortion to normalised image coordinates (..., 2) (OpenCV's model)."""
+        k1, k2, p1, p2, k3, k4, k5, k6 = self._coefficients()
+        xy = np.asarray(xy, np.float64)
+        x, y = xy[..., 0], xy[..., 1]
+        r2 = x * x + y * y
+        radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        return np.stack([xd, yd], axis=-1)
+
+    def undistort(self, xy, iterations: int = 20) -> np.ndarray:
+        """Invert :meth:`distort` by fixed-point iteration (as OpenCV's ``undistortPoints``)."""
+        xy = np.asarray(xy, np.float64)
+        if not np.any(self.distortion):
+            return xy
+        k1, k2, p1, p2, k3, k4, k5, k6 = self._coefficients()
+        x, y = xy[..., 0].copy(), xy[..., 1].copy()
+        for _ in range(iterations):
+            r2 = x * x + y * y
+            inv_radial = (1 + r2 * (k4 + r2 * (k5 + r2 * k6))) / (1 + r2 * (k1 + r2 * (k2 + r2 * k3)))
+            dx = 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+            dy = p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+            x = (xy[..., 0] - dx) * inv_radial
+            y = (xy[..., 1] - dy) * inv_radial
+        return np.stack([x, y], axis=-1)
+
+    def project(self, points) -> np.ndarray:
+        """Pixel coordinates (..., 2) of world points (..., 3)."""
+        pc = self.to_camera(points)
+        xy = self.distort(pc[..., :2] / pc[..., 2:3])
+        return np.stack([self.fx * xy[..., 0] + self.cx, self.fy * xy[..., 1] + self.cy], axis=-1)
+
+    def pixel_rays(self, pixels) -> np.ndarray:
+        """Unit ray directions (..., 3) in **camera** coordinates through pixels (..., 2)."""
+        p = np.asarray(pixels, np.float64)
+        xy = self.undistort(np.stack([(p[..., 0] - self.cx) / self.fx, (p[..., 1] - self.cy) / self.fy], -1))
+        d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+    def to_json(self) -> dict:
+        """The manifest's ``camera`` entry."""
+        return {"width": int(self.width), "height": int(self.height), "fx": float(self.fx), "fy": float(self.fy),
+                "cx": float(self.cx), "cy": float(self.cy), "distortion": [float(d) for d in self.distortion],
+                "rotation": np.asarray(self.rotation, float).tolist(),
+                "translation": [float(t) for t in self.translation]}

@@ -1,0 +1,185 @@
+"""The values a loaded capture is made of: images, lights, measurements,
+distances, the white target, and the capture itself."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera
+
+#: File name of the manifest inside a capture folder.
+MANIFEST = "capture.json"
+#: Value of the manifest's ``format`` field, and the version this module reads.
+FORMAT = "mifaces-capture"
+VERSION = 1
+#: Subfolder of a capture that loading ignores (the simulator's ground truth).
+GROUND_TRUTH = "ground_truth"
+#: Number of named feature points a measurement must have (paper sec. 4.2).
+FEATURE_POINT_RANGE = (7, 20)
+#: Transfer curves of integer images.
+TRANSFERS = ("linear", "srgb", "gamma")
+IMAGE_SUFFIXES = (".exr", ".png", ".tif", ".tiff", ".jpg", ".jpeg")
+
+
+class CaptureError(ValueError):
+    """A capture that cannot be loaded; the message lists every problem found."""
+
+    def __init__(self, path, problems: list[str]):
+        self.path = Path(path)
+        self.problems = list(problems)
+        lines = "\n".join(f"  - {p}" for p in self.problems)
+        super().__init__(f"invalid capture {self.path}: {len(self.problems)} problem(s)\n{lines}")
+
+
+@dataclass(frozen=True, eq=False)
+class Image:
+    """One photograph, decoded.
+
+    Attributes
+    ----------
+    pixels : (H, W, 3) float32
+        Linear values divided by ``exposure``.
+    saturated : (H, W) bool
+        Pixels where a channel reached the sensor's clipping level.
+    exposure : float
+        Relative exposure (time x gain) the picture was taken with.
+    path : Path
+    """
+
+    pixels: np.ndarray
+    saturated: np.ndarray
+    exposure: float
+    path: Path
+
+
+@dataclass(frozen=True, eq=False)
+class SpherePictures:
+    """The two steel-sphere pictures of one light condition (paper sec. 3).
+
+    ``highlight`` is taken under the point light (the spheres show its
+    reflection), ``outline`` under the diffuse light (the spheres show their
+    outline against the background). ``radius`` is the spheres' radius in mm.
+    """
+
+    radius: float
+    highlight: Image
+    outline: Image
+
+
+@dataclass(frozen=True, eq=False)
+class Light:
+    """One light condition.
+
+    Attributes
+    ----------
+    name : str
+    position : (3,) float64 or None
+        World position in mm, as given or as calibrated from ``spheres``.
+    intensity : (3,) float64
+        Radiant intensity of the point light per RGB channel, in the units of
+        the white target's calibration.
+    spheres : SpherePictures or None
+    calibration : object or None
+        The :class:`mifaces.capture.calibration.LightCalibration` the position came from.
+    """
+
+    name: str
+    position: np.ndarray | None
+    intensity: np.ndarray
+    spheres: SpherePictures | None = None
+    calibration: object | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """One measurement: a point-light photograph and its companions at one pose.
+
+    Attributes
+    ----------
+    name : str
+    light : str
+        Name of the :class:`Light` condition.
+    pose : str or None
+        Label shared by the measurements taken at one pose of the subject.
+    image : Image
+        The point-light photograph the BRDF is fitted to.
+    diffuse : Image or None
+        Companion picture under diffuse light.
+    exposures : tuple of Image
+        Companion exposure series (may be empty).
+    feature_points : dict
+        Feature point name (see :data:`mifaces.model.landmarks.FEATURE_POINTS`)
+        -> pixel position (2,) float64.
+    """
+
+    name: str
+    light: str
+    pose: str | None
+    image: Image
+    diffuse: Image | None
+    exposures: tuple[Image, ...]
+    feature_points: dict[str, np.ndarray]
+
+
+@dataclass(frozen=True)
+class Distance:
+    """A metric distance on the face between two named feature points, in mm."""
+
+    start: str
+    end: str
+    mm: float
+
+
+@dataclass(frozen=True, eq=False)
+class WhiteTarget:
+    """The white calibration target.
+
+    ``value`` is the linear RGB pixel value (per unit exposure) that a
+    Lambertian target of reflectance ``reflectance`` shows when lit by a
+    point light of intensity ``intensity`` at ``distance`` mm with incidence
+    cosine ``cos_incidence``.
+    """
+
+    value: np.ndarray
+    reflectance: float
+    distance: float
+    intensity: np.ndarray
+    cos_incidence: float = 1.0
+
+    def reflectance_scale(self) -> np.ndarray:
+        """The scale s (RGB) of ``r = s R d² / (I cos θ)`` that gives the target
+        its reflectance (the physical reading of the paper's eq. 4; see
+        :func:`mifaces.reflectance.samples.reflectance`): with that s, a white
+        target of reflectance 1 has r = 1."""
+        return self.reflectance * self.intensity * self.cos_incidence / (self.value * self.distance ** 2)
+
+
+@dataclass(frozen=True, eq=False)
+class Capture:
+    """A loaded, validated capture (see the module docstring)."""
+
+    path: Path
+    camera: Camera
+    lights: tuple[Light, ...]
+    measurements: tuple[Measurement, ...]
+    distances: tuple[Distance, ...]
+    white_target: WhiteTarget
+    metadata: dict = field(default_factory=dict)
+
+    def light(self, name: str) -> Light:
+        """The light condition called ``name``."""
+        for light in self.lights:
+            if light.name == name:
+                return light
+        raise KeyError(f"no light {name!r} in {self.path}; lights: {[l.name for l in self.lights]}")
+
+    def __repr__(self) -> str:
+        return (f"Capture({str(self.path)!r}: {self.camera.width}x{self.camera.height}, "
+                f"{len(self.lights)} lights, {len(self.measurements)} measurements)")
+
+
+# --------------------------------------------------------------------------------------------
+# Reading images
