@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import click
 
+from .status import CONVERGED
+
 
 @click.group()
 @click.option("--variant", default=None, help="Mitsuba variant (default: cuda_ad_rgb with a GPU, else llvm_ad_rgb).")
@@ -112,7 +114,7 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
     for f in fits:
         click.echo(f"  {f.measurement}: {f.status:13s} landmarks {f.loss.get('feature_rms_px', float('nan')):.2f} px, "
                    f"{f.seconds:.1f} s")
-    failed = [f.measurement for f in fits if f.status != "converged"]
+    failed = [f.measurement for f in fits if f.status != CONVERGED]
     click.echo(f"wrote {out_dir}/shapes.json")
     if failed:
         raise click.ClickException(f"{len(failed)} fit(s) did not converge: {', '.join(failed)} (see their .json)")

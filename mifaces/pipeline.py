@@ -74,7 +74,9 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     dict
         The report (also written as ``report.json``).
     """
-    from .reflectance.estimate import fit_brdf, ground_truth_errors, load_geometry, render_estimate
+    from .geometry import load_geometry
+    from .reflectance.estimate import fit_brdf, render_estimate
+    from .report import ground_truth_errors, write_markdown, write_picture
     from .capture import Capture, load_capture
     from .reflectance.samples import capture_samples
 
@@ -135,67 +137,6 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     report["seconds"] = timings
     report["novel_light_mm"] = novel.tolist()
     write_json(out / "report.json", report)
-    _write_picture(out / "report.png", panels, first.name)
-    _write_markdown(out / "report.md", report, first.name)
+    write_picture(out / "report.png", panels, first.name)
+    write_markdown(out / "report.md", report, first.name)
     return report
-
-
-def _write_picture(path: Path, panels, photo_name: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .files import atomic_path
-
-    def show(ax, image, title, scale):
-        ax.imshow(np.clip((np.clip(image * scale, 0, 1)) ** (1 / 2.2), 0, 1))
-        ax.set_title(title, fontsize=9)
-        ax.axis("off")
-
-    fig, axes = plt.subplots(len(panels), 4, figsize=(12, 3 * len(panels)), squeeze=False)
-    for row, (model, photo, rendered, relit) in zip(axes, panels):
-        scale = 0.8 / max(np.percentile(photo, 99.5), 1e-12)
-        show(row[0], photo, f"photograph {photo_name}", scale)
-        show(row[1], rendered, f"{model}: fitted, same light", scale)
-        show(row[2], 4 * np.abs(rendered - photo), "|difference| x 4", scale)
-        show(row[3], relit, f"{model}: novel light", scale)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90, format="png")
-    plt.close(fig)
-
-
-def _write_markdown(path: Path, report: dict, photo_name: str) -> None:
-    lines = ["# mifaces measurement report", "",
-             f"Capture `{report['capture']}`: {report['measurements']} photographs, geometry {report['geometry']}, "
-             f"texture {report['resolution']}².", "", "![report](report.png)", "",
-             "| model | region | samples | status | parameters | loss | error vs ground truth |",
-             "|---|---|---|---|---|---|---|"]
-    for model, entry in report["models"].items():
-        truth = entry.get("ground_truth") or {}
-        for region, params in entry["regions"].items():
-            fit = entry["fit"][region]
-            text = ", ".join(f"{k} {_fmt(v)}" for k, v in params.items())
-            err = (truth.get("regions") or {}).get(region)
-            err_text = ", ".join(f"{k} {100 * v:.1f}%" for k, v in err.items()) if err else ""
-            lines.append(f"| {model} | {region} | {fit['samples']} | {fit['status']} | {text} | "
-                         f"{_fmt(fit['loss'])} | {err_text} |")
-    lines += ["", "| model | image RMSE (first photograph, relative) | albedo RMSE vs ground truth | fit time (s) |",
-              "|---|---|---|---|"]
-    for model, entry in report["models"].items():
-        truth = entry.get("ground_truth") or {}
-        albedo = f"{truth['albedo']['rmse_sampled']:.4f}" if "albedo" in truth else ""
-        lines.append(f"| {model} | {100 * entry['image_relative_rmse']:.2f}% | {albedo} | "
-                     f"{report['seconds'][f'fit_brdf_{model}']:.1f} |")
-    lines += ["", "Times (s): " + ", ".join(f"{k} {v:.1f}" for k, v in report["seconds"].items()), ""]
-    with atomic_write(path, "w") as f:
-        f.write("\n".join(lines))
-
-
-def _fmt(value) -> str:
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(f"{v:.3g}" for v in value) + "]"
-    if isinstance(value, float):
-        return f"{value:.4g}"
-    return str(value)

@@ -88,7 +88,8 @@ def test_scene_renders_the_first_photograph(capture_dir, estimate):
     assert np.median(relative) < 0.1
     assert abs(rendered[face].sum() / photo[face].sum() - 1) < 0.05
     # the same face rendered from memory: the API agrees with the XML
-    from mifaces.reflectance.estimate import load_geometry, render_estimate
+    from mifaces.geometry import load_geometry
+    from mifaces.reflectance.estimate import render_estimate
 
     model, shapes = load_geometry(capture)
     light = capture.light(first.light)
@@ -103,7 +104,7 @@ def test_other_models_and_lobes(capture_dir, tmp_path):
     from mifaces.reflectance.fitting import Schedule
     from mifaces.capture import load_capture
     from mifaces.reflectance.samples import capture_samples
-    from mifaces.reflectance.estimate import load_geometry
+    from mifaces.geometry import load_geometry
 
     mifaces.set_variant("llvm_ad_rgb")
     capture = load_capture(capture_dir)
@@ -127,7 +128,8 @@ def test_other_models_and_lobes(capture_dir, tmp_path):
 
 def test_bad_geometry_is_named(capture_dir, tmp_path):
     import mifaces
-    from mifaces.reflectance.estimate import fit_brdf, load_geometry
+    from mifaces.geometry import load_geometry
+    from mifaces.reflectance.estimate import fit_brdf
     from mifaces.capture import load_capture
     from mifaces.reflectance.samples import capture_samples
 
@@ -166,7 +168,7 @@ def test_cli_fit_brdf(capture_dir, tmp_path):
 def test_render_under_an_environment_map(capture_dir, estimate):
     """The fitted face under an environment map; a scene holds only the emitters it is given."""
     import mifaces
-    from mifaces.reflectance.estimate import load_geometry
+    from mifaces.geometry import load_geometry
     from mifaces.capture import load_capture
     from mifaces.render import face_scene, render_face
 
@@ -221,7 +223,7 @@ def test_samples_carry_their_region(capture_dir, tmp_path):
     """Every sample is labelled with the region of the triangle it lies on,
     and the label survives saving and concatenation."""
     import mifaces
-    from mifaces.reflectance.estimate import load_geometry
+    from mifaces.geometry import load_geometry
     from mifaces.capture import load_capture
     from mifaces.model.regions import REGIONS, texel_regions_of_mesh
     from mifaces.reflectance.samples import ReflectanceSamples, capture_samples

@@ -34,7 +34,9 @@ import numpy as np
 from skimage.transform import resize
 
 from mifaces import brdf
-from mifaces.reflectance.estimate import fit_brdf, ground_truth_errors, load_geometry, render_estimate
+from mifaces.geometry import load_geometry
+from mifaces.reflectance.estimate import fit_brdf, render_estimate
+from mifaces.report import ground_truth_errors
 from mifaces.capture import load_capture
 from mifaces.files import read_exr, write_json
 from mifaces.model.regions import REGIONS

@@ -47,7 +47,9 @@ from ..files import atomic_path, atomic_write, write_exr, write_json, write_png
 from ..model import MorphableModel, load_model
 from ..model.regions import REGIONS, regions_present, texel_regions_of_mesh
 from .samples import ReflectanceSamples, capture_samples
+from ..geometry import load_geometry
 from ..render import face_shapes
+from ..status import PRIOR
 
 #: Fit statistics stored per region under ``brdf.json``'s ``"fit"``.
 FIT_KEYS = ("diffuse_reflectance", "loss", "samples", "seconds", "status", "reason", "iterations")
@@ -103,45 +105,6 @@ class BRDFEstimate:
                 "samples": int(self.samples), "resolution": self.resolution,
                 "measurements": list(self.measurements), "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
                 "albedo": "albedo.exr"}
-
-
-def load_geometry(capture: Capture, geometry="ground-truth", face_model=None
-                  ) -> tuple[MorphableModel, dict[str, np.ndarray]]:
-    """The face model and per-measurement world-space vertices to sample with.
-
-    Parameters
-    ----------
-    capture : Capture
-    geometry : ``'ground-truth'``, path or mapping
-        ``'ground-truth'``: the simulator's ``ground_truth/`` of this capture.
-        A path: a folder written by ``mifaces fit-shape``. A mapping:
-        measurement name -> (V, 3) vertices in the capture's world frame (mm).
-    face_model : MorphableModel, path or ``'builtin'``, optional
-        The model the shapes belong to; default: the one the ground truth or
-        the fitted shapes name.
-    """
-    if isinstance(geometry, dict):
-        return load_model(face_model or "builtin"), {k: np.asarray(v, np.float64) for k, v in geometry.items()}
-    if str(geometry) == "ground-truth":
-        info_path = capture.path / GROUND_TRUTH / "scene.json"
-        if not info_path.is_file():
-            raise FileNotFoundError(f"{capture.path} has no {GROUND_TRUTH}/scene.json (only simulated captures "
-                                    "have ground truth): give fitted shapes instead")
-        info = json.loads(info_path.read_text())
-        model = load_model(face_model or info.get("model_source", info.get("model", "builtin")))
-        shapes = {m["name"]: np.load(info_path.parent / m["shape"]).astype(np.float64)
-                  for m in info["measurements"]}
-        return model, shapes
-    from ..shape.fit import INDEX, load_fitted_shapes
-
-    path = Path(geometry)
-    if not (path / INDEX).is_file():
-        raise FileNotFoundError(f"no fitted shapes at {path}: expected the folder mifaces fit-shape wrote "
-                                f"(with {INDEX}), or 'ground-truth'")
-    if face_model is None:
-        index = json.loads((path / INDEX).read_text())
-        face_model = index.get("model_source", index.get("model", "builtin"))
-    return load_model(face_model), load_fitted_shapes(path, capture)
 
 
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
@@ -376,46 +339,6 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     return save_image(image, out)
 
 
-def ground_truth_errors(estimate: BRDFEstimate, capture) -> dict | None:
-    """How far a fit is from a simulated capture's ground truth (``ground_truth/``).
-
-    Returns None for a capture without ground truth, else ``{"truth_model",
-    "regions": {region: {parameter: relative error, mean over channels}},
-    "albedo": {...}}``. Parameter errors are given where the truth is the
-    same model, for the regions fitted on their own samples (η, held at its
-    published value, is left out); the albedo errors, RMSE and mean error of
-    the refined map against the truth's (downsampled to the fit's
-    resolution), on texels with samples and on all face texels, always.
-    """
-    from skimage.transform import resize
-
-    from ..files import read_exr
-
-    folder = Path(capture.path if isinstance(capture, Capture) else capture) / GROUND_TRUTH
-    if not (folder / "brdf.json").is_file():
-        return None
-    truth = json.loads((folder / "brdf.json").read_text())
-    regions = {}
-    if truth["model"] == estimate.model:
-        for name, fit in estimate.fits.items():
-            if fit.status == "prior" or name not in truth["regions"]:
-                continue
-            regions[name] = {key: float(np.mean(np.abs(np.asarray(fit.params[key], float) - np.asarray(value, float))
-                                                / np.abs(np.asarray(value, float))))
-                             for key, value in truth["regions"][name].items() if key != "eta"}
-    r = estimate.resolution
-    error = estimate.albedo.albedo - resize(read_exr(folder / "albedo.exr"), (r, r, 3), anti_aliasing=True, order=1)
-    seen = estimate.albedo.samples > 0
-    face = estimate.region_map > 0
-    skin = seen & (estimate.region_map == REGIONS["skin"])
-    albedo = {"rmse_sampled": float(np.sqrt(np.mean(error[seen] ** 2))),
-              "rmse_face": float(np.sqrt(np.mean(error[face] ** 2))),
-              "skin_rmse_sampled": float(np.sqrt(np.mean(error[skin] ** 2))),
-              "bias_sampled": float(error[seen].mean()), "texels_sampled": int(seen.sum()),
-              "texels_face": int(face.sum())}
-    return {"truth_model": truth["model"], "regions": regions, "albedo": albedo}
-
-
 def load_estimate(path) -> dict:
     """Read a ``brdf.json`` (path to it or its folder) and the albedo map beside it:
     the JSON document with ``"albedo"`` replaced by the (R, R, 3) array."""
@@ -434,5 +357,5 @@ def load_estimate(path) -> dict:
     return data
 
 
-__all__ = ["BRDFEstimate", "fit_brdf", "load_geometry", "write_estimate", "scene_xml", "render_estimate",
-           "render_fitted", "ground_truth_errors", "load_estimate"]
+__all__ = ["BRDFEstimate", "fit_brdf", "write_estimate", "scene_xml", "render_estimate", "render_fitted",
+           "load_estimate"]

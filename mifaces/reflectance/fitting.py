@@ -28,10 +28,9 @@ import numpy as np
 
 from .. import brdf as brdf_models
 from ..brdf.model import BRDFModel, Parameter
-from .levenberg_marquardt import CONVERGED, levenberg_marquardt
+from ..status import AT_BOUND, CONVERGED, PRIOR
+from .levenberg_marquardt import levenberg_marquardt
 
-#: Status of a fit that converged with a parameter at the bound of its range.
-AT_BOUND = "at_bound"
 
 #: Parameters held fixed unless the caller frees them: the index of
 #: refraction trades off against the lobe scale, and skin's is known:
@@ -499,7 +498,7 @@ def prune_lobes(model: BRDFModel, space: ParameterSpace, problem: _Problem, para
 def prior_fit(model: BRDFModel, params: dict, samples: int, reason: str) -> RegionFit:
     """A region's BRDF taken from elsewhere (a neighbour, the defaults)."""
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=float("nan"),
-                     samples=samples, seconds=0.0, status="prior", reason=reason, iterations=0)
+                     samples=samples, seconds=0.0, status=PRIOR, reason=reason, iterations=0)
 
 
 #: Where a region without enough samples borrows its BRDF from, in order

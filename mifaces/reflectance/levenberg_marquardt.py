@@ -19,10 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-#: Convergence statuses a fit may end with.
-CONVERGED = "converged"
-MAX_ITERATIONS = "max_iterations"
-STALLED = "stalled"
+from ..status import CONVERGED, MAX_ITERATIONS, STALLED
 
 
 @dataclass

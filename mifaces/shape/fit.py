@@ -78,12 +78,10 @@ from pathlib import Path
 import numpy as np
 
 from ..model import load_model
+from ..status import CONVERGED, DIVERGED, NOT_CONVERGED
 from ..model.geometry import rotation_matrix
 
 #: Statuses a fit may end with.
-CONVERGED = "converged"
-DIVERGED = "diverged"
-NOT_CONVERGED = "not_converged"
 #: Name of the index file :func:`fit_shape` writes beside the per-measurement files.
 INDEX = "shapes.json"
 #: Phong exponent of the specular lobe (fixed; its strength is fitted).
