@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+import skimage.io
 
 
 @pytest.fixture(scope="module")
@@ -16,6 +17,7 @@ def capture_dir(small_capture):
 def test_measure_writes_a_report(capture_dir, tmp_path):
     import mifaces
     from mifaces.pipeline import measure
+    from mifaces.status import BRDF_STATUSES
 
     mifaces.set_variant("llvm_ad_rgb")
     report = measure(tmp_path / "m", capture_dir, models=("cooktorrance", "phong"), geometry="ground-truth",
@@ -23,17 +25,46 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
     for name in ("report.json", "report.md", "report.png", "brdf/cooktorrance/brdf.json", "brdf/phong/scene.xml"):
         assert (tmp_path / "m" / name).is_file(), name
     saved = json.loads((tmp_path / "m" / "report.json").read_text())
+    assert saved == json.loads(json.dumps(report))  # the file is the report returned
     assert set(saved["models"]) == {"cooktorrance", "phong"}
+    for model, entry in saved["models"].items():
+        assert set(entry["regions"]) == set(entry["fit"])
+        assert {fit["status"] for fit in entry["fit"].values()} <= set(BRDF_STATUSES)
+        assert entry["fit"]["skin"]["samples"] > 1000 and entry["fit"]["skin"]["status"] != "prior"
+        # the fitted face rendered under the photograph's light reproduces it, not just anything
+        assert 0 < entry["image_relative_rmse"] < 0.5
     skin = saved["models"]["cooktorrance"]["ground_truth"]["regions"]["skin"]
     assert skin["roughness"] < 0.3  # a 2-photograph, 64² fit: in the right range, not exact
-    for entry in saved["models"].values():
-        assert 0 < entry["image_relative_rmse"] < 0.5
-    assert "| cooktorrance | skin |" in (tmp_path / "m" / "report.md").read_text()
-    assert report["seconds"]["total"] > 0
+    assert saved["models"]["phong"]["ground_truth"]["regions"] == {}  # another family: no parameter errors
+    assert saved["models"]["phong"]["ground_truth"]["albedo"]["rmse_sampled"] < 0.1
+    stages = report["seconds"]
+    assert set(stages) >= {"reflectance_samples", "fit_brdf_cooktorrance", "fit_brdf_phong", "total"}
+    assert stages["total"] >= sum(v for k, v in stages.items() if k != "total") * 0.99
+    markdown = (tmp_path / "m" / "report.md").read_text()
+    assert "| cooktorrance | skin |" in markdown and "| phong | skin |" in markdown
+    picture = skimage.io.imread(tmp_path / "m" / "report.png")
+    assert picture.shape[0] / picture.shape[1] == pytest.approx(2 / 4, rel=0.1)  # a row of four panels per model
     with pytest.raises(ValueError, match="unknown BRDF model"):
         measure(tmp_path / "x", capture_dir, models=("blinn",))
     with pytest.raises(ValueError, match="geometry must be"):
         measure(tmp_path / "x", capture_dir, geometry="guess")
+
+
+def test_cli_measure_prints_skin_and_errors(capture_dir, tmp_path):
+    """The main job's command line: each model's skin parameters with their ground-truth error, and the report."""
+    from click.testing import CliRunner
+
+    from mifaces.cli import main
+
+    out = tmp_path / "cli"
+    result = CliRunner().invoke(main, ["--variant", "llvm_ad_rgb", "measure", str(capture_dir), "--out", str(out),
+                                       "--model", "ward", "--geometry", "ground-truth", "--resolution", "64"])
+    assert result.exit_code == 0, result.output
+    line = next(line for line in result.output.splitlines() if line.startswith("ward"))
+    assert "skin:" in line and "alpha=" in line and "specular_reflectance=[" in line
+    assert "vs ground truth" not in line  # the truth is Cook-Torrance: no parameter errors for Ward
+    assert f"report: {out}/report.md" in result.output
+    assert json.loads((out / "report.json").read_text())["models"].keys() == {"ward"}
 
 
 def test_novel_light_is_not_a_capture_light(capture_dir):
