@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import mifaces  # noqa: F401  # isort: skip
-
 import numpy as np
 import pytest
 

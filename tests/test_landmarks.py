@@ -5,8 +5,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import mifaces  # noqa: F401  # isort: skip
-
 import numpy as np
 import pytest
 
