@@ -199,3 +199,29 @@ def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, 
     paths = render_fitted(brdf_dir, capture, out_stem, measurement, geometry, yaw=yaw,
                           light_position=light_position, envmap=envmap, envmap_scale=envmap_scale, spp=spp)
     click.echo(f"wrote {paths['exr']} and {paths['png']}")
+
+
+@main.command()
+@click.argument("images", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
+@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
+              help="JSON file: {IMAGE: {points: 68 [x, y], box: [x0, y0, x1, y1]}}.")
+@click.option("--box", default=None, type=(int, int, int, int),
+              help="Face box X0 Y0 X1 Y1 for every image (pixels, X1 Y1 inside), skipping the face detector.")
+def landmarks(images: tuple[str, ...], out_path: str, box) -> None:
+    """Find the 68 iBUG landmarks of the face in each of IMAGES (pixel centres at integers)."""
+    from .files import write_json
+    from .landmarks import NoFaceError, detect_landmarks
+
+    found, failed = {}, []
+    for image in images:
+        try:
+            result = detect_landmarks(image, box=box)
+        except NoFaceError as error:
+            click.echo(f"error: {error}", err=True)
+            failed.append(image)
+            continue
+        found[image] = {"points": result.points.tolist(), "box": list(result.box)}
+    write_json(out_path, found)
+    click.echo(f"wrote the landmarks of {len(found)} of {len(images)} images to {out_path}")
+    if failed:
+        raise SystemExit(1)
