@@ -256,3 +256,27 @@ def test_too_few_iterations_is_not_converged(model, camera, posed, tmp_path):
     assert fits[0].status == NOT_CONVERGED and "more iterations" in fits[0].message
     assert not (tmp_path / "posed.npy").exists()
     assert json.loads((tmp_path / "shapes.json").read_text())["measurements"]["posed"]["vertices"] is None
+
+
+def test_shapes_in_world_equals_what_is_read_back(model, camera, posed, tmp_path):
+    """The in-memory hand-off gives exactly what load_fitted_shapes reads from the written folder:
+    the converged fits' world-frame vertices, the others left out with a warning."""
+    _, _, v, m = posed
+    rng = np.random.default_rng(3)
+    scrambled = {n: rng.uniform(5, SIZE - 5, 2) for n in m.feature_points}
+    bad = measurement("scrambled", model, camera, v, (m.image.pixels, m.diffuse.pixels), scrambled)
+    # a camera that is not the identity, so the world frame differs from camera space
+    turned = Camera(SIZE, SIZE, camera.fx, camera.fy, camera.cx, camera.cy, np.zeros(5),
+                    rotation_matrix(20.0, -10.0, 5.0), np.array([30.0, -20.0, 50.0]))
+    cap = capture(turned, [m, bad])
+    fits = fit_shape(cap, model, out=tmp_path, progress=False,
+                     iterations=ShapeSchedule(levels=((20, 300, 2.0),), pose_iterations=60))
+    assert [f.status for f in fits] == [CONVERGED, DIVERGED]
+    with pytest.warns(UserWarning, match="scrambled"):
+        in_memory = shapes_in_world(fits, cap)
+    with pytest.warns(UserWarning, match="scrambled"):
+        read_back = load_fitted_shapes(tmp_path, cap)
+    assert list(in_memory) == list(read_back) == ["posed"]
+    assert in_memory["posed"].dtype == read_back["posed"].dtype == np.float32
+    np.testing.assert_array_equal(in_memory["posed"], read_back["posed"])
+    assert not np.allclose(in_memory["posed"], fits[0].vertices_camera, atol=1.0)
