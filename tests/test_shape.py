@@ -27,7 +27,7 @@ from mifaces.render import mitsuba_sensor
 from mifaces.model.geometry import rotation_matrix
 from mifaces.shape import (ShapeFitError, ShapeSchedule, Weights, feature_targets, fit_measurement, fit_shape,
                            light_direction, load_fitted_shapes, rotation_centre, shapes_in_world)
-from mifaces.shape.fitter import _Fitter
+from mifaces.shape.fitter import Fitter
 from mifaces.status import CONVERGED, DIVERGED, NOT_CONVERGED
 
 SIZE = 128
@@ -169,7 +169,7 @@ def test_gradients_finite_and_match_differences(model, camera, posed):
     """dE/dtheta from Dr.Jit is finite everywhere and matches central differences."""
     _, _, _, m = posed
     targets = feature_targets(m, model)
-    fitter = _Fitter(model, camera, {"point": m.image.pixels, "diffuse": m.diffuse.pixels}, targets,
+    fitter = Fitter(model, camera, {"point": m.image.pixels, "diffuse": m.diffuse.pixels}, targets,
                         Weights(), SCHEDULE, np.random.default_rng(0))
     fitter.set_samples(500)
     fitter.energy.set_level(2.0)

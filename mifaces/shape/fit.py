@@ -15,7 +15,7 @@ from tqdm import tqdm
 
 from ..model import MorphableModel, load_model
 from ..status import CONVERGED, DIVERGED, NOT_CONVERGED
-from .fitter import _Fitter
+from .fitter import Fitter
 from .io import as_capture, write_fit, write_index
 from .result import ShapeFit, ShapeFitError, ShapeSchedule, Weights
 from .targets import feature_targets, light_direction, reference_measurement
@@ -86,7 +86,7 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
         if img.shape[:2] != (camera.height, camera.width):
             raise ShapeFitError(f"measurement {measurement.name!r}: {key} image is {img.shape[1]}x{img.shape[0]}, "
                                 f"the camera {camera.width}x{camera.height}")
-    fitter = _Fitter(model, camera, images, targets, weights or Weights(), schedule, np.random.default_rng(seed),
+    fitter = Fitter(model, camera, images, targets, weights or Weights(), schedule, np.random.default_rng(seed),
                      light_world=light_position, fit_focal=fit_focal, initial_color=initial_color,
                      initial=initial, fixed=fixed, distances=distances)
     own_bar = progress is True

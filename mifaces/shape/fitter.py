@@ -20,8 +20,8 @@ from ..model.mesh import mitsuba_mesh
 from ..status import DIVERGED
 from .energy import Energy, Layout
 from .result import ShapeSchedule, Weights
-from .targets import FRONTAL, light_direction, metric_distances, normalised, rotation_centre, start_light, \
-    start_translation
+from .targets import (FRONTAL, light_direction, metric_distances, normalised, rotation_centre, start_light,
+                      start_translation)
 
 #: Sample vertices are kept this far (mm) from the mesh's open border.
 BORDER_MARGIN = 6.0
@@ -56,14 +56,14 @@ class _Adam:
         return rate * (self.m1 / (1 - b1 ** self.k)) / (np.sqrt(self.m2 / (1 - b2 ** self.k)) + self.eps)
 
 
-class _Fitter:
+class Fitter:
     """One fit: the start, the sample sets, visibility, and Adam over the schedule's stages."""
 
     def __init__(self, model, camera, images: dict, targets, weights: Weights, schedule: ShapeSchedule, rng,
                  light_world=None, fit_focal=True, initial_color=None, initial=None, fixed=(), distances=()):
         self.model, self.camera, self.weights, self.schedule, self.rng = model, camera, weights, schedule, rng
         self.fit_focal = fit_focal
-        self.names, self.feature_vertices, self.feature_pixels = targets
+        _, self.feature_vertices, self.feature_pixels = targets
         self.scale_px = camera.height / 512.0  # px per "512-px pixel"
         self.images, self.image_scale = {}, {}
         for key, pixels in images.items():
