@@ -11,7 +11,7 @@ import numpy as np
 
 from .capture import GROUND_TRUTH, Capture
 from .model import MorphableModel, load_model
-from .shape.fit import INDEX, load_fitted_shapes
+from .shape.io import INDEX, load_fitted_shapes
 
 
 def load_geometry(capture: Capture, geometry="ground-truth", face_model=None

@@ -55,7 +55,7 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 import numpy as np
 from scipy.spatial import cKDTree
 
-from mifaces.shape import fit as se
+from mifaces import shape as se
 from mifaces.capture import load_capture
 from mifaces.files import atomic_path, write_json
 from mifaces.model.landmarks import FEATURE_POINTS
@@ -269,7 +269,7 @@ def sweep(path: Path, model_source, factors, name="m00") -> list[dict]:
     out = []
     for factor in factors:
         fit = se.fit_measurement(m, capture.camera, model, light_position=capture.light(m.light).position,
-                                 schedule=se.Schedule.scaled(factor), progress=False, distances=capture.distances)
+                                 schedule=se.ShapeSchedule.scaled(factor), progress=False, distances=capture.distances)
         row = {"resolution": capture.camera.width, "factor": factor, "iterations": fit.iterations,
                "seconds": fit.seconds, "status": fit.status,
                "landmark_px": landmark_error(entry["feature_points"], capture.camera.project, fit.vertices_world,
@@ -412,8 +412,8 @@ def main():
     factor = args.iterations or (0.5 if args.quick else 1.0)
     eos = Eos()
     result = {"command": "python " + " ".join(["validation/shape_estimation.py"] + sys.argv[1:]),
-              "schedule": {"levels": [list(level) for level in se.Schedule.scaled(factor).levels],
-                           "pose_iterations": se.Schedule.scaled(factor).pose_iterations},
+              "schedule": {"levels": [list(level) for level in se.ShapeSchedule.scaled(factor).levels],
+                           "pose_iterations": se.ShapeSchedule.scaled(factor).pose_iterations},
               "weights": se.Weights().__dict__, "captures": {}}
     result["captures"]["builtin"] = run_capture("builtin", builtin, "builtin", eos, factor, work / "fits")
     result["captures"]["sfm"] = run_capture("sfm", surrey, str(SFM / "sfm_shape_3448.npz"), eos, factor,

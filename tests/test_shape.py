@@ -1,4 +1,4 @@
-"""Tests of mifaces.shape.fit (paper sec. 4.2).
+"""Tests of mifaces.shape (paper sec. 4.2).
 
 The photographs are rendered here with Mitsuba's own path tracer (``direct``
 integrator: a diffuse face under a directional light, and under a constant
@@ -20,16 +20,19 @@ import mifaces  # noqa: F401  (before drjit/mitsuba)
 import drjit as dr
 import mitsuba as mi
 
-from mifaces.shape import fit as se
 from mifaces.capture import Camera, Capture, Image, Light, Measurement, WhiteTarget
 from mifaces.model.landmarks import FEATURE_POINTS
 from mifaces.model.mesh import mitsuba_mesh
 from mifaces.render import mitsuba_sensor
 from mifaces.model.geometry import rotation_matrix
+from mifaces.shape import (ShapeFitError, ShapeSchedule, Weights, feature_targets, fit_measurement, fit_shape,
+                           light_direction, load_fitted_shapes, rotation_centre, shapes_in_world)
+from mifaces.shape.fitter import Fitter
+from mifaces.status import CONVERGED, DIVERGED, NOT_CONVERGED
 
 SIZE = 128
 #: A short coarse-to-fine schedule: these tests check recovery, not the last digit.
-SCHEDULE = se.Schedule(levels=((60, 800, 3.0), (80, 1500, 1.0)), pose_iterations=80)
+SCHEDULE = ShapeSchedule(levels=((60, 800, 3.0), (80, 1500, 1.0)), pose_iterations=80)
 
 
 SURREY = Path(__file__).resolve().parents[2] / "shared" / "models" / "sfm_3448" / "sfm_shape_3448.npz"
@@ -59,7 +62,7 @@ def pose_vertices(model, ypr_deg, translation, shape=None):
     convention, written out with the simulator's rotation)."""
     local = model.shape(shape).astype(np.float64)
     r = np.diag([1.0, -1.0, -1.0]) @ rotation_matrix(*ypr_deg)
-    return (local - se.rotation_centre(model)) @ r.T + np.asarray(translation, np.float64)
+    return (local - rotation_centre(model)) @ r.T + np.asarray(translation, np.float64)
 
 
 def render(model, camera, vertices, light_towards=(0.25, -0.35, -0.9), spp=16):
@@ -120,19 +123,19 @@ def test_pose_recovery_surrey(surrey, camera, tmp_path):
 
 def check_pose_recovery(model, camera, posed, tmp_path, fixed):
     ypr, t, truth, m = posed
-    fits = se.fit_shape(capture(camera, [m]), model, out=tmp_path, iterations=SCHEDULE, progress=False,
+    fits = fit_shape(capture(camera, [m]), model, out=tmp_path, iterations=SCHEDULE, progress=False,
                         fit_focal=False, fixed=fixed)
     fit = fits[0]
-    assert fit.status == se.CONVERGED, fit.message
+    assert fit.status == CONVERGED, fit.message
     np.testing.assert_allclose(fit.yaw_pitch_roll, ypr, atol=1.0)
-    position = fit.translation + fit.rotation @ se.rotation_centre(model)
+    position = fit.translation + fit.rotation @ rotation_centre(model)
     np.testing.assert_allclose(position[:2], t[:2], atol=1.5)
     assert abs(position[2] - t[2]) < 15.0  # depth: from the face's size in the image
     err = np.linalg.norm(fit.vertices_camera - truth, axis=1)
     assert np.sqrt(np.mean(err ** 2)) < 10.0
     assert fit.loss["feature_rms_px"] < 0.5
     # written atomically and read back in the world frame (here world = camera)
-    shapes = se.load_fitted_shapes(tmp_path, capture(camera, [m]))
+    shapes = load_fitted_shapes(tmp_path, capture(camera, [m]))
     np.testing.assert_allclose(shapes["posed"], fit.vertices_world, atol=1e-3)
     index = json.loads((tmp_path / "shapes.json").read_text())
     assert index["measurements"]["posed"]["status"] == "converged"
@@ -147,11 +150,11 @@ def test_shape_recovery_known_pose(model, camera):
     alpha = np.array([1.5, -1.2, 1.0])
     truth = pose_vertices(model, ypr, t, alpha)
     m = measurement("shape", model, camera, truth, render(model, camera, truth))
-    schedule = se.Schedule(levels=((100, 1000, 3.0), (200, 2000, 1.0)), pose_iterations=60)
-    fit = se.fit_measurement(m, camera, model, schedule=schedule, progress=False, fit_focal=False,
+    schedule = ShapeSchedule(levels=((100, 1000, 3.0), (200, 2000, 1.0)), pose_iterations=60)
+    fit = fit_measurement(m, camera, model, schedule=schedule, progress=False, fit_focal=False,
                              initial={"rotation": np.radians(ypr), "translation": t},
                              fixed=("rotation", "translation", "expression"))
-    assert fit.status == se.CONVERGED
+    assert fit.status == CONVERGED
     # at 128 px the leading (mostly in-plane) mode is recovered closely; the two mostly-depth
     # modes, seen only through shading, with the right sign and at least 40 % of their size
     assert abs(fit.coefficients[0] - alpha[0]) < 0.3
@@ -165,14 +168,14 @@ def test_shape_recovery_known_pose(model, camera):
 def test_gradients_finite_and_match_differences(model, camera, posed):
     """dE/dtheta from Dr.Jit is finite everywhere and matches central differences."""
     _, _, _, m = posed
-    targets = se.feature_targets(m, model)
-    fitter = se._Fitter(model, camera, {"point": m.image.pixels, "diffuse": m.diffuse.pixels}, targets,
-                        se.Weights(), SCHEDULE, np.random.default_rng(0))
+    targets = feature_targets(m, model)
+    fitter = Fitter(model, camera, {"point": m.image.pixels, "diffuse": m.diffuse.pixels}, targets,
+                        Weights(), SCHEDULE, np.random.default_rng(0))
     fitter.set_samples(500)
-    fitter.set_level(2.0)
+    fitter.energy.set_level(2.0)
     theta = fitter.initial()
     fitter.update_visibility(theta)
-    terms, g = fitter.evaluate(theta, 1.0, 1.0)
+    terms, g = fitter.energy.evaluate(theta, 1.0, 1.0)
     assert all(np.isfinite(v) for v in terms.values())
     assert np.all(np.isfinite(g)) and np.any(g != 0)
     L = fitter.layout
@@ -181,8 +184,8 @@ def test_gradients_finite_and_match_differences(model, camera, posed):
         plus, minus = theta.copy(), theta.copy()
         plus[index] += h
         minus[index] -= h
-        fd = (fitter.evaluate(plus, 1.0, 1.0, grad=False)[0]["E"] -
-              fitter.evaluate(minus, 1.0, 1.0, grad=False)[0]["E"]) / (2 * h)
+        fd = (fitter.energy.evaluate(plus, 1.0, 1.0, grad=False)[0]["E"] -
+              fitter.energy.evaluate(minus, 1.0, 1.0, grad=False)[0]["E"]) / (2 * h)
         assert fd == pytest.approx(g[index], rel=0.1, abs=1e-2 * max(1.0, abs(fd)))
 
 
@@ -192,17 +195,17 @@ def test_feature_point_errors(model, camera, posed, tmp_path):
     images = (m.image.pixels, m.diffuse.pixels)
     bad_name = dict(m.feature_points)
     bad_name["nose_tipp"] = bad_name.pop("nose_tip")
-    with pytest.raises(se.ShapeFitError, match="nose_tipp"):
-        se.fit_shape(capture(camera, [m, measurement("bad", model, camera, v, images, bad_name)]), model,
+    with pytest.raises(ShapeFitError, match="nose_tipp"):
+        fit_shape(capture(camera, [m, measurement("bad", model, camera, v, images, bad_name)]), model,
                      out=tmp_path, progress=False)
     assert not any(tmp_path.iterdir())
-    with pytest.raises(se.ShapeFitError, match="at least 6"):
-        se.fit_measurement(measurement("few", model, camera, v, images, dict(list(m.feature_points.items())[:3])),
+    with pytest.raises(ShapeFitError, match="at least 6"):
+        fit_measurement(measurement("few", model, camera, v, images, dict(list(m.feature_points.items())[:3])),
                            camera, model, progress=False)
-    with pytest.raises(se.ShapeFitError, match="0 usable"):
-        se.fit_measurement(measurement("none", model, camera, v, images, {}), camera, model, progress=False)
-    with pytest.raises(se.ShapeFitError, match="no measurement"):
-        se.fit_shape(capture(camera, [m]), model, measurements=["m99"], progress=False)
+    with pytest.raises(ShapeFitError, match="0 usable"):
+        fit_measurement(measurement("none", model, camera, v, images, {}), camera, model, progress=False)
+    with pytest.raises(ShapeFitError, match="no measurement"):
+        fit_shape(capture(camera, [m]), model, measurements=["m99"], progress=False)
 
 
 def test_diverged_fit_is_reported_not_written(model, camera, posed, tmp_path):
@@ -214,14 +217,14 @@ def test_diverged_fit_is_reported_not_written(model, camera, posed, tmp_path):
     bad = measurement("scrambled", model, camera, v, (m.image.pixels, m.diffuse.pixels), scrambled)
     # a stale success from an earlier run must not survive
     np.save(tmp_path / "scrambled.npy", np.zeros((3, 3), np.float32))
-    fits = se.fit_shape(capture(camera, [bad]), model, out=tmp_path, progress=False,
-                        iterations=se.Schedule(levels=((20, 300, 2.0),), pose_iterations=60))
-    assert fits[0].status == se.DIVERGED and "feature points" in fits[0].message
+    fits = fit_shape(capture(camera, [bad]), model, out=tmp_path, progress=False,
+                        iterations=ShapeSchedule(levels=((20, 300, 2.0),), pose_iterations=60))
+    assert fits[0].status == DIVERGED and "feature points" in fits[0].message
     assert not (tmp_path / "scrambled.npy").exists()
     data = json.loads((tmp_path / "scrambled.json").read_text())
     assert data["status"] == "diverged" and data["vertices"] is None
     with pytest.warns(UserWarning, match="scrambled"):
-        assert se.load_fitted_shapes(tmp_path) == {}
+        assert load_fitted_shapes(tmp_path) == {}
 
 
 def test_non_finite_energy_is_diverged(model, camera, posed):
@@ -232,24 +235,48 @@ def test_non_finite_energy_is_diverged(model, camera, posed):
     broken_m = Measurement(m.name, m.light, m.pose, Image(broken, m.image.saturated, 1.0, m.image.path), None, (),
                            m.feature_points)
     # _normalised maps NaN to 0: the fit runs on a black image and does not crash
-    fit = se.fit_measurement(broken_m, camera, model, progress=False,
-                             schedule=se.Schedule(levels=((5, 200, 2.0),), pose_iterations=5), lr=(1e30, 1e30))
-    assert fit.status == se.DIVERGED
+    fit = fit_measurement(broken_m, camera, model, progress=False,
+                             schedule=ShapeSchedule(levels=((5, 200, 2.0),), pose_iterations=5), lr=(1e30, 1e30))
+    assert fit.status == DIVERGED
 
 
 def test_light_direction_convention():
-    assert np.allclose(se.light_direction(0.0, 0.0), [0, 0, -1])
-    assert se.light_direction(math.radians(30), 0.0)[1] < 0  # up in the image is -y
-    assert se.light_direction(0.0, math.radians(30))[0] > 0
-    assert dr.allclose(1.0, float(np.linalg.norm(se.light_direction(0.3, -0.7))))
+    assert np.allclose(light_direction(0.0, 0.0), [0, 0, -1])
+    assert light_direction(math.radians(30), 0.0)[1] < 0  # up in the image is -y
+    assert light_direction(0.0, math.radians(30))[0] > 0
+    assert dr.allclose(1.0, float(np.linalg.norm(light_direction(0.3, -0.7))))
 
 
 def test_too_few_iterations_is_not_converged(model, camera, posed, tmp_path):
     """Feature points still approaching their targets when the iterations run out: 'not_converged',
     not written as a success either."""
     _, _, _, m = posed
-    fits = se.fit_shape(capture(camera, [m]), model, out=tmp_path, progress=False,
-                        iterations=se.Schedule(levels=(), pose_iterations=3))
-    assert fits[0].status == se.NOT_CONVERGED and "more iterations" in fits[0].message
+    fits = fit_shape(capture(camera, [m]), model, out=tmp_path, progress=False,
+                        iterations=ShapeSchedule(levels=(), pose_iterations=3))
+    assert fits[0].status == NOT_CONVERGED and "more iterations" in fits[0].message
     assert not (tmp_path / "posed.npy").exists()
     assert json.loads((tmp_path / "shapes.json").read_text())["measurements"]["posed"]["vertices"] is None
+
+
+def test_shapes_in_world_equals_what_is_read_back(model, camera, posed, tmp_path):
+    """The in-memory hand-off gives exactly what load_fitted_shapes reads from the written folder:
+    the converged fits' world-frame vertices, the others left out with a warning."""
+    _, _, v, m = posed
+    rng = np.random.default_rng(3)
+    scrambled = {n: rng.uniform(5, SIZE - 5, 2) for n in m.feature_points}
+    bad = measurement("scrambled", model, camera, v, (m.image.pixels, m.diffuse.pixels), scrambled)
+    # a camera that is not the identity, so the world frame differs from camera space
+    turned = Camera(SIZE, SIZE, camera.fx, camera.fy, camera.cx, camera.cy, np.zeros(5),
+                    rotation_matrix(20.0, -10.0, 5.0), np.array([30.0, -20.0, 50.0]))
+    cap = capture(turned, [m, bad])
+    fits = fit_shape(cap, model, out=tmp_path, progress=False,
+                     iterations=ShapeSchedule(levels=((20, 300, 2.0),), pose_iterations=60))
+    assert [f.status for f in fits] == [CONVERGED, DIVERGED]
+    with pytest.warns(UserWarning, match="scrambled"):
+        in_memory = shapes_in_world(fits, cap)
+    with pytest.warns(UserWarning, match="scrambled"):
+        read_back = load_fitted_shapes(tmp_path, cap)
+    assert list(in_memory) == list(read_back) == ["posed"]
+    assert in_memory["posed"].dtype == read_back["posed"].dtype == np.float32
+    np.testing.assert_array_equal(in_memory["posed"], read_back["posed"])
+    assert not np.allclose(in_memory["posed"], fits[0].vertices_camera, atol=1.0)

@@ -1,0 +1,242 @@
+"""The optimiser of one shape fit (paper sec. 4.2): Adam (Kingma and Ba 2015)
+on parameters scaled to natural units, in place of the paper's stochastic
+Newton method -- landmark-only steps first, then coarse-to-fine image levels
+with a geometrically decaying step; the sample vertices drawn per level, and
+visibility and cast shadows by Mitsuba ray casting on the full current mesh,
+recomputed every ``visibility_interval`` iterations (the paper re-computes its
+shadow map every 1000 iterations)."""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..model.geometry import rotation_matrix, vertex_normals
+from ..model.mesh import mitsuba_mesh
+from ..status import DIVERGED
+from .energy import Energy, Layout
+from .result import ShapeSchedule, Weights
+from .targets import (FRONTAL, light_direction, metric_distances, normalised, rotation_centre, start_light,
+                      start_translation)
+
+#: Sample vertices are kept this far (mm) from the mesh's open border.
+BORDER_MARGIN = 6.0
+
+
+def distance_from_border(model) -> np.ndarray:
+    """Distance (mm, on the mean shape) of every vertex from the nearest vertex on an open
+    border of the mesh (an edge used by one triangle); inf for a closed mesh."""
+    t = np.asarray(model.triangles, np.int64)
+    edges = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    border = np.unique(unique[counts == 1])
+    if len(border) == 0:
+        return np.full(model.vertex_count, np.inf)
+    return cKDTree(model.shape_mean[border]).query(model.shape_mean)[0]
+
+
+class _Adam:
+    """Adam's moments over one stage (Kingma and Ba 2015, Algorithm 1), on ``theta / unit``."""
+
+    beta1, beta2, eps = 0.9, 0.999, 1e-8
+
+    def __init__(self, size: int):
+        self.m1, self.m2, self.k = np.zeros(size), np.zeros(size), 0
+
+    def step(self, gu: np.ndarray, rate: float) -> np.ndarray:
+        """The step (in units) for the scaled gradient ``gu``."""
+        b1, b2 = self.beta1, self.beta2
+        self.m1 = b1 * self.m1 + (1 - b1) * gu
+        self.m2 = b2 * self.m2 + (1 - b2) * gu * gu
+        self.k += 1
+        return rate * (self.m1 / (1 - b1 ** self.k)) / (np.sqrt(self.m2 / (1 - b2 ** self.k)) + self.eps)
+
+
+class Fitter:
+    """One fit: the start, the sample sets, visibility, and Adam over the schedule's stages."""
+
+    def __init__(self, model, camera, images: dict, targets, weights: Weights, schedule: ShapeSchedule, rng,
+                 light_world=None, fit_focal=True, initial_color=None, initial=None, fixed=(), distances=()):
+        self.model, self.camera, self.weights, self.schedule, self.rng = model, camera, weights, schedule, rng
+        self.fit_focal = fit_focal
+        _, self.feature_vertices, self.feature_pixels = targets
+        self.scale_px = camera.height / 512.0  # px per "512-px pixel"
+        self.images, self.image_scale = {}, {}
+        for key, pixels in images.items():
+            self.images[key], self.image_scale[key] = normalised(pixels)
+        self.image_names = list(self.images)
+        self.layout = Layout(model, self.image_names)
+        self.centre = rotation_centre(model)
+        self.initial_blocks = dict(initial or {})
+        unknown = [k for k in list(self.initial_blocks) + list(fixed) if k not in self.layout.slices]
+        if unknown:
+            raise ValueError(f"unknown parameter block(s) {unknown}; blocks: {list(self.layout.slices)}")
+        self.fixed = tuple(fixed)
+        used = np.zeros(model.vertex_count, bool)
+        used[model.triangles.ravel()] = True
+        # samples keep away from the mesh's open border, whose pixels mix face and background
+        inner = distance_from_border(model) > BORDER_MARGIN
+        self.candidates = np.flatnonzero(used & (model.vertex_regions() != 0) & inner)
+        if len(self.candidates) < 100:
+            self.candidates = np.flatnonzero(used)
+        self.initial_color = initial_color
+        self.start_translation = start_translation(model, camera, self.feature_vertices, self.feature_pixels,
+                                                   self.centre)
+        #: the point light's start angles and its distance (mm) from the face centre: infinite
+        #: (a directional light) unless the capture's calibration gives the light's position
+        self.light_angles, self.light_distance = (0.0, 0.0), math.inf
+        if "point" in self.images and light_world is not None:
+            el, az, self.light_distance = start_light(camera, self.start_translation,
+                                                      np.asarray(light_world, np.float64))
+            self.light_angles = (el, az)
+        self.energy = Energy(model, camera, self.layout, weights, self.images, self.feature_vertices,
+                             self.feature_pixels, metric_distances(distances, model), self.centre,
+                             self.light_distance)
+
+    def initial(self) -> np.ndarray:
+        """Frontal view of the mean face placed on the feature points (paper: 'default values
+        defining a frontal view and frontal illumination'), lights from the calibration."""
+        L, m = self.layout, self.model
+        theta = np.zeros(L.size)
+        theta[L["translation"]] = self.start_translation
+        for image in self.image_names:
+            theta[L[f"{image}.light_angles"]] = self.light_angles if image == "point" else (0.0, 0.0)
+            theta[L[f"{image}.light_color"]] = 0.8 if image == "point" else 0.0
+            theta[L[f"{image}.ambient"]] = 0.1 if image == "point" else 1.0
+            theta[L[f"{image}.specular"]] = 0.05 if image == "point" else 0.0
+            theta[L[f"{image}.contrast"]] = 1.0
+            theta[L[f"{image}.gain"]] = 1.0
+        if m.has_texture and self.initial_color is not None:
+            theta[L["color"]] = np.asarray(self.initial_color, np.float64)[: m.color_dim]
+        if not m.has_texture:
+            theta[L["albedo"]] = np.tile([0.55, 0.42, 0.36], m.vertex_count)
+        for name, value in self.initial_blocks.items():
+            theta[L[name]] = np.broadcast_to(np.asarray(value, np.float64), (L[name].stop - L[name].start,))
+        return theta
+
+    def set_samples(self, count: int):
+        """Draw ``count`` sample vertices for the image term and hand them to the energy."""
+        count = min(count, len(self.candidates))
+        self.samples = np.sort(self.rng.choice(self.candidates, count, replace=False))
+        self.energy.set_samples(self.samples)
+
+    # ---- full mesh, visibility and cast shadows (Mitsuba ray casting) -------------------------
+    def vertices_camera(self, theta: np.ndarray) -> np.ndarray:
+        """All model vertices in camera space (numpy float64, mm)."""
+        m, L = self.model, self.layout
+        alpha = theta[L["shape"]]
+        delta = theta[L["expression"]] if m.has_expressions else None
+        local = m.shape(alpha, delta).astype(np.float64)
+        return (local - self.centre) @ self.rotation(theta).T + theta[L["translation"]]
+
+    def rotation(self, theta: np.ndarray) -> np.ndarray:
+        """Model -> camera rotation ``R0 R(yaw, pitch, roll)`` of ``theta``."""
+        return FRONTAL @ rotation_matrix(*np.degrees(theta[self.layout["rotation"]]))
+
+    def update_visibility(self, theta: np.ndarray):
+        """Camera visibility of the samples and cast shadows of the directed light, by ray casting
+        against the current full mesh (``Scene.ray_test``)."""
+        L = self.layout
+        verts = self.vertices_camera(theta)
+        scene = mi.load_dict({"type": "scene", "face": mitsuba_mesh(verts, self.model.triangles)})
+        p = verts[self.samples]
+        n = vertex_normals(verts, self.model.triangles)[self.samples].astype(np.float64)
+        eps = 0.3
+        dist = np.linalg.norm(p, axis=1)
+        d = -p / dist[:, None]  # towards the camera
+        origin = p + eps * n
+
+        def occluded(o, direction, maxt):
+            ray = mi.Ray3f(mi.Point3f(*[mi.Float(o[:, k].astype(np.float32)) for k in range(3)]),
+                           mi.Vector3f(*[mi.Float(direction[:, k].astype(np.float32)) for k in range(3)]))
+            ray.maxt = mi.Float(np.asarray(maxt, np.float32))
+            return np.asarray(scene.ray_test(ray), bool)
+
+        seen = ~occluded(origin, d, np.maximum(dist - 2 * eps, eps))
+        seen &= np.sum(n * d, axis=1) > 0
+        lit = np.ones(len(p), bool)
+        if "point" in self.image_names:
+            el, az = theta[L["point.light_angles"]]
+            ld = np.broadcast_to(light_direction(el, az), p.shape)
+            maxt = np.full(len(p), 1e5)
+            if math.isfinite(self.light_distance):
+                to_light = theta[L["translation"]] + self.light_distance * ld - origin
+                maxt = np.linalg.norm(to_light, axis=1)
+                ld = to_light / maxt[:, None]
+            lit = ~occluded(origin, np.ascontiguousarray(ld), maxt)
+        self.energy.set_visibility(seen, lit)
+        dr.eval()
+
+    # ---- optimisation ------------------------------------------------------------------------
+    def stages(self) -> list[tuple]:
+        """``(name, iterations, samples, blur, mask)`` per stage: the landmark-only stage (pose, focal
+        length, shape and expression; lighting, colour and texture frozen), then the image levels."""
+        L = self.layout
+        pose_mask = np.zeros(L.size, bool)
+        for name in ("rotation", "translation", "log_focal", "shape", "expression"):
+            pose_mask[L[name]] = True
+        stages = [("pose", self.schedule.pose_iterations, None, None, pose_mask)]
+        if self.image_names:
+            for i, (iters, samples, blur) in enumerate(self.schedule.levels):
+                stages.append((f"level{i}", int(iters), int(samples), float(blur), np.ones(L.size, bool)))
+        return stages
+
+    def run(self, progress_bar=None, lr=(0.1, 0.01), visibility_interval: int = 50):
+        """Adam on ``theta / unit`` over :meth:`stages`.
+
+        Returns ``(theta, terms, history, iterations, status, message)``; ``status`` is None unless
+        the energy or its gradient became non-finite (``'diverged'``).
+        """
+        L, w = self.layout, self.weights
+        theta = self.initial()
+        units = self.layout.units.copy()
+        if not self.fit_focal:
+            units[L["log_focal"]] = 0.0
+        for name in self.fixed:
+            units[L[name]] = 0.0
+        nonnegative = np.zeros(L.size, bool)
+        for key in self.image_names:
+            for name in ("light_color", "ambient", "specular", "contrast", "gain"):
+                nonnegative[L[f"{key}.{name}"]] = True
+        stages = self.stages()
+        image_total = sum(s[1] for s in stages[1:])
+        history, terms, it_total, image_done = [], {}, 0, 0
+        for name, iters, samples, blur, mask in stages:
+            adam = _Adam(L.size)
+            self.set_samples(100 if samples is None else samples)
+            if samples is not None:
+                self.energy.set_level(blur)
+                self.update_visibility(theta)
+            for it in range(iters):
+                if samples is None:
+                    fw, iw, rate = 1.0, 0.0, lr[0]
+                else:
+                    frac = image_done / max(image_total, 1)
+                    fade = min(frac / max(w.feature_fade, 1e-9), 1.0)
+                    fw = (1 - fade) * 1.0 + fade * (w.feature_final / max(w.feature, 1e-12))
+                    iw, rate = 1.0, lr[0] * (lr[1] / lr[0]) ** frac
+                    if it > 0 and it % visibility_interval == 0:
+                        self.update_visibility(theta)
+                terms, g = self.energy.evaluate(theta, fw, iw)
+                if not (np.isfinite(terms["E"]) and np.all(np.isfinite(g))):
+                    return theta, terms, history, it_total, DIVERGED, f"non-finite energy or gradient in {name}"
+                theta = theta - adam.step(g * units * mask, rate) * units * mask
+                theta[nonnegative] = np.maximum(theta[nonnegative], 0.0)
+                it_total += 1
+                if samples is not None:
+                    image_done += 1
+                if it % 10 == 0 or it == iters - 1:
+                    history.append({"iteration": it_total, "stage": name, **{k: float(v) for k, v in terms.items()}})
+                if progress_bar is not None:
+                    progress_bar.update(1)
+                    progress_bar.set_postfix(stage=name, E=f"{terms['E']:.3g}", lm=f"{terms['feature_rms_px']:.2f}px")
+        use_image = bool(self.image_names and self.schedule.levels)
+        if use_image:
+            self.update_visibility(theta)
+        terms, _ = self.energy.evaluate(theta, w.feature_final / max(w.feature, 1e-12), 1.0 if use_image else 0.0,
+                                        grad=False)
+        return theta, terms, history, it_total, None, ""

@@ -1,0 +1,154 @@
+"""What a shape fit is asked for and what it returns (paper sec. 4.2): the
+coarse-to-fine schedule, the weights of the energy's terms, and the fitted
+shape and rendering parameters of one measurement."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..status import CONVERGED
+
+
+class ShapeFitError(ValueError):
+    """A measurement that cannot be fitted (missing or misnamed feature points, ...)."""
+
+
+@dataclass(frozen=True)
+class ShapeSchedule:
+    """The coarse-to-fine schedule of one shape fit.
+
+    Each level is ``(iterations, samples, blur)``: Adam steps, number of model
+    vertices sampled for the image term, and the standard deviation (px at
+    512 px image height; scaled with the image) of the Gaussian the image is
+    blurred with. ``pose_iterations`` landmark-only steps (pose, focal length,
+    shape) come first.
+    """
+
+    levels: tuple = ((150, 1000, 4.0), (150, 2500, 2.0), (200, 5000, 1.0))
+    pose_iterations: int = 150
+
+    @property
+    def iterations(self) -> int:
+        """All steps: the landmark-only ones and those of every image level."""
+        return self.pose_iterations + sum(int(level[0]) for level in self.levels)
+
+    @classmethod
+    def scaled(cls, factor: float) -> ShapeSchedule:
+        """The default schedule with every iteration count multiplied by ``factor``."""
+        d = cls()
+        return cls(tuple((max(1, int(round(i * factor))), s, b) for i, s, b in d.levels),
+                   max(1, int(round(d.pose_iterations * factor))))
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Weights of the terms of E (paper sec. 4.2).
+
+    ``image_sigma``: the RGB residual (in units of the normalised image, whose
+    99th percentile is 1) that costs 1; ``feature_sigma``: the feature-point
+    residual (px at 512 px image height) that costs 1; the feature term's
+    weight fades linearly from ``feature`` to ``feature_final`` over the first
+    ``feature_fade`` of the image iterations. ``shape``, ``expression``,
+    ``texture``: weights of the squared Mahalanobis norms; ``albedo``: of the
+    per-vertex albedo's squared deviation from its mean (models without a
+    colour model), per vertex; ``focal``: standard deviation of log focal length
+    around the calibrated value; ``distance_sigma``: the error (mm) of a metric
+    distance between feature points that costs 1 (part of E_P: it fixes the
+    scale, hence the depth, that images alone leave open).
+    """
+
+    image_sigma: float = 0.05
+    feature_sigma: float = 1.0
+    feature: float = 1.0
+    feature_final: float = 0.5
+    feature_fade: float = 0.5
+    shape: float = 0.1
+    expression: float = 0.1
+    texture: float = 0.1
+    albedo: float = 2.0
+    focal: float = 0.01
+    distance_sigma: float = 1.0
+
+
+@dataclass
+class ShapeFit:
+    """The fitted shape and rendering parameters of one measurement.
+
+    Attributes
+    ----------
+    measurement : str
+    status : str
+        ``'converged'``; ``'diverged'`` (non-finite loss, or feature points
+        ending farther from their targets than they started, or more than 4x
+        the limit); ``'not_converged'`` (feature points still above the limit
+        but closer than at the start: more iterations may help); ``message``
+        says why. Only converged fits are written as shapes.
+    vertices_world, vertices_camera : (N, 3) float32
+        Fitted vertices in the capture's world frame and in camera space, mm.
+    coefficients : (K,) float64
+        Shape coefficients alpha (standard deviations).
+    expression : (E,) float64
+        Expression coefficients delta (empty for models without expressions).
+    color : (C,) float64 or None
+        Texture coefficients beta (None for models without a colour model).
+    albedo : (N, 3) float32 or None
+        Per-vertex albedo (models without a colour model).
+    rotation : (3, 3) float64
+        Model -> camera rotation ``R0 R(yaw, pitch, roll)``.
+    translation : (3,) float64
+        Model -> camera translation: ``x_camera = rotation x_model + translation``.
+    yaw_pitch_roll : (3,) float64
+        Degrees.
+    focal_length : (2,) float64
+        ``fx, fy`` in px.
+    light : dict
+        Per image (``'point'``, ``'diffuse'``): ``direction`` (unit, camera
+        space, towards the light), ``color``, ``ambient``, ``specular``,
+        ``contrast``, ``gain``, ``offset``.
+    loss : dict
+        Final terms ``E``, ``E_I``, ``E_F``, ``E_P`` and the diagnostics
+        ``feature_rms_px`` and ``image_rms``.
+    iterations : int
+    seconds : float
+    message : str
+    """
+
+    measurement: str
+    status: str
+    vertices_world: np.ndarray
+    vertices_camera: np.ndarray
+    coefficients: np.ndarray
+    expression: np.ndarray
+    color: np.ndarray | None
+    albedo: np.ndarray | None
+    rotation: np.ndarray
+    translation: np.ndarray
+    yaw_pitch_roll: np.ndarray
+    focal_length: np.ndarray
+    light: dict
+    loss: dict
+    iterations: int
+    seconds: float
+    message: str = ""
+    history: list = field(default_factory=list)
+
+    @property
+    def converged(self) -> bool:
+        return self.status == CONVERGED
+
+    def to_json(self) -> dict:
+        """Everything but the vertices, as JSON-ready values."""
+        def f(a):
+            return None if a is None else np.asarray(a, np.float64).tolist()
+
+        return {"measurement": self.measurement, "status": self.status, "message": self.message,
+                "coefficients": f(self.coefficients), "expression": f(self.expression), "color": f(self.color),
+                "rotation": f(self.rotation), "translation_mm": f(self.translation),
+                "yaw_pitch_roll_deg": f(self.yaw_pitch_roll), "focal_length_px": f(self.focal_length),
+                "light": {k: {kk: (f(vv) if not isinstance(vv, float) else vv) for kk, vv in v.items()}
+                          for k, v in self.light.items()},
+                "loss": {k: float(v) for k, v in self.loss.items()}, "iterations": int(self.iterations),
+                "seconds": float(self.seconds), "frame": "vertices in camera space (OpenCV), mm",
+                "history": self.history}

@@ -1,0 +1,154 @@
+"""What a shape fit matches and where it starts (paper sec. 4.2): the clicked
+feature points, the metric distances between them, the photographs
+normalised and blurred, the frontal start of pose and light, and the
+measurement whose texture starts the others.
+
+Frames: model space (mm, y up, face along +z); camera space (OpenCV: x right,
+y down, z forward; mm), ``x_camera = R0 R(yaw, pitch, roll) (x_model - c) + t``
+with ``R0`` = :data:`FRONTAL` and ``c`` = :func:`rotation_centre`; pixels with
+the centre of the top-left pixel at (0, 0).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.ndimage as ndi
+
+from ..model.landmarks import FEATURE_POINTS
+from .result import ShapeFitError
+
+#: Model -> camera rotation of a frontal view (model y up, face along +z; camera y down, z forward).
+FRONTAL = np.diag([1.0, -1.0, -1.0])
+
+
+def light_direction(elevation: float, azimuth: float) -> np.ndarray:
+    """Unit direction towards the light in camera space for two angles (radians):
+    (0, 0) points at the camera, positive elevation up, positive azimuth to the image's right."""
+    return np.array([math.cos(elevation) * math.sin(azimuth), -math.sin(elevation),
+                     -math.cos(elevation) * math.cos(azimuth)])
+
+
+def rotation_centre(model) -> np.ndarray:
+    """The point ``c`` of the model the fitted rotation turns about: the centre of the
+    mean shape's bounding box (model space, mm)."""
+    return 0.5 * (model.shape_mean.min(axis=0) + model.shape_mean.max(axis=0)).astype(np.float64)
+
+
+def metric_distances(distances, model) -> list[tuple[int, int, float]]:
+    """The capture's metric distances as ``(vertex, vertex, mm)`` on ``model``.
+
+    ``distances`` holds :class:`mifaces.capture.Distance` values (or ``(start, end, mm)``
+    tuples) between named feature points; those whose points the model lacks are skipped.
+    """
+    ibug = model.ibug_landmarks
+    out = []
+    for d in distances or ():
+        start, end, mm = (d.start, d.end, d.mm) if hasattr(d, "mm") else d
+        for name in (start, end):
+            if name not in FEATURE_POINTS:
+                raise ShapeFitError(f"metric distance names unknown feature point {name!r}; "
+                                    f"known names: {sorted(FEATURE_POINTS)}")
+        if FEATURE_POINTS[start] in ibug and FEATURE_POINTS[end] in ibug and mm > 0:
+            out.append((ibug[FEATURE_POINTS[start]], ibug[FEATURE_POINTS[end]], float(mm)))
+    return out
+
+
+def feature_targets(measurement, model) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """The measurement's feature points that the fit uses: ``(names, vertices, pixels)``.
+
+    Raises
+    ------
+    ShapeFitError
+        If the measurement has fewer than 6 feature points, names one outside
+        :data:`~mifaces.model.landmarks.FEATURE_POINTS`, or one the model does not define.
+    """
+    points = dict(getattr(measurement, "feature_points", None) or {})
+    name = getattr(measurement, "name", "?")
+    unknown = [n for n in points if n not in FEATURE_POINTS]
+    if unknown:
+        raise ShapeFitError(f"measurement {name!r}: unknown feature point name(s) {sorted(unknown)}; "
+                            f"known names: {sorted(FEATURE_POINTS)}")
+    ibug = model.ibug_landmarks
+    missing_on_model = [n for n in points if FEATURE_POINTS[n] not in ibug]
+    usable = [n for n in points if FEATURE_POINTS[n] in ibug]
+    if len(usable) < 6:
+        raise ShapeFitError(
+            f"measurement {name!r}: {len(usable)} usable feature point(s) {sorted(usable)}, the fit needs at "
+            f"least 6 (paper sec. 4.2: 7-20)" + (f"; not defined on model {model.name!r}: "
+                                                f"{sorted(missing_on_model)}" if missing_on_model else ""))
+    pixels = np.array([np.asarray(points[n], np.float64).reshape(2) for n in usable])
+    if not np.all(np.isfinite(pixels)):
+        raise ShapeFitError(f"measurement {name!r}: non-finite feature point position(s)")
+    vertices = np.array([ibug[FEATURE_POINTS[n]] for n in usable], np.int64)
+    return usable, vertices, pixels
+
+
+def normalised(pixels: np.ndarray) -> tuple[np.ndarray, float]:
+    """Image divided by its 99th percentile (so E_I's sigma means the same for every image),
+    non-finite pixels set to 0; and the percentile."""
+    p = np.asarray(pixels, np.float32)
+    scale = float(np.percentile(p, 99.0))
+    scale = scale if scale > 0 and np.isfinite(scale) else 1.0
+    return np.nan_to_num(p / scale), scale
+
+
+def blurred(image: np.ndarray, sigma: float) -> np.ndarray:
+    """``image`` (H, W, 3) blurred by a Gaussian of standard deviation ``sigma`` px (none below 0.05)."""
+    if sigma <= 0.05:
+        return image
+    return ndi.gaussian_filter(image, (sigma, sigma, 0), mode="nearest")
+
+
+def start_translation(model, camera, feature_vertices, feature_pixels, centre) -> np.ndarray:
+    """Camera-space position (mm) of the rotation centre that places the frontal mean face on the
+    feature points (paper: 'default values defining a frontal view'): depth from the spread of the
+    points, x and y from their centroid."""
+    lm = model.shape_mean[feature_vertices].astype(np.float64)
+    lm_c = (lm - centre) @ FRONTAL.T
+    px = feature_pixels
+    spread_px = np.sqrt(np.mean(np.sum((px - px.mean(0)) ** 2, axis=1)))
+    spread_mm = np.sqrt(np.mean(np.sum((lm_c[:, :2] - lm_c[:, :2].mean(0)) ** 2, axis=1)))
+    z = camera.fy * spread_mm / max(spread_px, 1e-6)
+    rays = camera.undistort(np.stack([(px[:, 0] - camera.cx) / camera.fx, (px[:, 1] - camera.cy) / camera.fy], -1))
+    xy = rays.mean(0) * (z + lm_c[:, 2].mean()) - lm_c[:, :2].mean(0)
+    return np.array([xy[0], xy[1], z])
+
+
+def start_light(camera, translation, light_world) -> tuple[float, float, float]:
+    """The calibrated lamp seen from the face at camera-space position ``translation`` (mm):
+    ``(elevation, azimuth, distance)``, angles in radians as in :func:`light_direction`,
+    distance in mm."""
+    head = camera.to_world(translation)
+    d = camera.rotation @ (light_world - head)
+    distance = float(np.linalg.norm(d))
+    d /= np.linalg.norm(d)
+    return math.asin(float(np.clip(-d[1], -1, 1))), math.atan2(d[0], -d[2]), distance
+
+
+def reference_measurement(capture) -> str:
+    """The measurement to take the starting texture from: the one whose light is closest to the
+    camera's viewing axis and whose feature points are most left-right symmetric (a frontal view
+    at frontal illumination, paper sec. 4.2)."""
+    cam = capture.camera
+    best, best_score = capture.measurements[0].name, np.inf
+    for m in capture.measurements:
+        light = capture.light(m.light).position if m.light else None
+        angle = 0.0
+        if light is not None:
+            fp = np.array(list(m.feature_points.values()))
+            centre = cam.to_world(cam.pixel_rays(fp.mean(0)) * np.linalg.norm(cam.translation))
+            d1 = (light - centre) / np.linalg.norm(light - centre)
+            d2 = (cam.position - centre) / np.linalg.norm(cam.position - centre)
+            angle = math.degrees(math.acos(float(np.clip(d1 @ d2, -1, 1))))
+        pts = m.feature_points
+        asym = 0.0
+        if "nose_tip" in pts and "right_eye_outer" in pts and "left_eye_outer" in pts:
+            a = np.linalg.norm(np.asarray(pts["right_eye_outer"]) - pts["nose_tip"])
+            b = np.linalg.norm(np.asarray(pts["left_eye_outer"]) - pts["nose_tip"])
+            asym = abs(math.log(max(a, 1e-6) / max(b, 1e-6))) * 100.0
+        score = angle + asym
+        if score < best_score:
+            best, best_score = m.name, score
+    return best
