@@ -20,10 +20,23 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import atomic_write, write_json
+from .capture import Capture, load_capture
+from .files import write_json
+from .geometry import load_geometry
+from .model import load_model
+from .reflectance import capture_samples, fit_brdf, render_estimate
+from .report import ground_truth_errors, write_markdown, write_picture
+from .shape import fit_shape, shapes_in_world
+from .studio import simulate
 
 #: Models ``measure`` fits unless told otherwise.
 MODELS = ("cooktorrance", "ward", "phong", "lafortune")
+#: Where the face geometry comes from.
+GEOMETRIES = ("fitted", "ground-truth")
+
+
+class NoUsableShapeError(ValueError):
+    """No photograph of a capture got a shape fit that the next stages can use."""
 
 
 def novel_light(capture, centre: np.ndarray) -> np.ndarray:
@@ -45,8 +58,13 @@ def novel_light(capture, centre: np.ndarray) -> np.ndarray:
 
 
 def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resolution: int = 512,
-            shape_iterations: float | None = None, spp: int = 64, progress: bool = True) -> dict:
+            shape_iterations: float | None = None, spp: int = 64, face_model="builtin", progress: bool = True) -> dict:
     """Measure the reflectance of the face in ``capture``, writing everything to ``out``.
+
+    The stages hand their results to each other in memory: the face model is
+    loaded once, the fitted shapes go straight to the reflectance samples, the
+    samples (with their region labels) to every BRDF model's fit. Files are
+    written for the user, never read back.
 
     Parameters
     ----------
@@ -55,7 +73,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         ``brdf/<model>/``, ``report.{md,json,png}``.
     capture : path or Capture, optional
         A capture folder; without one, the default capture of
-        :func:`mifaces.studio.simulate.simulate` (built-in face, Cook-Torrance
+        :func:`mifaces.studio.simulate` (built-in face, Cook-Torrance
         ground truth) is simulated first into ``out/capture``.
     models : sequence of str
         BRDF models to fit.
@@ -68,71 +86,42 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         Scale of the shape fitter's iteration schedule.
     spp : int
         Samples per pixel of the report's renders.
+    face_model : str, path or MorphableModel
+        The face model fitted to the photographs (``geometry='fitted'``).
 
     Returns
     -------
     dict
         The report (also written as ``report.json``).
-    """
-    from .geometry import load_geometry
-    from .reflectance.estimate import fit_brdf, render_estimate
-    from .report import ground_truth_errors, write_markdown, write_picture
-    from .capture import Capture, load_capture
-    from .reflectance.samples import capture_samples
 
+    Raises
+    ------
+    NoUsableShapeError
+        No shape fit converged, so there is no geometry to sample reflectance on.
+    """
     t0 = time.perf_counter()
     out = Path(out)
-    if geometry not in ("fitted", "ground-truth"):
-        raise ValueError(f"geometry must be 'fitted' or 'ground-truth', got {geometry!r}")
+    if geometry not in GEOMETRIES:
+        raise ValueError(f"geometry must be one of {GEOMETRIES}, got {geometry!r}")
     unknown = [m for m in models if m not in MODELS]
     if unknown or not models:
         raise ValueError(f"unknown BRDF model(s) {unknown}; choose from {list(MODELS)}")
     timings = {}
-    if capture is None:
-        from .studio.simulate import simulate
-
-        simulated = simulate(out / "capture", progress=progress)
-        timings["simulate"] = simulated.seconds
-        capture = out / "capture"
-    capture = capture if isinstance(capture, Capture) else load_capture(capture)
+    capture = _capture(out, capture, timings, progress)
     report = {"capture": str(capture.path), "measurements": len(capture.measurements), "geometry": geometry,
               "resolution": resolution, "models": {}}
-    if geometry == "fitted":
-        from .shape.fit import fit_shape
-
-        t = time.perf_counter()
-        fits = fit_shape(capture, out=out / "shapes", iterations=shape_iterations, progress=progress)
-        timings["fit_shape"] = time.perf_counter() - t
-        report["shapes"] = {f.measurement: {"status": f.status, "seconds": f.seconds,
-                                            "feature_rms_px": f.loss.get("feature_rms_px")} for f in fits}
-        face, shapes = load_geometry(capture, out / "shapes")
-    else:
-        face, shapes = load_geometry(capture, "ground-truth")
+    face, shapes = _geometry(out, capture, geometry, face_model, shape_iterations, report, timings, progress)
     t = time.perf_counter()
     samples = capture_samples(capture, shapes, face, resolution, progress=progress)
     timings["reflectance_samples"] = time.perf_counter() - t
     first = next(m for m in capture.measurements if m.name in shapes)
-    lamp = capture.light(first.light)
     novel = novel_light(capture, np.asarray(shapes[first.name]).mean(axis=0))
     panels = []
     for model in models:
-        t = time.perf_counter()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
-                                out=out / "brdf" / model, progress=progress)
-        timings[f"fit_brdf_{model}"] = time.perf_counter() - t
-        entry = estimate.to_json()
-        entry["warnings"] = [str(w.message) for w in caught]
-        entry["ground_truth"] = ground_truth_errors(estimate, capture)
-        rendered = render_estimate(estimate, face, shapes[first.name], capture.camera, lamp.position,
-                                   lamp.intensity, spp=spp)
-        relit = render_estimate(estimate, face, shapes[first.name], capture.camera, novel, lamp.intensity, spp=spp)
-        face_pixels = first.image.pixels.mean(axis=2) > 0.02 * first.image.pixels.max()
-        entry["image_relative_rmse"] = float(np.sqrt(np.mean((rendered[face_pixels] - first.image.pixels[face_pixels])
-                                                             ** 2)) / np.mean(first.image.pixels[face_pixels]))
+        entry, panel = _fit_model(out, capture, model, face, shapes, samples, first, novel, resolution, spp,
+                                  timings, progress)
         report["models"][model] = entry
-        panels.append((model, first.image.pixels, rendered, relit))
+        panels.append(panel)
     timings["total"] = time.perf_counter() - t0
     report["seconds"] = timings
     report["novel_light_mm"] = novel.tolist()
@@ -140,3 +129,59 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     write_picture(out / "report.png", panels, first.name)
     write_markdown(out / "report.md", report, first.name)
     return report
+
+
+def _capture(out: Path, capture, timings: dict, progress: bool) -> Capture:
+    """The capture to measure: loaded, or simulated into ``out/capture`` when none is given."""
+    if capture is None:
+        simulated = simulate(out / "capture", progress=progress)
+        timings["simulate"] = simulated.seconds
+        capture = out / "capture"
+    return capture if isinstance(capture, Capture) else load_capture(capture)
+
+
+def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iterations, report: dict,
+              timings: dict, progress: bool):
+    """The face model and per-measurement world vertices: fitted (and written to
+    ``out/shapes`` for the user) or the simulator's ground truth."""
+    if geometry == "ground-truth":
+        return load_geometry(capture, "ground-truth")
+    face = face_model if not isinstance(face_model, (str, Path)) else load_model(face_model)
+    t = time.perf_counter()
+    fits = fit_shape(capture, face, out=out / "shapes", iterations=shape_iterations, progress=progress)
+    timings["fit_shape"] = time.perf_counter() - t
+    report["shapes"] = {f.measurement: {"status": f.status, "seconds": f.seconds,
+                                        "feature_rms_px": f.loss.get("feature_rms_px")} for f in fits}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the failed fits are named below
+        shapes = shapes_in_world(fits, capture)
+    if not shapes:
+        detail = "; ".join(f"{f.measurement}: {f.status}" + (f" ({f.message})" if f.message else "")
+                           for f in fits)
+        raise NoUsableShapeError(f"no shape fit converged, so there is no face geometry to measure reflectance on: "
+                                 f"{detail}. The fits are in {out / 'shapes'}.")
+    return face, shapes
+
+
+def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, first, novel, resolution: int,
+               spp: int, timings: dict, progress: bool):
+    """Fit one BRDF model, render it in the first photograph's place and under
+    the novel light; the report's entry and picture row."""
+    t = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
+                            out=out / "brdf" / model, progress=progress)
+    timings[f"fit_brdf_{model}"] = time.perf_counter() - t
+    entry = estimate.to_json()
+    entry["warnings"] = [str(w.message) for w in caught]
+    entry["ground_truth"] = ground_truth_errors(estimate, capture)
+    lamp = capture.light(first.light)
+    vertices = shapes[first.name]
+    rendered = render_estimate(estimate, face, vertices, capture.camera, lamp.position, lamp.intensity, spp=spp)
+    relit = render_estimate(estimate, face, vertices, capture.camera, novel, lamp.intensity, spp=spp)
+    photo = first.image.pixels
+    face_pixels = photo.mean(axis=2) > 0.02 * photo.max()
+    entry["image_relative_rmse"] = float(np.sqrt(np.mean((rendered[face_pixels] - photo[face_pixels]) ** 2))
+                                         / np.mean(photo[face_pixels]))
+    return entry, (model, photo, rendered, relit)

@@ -103,3 +103,26 @@ def test_cli_fit_shape_then_fit_brdf_on_the_fitted_shape(capture_dir, tmp_path):
     missing = runner.invoke(main, ["fit-brdf", str(capture_dir), "--geometry", str(tmp_path), "--out",
                                    str(tmp_path / "x")])
     assert missing.exit_code != 0 and "no fitted shapes" in str(missing.exception)
+
+
+def test_measure_names_the_failed_shape_fits(capture_dir, tmp_path, monkeypatch):
+    """Without one usable shape fit, measure stops with a message naming each fit's status and reason,
+    before any reflectance stage runs."""
+    import mifaces.pipeline as pipeline
+    from mifaces.shape import ShapeFit
+
+    def failing(capture, model, **options):
+        return [ShapeFit(measurement=m.name, status="not_converged", vertices_world=None, vertices_camera=None,
+                         coefficients=np.zeros(1), expression=np.zeros(0), color=None, albedo=None,
+                         rotation=np.eye(3), translation=np.zeros(3), yaw_pitch_roll=np.zeros(3),
+                         focal_length=np.ones(2), light={}, loss={}, iterations=1, seconds=0.0,
+                         message="feature points end 2.6 px RMS from their targets")
+                for m in capture.measurements]
+
+    def never(*args, **kwargs):
+        raise AssertionError("reflectance sampled without geometry")
+
+    monkeypatch.setattr(pipeline, "fit_shape", failing)
+    monkeypatch.setattr(pipeline, "capture_samples", never)
+    with pytest.raises(pipeline.NoUsableShapeError, match=r"m00: not_converged \(feature points end 2.6 px"):
+        pipeline.measure(tmp_path / "m", capture_dir, models=("ward",), progress=False)
