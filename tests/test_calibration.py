@@ -16,7 +16,7 @@ import pytest
 from mifaces.capture.calibration import (CalibrationError, SphereDetection, calibrate_light, closest_point,
                                  fit_sphere_cone, reflected_ray)
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.studio.simulate import STEEL_SPHERE_RADIUS, studio_camera
+from mifaces.studio.scene import STEEL_SPHERE_RADIUS, studio_camera
 from test_simulate import studio  # noqa: F401  (the shared session fixture)
 
 

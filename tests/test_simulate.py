@@ -23,8 +23,8 @@ from mifaces.capture import (GROUND_TRUTH, IMAGE_SUFFIXES, MANIFEST, GroundTruth
                              read_image, write_ground_truth)
 from mifaces.files import read_exr
 from mifaces.studio.truth import COOK_TORRANCE_REGIONS, brdf_with_overrides, default_brdf
-from mifaces.studio.simulate import (LIGHT_DISTANCE,
-                              simulate, studio_camera)
+from mifaces.studio.scene import LIGHT_DISTANCE, studio_camera
+from mifaces.studio.simulate import simulate
 
 #: The shared capture: two lights with two poses each, both companions.
 STUDIO = dict(measurements=4, resolution=(384, 384), spp=2, companion="both", albedo_resolution=128, seed=0,
