@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .capture import GROUND_TRUTH, Capture
+from .capture import GROUND_TRUTH, Capture, read_ground_truth
+from .capture.ground_truth import SCENE
 from .model import MorphableModel, load_model
 from .shape.io import INDEX, load_fitted_shapes
 
@@ -32,15 +33,11 @@ def load_geometry(capture: Capture, geometry="ground-truth", face_model=None
     if isinstance(geometry, dict):
         return load_model(face_model or "builtin"), {k: np.asarray(v, np.float64) for k, v in geometry.items()}
     if str(geometry) == "ground-truth":
-        info_path = capture.path / GROUND_TRUTH / "scene.json"
-        if not info_path.is_file():
-            raise FileNotFoundError(f"{capture.path} has no {GROUND_TRUTH}/scene.json (only simulated captures "
+        truth = read_ground_truth(capture)
+        if truth is None:
+            raise FileNotFoundError(f"{capture.path} has no {GROUND_TRUTH}/{SCENE} (only simulated captures "
                                     "have ground truth): give fitted shapes instead")
-        info = json.loads(info_path.read_text())
-        model = load_model(face_model or info.get("model_source", info.get("model", "builtin")))
-        shapes = {m["name"]: np.load(info_path.parent / m["shape"]).astype(np.float64)
-                  for m in info["measurements"]}
-        return model, shapes
+        return load_model(face_model or truth.model), {k: v.astype(np.float64) for k, v in truth.shapes.items()}
     path = Path(geometry)
     if not (path / INDEX).is_file():
         raise FileNotFoundError(f"no fitted shapes at {path}: expected the folder mifaces fit-shape wrote "

@@ -3,13 +3,12 @@ and the report's picture and Markdown text."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
-from .capture import GROUND_TRUTH, Capture
-from .files import atomic_path, atomic_write, read_exr
+from .capture import read_ground_truth
+from .files import atomic_path, atomic_write
 from .model.regions import REGIONS
 from .status import PRIOR
 
@@ -27,10 +26,10 @@ def ground_truth_errors(estimate, capture) -> dict | None:
     """
     from skimage.transform import resize
 
-    folder = Path(capture.path if isinstance(capture, Capture) else capture) / GROUND_TRUTH
-    if not (folder / "brdf.json").is_file():
+    ground_truth = read_ground_truth(capture)
+    if ground_truth is None:
         return None
-    truth = json.loads((folder / "brdf.json").read_text())
+    truth = ground_truth.brdf
     regions = {}
     if truth["model"] == estimate.model:
         for name, fit in estimate.fits.items():
@@ -40,7 +39,7 @@ def ground_truth_errors(estimate, capture) -> dict | None:
                                                 / np.abs(np.asarray(value, float))))
                              for key, value in truth["regions"][name].items() if key != "eta"}
     r = estimate.resolution
-    error = estimate.albedo.albedo - resize(read_exr(folder / "albedo.exr"), (r, r, 3), anti_aliasing=True, order=1)
+    error = estimate.albedo.albedo - resize(ground_truth.albedo, (r, r, 3), anti_aliasing=True, order=1)
     seen = estimate.albedo.samples > 0
     face = estimate.region_map > 0
     skin = seen & (estimate.region_map == REGIONS["skin"])

@@ -9,15 +9,14 @@ whole method against the lights of the shared simulated capture
 from __future__ import annotations
 
 import dataclasses
-import json
 
 import numpy as np
 import pytest
 
 from mifaces.capture.calibration import (CalibrationError, SphereDetection, calibrate_light, closest_point,
                                  fit_sphere_cone, reflected_ray)
-from mifaces.capture import GROUND_TRUTH, load_capture
-from mifaces.studio.simulate import STEEL_SPHERE_RADIUS, studio_camera
+from mifaces.capture import load_capture, read_ground_truth
+from mifaces.studio.scene import STEEL_SPHERE_RADIUS, studio_camera
 from test_simulate import studio  # noqa: F401  (the shared session fixture)
 
 
@@ -80,18 +79,16 @@ def test_reflected_ray_obeys_the_mirror_law():
         np.testing.assert_allclose(direction, towards / np.linalg.norm(towards), atol=1e-9)
 
 
-def _truth(studio):
-    scene = json.loads((studio / GROUND_TRUTH / "scene.json").read_text())
-    return scene, np.array(scene["head_center_mm"])
 
 
 def test_light_calibration_recovers_the_simulated_lights(studio):
     """Within 1 % of the light's distance from the subject, noise included (issue 4)."""
     capture = load_capture(studio)
-    scene, head = _truth(studio)
-    camera = capture.camera
-    for light, truth in zip(capture.lights, scene["lights"]):
-        position = np.array(truth["position_mm"])
+    ground_truth = read_ground_truth(studio)
+    head, camera = ground_truth.head_center, capture.camera
+    for light in capture.lights:
+        truth = ground_truth.light(light.name)
+        position = truth.position
         error = np.linalg.norm(light.position - position) / np.linalg.norm(position - head)
         assert error < 0.01, f"{light.name}: {100 * error:.2f} % of the light distance"
         cal = light.calibration
@@ -100,9 +97,8 @@ def test_light_calibration_recovers_the_simulated_lights(studio):
         np.testing.assert_allclose(camera.to_camera(light.position), cal.position_camera)
         # each sphere located to a fraction of a millimetre across, a few along the view
         for sphere in cal.spheres:
-            nearest = min(truth["steel_sphere_centers_mm"],
-                          key=lambda c: np.linalg.norm(camera.project(np.array(c)) - sphere.center_px))
-            offset = camera.to_world(sphere.center) - np.array(nearest)
+            nearest = min(truth.sphere_centers, key=lambda c: np.linalg.norm(camera.project(c) - sphere.center_px))
+            offset = camera.to_world(sphere.center) - nearest
             assert np.linalg.norm(offset) < 4.0 and sphere.radius == STEEL_SPHERE_RADIUS
             assert sphere.cone_residual < 1e-4
 
@@ -120,8 +116,8 @@ def test_a_sphere_without_highlight_is_left_out(studio):
     cal = calibrate_light(dataclasses.replace(spheres, highlight=highlight), capture.camera)
     assert len(cal.spheres) == 3 and len(cal.rejected) == 1
     np.testing.assert_allclose(cal.rejected[0].center, first.center)
-    scene, head = _truth(studio)
-    position = np.array(scene["lights"][0]["position_mm"])
+    ground_truth = read_ground_truth(studio)
+    head, position = ground_truth.head_center, ground_truth.light("L00").position
     assert np.linalg.norm(cal.position - position) < 0.03 * np.linalg.norm(position - head)
     # with one sphere left there is nothing to triangulate
     dark = dataclasses.replace(spheres.highlight, pixels=np.full_like(spheres.highlight.pixels, 1e-3))

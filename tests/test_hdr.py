@@ -3,17 +3,15 @@
 The simulated exposure series of the shared capture (:func:`test_simulate.studio`)
 is merged and compared with the point-light photograph of the same render,
 whose noise is independent, in units of the noise both should have under the
-simulator's sensor model (``ground_truth/scene.json``).
+simulator's sensor model (:attr:`mifaces.capture.GroundTruth.noise`).
 """
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 
-from mifaces.capture import GROUND_TRUTH, load_capture
+from mifaces.capture import load_capture, read_ground_truth
 from mifaces.capture.hdr import decode_srgb, merge_exposures, merge_series, scale_to_white
 from test_simulate import studio  # noqa: F401  (the shared session fixture)
 
@@ -85,7 +83,7 @@ def test_merge_names_bad_input(args, message):
 
 def test_merge_of_a_simulated_series_is_the_radiance_within_noise(studio):
     capture = load_capture(studio, calibrate=False)
-    noise = json.loads((studio / GROUND_TRUTH / "scene.json").read_text())["noise"]
+    noise = read_ground_truth(studio).noise
     full_well, read_noise = noise["full_well"], noise["read_noise"]
     codes = decode_srgb(np.arange(256, dtype=np.uint8)).astype(np.float64)
     code_step = np.gradient(codes)  # linear value per 8-bit code

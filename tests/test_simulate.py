@@ -19,11 +19,12 @@ import pytest
 
 import mifaces  # noqa: F401  # isort: skip
 from conftest import JIT_VARIANTS
-from mifaces.capture import GROUND_TRUTH, IMAGE_SUFFIXES, MANIFEST, load_capture, read_image
+from mifaces.capture import (GROUND_TRUTH, IMAGE_SUFFIXES, MANIFEST, GroundTruth, load_capture, read_ground_truth,
+                             read_image, write_ground_truth)
 from mifaces.files import read_exr
 from mifaces.studio.truth import COOK_TORRANCE_REGIONS, brdf_with_overrides, default_brdf
-from mifaces.studio.simulate import (LIGHT_DISTANCE,
-                              simulate, studio_camera)
+from mifaces.studio.scene import LIGHT_DISTANCE, studio_camera
+from mifaces.studio.simulate import simulate
 
 #: The shared capture: two lights with two poses each, both companions.
 STUDIO = dict(measurements=4, resolution=(384, 384), spp=2, companion="both", albedo_resolution=128, seed=0,
@@ -60,8 +61,10 @@ def _link(src, dst):
         shutil.copy2(src, dst)
 
 
-def _scene(path: Path) -> dict:
-    return json.loads((path / GROUND_TRUTH / "scene.json").read_text())
+def _truth(path: Path) -> GroundTruth:
+    truth = read_ground_truth(path)
+    assert truth is not None, f"{path} has no ground truth"
+    return truth
 
 
 # --------------------------------------------------------------------------------------------
@@ -69,11 +72,11 @@ def _scene(path: Path) -> dict:
 # --------------------------------------------------------------------------------------------
 def test_simulated_capture_loads_and_validates(studio):
     capture = load_capture(studio)
-    scene = _scene(studio)
+    truth = _truth(studio)
     width, height = STUDIO["resolution"]
     assert (capture.camera.width, capture.camera.height) == (width, height)
     # the manifest's camera is the studio camera of the ground truth's head centre
-    camera = studio_camera(width, height, np.array(scene["head_center_mm"]))
+    camera = studio_camera(width, height, truth.head_center)
     np.testing.assert_allclose(capture.camera.matrix, camera.matrix)
     np.testing.assert_allclose(capture.camera.position, camera.position, atol=1e-9)
     assert [l.name for l in capture.lights] == ["L00", "L01"]
@@ -91,7 +94,7 @@ def test_simulated_capture_loads_and_validates(studio):
     from mifaces.model.landmarks import FEATURE_POINTS
 
     landmarks = load_model("builtin").ibug_landmarks
-    neutral = np.load(studio / GROUND_TRUTH / "shapes" / "neutral.npy").astype(np.float64)
+    neutral = truth.neutral.astype(np.float64)
     assert len(capture.distances) == 3
     for d in capture.distances:
         a, b = (neutral[landmarks[FEATURE_POINTS[n]]] for n in (d.start, d.end))
@@ -107,13 +110,13 @@ def test_feature_points_are_the_projected_landmarks(studio):
     from mifaces.model.landmarks import FEATURE_POINTS
 
     capture = load_capture(studio, calibrate=False)
-    scene = _scene(studio)
+    ground_truth = _truth(studio)
     landmarks = load_model("builtin").ibug_landmarks
     sigma = 0.5 * STUDIO["resolution"][0] / 512  # the annotator's noise per coordinate
-    for m, truth in zip(capture.measurements, scene["measurements"]):
-        assert set(m.feature_points) == set(truth["feature_points"])
-        vertices = np.load(studio / GROUND_TRUTH / truth["shape"]).astype(np.float64)
-        for name, xy in truth["feature_points"].items():
+    for m, truth in zip(capture.measurements, ground_truth.measurements):
+        assert m.name == truth.name and set(m.feature_points) == set(truth.feature_points)
+        vertices = truth.vertices.astype(np.float64)
+        for name, xy in truth.feature_points.items():
             # the exact position is the projection of the landmark vertex of the measurement's shape
             np.testing.assert_allclose(xy, capture.camera.project(vertices[landmarks[FEATURE_POINTS[name]]]),
                                        atol=1e-3)
@@ -150,22 +153,59 @@ def test_capture_folder_holds_only_what_a_real_capture_would(studio):
 
 def test_ground_truth_layout(studio):
     gt = studio / GROUND_TRUTH
-    scene = _scene(studio)
+    scene = json.loads((gt / "scene.json").read_text())
     assert json.loads((gt / "brdf.json").read_text()) == brdf_with_overrides("cooktorrance", None)
     albedo = read_exr(gt / "albedo.exr")
     assert albedo.shape == (STUDIO["albedo_resolution"],) * 2 + (3,)
     assert 0 < albedo.min() and albedo.max() <= 0.95
     assert scene["seed"] == STUDIO["seed"] and scene["resolution"] == list(STUDIO["resolution"])
+    assert scene["albedo"] == "albedo.exr" and scene["brdf"] == "brdf.json"
     neutral = np.load(gt / "shapes" / "neutral.npy")
+    assert [m["shape"] for m in scene["measurements"]] == [f"shapes/m{i:02d}.npy" for i in range(STUDIO["measurements"])]
     for m in scene["measurements"]:
         shape = np.load(gt / m["shape"])
-        assert shape.shape == neutral.shape
+        assert shape.shape == neutral.shape and shape.dtype == np.float32
         rotation = np.array(m["rotation"])
         np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
     head = np.array(scene["head_center_mm"])
     for light in scene["lights"]:
         distance = np.linalg.norm(np.array(light["position_mm"]) - head)
         assert 0.9 * LIGHT_DISTANCE - 1e-6 <= distance <= 1.1 * LIGHT_DISTANCE + 1e-6
+
+
+def test_read_ground_truth_returns_what_the_simulator_wrote(studio, tmp_path):
+    gt = studio / GROUND_TRUTH
+    scene = json.loads((gt / "scene.json").read_text())
+    truth = read_ground_truth(load_capture(studio, calibrate=False))
+    assert truth.path == gt and truth.model == "builtin"
+    assert (truth.seed, truth.spp, truth.resolution) == (STUDIO["seed"], STUDIO["spp"], STUDIO["resolution"])
+    assert truth.brdf == brdf_with_overrides("cooktorrance", None)
+    np.testing.assert_array_equal(truth.albedo, read_exr(gt / "albedo.exr"))
+    np.testing.assert_array_equal(truth.neutral, np.load(gt / "shapes" / "neutral.npy"))
+    assert list(truth.shapes) == [m["name"] for m in scene["measurements"]] == ["m00", "m01", "m02", "m03"]
+    for m, entry in zip(truth.measurements, scene["measurements"]):
+        np.testing.assert_array_equal(truth.shapes[m.name], np.load(gt / entry["shape"]))
+        np.testing.assert_array_equal(m.rotation, entry["rotation"])
+        assert m.light == entry["light"] and m.expression == entry["expression"]
+        assert {k: v.tolist() for k, v in m.feature_points.items()} == entry["feature_points"]
+    assert [l.name for l in truth.lights] == ["L00", "L01"]
+    np.testing.assert_array_equal(truth.light("L01").position, scene["lights"][1]["position_mm"])
+    np.testing.assert_array_equal(truth.head_center, scene["head_center_mm"])
+    assert truth.camera.to_json() == scene["camera"] and truth.noise == scene["noise"]
+    # written again, the folder is the same, byte for byte
+    write_ground_truth(tmp_path / "again", truth)
+    again = _files(tmp_path / "again" / GROUND_TRUTH)
+    assert again.keys() == _files(gt).keys()
+    for name, path in again.items():
+        assert path.read_bytes() == (gt / name).read_bytes(), name
+
+
+def test_a_capture_without_ground_truth_has_none(studio, tmp_path):
+    copy = copy_capture(studio, tmp_path / "capture")
+    shutil.rmtree(copy / GROUND_TRUTH)
+    assert read_ground_truth(copy) is None
+    assert read_ground_truth(load_capture(copy, calibrate=False)) is None
+    assert read_ground_truth(copy / MANIFEST) is None
 
 
 def test_ground_truth_folder_is_ignored_by_the_loader(studio, tmp_path):
@@ -211,7 +251,7 @@ def test_simulation_is_reproducible_for_a_fixed_seed(tmp_path):
             assert other.read_bytes() == path.read_bytes(), name
     # another seed: another face, other lights, other noise
     assert not np.allclose(read_exr(c / "images/m00_point.exr"), read_exr(a / "images/m00_point.exr"), atol=0.01)
-    assert _scene(c)["lights"][0]["position_mm"] != _scene(a)["lights"][0]["position_mm"]
+    assert not np.allclose(_truth(c).lights[0].position, _truth(a).lights[0].position)
 
 
 def _assert_close_json(x, y, where):
@@ -319,7 +359,7 @@ def test_cli_simulate_writes_a_capture(tmp_path):
     capture = load_capture(out)
     assert (capture.camera.width, capture.camera.height) == (40, 32)
     assert len(capture.measurements) == 1 and len(capture.measurements[0].exposures) == 3
-    truth = json.loads((out / GROUND_TRUTH / "brdf.json").read_text())
+    truth = _truth(out).brdf
     assert truth["model"] == "ward" and truth["regions"]["lips"]["alpha"] == 0.2
 
 

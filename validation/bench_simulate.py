@@ -38,7 +38,7 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 import mitsuba as mi
 import numpy as np
 
-from mifaces.capture import GROUND_TRUTH, load_capture
+from mifaces.capture import load_capture, read_ground_truth
 from mifaces.files import atomic_path, read_exr, write_json
 from mifaces.studio.simulate import PRESETS, simulate
 
@@ -54,11 +54,11 @@ def run(path: Path, **kwargs) -> dict:
     t_load = time.perf_counter()
     capture = load_capture(path)
     load_seconds = time.perf_counter() - t_load
-    scene = json.loads((path / GROUND_TRUTH / "scene.json").read_text())
-    head = np.array(scene["head_center_mm"])
+    truth = read_ground_truth(capture)
+    head = truth.head_center
     lights = []
-    for light, truth in zip(capture.lights, scene["lights"]):
-        position = np.array(truth["position_mm"])
+    for light in capture.lights:
+        position = truth.light(light.name).position
         distance = float(np.linalg.norm(position - head))
         error = float(np.linalg.norm(light.position - position))
         lights.append({"light": light.name, "distance_mm": round(distance, 1), "error_mm": round(error, 2),

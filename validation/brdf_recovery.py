@@ -37,8 +37,8 @@ from mifaces import brdf
 from mifaces.geometry import load_geometry
 from mifaces.reflectance.estimate import fit_brdf, render_estimate
 from mifaces.report import ground_truth_errors
-from mifaces.capture import load_capture
-from mifaces.files import read_exr, write_json
+from mifaces.capture import load_capture, read_ground_truth
+from mifaces.files import write_json
 from mifaces.model.regions import REGIONS
 from mifaces.render import face_shapes, mitsuba_sensor
 from mifaces.studio.simulate import simulate
@@ -57,7 +57,7 @@ def same_family(work: Path, args) -> list[dict]:
         simulate(capture_dir, brdf=model, measurements=6, resolution=(args.image, args.image), spp=args.spp,
                  seed=11, progress=False)
         t_sim = time.perf_counter() - t0
-        truth = json.loads((capture_dir / "ground_truth" / "brdf.json").read_text())
+        truth = read_ground_truth(capture_dir).brdf
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             estimate = fit_brdf(capture_dir, model, resolution=args.resolution, progress=False)
@@ -117,8 +117,8 @@ def cross_family(work: Path, args) -> list[dict]:
     held_light = capture.measurements[-1].light
     train = [m.name for m in capture.measurements if m.light != held_light]
     held = [m for m in capture.measurements if m.light == held_light]
-    truth = json.loads((capture_dir / "ground_truth" / "brdf.json").read_text())
-    gt_albedo = read_exr(capture_dir / "ground_truth" / "albedo.exr")
+    ground_truth = read_ground_truth(capture)
+    truth, gt_albedo = ground_truth.brdf, ground_truth.albedo
     light, view = hemisphere_directions()
     rows = []
 

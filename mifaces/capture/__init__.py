@@ -11,7 +11,8 @@ the face and the value of the white calibration target.
 :func:`load_capture` reads and validates a capture and returns a
 :class:`Capture`, a plain dataclass of arrays. Every problem found is named
 in one :class:`CaptureError`. A ``ground_truth/`` subfolder (written by the
-simulator) is never read.
+simulator) is never read by it: :func:`read_ground_truth` reads it, as a
+:class:`GroundTruth`.
 
 Conventions
 -----------
@@ -27,6 +28,7 @@ Conventions
 
 
 from .camera import Camera
+from .ground_truth import GroundTruth, TrueLight, TrueMeasurement, read_ground_truth, write_ground_truth
 from .images import decode, read_image
 from .loader import load_capture
 from .types import (FEATURE_POINT_RANGE, FORMAT, GROUND_TRUTH, IMAGE_SUFFIXES, MANIFEST, TRANSFERS, VERSION,
@@ -34,4 +36,5 @@ from .types import (FEATURE_POINT_RANGE, FORMAT, GROUND_TRUTH, IMAGE_SUFFIXES, M
 
 __all__ = ["Camera", "Capture", "CaptureError", "Distance", "Image", "Light", "Measurement", "SpherePictures",
            "WhiteTarget", "decode", "read_image", "load_capture", "MANIFEST", "FORMAT", "VERSION", "GROUND_TRUTH",
-           "FEATURE_POINT_RANGE", "TRANSFERS", "IMAGE_SUFFIXES"]
+           "FEATURE_POINT_RANGE", "TRANSFERS", "IMAGE_SUFFIXES", "GroundTruth", "TrueLight", "TrueMeasurement",
+           "read_ground_truth", "write_ground_truth"]

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -99,6 +98,15 @@ class Camera:
         xy = self.undistort(np.stack([(p[..., 0] - self.cx) / self.fx, (p[..., 1] - self.cy) / self.fy], -1))
         d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+    @classmethod
+    def from_json(cls, entry: dict) -> Camera:
+        """The camera of a manifest's ``camera`` entry, trusted as written by :meth:`to_json`
+        (:func:`mifaces.capture.load_capture` validates a manifest's own)."""
+        return cls(int(entry["width"]), int(entry["height"]), float(entry["fx"]), float(entry["fy"]),
+                   float(entry["cx"]), float(entry["cy"]), np.asarray(entry.get("distortion", []), np.float64),
+                   np.asarray(entry.get("rotation", np.eye(3)), np.float64),
+                   np.asarray(entry.get("translation", np.zeros(3)), np.float64))
 
     def to_json(self) -> dict:
         """The manifest's ``camera`` entry."""

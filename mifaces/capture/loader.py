@@ -13,7 +13,7 @@ from ..model.landmarks import FEATURE_POINTS
 from .calibration import CalibrationError, calibrate_light
 from .camera import Camera
 from .images import read_image
-from .types import (FEATURE_POINT_RANGE, FORMAT, GROUND_TRUTH, IMAGE_SUFFIXES, MANIFEST, TRANSFERS, VERSION,
+from .types import (FEATURE_POINT_RANGE, FORMAT, IMAGE_SUFFIXES, MANIFEST, TRANSFERS, VERSION,
                     Capture, CaptureError, Distance, Image, Light, Measurement, SpherePictures, WhiteTarget)
 
 
@@ -36,6 +36,11 @@ class _Problems(list):
                 self.append(f"{where}: must be an object")
                 continue
             yield i, entry, where
+
+    def unique(self, key: str, names: list[str]) -> None:
+        """Record a problem for each name used more than once in ``data[key]``."""
+        for name in {n for n in names if names.count(n) > 1}:
+            self.append(f"{key}: name {name!r} used more than once")
 
     def need(self, obj, key, where, kind=None):
         if not isinstance(obj, dict) or key not in obj:
@@ -206,7 +211,30 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True) -> Capture:
         malformed calibration, unknown feature points, lights that cannot be
         calibrated.
     """
-    path = Path(path)
+    root, data = _read_manifest(Path(path))
+    problems = _Problems()
+    if data.get("format") != FORMAT:
+        problems.append(f"format: must be {FORMAT!r}, got {data.get('format')!r}")
+    if data.get("version") != VERSION:
+        problems.append(f"version: this mifaces reads version {VERSION}, got {data.get('version')!r}")
+    camera = _camera(data.get("camera"), problems)
+    white = _white_target(data.get("white_target"), problems)
+    distances = _distances(data.get("distances"), problems)
+    lights = _lights(data, root, camera, problems)
+    measurements = _measurements(data, root, camera, [l.name for l in lights], problems)
+    if problems:
+        raise CaptureError(root, problems)
+    if calibrate:
+        lights = _calibrate(lights, camera, problems)
+        if problems:
+            raise CaptureError(root, problems)
+    metadata = data.get("metadata", {})
+    return Capture(root, camera, tuple(lights), tuple(measurements), tuple(distances), white,
+                   dict(metadata) if isinstance(metadata, dict) else {})
+
+
+def _read_manifest(path: Path) -> tuple[Path, dict]:
+    """The capture folder and its manifest's JSON object; a :class:`CaptureError` when there is none."""
     manifest = path if path.is_file() else path / MANIFEST
     root = manifest.parent
     if not manifest.is_file():
@@ -215,36 +243,28 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True) -> Capture:
         data = json.loads(manifest.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise CaptureError(root, [f"{MANIFEST} is not valid JSON: {e}"]) from None
-    problems = _Problems()
     if not isinstance(data, dict):
         raise CaptureError(root, [f"{MANIFEST}: must hold a JSON object, got {type(data).__name__}"])
-    if data.get("format") != FORMAT:
-        problems.append(f"format: must be {FORMAT!r}, got {data.get('format')!r}")
-    if data.get("version") != VERSION:
-        problems.append(f"version: this mifaces reads version {VERSION}, got {data.get('version')!r}")
+    return root, data
 
-    camera = _camera(data.get("camera"), problems)
 
-    # white target
-    wt = data.get("white_target")
-    white = None
+def _white_target(wt, problems: _Problems) -> WhiteTarget | None:
     if not isinstance(wt, dict):
         problems.append("white_target: missing or not an object")
-    else:
-        n = len(problems)
-        value = problems.vector(wt, "value", "white_target", 3, positive=True, scalar_ok=True)
-        refl = problems.number(wt, "reflectance", "white_target", positive=True, default=1.0, required=False)
-        dist = problems.number(wt, "distance_mm", "white_target", positive=True)
-        inten = problems.vector(wt, "intensity", "white_target", 3, positive=True, scalar_ok=True)
-        cos_i = problems.number(wt, "cos_incidence", "white_target", positive=True, default=1.0, required=False)
-        if cos_i is not None and cos_i > 1:
-            problems.append(f"white_target.cos_incidence: must be in (0, 1], got {cos_i}")
-        if len(problems) == n:
-            white = WhiteTarget(value, refl, dist, inten, cos_i)
+        return None
+    n = len(problems)
+    value = problems.vector(wt, "value", "white_target", 3, positive=True, scalar_ok=True)
+    refl = problems.number(wt, "reflectance", "white_target", positive=True, default=1.0, required=False)
+    dist = problems.number(wt, "distance_mm", "white_target", positive=True)
+    inten = problems.vector(wt, "intensity", "white_target", 3, positive=True, scalar_ok=True)
+    cos_i = problems.number(wt, "cos_incidence", "white_target", positive=True, default=1.0, required=False)
+    if cos_i is not None and cos_i > 1:
+        problems.append(f"white_target.cos_incidence: must be in (0, 1], got {cos_i}")
+    return WhiteTarget(value, refl, dist, inten, cos_i) if len(problems) == n else None
 
-    # distances
+
+def _distances(entries, problems: _Problems) -> list[Distance]:
     distances = []
-    entries = data.get("distances")
     if not isinstance(entries, list) or len(entries) < 3:
         problems.append(f"distances: need a list of at least three metric distances on the face, got {entries!r}"[:300])
         entries = entries if isinstance(entries, list) else []
@@ -257,8 +277,10 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True) -> Capture:
                 problems.append(f"{where}: unknown feature point {name!r}")
         if a is not None and b is not None and mm is not None:
             distances.append(Distance(a, b, mm))
+    return distances
 
-    # lights
+
+def _lights(data: dict, root: Path, camera: Camera | None, problems: _Problems) -> list[Light]:
     lights = []
     for i, e, where in problems.objects(data, "lights", " of light conditions"):
         name = problems.need(e, "name", where, str)
@@ -278,18 +300,19 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True) -> Capture:
             problems.append(f"{where}: needs 'position_mm' or 'spheres' (the steel-sphere pictures)")
         if name is not None and intensity is not None:
             lights.append(Light(name, position, intensity, spheres))
-    names = [l.name for l in lights]
-    for name in {n for n in names if names.count(n) > 1}:
-        problems.append(f"lights: name {name!r} used more than once")
+    problems.unique("lights", [l.name for l in lights])
+    return lights
 
-    # measurements
+
+def _measurements(data: dict, root: Path, camera: Camera | None, lights: list[str],
+                  problems: _Problems) -> list[Measurement]:
     measurements = []
     for i, e, where in problems.objects(data, "measurements", ""):
         name = problems.need(e, "name", where, str) or f"#{i}"
         where = f"measurements[{i}] ({name})"
         light = problems.need(e, "light", where, str)
-        if light is not None and light not in names:
-            problems.append(f"{where}.light: no light condition named {light!r} (lights: {names})")
+        if light is not None and light not in lights:
+            problems.append(f"{where}.light: no light condition named {light!r} (lights: {lights})")
         pose = e.get("pose")
         image = _image(e.get("image"), f"{where}.image", root, camera, problems) if "image" in e else \
             problems.need(e, "image", where)
@@ -308,28 +331,21 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True) -> Capture:
         if isinstance(image, Image) and light is not None and None not in exposures:
             measurements.append(Measurement(name, light, None if pose is None else str(pose), image, diffuse,
                                             tuple(exposures), points))
-    mnames = [m.name for m in measurements]
-    for name in {n for n in mnames if mnames.count(n) > 1}:
-        problems.append(f"measurements: name {name!r} used more than once")
+    problems.unique("measurements", [m.name for m in measurements])
+    return measurements
 
-    if problems:
-        raise CaptureError(root, problems)
 
-    if calibrate:
-        calibrated = []
-        for light in lights:
-            if light.position is None and light.spheres is not None:
-                try:
-                    cal = calibrate_light(light.spheres, camera)
-                except CalibrationError as e:
-                    problems.append(f"light {light.name!r}: steel-sphere calibration failed: {e}")
-                    calibrated.append(light)
-                    continue
-                light = Light(light.name, cal.position, light.intensity, light.spheres, cal)
-            calibrated.append(light)
-        lights = calibrated
-        if problems:
-            raise CaptureError(root, problems)
-
-    return Capture(root, camera, tuple(lights), tuple(measurements), tuple(distances), white,
-                   dict(data.get("metadata", {})) if isinstance(data.get("metadata", {}), dict) else {})
+def _calibrate(lights: list[Light], camera: Camera, problems: _Problems) -> list[Light]:
+    """The lights with the positions their steel-sphere pictures give (paper sec. 3)."""
+    calibrated = []
+    for light in lights:
+        if light.position is None and light.spheres is not None:
+            try:
+                cal = calibrate_light(light.spheres, camera)
+            except CalibrationError as e:
+                problems.append(f"light {light.name!r}: steel-sphere calibration failed: {e}")
+                calibrated.append(light)
+                continue
+            light = Light(light.name, cal.position, light.intensity, light.spheres, cal)
+        calibrated.append(light)
+    return calibrated

@@ -1,0 +1,162 @@
+"""The studio's geometry and its Mitsuba scenes (paper sec. 3).
+
+A fixed, calibrated camera on the +z axis through the head; point lights on
+a sphere of about :data:`LIGHT_DISTANCE` around the head, in front of the
+face; four steel spheres in a plane facing the camera, around the head, to
+locate each light from; a black room (no geometry but the subject and the
+spheres: the walls return no light). Lengths in mm, world frame.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..capture import Camera
+from ..render import mitsuba_sensor, rgb
+
+#: Studio geometry (mm). Camera distance to the head centre, field height there.
+CAMERA_DISTANCE = 1200.0
+FIELD_HEIGHT = 300.0
+LIGHT_DISTANCE = 1500.0
+#: Radius of the steel spheres and of the lamp's emitting sphere (mm). The lamp is a sphere in the
+#: calibration pictures only (a point's mirror image has no area); its size makes the highlight a few
+#: pixels wide, which locates it to a few hundredths of a pixel.
+STEEL_SPHERE_RADIUS = 40.0
+LAMP_RADIUS = 120.0
+#: Steel-sphere centres relative to the head centre (mm, world frame).
+SPHERE_OFFSETS = np.array([[-95.0, 95.0, 0.0], [95.0, 95.0, 0.0], [-95.0, -95.0, 0.0], [95.0, -95.0, 0.0]])
+#: Exposures: the white target at the light distance reads this fraction of full scale.
+WHITE_LEVEL = 0.5
+#: Up to three poses per light: (yaw, pitch, roll) in degrees, before the subject's jitter.
+POSES = [(0.0, 0.0, 0.0), (-25.0, 0.0, 0.0), (25.0, 0.0, 0.0)]
+#: Mitsuba's path tracer: shadows and one-bounce-and-more interreflection.
+INTEGRATOR = {"type": "path", "max_depth": 4, "hide_emitters": False}
+#: The diffuse light of the companion and steel-sphere outline pictures: uniform white from all around.
+DIFFUSE_LIGHT = {"diffuse_light": {"type": "constant", "radiance": rgb(1.0)}}
+
+
+@dataclass(frozen=True, eq=False)
+class Studio:
+    """The studio set up around one subject.
+
+    Attributes
+    ----------
+    camera : Camera
+    head : (3,) float64
+        The head centre, mm.
+    light_positions : (L, 3) float64
+        World positions of the point light in its L conditions, mm.
+    intensity : (3,) float64
+        Radiant intensity of the point light (the white target at
+        :data:`LIGHT_DISTANCE` reads 1 per unit exposure).
+    exposure : float
+        Exposure of the point-light photographs.
+    per_light : list of int
+        Number of poses (measurements) per light condition.
+    sphere_centers : (4, 3) float64
+        Steel-sphere centres, mm.
+    sensor : dict
+        The Mitsuba sensor of ``camera``.
+    """
+
+    camera: Camera
+    head: np.ndarray
+    light_positions: np.ndarray
+    intensity: np.ndarray
+    exposure: float
+    per_light: list[int]
+    sphere_centers: np.ndarray
+    sensor: dict
+
+    @property
+    def schedule(self) -> list[tuple[int, int]]:
+        """(light index, pose index) of each measurement, in order."""
+        return [(li, pi) for li, count in enumerate(self.per_light) for pi in range(count)]
+
+
+def light_directions(count: int, rng: np.random.Generator, azimuth=(-70.0, 70.0), elevation=(-20.0, 50.0)
+                     ) -> np.ndarray:
+    """``count`` unit directions spread over the part of the sphere in front of the face
+    (a Fibonacci lattice in azimuth and sin(elevation), jittered)."""
+    golden = (math.sqrt(5) - 1) / 2
+    out = []
+    for i in range(count):
+        u = ((i + 0.5) / count + rng.uniform(-0.15, 0.15) / count) % 1.0
+        v = (i * golden + rng.uniform(-0.05, 0.05)) % 1.0
+        az = np.radians(azimuth[0] + u * (azimuth[1] - azimuth[0]))
+        s0, s1 = np.sin(np.radians(elevation[0])), np.sin(np.radians(elevation[1]))
+        el = np.arcsin(s0 + v * (s1 - s0))
+        out.append([np.cos(el) * np.sin(az), np.sin(el), np.cos(el) * np.cos(az)])
+    return np.array(out)
+
+
+def studio_camera(width: int, height: int, head: np.ndarray) -> Camera:
+    """The fixed camera: on the +z axis through the head centre at
+    :data:`CAMERA_DISTANCE`, looking at it, :data:`FIELD_HEIGHT` mm of field
+    at the head, principal point at the image centre, no distortion."""
+    fy = height * CAMERA_DISTANCE / FIELD_HEIGHT
+    rotation = np.diag([1.0, -1.0, -1.0])  # OpenCV axes: x right, y down, z forward (world -z)
+    position = head + np.array([0.0, 0.0, CAMERA_DISTANCE])
+    return Camera(width, height, fy, fy, width / 2 - 0.5, height / 2 - 0.5, np.zeros(5), rotation,
+                  -rotation @ position)
+
+
+def set_up_studio(width: int, height: int, head: np.ndarray, measurements: int, rng: np.random.Generator,
+                  spp: int) -> Studio:
+    """The studio for ``measurements`` photographs of a head centred at ``head``:
+    ceil(K / 3) light conditions with up to three poses each (the deficit from
+    the last lights), the lights placed with ``rng``."""
+    n_lights = math.ceil(measurements / 3)
+    per_light = [3] * n_lights
+    for i in range(3 * n_lights - measurements):  # the deficit (at most 2) from the last lights
+        per_light[-1 - i % n_lights] -= 1
+    directions = light_directions(n_lights, rng)
+    distances = LIGHT_DISTANCE * rng.uniform(0.9, 1.1, n_lights)
+    camera = studio_camera(width, height, head)
+    # the steel spheres: around where the head is, all in the field of view, in one plane facing the camera
+    # so that for lights in front (azimuth within 70 degrees) none lies in another's shadow
+    return Studio(camera=camera, head=head, light_positions=head + directions * distances[:, None],
+                  intensity=np.full(3, np.pi * LIGHT_DISTANCE ** 2), exposure=WHITE_LEVEL, per_light=per_light,
+                  sphere_centers=head + SPHERE_OFFSETS, sensor=mitsuba_sensor(camera, spp))
+
+
+def white_value(studio: Studio) -> np.ndarray:
+    """What the white target reads per unit exposure: Lambertian, reflectance 1, frontal, at
+    :data:`LIGHT_DISTANCE` (1 by the choice of :attr:`Studio.intensity`)."""
+    return studio.intensity / (np.pi * LIGHT_DISTANCE ** 2)
+
+
+# --------------------------------------------------------------------------------------------
+# Mitsuba scenes
+# --------------------------------------------------------------------------------------------
+def scene(studio: Studio, shapes: dict, emitters: dict, spp: int) -> dict:
+    """The scene dict of ``shapes`` lit by ``emitters`` as the studio camera sees it with ``spp`` samples."""
+    d = {"type": "scene", "integrator": INTEGRATOR,
+         "sensor": dict(studio.sensor, sampler={"type": "independent", "sample_count": spp})}
+    d.update(shapes)
+    d.update(emitters)
+    return d
+
+
+def steel_spheres(studio: Studio) -> dict:
+    """The four chrome spheres."""
+    return {f"steel_{i}": {"type": "sphere", "center": c.tolist(), "radius": STEEL_SPHERE_RADIUS,
+                           "bsdf": {"type": "conductor", "material": "Cr"}}
+            for i, c in enumerate(studio.sphere_centers)}
+
+
+def lamp(studio: Studio, light: int) -> dict:
+    """The point light ``light`` as a sphere of :data:`LAMP_RADIUS` of the same intensity (the
+    steel-sphere pictures: its mirror image has an area)."""
+    radiance = studio.intensity / (np.pi * LAMP_RADIUS ** 2)
+    return {"lamp": {"type": "sphere", "center": studio.light_positions[light].tolist(), "radius": LAMP_RADIUS,
+                     "emitter": {"type": "area", "radiance": rgb(radiance)}}}
+
+
+def point_light(studio: Studio, light: int) -> dict:
+    """The point light of condition ``light``."""
+    return {"light": {"type": "point", "position": studio.light_positions[light].tolist(),
+                      "intensity": rgb(studio.intensity)}}

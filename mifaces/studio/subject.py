@@ -1,0 +1,112 @@
+"""The simulated subject: a morphable-model face, its albedo map, and its
+pose and expression in each measurement (lengths in mm, world frame)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.ndimage as ndi
+
+from ..model.geometry import rotation_matrix
+from ..model.texture_space import rasterize
+from .scene import POSES
+
+
+@dataclass(frozen=True, eq=False)
+class Subject:
+    """A face: model coefficients, the neutral shape and the albedo map.
+
+    Attributes
+    ----------
+    coefficients : dict
+        ``shape`` (and ``color`` for a model with texture) coefficients.
+    neutral : (V, 3)
+        The neutral face, mm.
+    head : (3,) float64
+        Centre of the neutral face's bounding box: the centre of head rotations.
+    albedo : (N, N, 3) float32
+        Linear RGB albedo map in the model's texture space.
+    """
+
+    coefficients: dict[str, np.ndarray]
+    neutral: np.ndarray
+    head: np.ndarray
+    albedo: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class HeadPose:
+    """The subject in one measurement: ``vertices = R (shape(expression) - head) + head + t``.
+
+    ``yaw_pitch_roll`` in degrees (:func:`mifaces.model.geometry.rotation_matrix`),
+    ``expression`` the expression coefficients (None for a model without
+    expressions), ``vertices`` (V, 3) float64 in world space.
+    """
+
+    yaw_pitch_roll: tuple[float, float, float]
+    rotation: np.ndarray
+    translation: np.ndarray
+    expression: np.ndarray | None
+    vertices: np.ndarray
+
+
+def make_subject(face_model, rng: np.random.Generator, albedo_resolution: int) -> Subject:
+    """A typical (not an extreme) face of ``face_model``: random coefficients scaled by 0.7, and
+    its albedo map with fine detail (:func:`albedo_map`)."""
+    coefficients = face_model.random_coefficients(rng)
+    coefficients["shape"] *= 0.7
+    if "color" in coefficients:
+        coefficients["color"] *= 0.7
+    neutral = face_model.shape(coefficients["shape"])
+    head = 0.5 * (neutral.min(axis=0) + neutral.max(axis=0))
+    albedo = albedo_map(face_model, coefficients.get("color"), rng, albedo_resolution)
+    return Subject(coefficients, neutral, head, albedo)
+
+
+def head_pose(face_model, subject: Subject, pose: int, rng: np.random.Generator) -> HeadPose:
+    """The subject at pose ``pose`` of :data:`mifaces.studio.scene.POSES`, as a sitter holds it:
+    jittered by up to 3° yaw, 4° pitch, 2° roll, moved by 3 mm (standard deviation) and with a
+    small random expression."""
+    yaw, pitch, roll = POSES[pose]
+    yaw += rng.uniform(-3, 3)
+    pitch += rng.uniform(-4, 4)
+    roll += rng.uniform(-2, 2)
+    rotation = rotation_matrix(yaw, pitch, roll)
+    translation = rng.normal(0.0, 3.0, 3)
+    expression = None
+    if face_model.has_expressions:
+        expression = np.abs(rng.normal(0.0, 0.12, face_model.expression_dim))
+    local = face_model.shape(subject.coefficients["shape"], expression).astype(np.float64)
+    vertices = (local - subject.head) @ rotation.T + subject.head + translation
+    return HeadPose((yaw, pitch, roll), rotation, translation, expression, vertices)
+
+
+def albedo_map(model, color, rng: np.random.Generator, size: int = 1024, detail: float = 0.12) -> np.ndarray:
+    """Per-texel albedo (size, size, 3), linear RGB, in the model's texture space.
+
+    The model's per-vertex albedo for colour coefficients ``color``,
+    interpolated over the triangles, times fine multiplicative detail:
+    log-normal noise at pore/freckle scales (1-2 texels and ~6 texels;
+    ``detail`` is its standard deviation in log units), and a few darker
+    spots. Texels no triangle covers take the nearest covered texel.
+    """
+    per_vertex = model.texture(color) if model.has_texture else np.full((model.vertex_count, 3), 0.45, np.float32)
+    cov = rasterize(model.uv, model.triangles, (size, size))
+    covered = cov.covered
+    tri = model.triangles[cov.triangle[covered]]
+    bary = cov.barycentric[covered]
+    image = np.zeros((size, size, 3), np.float64)
+    image[covered] = np.einsum("nk,nkc->nc", bary, per_vertex[tri])
+    _, (ri, ci) = ndi.distance_transform_edt(~covered, return_indices=True)
+    image = image[ri, ci]
+    fine = ndi.gaussian_filter(rng.standard_normal((size, size)), 0.8)
+    medium = ndi.gaussian_filter(rng.standard_normal((size, size)), 3.0)
+    fine /= fine.std()
+    medium /= medium.std()
+    spots = ndi.gaussian_filter((rng.random((size, size)) < 2e-4).astype(float), 2.0)
+    spots /= max(spots.max(), 1e-12)
+    log = detail * (0.6 * fine + 0.8 * medium) - 0.5 * spots
+    tint = np.array([0.8, 1.0, 1.15])  # spots are melanin: darker in blue than red
+    image = image * np.exp(log[..., None] * tint)
+    return np.clip(image, 0.0, 0.95).astype(np.float32)

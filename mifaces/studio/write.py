@@ -1,0 +1,103 @@
+"""Writing a simulated capture: the photographs and the manifest a real capture
+would have (:mod:`mifaces.capture`, ``docs/capture.md``), and the ground truth
+beside them (:mod:`mifaces.capture.ground_truth`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..capture import FORMAT, MANIFEST, VERSION, GroundTruth, TrueLight, TrueMeasurement
+from ..files import write_exr, write_json, write_png
+from ..model.landmarks import FEATURE_POINTS
+from .photograph import FULL_WELL, READ_NOISE, Photographs, SpherePhotographs
+from .scene import INTEGRATOR, LAMP_RADIUS, LIGHT_DISTANCE, STEEL_SPHERE_RADIUS, Studio, white_value
+from .subject import HeadPose, Subject
+
+#: Folder of the photographs inside the capture.
+IMAGES = "images"
+#: The metric distances on the face the manifest gives (paper sec. 4.2).
+DISTANCE_PAIRS = [("right_eye_outer", "left_eye_outer"), ("right_eye_inner", "left_eye_inner"),
+                  ("mouth_right", "mouth_left")]
+
+
+def light_name(light: int) -> str:
+    """The manifest's name of light condition ``light``."""
+    return f"L{light:02d}"
+
+
+def write_sphere_photographs(out: Path, studio: Studio, light: int, pictures: SpherePhotographs) -> dict:
+    """Write the steel-sphere pictures of condition ``light`` (linear EXR); its manifest entry."""
+    name = light_name(light)
+    highlight, outline = f"{IMAGES}/{name}_spheres_point.exr", f"{IMAGES}/{name}_spheres_diffuse.exr"
+    write_exr(out / highlight, pictures.highlight)
+    write_exr(out / outline, pictures.outline)
+    return {"name": name, "intensity": studio.intensity.tolist(),
+            "spheres": {"radius_mm": STEEL_SPHERE_RADIUS,
+                        "highlight": {"path": highlight, "exposure": pictures.highlight_exposure, "saturation": 1.0},
+                        "outline": {"path": outline, "exposure": pictures.outline_exposure, "saturation": 1.0}}}
+
+
+def write_photographs(out: Path, name: str, light: int, pose: int, photographs: Photographs) -> dict:
+    """Write the pictures of measurement ``name``: the point-light photograph as linear EXR, the
+    companions as 8-bit sRGB PNG; its manifest entry (without feature points)."""
+    point = f"{IMAGES}/{name}_point.exr"
+    write_exr(out / point, photographs.point)
+    entry = {"name": name, "light": light_name(light), "pose": f"P{light:02d}{pose}",
+             "image": {"path": point, "exposure": photographs.exposure, "saturation": 1.0}}
+    if photographs.diffuse is not None:
+        diffuse = f"{IMAGES}/{name}_diffuse.png"
+        write_png(out / diffuse, photographs.diffuse)
+        entry["diffuse"] = {"path": diffuse, "transfer": "srgb", "exposure": photographs.diffuse_exposure}
+    if photographs.exposures:
+        series = []
+        for k, (picture, exposure) in enumerate(photographs.exposures):
+            path = f"{IMAGES}/{name}_exposure{k}.png"
+            write_png(out / path, picture)
+            series.append({"path": path, "transfer": "srgb", "exposure": exposure})
+        entry["exposures"] = series
+    return entry
+
+
+def write_manifest(out: Path, studio: Studio, face_model, neutral: np.ndarray, lights: list[dict],
+                   measurements: list[dict]) -> None:
+    """Write ``capture.json``: the camera, the white target, three metric distances on the
+    ``neutral`` face, and the light and measurement entries."""
+    landmarks = face_model.ibug_landmarks
+    distances = [{"from": a, "to": b, "mm": round(float(np.linalg.norm(
+        neutral[landmarks[FEATURE_POINTS[a]]] - neutral[landmarks[FEATURE_POINTS[b]]])), 3)}
+        for a, b in DISTANCE_PAIRS]
+    manifest = {
+        "format": FORMAT, "version": VERSION,
+        "camera": studio.camera.to_json(),
+        "white_target": {"value": white_value(studio).tolist(), "reflectance": 1.0, "distance_mm": LIGHT_DISTANCE,
+                         "intensity": studio.intensity.tolist(), "cos_incidence": 1.0},
+        "distances": distances,
+        "lights": lights,
+        "measurements": measurements,
+        "metadata": {"source": "mifaces simulate", "units": "mm"},
+    }
+    write_json(out / MANIFEST, manifest)
+
+
+def true_measurement(name: str, light: int, pose: HeadPose, feature_points: dict, face_model) -> TrueMeasurement:
+    """The ground truth of measurement ``name``: the subject's pose and shape, and the exact
+    ``feature_points``."""
+    expression = {} if pose.expression is None else dict(zip(face_model.expression_names,
+                                                             map(float, pose.expression)))
+    return TrueMeasurement(name, light_name(light), pose.vertices.astype(np.float32), pose.rotation,
+                           pose.translation, np.array(pose.yaw_pitch_roll), expression,
+                           {k: np.asarray(v) for k, v in feature_points.items()})
+
+
+def ground_truth(face_model, subject: Subject, studio: Studio, measurements: list[TrueMeasurement], brdf: dict,
+                 seed: int, spp: int) -> GroundTruth:
+    """What the simulation knew, as :func:`mifaces.capture.write_ground_truth` writes it."""
+    lights = tuple(TrueLight(light_name(i), position, studio.intensity, LAMP_RADIUS, studio.sphere_centers)
+                   for i, position in enumerate(studio.light_positions))
+    return GroundTruth(
+        model=face_model.name, seed=seed, spp=spp, resolution=(studio.camera.width, studio.camera.height),
+        coefficients=subject.coefficients, head_center=subject.head, camera=studio.camera, lights=lights,
+        sphere_radius=STEEL_SPHERE_RADIUS, neutral=subject.neutral, measurements=tuple(measurements), brdf=brdf,
+        albedo=subject.albedo, integrator=INTEGRATOR, noise={"full_well": FULL_WELL, "read_noise": READ_NOISE})
