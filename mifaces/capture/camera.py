@@ -24,6 +24,9 @@ class Camera:
         R of ``x_camera = R x_world + t``.
     translation : (3,) float64
         t of that relation, in mm.
+    calibrated : bool
+        False where the intrinsics (``fx, fy, cx, cy``) are only a starting
+        guess (an unknown camera): the shape fit then estimates them.
     """
 
     width: int
@@ -35,6 +38,7 @@ class Camera:
     distortion: np.ndarray = field(default_factory=lambda: np.zeros(0))
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
     translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    calibrated: bool = True
 
     @property
     def matrix(self) -> np.ndarray:

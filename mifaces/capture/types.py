@@ -47,12 +47,20 @@ class Image:
     exposure : float
         Relative exposure (time x gain) the picture was taken with.
     path : Path
+    channels : int
+        Channels of the file: 1 for a greyscale photograph (its value is
+        repeated in the three channels of ``pixels``), else 3.
     """
 
     pixels: np.ndarray
     saturated: np.ndarray
     exposure: float
     path: Path
+    channels: int = 3
+
+    @property
+    def greyscale(self) -> bool:
+        return self.channels == 1
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,13 +85,21 @@ class Light:
     ----------
     name : str
     position : (3,) float64 or None
-        World position in mm, as given or as calibrated from ``spheres``.
+        World position in mm of a point light, as given or as calibrated from
+        ``spheres``; None for a directional light.
     intensity : (3,) float64
-        Radiant intensity of the point light per RGB channel, in the units of
-        the white target's calibration.
+        Per RGB channel: a point light's radiant intensity, in the units of
+        the white target's calibration (pixel value x mm²); a directional
+        light's irradiance at normal incidence (pixel value), 1 where its
+        absolute value is unknown (``relative``).
     spheres : SpherePictures or None
     calibration : object or None
         The :class:`mifaces.capture.calibration.LightCalibration` the position came from.
+    direction : (3,) float64 or None
+        A directional (distant) light: unit vector in the world frame from
+        the subject towards the light. None for a point light.
+    relative : bool
+        The intensity is known only up to a factor common to all lights.
     """
 
     name: str
@@ -91,6 +107,26 @@ class Light:
     intensity: np.ndarray
     spheres: SpherePictures | None = None
     calibration: object | None = None
+    direction: np.ndarray | None = None
+    relative: bool = False
+
+    @property
+    def directional(self) -> bool:
+        """A distant light: the same direction and irradiance everywhere, no falloff."""
+        return self.direction is not None
+
+    def towards(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """Unit directions (N, 3) from world ``points`` (N, 3) towards the light,
+        and the distances (N,) to it (infinite for a directional light)."""
+        points = np.atleast_2d(np.asarray(points, np.float64))
+        if self.directional:
+            d = np.broadcast_to(np.asarray(self.direction, np.float64), points.shape).copy()
+            return d, np.full(len(points), np.inf)
+        if self.position is None:
+            raise ValueError(f"light {self.name!r} has no position (load the capture with calibrate=True)")
+        offset = np.asarray(self.position, np.float64) - points
+        distance = np.linalg.norm(offset, axis=1)
+        return offset / np.maximum(distance, 1e-30)[:, None], distance
 
 
 @dataclass(frozen=True, eq=False)
@@ -112,7 +148,11 @@ class Measurement:
         Companion exposure series (may be empty).
     feature_points : dict
         Feature point name (see :data:`mifaces.model.landmarks.FEATURE_POINTS`)
-        -> pixel position (2,) float64.
+        -> pixel position (2,) float64. Empty where the capture gives none:
+        the shape stage then detects them (:mod:`mifaces.landmarks`).
+    face_box : (x0, y0, x1, y1) or None
+        Where the face is in the photograph (pixels), for the landmark
+        detector on tight crops; None: the detector finds it.
     """
 
     name: str
@@ -122,6 +162,7 @@ class Measurement:
     diffuse: Image | None
     exposures: tuple[Image, ...]
     feature_points: dict[str, np.ndarray]
+    face_box: tuple[float, float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -166,8 +207,19 @@ class Capture:
     lights: tuple[Light, ...]
     measurements: tuple[Measurement, ...]
     distances: tuple[Distance, ...]
-    white_target: WhiteTarget
+    white_target: WhiteTarget | None
     metadata: dict = field(default_factory=dict)
+
+    @property
+    def greyscale(self) -> bool:
+        """Every point-light photograph is greyscale."""
+        return all(m.image.greyscale for m in self.measurements)
+
+    @property
+    def relative_reflectance(self) -> bool:
+        """Reflectance is known only up to a factor: no white target, or
+        lights of unknown absolute intensity."""
+        return self.white_target is None or any(light.relative for light in self.lights)
 
     def light(self, name: str) -> Light:
         """The light condition called ``name``."""
