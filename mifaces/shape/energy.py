@@ -379,6 +379,9 @@ class Energy:
         contrast = self._scalar(theta, L[f"{key}.contrast"].start)
         gain = mi.Color3f(*self._block(theta, f"{key}.gain"))
         offset = mi.Color3f(*self._block(theta, f"{key}.offset"))
+        grey = getattr(self, "greyscale", False)  # issue 12: set by fit.fit_measurement for grey photographs
+        if grey:  # one light colour, ambient, gain and offset: channel 0 of each block, so none can tint
+            lc, amb, gain, offset = (mi.Color3f(c.x) for c in (lc, amb, gain, offset))
         shadow = self.dr_shadow if key == "point" else 1.0
         ndl = dr.dot(nc, ld)
         refl = 2 * ndl * nc - ld
@@ -386,5 +389,7 @@ class Energy:
         lit = shadow * dr.select(ndl > 0, 1.0, 0.0)
         colour = albedo * (amb + lc * dr.maximum(ndl, 0.0) * shadow) + lc * spec * lit
         lum = LUMINANCE[0] * colour.x + LUMINANCE[1] * colour.y + LUMINANCE[2] * colour.z
+        if grey:  # the photograph's grey value against the rendering's luminance (contrast plays no part)
+            return mi.Color3f(gain.x * lum + offset.x)
         colour = lum + contrast * (colour - lum)
         return gain * colour + offset

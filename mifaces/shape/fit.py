@@ -1,13 +1,15 @@
 """Shape estimation (paper sec. 4.2): the morphable model fitted to each
-photograph of a capture, independently and from the average face, by
-minimising ``E = E_I + E_F + E_P`` (:mod:`mifaces.shape.energy`) with the
-optimiser of :mod:`mifaces.shape.fitter`. The method, its frames and how well
-it works: ``docs/shape_estimation.md``."""
+pose of a capture (the measurements sharing a ``pose`` label share one fit),
+independently and from the average face, by minimising ``E = E_I + E_F + E_P``
+(:mod:`mifaces.shape.energy`) with the optimiser of :mod:`mifaces.shape.fitter`.
+The method, its frames and how well it works: ``docs/shape_estimation.md``."""
 
 from __future__ import annotations
 
 import math
 import time
+import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,37 +20,75 @@ from ..status import CONVERGED, DIVERGED, NOT_CONVERGED
 from .fitter import Fitter
 from .io import as_capture, write_fit, write_index
 from .result import ShapeFit, ShapeFitError, ShapeSchedule, Weights
-from .targets import feature_targets, light_direction, reference_measurement
+from .targets import (eye_distance_px, feature_targets, light_direction, reference_measurement,
+                      start_light_angles)
+
+#: Default convergence limit of the feature points: RMS distance from their targets as a fraction of
+#: the face's eye distance (outer corners) in the image, on top of :data:`FEATURE_NOISE`; with it,
+#: the limit is 4 px on the simulator's 512 x 512 captures (eye distance about 152 px), as before.
+MAX_FEATURE_ERROR = 0.02
+#: Default expected RMS error (px) of the feature points themselves: whole-pixel positions, as a
+#: detector (:mod:`mifaces.landmarks`) or a careful click gives them.
+FEATURE_NOISE = 1.0
+#: Feature points of measurements labelled with one pose that differ from the pose's fitted
+#: measurement's by more than this fraction of their spread (RMS) are not one pose: fitted apart.
+POSE_AGREEMENT = 0.25
+
+
+def feature_limit(vertices_camera, model, focal_px: float, max_feature_error: float = MAX_FEATURE_ERROR,
+                  feature_noise: float = FEATURE_NOISE) -> float:
+    """The RMS feature-point error (px) within which a fit has converged:
+    ``max_feature_error * d_eyes + feature_noise``, with ``d_eyes`` the fitted face's eye distance in
+    the image (:func:`~mifaces.shape.targets.eye_distance_px`), so the limit follows the face's size
+    in the image, not the image's size, and the points' own noise."""
+    return max_feature_error * eye_distance_px(vertices_camera, model, focal_px) + feature_noise
+
+
+def estimated_quantities(camera, distances, fit_focal: bool = True) -> tuple[str, ...]:
+    """What a fit estimates that the capture does not give (:attr:`ShapeFit.estimated`)."""
+    return (("scale",) if not len(distances or ()) else ()) + \
+        (("focal_length",) if fit_focal and not getattr(camera, "calibrated", True) else ())
 
 
 def fit_measurement(measurement, camera, model="builtin", light_position=None, schedule: ShapeSchedule | None = None,
                     weights: Weights | None = None, use_diffuse: bool = True, use_point: bool = True,
-                    fit_focal: bool = True, initial_color=None, seed: int = 0, max_feature_error: float = 4.0,
-                    progress=True, lr=(0.1, 0.01), visibility_interval: int = 50, initial: dict | None = None,
-                    fixed=(), distances=()) -> ShapeFit:
+                    fit_focal: bool = True, initial_color=None, seed: int = 0,
+                    max_feature_error: float = MAX_FEATURE_ERROR, progress=True, lr=(0.1, 0.01),
+                    visibility_interval: int = 50, initial: dict | None = None, fixed=(), distances=(),
+                    light=None, feature_noise: float = FEATURE_NOISE) -> ShapeFit:
     """Fit the morphable model to one measurement (paper sec. 4.2), from the mean face.
 
     Parameters
     ----------
     measurement : mifaces.capture.Measurement
+        Greyscale photographs (``Image.greyscale``) are compared grey with grey: the
+        rendering's luminance against the photograph's value, with one light colour,
+        ambient, gain and offset (no tint), the model's albedo still coloured.
     camera : mifaces.capture.Camera
-        The calibrated camera (its focal length is the start and prior of the fitted one).
+        The camera; its focal length is the start and prior of the fitted one, with
+        :attr:`Weights.focal` for a calibrated camera and :attr:`Weights.focal_uncalibrated`
+        where ``camera.calibrated`` is False (the principal point stays where it is: one
+        view cannot tell it from the face's position).
     model : str, path or MorphableModel
     light_position : (3,) array, optional
         World position of the point light (mm): starts the directed light's direction.
+    light : mifaces.capture.Light, optional
+        The point image's light: a directional light's direction (camera frame) or a point
+        light's position starts the directed light (supersedes ``light_position``).
     schedule, weights : optional
         :class:`ShapeSchedule` and :class:`Weights`; defaults as documented there.
     use_diffuse, use_point : bool
         Use the companion diffuse-light image / the point-light image in E_I.
     fit_focal : bool
-        Optimise the focal length (paper sec. 4.2) under a weak prior around the calibration.
+        Optimise the focal length (paper sec. 4.2) under a prior around the camera's.
     initial_color : (C,) array, optional
         Texture coefficients to start from (the paper starts every fit from the
         texture of a frontal, frontally lit view).
-    max_feature_error : float
-        A fit whose feature points end farther than this RMS (px at 512 px image
-        height) from their targets is not a success: ``'diverged'`` or
-        ``'not_converged'`` (see :attr:`ShapeFit.status`).
+    max_feature_error, feature_noise : float
+        A fit whose feature points end farther than :func:`feature_limit` (px RMS:
+        ``max_feature_error`` times the face's eye distance in the image, plus the
+        points' expected noise ``feature_noise`` in px) from their targets is not a
+        success: ``'diverged'`` or ``'not_converged'`` (see :attr:`ShapeFit.status`).
     seed : int
         Seeds the choice of sample vertices.
     progress : bool or tqdm
@@ -68,6 +108,7 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
     distances : iterable of mifaces.capture.Distance
         Metric distances between feature points (mm) that fix the face's scale
         (``Capture.distances``); a term of E_P with :attr:`Weights.distance_sigma`.
+        Without them the scale comes from the prior (the mean face's size).
 
     Returns
     -------
@@ -76,19 +117,31 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
     t0 = time.perf_counter()
     model = load_model(model)
     schedule = schedule or ShapeSchedule()
+    weights = weights or Weights()
+    if not getattr(camera, "calibrated", True):
+        weights = replace(weights, focal=weights.focal_uncalibrated)
     targets = feature_targets(measurement, model)
-    images = {}
+    used = {}
     if use_point:
-        images["point"] = measurement.image.pixels
+        used["point"] = measurement.image
     if use_diffuse and measurement.diffuse is not None:
-        images["diffuse"] = measurement.diffuse.pixels
+        used["diffuse"] = measurement.diffuse
+    images = {key: image.pixels for key, image in used.items()}
     for key, img in images.items():
         if img.shape[:2] != (camera.height, camera.width):
             raise ShapeFitError(f"measurement {measurement.name!r}: {key} image is {img.shape[1]}x{img.shape[0]}, "
                                 f"the camera {camera.width}x{camera.height}")
-    fitter = Fitter(model, camera, images, targets, weights or Weights(), schedule, np.random.default_rng(seed),
-                     light_world=light_position, fit_focal=fit_focal, initial_color=initial_color,
-                     initial=initial, fixed=fixed, distances=distances)
+    initial = dict(initial or {})
+    if light is not None and light.directional:
+        if "point" in images and "point.light_angles" not in initial:
+            initial["point.light_angles"] = start_light_angles(light, camera, camera.position)
+    elif light is not None:
+        light_position = light.position
+    fitter = Fitter(model, camera, images, targets, weights, schedule, np.random.default_rng(seed),
+                    light_world=light_position, fit_focal=fit_focal, initial_color=initial_color,
+                    initial=initial, fixed=fixed, distances=distances)
+    greyscale = bool(used) and all(getattr(image, "greyscale", False) for image in used.values())
+    fitter.energy.greyscale = greyscale  # read by Energy._shade
     own_bar = progress is True
     bar = tqdm(total=schedule.pose_iterations + (sum(int(l[0]) for l in schedule.levels) if images else 0),
                desc=f"fit {measurement.name}", unit="it", leave=False) if own_bar else (progress or None)
@@ -98,10 +151,13 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
     finally:
         if own_bar:
             bar.close()
+    fit = _result(fitter, theta, measurement.name, terms, history, iterations, greyscale)
     if status is None:
-        status, message = _status(theta, terms, history, max_feature_error * fitter.scale_px)
-    return _result(fitter, theta, measurement.name, status, message, terms, history, iterations,
-                   time.perf_counter() - t0)
+        limit = (feature_limit(fit.vertices_camera, model, float(fit.focal_length[1]), max_feature_error,
+                               feature_noise) if np.all(np.isfinite(theta)) else math.inf)
+        status, message = _status(theta, terms, history, limit)
+    return replace(fit, status=status, message=message, seconds=time.perf_counter() - t0,
+                   estimated=estimated_quantities(camera, distances, fit_focal))
 
 
 def _status(theta, terms: dict, history: list, limit_px: float) -> tuple[str, str]:
@@ -119,24 +175,30 @@ def _status(theta, terms: dict, history: list, limit_px: float) -> tuple[str, st
             f"(limit {limit_px:.1f} px; {start:.1f} px at the start)" + ("" if ran_away else ": more iterations may help"))
 
 
-def _result(fitter, theta, name, status, message, terms, history, iterations, seconds) -> ShapeFit:
-    """The :class:`ShapeFit` of parameters ``theta``: vertices, pose and per-image lighting, with the
-    gain and offset back in the photograph's units."""
+def _result(fitter, theta, name, terms, history, iterations, greyscale=False) -> ShapeFit:
+    """The :class:`ShapeFit` of parameters ``theta`` (status still open): vertices, pose and
+    per-image lighting, with the gain and offset back in the photograph's units; for greyscale
+    photographs the tied colour blocks' one value (channel 0) in every channel."""
     L, model, camera = fitter.layout, fitter.model, fitter.camera
     finite = np.all(np.isfinite(theta))
     verts_c = fitter.vertices_camera(theta) if finite else np.full((model.vertex_count, 3), np.nan)
+
+    def block(key, name):
+        value = theta[L[f"{key}.{name}"]]
+        return np.full_like(value, value[0]) if greyscale and len(value) == 3 else value.copy()
+
     light = {}
     for key in fitter.image_names:
         el, az = theta[L[f"{key}.light_angles"]]
         scale = fitter.image_scale[key]
-        light[key] = {"direction": light_direction(el, az), "color": theta[L[f"{key}.light_color"]],
-                      "ambient": theta[L[f"{key}.ambient"]], "specular": float(theta[L[f"{key}.specular"]][0]),
-                      "contrast": float(theta[L[f"{key}.contrast"]][0]),
-                      "gain": theta[L[f"{key}.gain"]] * scale, "offset": theta[L[f"{key}.offset"]] * scale}
+        light[key] = {"direction": light_direction(el, az), "color": block(key, "light_color"),
+                      "ambient": block(key, "ambient"), "specular": float(theta[L[f"{key}.specular"]][0]),
+                      "contrast": 1.0 if greyscale else float(theta[L[f"{key}.contrast"]][0]),
+                      "gain": block(key, "gain") * scale, "offset": block(key, "offset") * scale}
     rot = fitter.rotation(theta)
     focal = math.exp(theta[L["log_focal"]][0]) * np.array([camera.fx, camera.fy])
     return ShapeFit(
-        measurement=name, status=status,
+        measurement=name, status=NOT_CONVERGED,
         vertices_world=camera.to_world(verts_c).astype(np.float32), vertices_camera=verts_c.astype(np.float32),
         coefficients=theta[L["shape"]].copy(),
         expression=theta[L["expression"]].copy(),
@@ -144,7 +206,7 @@ def _result(fitter, theta, name, status, message, terms, history, iterations, se
         albedo=theta[L["albedo"]].reshape(-1, 3).astype(np.float32) if "albedo" in L.slices else None,
         rotation=rot, translation=theta[L["translation"]] - rot @ fitter.centre,
         yaw_pitch_roll=np.degrees(theta[L["rotation"]]), focal_length=focal, light=light, loss=terms,
-        iterations=iterations, seconds=seconds, message=message, history=history)
+        iterations=iterations, seconds=0.0, history=history)
 
 
 def _model_source(model) -> str:
@@ -157,14 +219,22 @@ def _model_source(model) -> str:
 
 def fit_shape(capture, model="builtin", measurements=None, out=None,
               iterations: float | ShapeSchedule | None = None, progress: bool = True, weights: Weights | None = None,
-              use_diffuse: bool = True, fit_focal: bool = True, seed: int = 0, max_feature_error: float = 4.0,
-              fixed=()) -> list[ShapeFit]:
-    """Fit the morphable model to every measurement of a capture, independently (paper sec. 4.2).
+              use_diffuse: bool = True, fit_focal: bool = True, seed: int = 0,
+              max_feature_error: float = MAX_FEATURE_ERROR, fixed=(), feature_noise: float = FEATURE_NOISE
+              ) -> list[ShapeFit]:
+    """Fit the morphable model to every pose of a capture, independently (paper sec. 4.2).
 
-    Each measurement is fitted from the average face; the texture of a
-    frontal, frontally lit measurement (fitted first) starts the others, as
-    in the paper. :func:`~mifaces.shape.io.shapes_in_world` turns the result
-    into the next stage's input without the round trip through ``out``.
+    Measurements sharing a ``pose`` label (one pose of the subject photographed
+    under several lights) share one fit: the pose is fitted once, on its
+    measurement whose light is nearest the camera's axis (with its diffuse
+    companion where present), and the others get that fit's geometry
+    (:attr:`ShapeFit.shared_with`); a labelled measurement whose feature points
+    disagree with that one's (by more than :data:`POSE_AGREEMENT` of their
+    spread) is fitted on its own, with a warning. Each fit starts from the
+    average face; the texture of a frontal, frontally lit measurement (fitted
+    first) starts the others, as in the paper.
+    :func:`~mifaces.shape.io.shapes_in_world` turns the result into the next
+    stage's input without the round trip through ``out``.
 
     Parameters
     ----------
@@ -189,16 +259,15 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     fit_focal : bool
         Optimise the focal length.
     seed : int
-    max_feature_error : float
-        RMS feature-point error (px at 512 px) above which a fit is not a success
-        (``'diverged'`` or ``'not_converged'``, see :attr:`ShapeFit.status`).
+    max_feature_error, feature_noise : float
+        The convergence limit of the feature points (see :func:`feature_limit`).
     fixed : iterable of str
         Parameter blocks held at their start values (see :func:`fit_measurement`).
 
     Returns
     -------
     list of ShapeFit
-        In the order of the capture's measurements.
+        One per measurement, in the order of the capture's measurements.
 
     Raises
     ------
@@ -215,26 +284,84 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
         schedule = ShapeSchedule() if iterations is None else ShapeSchedule.scaled(float(iterations))
     todo = _measurements(capture, measurements, model)
     reference = reference_measurement(capture) if model.has_texture else None
+    groups = sorted(pose_groups(capture, todo), key=lambda g: g[0].name != reference)
     fits, initial_color = {}, None
     bar = tqdm(total=len(todo), desc="fit-shape", unit="image", disable=not progress)
-    for m in sorted(todo, key=lambda m: m.name != reference):
-        light = capture.light(m.light).position if m.light else None
-        fit = fit_measurement(m, capture.camera, model, light_position=light, schedule=schedule, weights=weights,
+    for leader, *others in groups:
+        light = capture.light(leader.light) if leader.light else None
+        fit = fit_measurement(leader, capture.camera, model, light=light, schedule=schedule, weights=weights,
                               use_diffuse=use_diffuse, fit_focal=fit_focal, initial_color=initial_color,
                               seed=seed, max_feature_error=max_feature_error, progress=progress, fixed=fixed,
-                              distances=capture.distances)
-        if m.name == reference and fit.converged:
+                              distances=capture.distances, feature_noise=feature_noise)
+        if leader.name == reference and fit.converged:
             initial_color = fit.color
-        fits[m.name] = fit
-        if out is not None:
-            write_fit(out, fit, model)
-        bar.update(1)
-        bar.set_postfix(last=m.name, status=fit.status)
+        for fit_m in [fit] + [shared_fit(fit, m, capture) for m in others]:
+            fits[fit_m.measurement] = fit_m
+            if out is not None:
+                write_fit(out, fit_m, model)
+        bar.update(1 + len(others))
+        bar.set_postfix(last=leader.name, status=fit.status)
     bar.close()
     result = [fits[m.name] for m in todo]
     if out is not None:
         write_index(out, capture, model, result, reference, model_source=source)
     return result
+
+
+def pose_groups(capture, measurements) -> list[list]:
+    """``measurements`` grouped by their ``pose`` label, each group led by the measurement its
+    shared fit is made on (:func:`~mifaces.shape.targets.reference_measurement` among them);
+    unlabelled measurements, and labelled ones whose feature points disagree with the leader's
+    (:data:`POSE_AGREEMENT`), are groups of their own."""
+    labelled: dict[str, list] = {}
+    groups = []
+    for m in measurements:
+        if m.pose is None:
+            groups.append([m])
+        else:
+            labelled.setdefault(m.pose, []).append(m)
+    for pose, members in labelled.items():
+        leader = next(m for m in members if m.name == reference_measurement(capture, members))
+        group = [leader]
+        for m in members:
+            if m is leader:
+                continue
+            if _points_agree(leader.feature_points, m.feature_points):
+                group.append(m)
+            else:
+                warnings.warn(f"measurement {m.name!r} is labelled pose {pose!r} but its feature points differ "
+                              f"from {leader.name!r}'s: fitted on its own", stacklevel=3)
+                groups.append([m])
+        groups.append(group)
+    order = {m.name: i for i, m in enumerate(measurements)}
+    return sorted(groups, key=lambda g: min(order[m.name] for m in g))
+
+
+def _points_agree(a: dict, b: dict) -> bool:
+    """Feature points ``b`` within :data:`POSE_AGREEMENT` of the spread of ``a`` (RMS over the names
+    both have); too few shared names do not agree."""
+    names = [n for n in a if n in b]
+    if len(names) < 3:
+        return False
+    pa = np.array([np.asarray(a[n], np.float64) for n in names])
+    pb = np.array([np.asarray(b[n], np.float64) for n in names])
+    spread = np.sqrt(np.mean(np.sum((pa - pa.mean(0)) ** 2, axis=1)))
+    return float(np.sqrt(np.mean(np.sum((pa - pb) ** 2, axis=1)))) <= POSE_AGREEMENT * spread
+
+
+def shared_fit(fit: ShapeFit, measurement, capture) -> ShapeFit:
+    """The fit of ``measurement`` that shares ``fit``'s geometry, pose and texture (same pose):
+    no lighting fitted (only the capture's light direction, in camera space, where known),
+    0 iterations, 0 seconds."""
+    light = {}
+    source = capture.light(measurement.light) if measurement.light else None
+    head = fit.vertices_world.mean(axis=0)
+    angles = start_light_angles(source, capture.camera, head) if np.all(np.isfinite(head)) else None
+    if angles is not None:
+        light["point"] = {"direction": light_direction(*angles)}
+    return replace(fit, measurement=measurement.name, light=light, iterations=0, seconds=0.0, history=[],
+                   shared_with=fit.measurement,
+                   message=f"geometry of {fit.measurement!r} (same pose)" + (f"; {fit.message}" if fit.message else ""))
 
 
 def _measurements(capture, names, model) -> list:

@@ -65,7 +65,8 @@ def write_index(out, capture, model, fits: list[ShapeFit], reference=None, model
         index["measurements"][fit.measurement] = {
             "status": fit.status, "vertices": f"{fit.measurement}.npy" if fit.converged else None,
             "parameters": f"{fit.measurement}.json", "seconds": round(fit.seconds, 3),
-            "feature_rms_px": fit.loss.get("feature_rms_px"), "message": fit.message}
+            "feature_rms_px": fit.loss.get("feature_rms_px"), "message": fit.message,
+            "shared_with": fit.shared_with, "estimated": list(fit.estimated)}
     write_json(out / INDEX, index)
 
 

@@ -54,9 +54,11 @@ class Weights:
     ``texture``: weights of the squared Mahalanobis norms; ``albedo``: of the
     per-vertex albedo's squared deviation from its mean (models without a
     colour model), per vertex; ``focal``: standard deviation of log focal length
-    around the calibrated value; ``distance_sigma``: the error (mm) of a metric
-    distance between feature points that costs 1 (part of E_P: it fixes the
-    scale, hence the depth, that images alone leave open).
+    around the calibrated value, and ``focal_uncalibrated`` around the guess of
+    an uncalibrated camera (``Camera.calibrated`` False); ``distance_sigma``:
+    the error (mm) of a metric distance between feature points that costs 1
+    (part of E_P: it fixes the scale, hence the depth, that images alone leave
+    open).
     """
 
     image_sigma: float = 0.05
@@ -69,6 +71,7 @@ class Weights:
     texture: float = 0.1
     albedo: float = 2.0
     focal: float = 0.01
+    focal_uncalibrated: float = 0.3
     distance_sigma: float = 1.0
 
 
@@ -80,11 +83,13 @@ class ShapeFit:
     ----------
     measurement : str
     status : str
-        ``'converged'``; ``'diverged'`` (non-finite loss, or feature points
-        ending farther from their targets than they started, or more than 4x
-        the limit); ``'not_converged'`` (feature points still above the limit
-        but closer than at the start: more iterations may help); ``message``
-        says why. Only converged fits are written as shapes.
+        ``'converged'`` (feature points end within the limit of
+        :func:`~mifaces.shape.fit.feature_limit`); ``'diverged'`` (non-finite
+        loss, or feature points ending farther from their targets than they
+        started, or more than 4x the limit); ``'not_converged'`` (feature
+        points still above the limit but closer than at the start: more
+        iterations may help); ``message`` says why. Only converged fits are
+        written as shapes.
     vertices_world, vertices_camera : (N, 3) float32
         Fitted vertices in the capture's world frame and in camera space, mm.
     coefficients : (K,) float64
@@ -113,6 +118,17 @@ class ShapeFit:
     iterations : int
     seconds : float
     message : str
+    shared_with : str or None
+        The measurement whose fit this one shares (same ``pose`` label: one
+        fit per pose, see :func:`~mifaces.shape.fit.fit_shape`); None for a
+        fit of its own. A shared fit has the geometry, pose and texture of
+        that fit, no fitted lighting, 0 iterations and 0 seconds.
+    estimated : tuple of str
+        What the capture did not give and the fit estimated: ``'scale'`` (no
+        metric distances: the face's size, hence its depth, comes from the
+        model's prior, the mean face's size), ``'focal_length'`` (an
+        uncalibrated camera: the focal length fitted from the guess; the
+        principal point stays at the guess).
     """
 
     measurement: str
@@ -133,6 +149,8 @@ class ShapeFit:
     seconds: float
     message: str = ""
     history: list = field(default_factory=list)
+    shared_with: str | None = None
+    estimated: tuple = ()
 
     @property
     def converged(self) -> bool:
@@ -151,4 +169,4 @@ class ShapeFit:
                           for k, v in self.light.items()},
                 "loss": {k: float(v) for k, v in self.loss.items()}, "iterations": int(self.iterations),
                 "seconds": float(self.seconds), "frame": "vertices in camera space (OpenCV), mm",
-                "history": self.history}
+                "shared_with": self.shared_with, "estimated": list(self.estimated), "history": self.history}

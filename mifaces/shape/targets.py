@@ -30,6 +30,24 @@ def light_direction(elevation: float, azimuth: float) -> np.ndarray:
                      -math.cos(elevation) * math.cos(azimuth)])
 
 
+def light_angles(direction) -> tuple[float, float]:
+    """``(elevation, azimuth)`` in radians of a camera-space direction towards a light: the
+    inverse of :func:`light_direction`."""
+    d = np.asarray(direction, np.float64)
+    d = d / np.linalg.norm(d)
+    return math.asin(float(np.clip(-d[1], -1, 1))), math.atan2(d[0], -d[2])
+
+
+def start_light_angles(light, camera, head_world) -> tuple[float, float] | None:
+    """Start angles (:func:`light_angles`) of a capture's :class:`~mifaces.capture.Light` seen
+    from the world point ``head_world`` (mm): a directional light's direction, a point light's
+    direction from there, turned into the camera frame; None for a light with neither."""
+    if light is None or (not light.directional and light.position is None):
+        return None
+    towards, _ = light.towards(np.asarray(head_world, np.float64)[None])
+    return light_angles(camera.rotation @ towards[0])
+
+
 def rotation_centre(model) -> np.ndarray:
     """The point ``c`` of the model the fitted rotation turns about: the centre of the
     mean shape's bounding box (model space, mm)."""
@@ -122,33 +140,53 @@ def start_light(camera, translation, light_world) -> tuple[float, float, float]:
     distance in mm."""
     head = camera.to_world(translation)
     d = camera.rotation @ (light_world - head)
-    distance = float(np.linalg.norm(d))
-    d /= np.linalg.norm(d)
-    return math.asin(float(np.clip(-d[1], -1, 1))), math.atan2(d[0], -d[2]), distance
+    return (*light_angles(d), float(np.linalg.norm(d)))
 
 
-def reference_measurement(capture) -> str:
-    """The measurement to take the starting texture from: the one whose light is closest to the
-    camera's viewing axis and whose feature points are most left-right symmetric (a frontal view
-    at frontal illumination, paper sec. 4.2)."""
-    cam = capture.camera
-    best, best_score = capture.measurements[0].name, np.inf
-    for m in capture.measurements:
-        light = capture.light(m.light).position if m.light else None
-        angle = 0.0
-        if light is not None:
-            fp = np.array(list(m.feature_points.values()))
-            centre = cam.to_world(cam.pixel_rays(fp.mean(0)) * np.linalg.norm(cam.translation))
-            d1 = (light - centre) / np.linalg.norm(light - centre)
-            d2 = (cam.position - centre) / np.linalg.norm(cam.position - centre)
-            angle = math.degrees(math.acos(float(np.clip(d1 @ d2, -1, 1))))
+def eye_distance_px(vertices_camera, model, focal_px: float) -> float:
+    """The face's size in the image: the distance between the outer eye corners (iBUG 37, 46) of
+    camera-space ``vertices_camera`` (mm), in 3-D, at the eyes' depth, in px for a focal length of
+    ``focal_px``. Independent of head rotation and of the face's overall scale (a model without
+    those landmarks: the RMS spread of its feature points about their centroid, likewise)."""
+    v = np.asarray(vertices_camera, np.float64)
+    ibug = model.ibug_landmarks
+    if 37 in ibug and 46 in ibug:
+        a, b = v[ibug[37]], v[ibug[46]]
+        return focal_px * float(np.linalg.norm(a - b)) / max(0.5 * (a[2] + b[2]), 1e-9)
+    p = v[[ibug[i] for i in FEATURE_POINTS.values() if i in ibug]]
+    return focal_px * float(np.sqrt(np.mean(np.sum((p - p.mean(0)) ** 2, axis=1)))) / max(p[:, 2].mean(), 1e-9)
+
+
+def light_axis_angle(capture, measurement) -> float:
+    """Angle (degrees) between a measurement's light and the camera's viewing axis, seen from the
+    feature points' centroid at the camera's distance; 0 for a measurement without a light."""
+    if not measurement.light:
+        return 0.0
+    light, cam = capture.light(measurement.light), capture.camera
+    fp = np.array(list(measurement.feature_points.values()))
+    distance = max(float(np.linalg.norm(cam.translation)), 1.0)
+    centre = cam.to_world(cam.pixel_rays(fp.mean(0)) * distance)
+    if not light.directional and light.position is None:
+        return 0.0
+    towards, _ = light.towards(centre[None])
+    d2 = (cam.position - centre) / np.linalg.norm(cam.position - centre)
+    return math.degrees(math.acos(float(np.clip(towards[0] @ d2, -1, 1))))
+
+
+def reference_measurement(capture, measurements=None) -> str:
+    """Among ``measurements`` (default: all of the capture's), the one to take the starting
+    texture from, or to fit a pose's shared shape on: the one whose light (point or directional)
+    is closest to the camera's viewing axis and whose feature points are most left-right
+    symmetric (a frontal view at frontal illumination, paper sec. 4.2)."""
+    best, best_score = None, np.inf
+    for m in capture.measurements if measurements is None else measurements:
         pts = m.feature_points
         asym = 0.0
         if "nose_tip" in pts and "right_eye_outer" in pts and "left_eye_outer" in pts:
             a = np.linalg.norm(np.asarray(pts["right_eye_outer"]) - pts["nose_tip"])
             b = np.linalg.norm(np.asarray(pts["left_eye_outer"]) - pts["nose_tip"])
             asym = abs(math.log(max(a, 1e-6) / max(b, 1e-6))) * 100.0
-        score = angle + asym
-        if score < best_score:
+        score = light_axis_angle(capture, m) + asym
+        if best is None or score < best_score:
             best, best_score = m.name, score
     return best
