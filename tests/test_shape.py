@@ -428,7 +428,8 @@ def yale_capture(subject: Path, lights: int = 8):
     found = detect_landmarks(frontal.pixels, box=(0, 0, w - 1, h - 1)).points
     points = {n: found[i - 1] for n, i in FEATURE_POINTS.items() if i >= 18 or n == "chin"}
     diffuse = image(frontal.pixels, frontal.stem)
-    ms = [Measurement(y.stem, y.light, "frontal", image(y.pixels, y.stem), diffuse, (), points) for y in chosen]
+    ms = [Measurement(y.stem, f"L{i}", "frontal", image(y.pixels, y.stem), diffuse, (), points)
+          for i, y in enumerate(chosen)]
     camera = Camera(w, h, 4.0 * h, 4.0 * h, (w - 1) / 2, (h - 1) / 2, calibrated=False)
     return directional_capture(camera, ms, [y.direction for y in chosen], path=subject)
 
