@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import click
 
+from .capture.ground_truth import ground_truth_folder
 from .status import CONVERGED
 
 
@@ -90,7 +91,7 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
     click.echo(f"simulated {result.measurements} measurement{'s' * (result.measurements != 1)} under "
                f"{result.lights} light{'s' * (result.lights != 1)} in {result.seconds:.1f} s "
                f"({result.seconds_per_measurement:.1f} s per measurement)")
-    click.echo(f"  capture:      {result.path}\n  ground truth: {result.path / 'ground_truth'}")
+    click.echo(f"  capture:      {result.path}\n  ground truth: {ground_truth_folder(result.path)}")
 
 
 @main.command("fit-shape")
