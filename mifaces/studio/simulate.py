@@ -55,7 +55,7 @@ from ..capture import FORMAT, GROUND_TRUTH, MANIFEST, VERSION, Camera
 from ..files import atomic_write, write_exr, write_json, write_png
 from ..model.geometry import rotation_matrix
 from ..render import face_shapes, mitsuba_sensor, rgb as _rgb
-from .truth import COOK_TORRANCE_REGIONS, DEFAULT_OPTIONS, brdf_with_overrides, default_brdf  # noqa: F401
+from .truth import COOK_TORRANCE_REGIONS, brdf_with_overrides, default_brdf  # noqa: F401
 
 PRESETS = {"paper": {"measurements": 22}}
 #: Studio geometry (mm). Camera distance to the head centre, field height there.
