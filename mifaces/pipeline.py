@@ -20,10 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .brdf import NAMES
 from .files import atomic_write, write_json
 
 #: Models ``measure`` fits unless told otherwise.
-MODELS = ("cooktorrance", "ward", "phong", "lafortune")
+MODELS = NAMES
 
 
 def novel_light(capture, centre: np.ndarray) -> np.ndarray:
