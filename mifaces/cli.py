@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import click
 
+from .brdf import NAMES as BRDF_MODELS
 from .capture.ground_truth import ground_truth_folder
 from .status import CONVERGED
 
@@ -55,7 +56,7 @@ def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
 @click.option("--model", "face_model", default="builtin", show_default=True,
               help="Face model: 'builtin' or a model file (see mifaces.load_model).")
 @click.option("--brdf", "brdf_model", default="cooktorrance", show_default=True,
-              type=click.Choice(["phong", "cooktorrance", "ward", "lafortune"]), help="Ground-truth BRDF plugin.")
+              type=click.Choice(BRDF_MODELS), help="Ground-truth BRDF plugin.")
 @click.option("--brdf-params", type=click.Path(exists=True, dir_okay=False), default=None,
               help='JSON overrides: {"model": ..., "regions": {region: {parameter: value}}} (docs/capture.md).')
 @click.option("--measurements", default=6, show_default=True, type=click.IntRange(1),
@@ -124,7 +125,7 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
 @main.command("fit-brdf")
 @click.argument("capture", type=click.Path(exists=True))
 @click.option("--model", "brdf_model", default="cooktorrance", show_default=True,
-              type=click.Choice(["phong", "cooktorrance", "ward", "lafortune"]), help="BRDF model to fit per region.")
+              type=click.Choice(BRDF_MODELS), help="BRDF model to fit per region.")
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Folder for brdf.json, albedo.exr and scene.xml.")
 @click.option("--geometry", default="ground-truth", show_default=True,
@@ -158,7 +159,7 @@ def _short(value) -> str:
 @click.argument("capture", required=False, type=click.Path(exists=True))
 @click.option("--out", "out_dir", default="out/measure", show_default=True, type=click.Path(file_okay=False),
               help="Output folder (capture/, shapes/, brdf/<model>/, report.md/json/png).")
-@click.option("--model", "models", multiple=True, type=click.Choice(["phong", "cooktorrance", "ward", "lafortune"]),
+@click.option("--model", "models", multiple=True, type=click.Choice(BRDF_MODELS),
               help="BRDF model(s) to fit (default: all four).")
 @click.option("--geometry", default="fitted", show_default=True, type=click.Choice(["fitted", "ground-truth"]),
               help="Fit the face model to each photograph, or use a simulated capture's true shapes.")

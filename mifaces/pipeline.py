@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .brdf import NAMES
 from .capture import Capture, load_capture
 from .files import write_json
 from .geometry import load_geometry
@@ -30,7 +31,7 @@ from .shape import fit_shape, shapes_in_world
 from .studio import simulate
 
 #: Models ``measure`` fits unless told otherwise.
-MODELS = ("cooktorrance", "ward", "phong", "lafortune")
+MODELS = NAMES
 #: Where the face geometry comes from.
 GEOMETRIES = ("fitted", "ground-truth")
 

@@ -101,7 +101,7 @@ def test_scene_renders_the_first_photograph(capture_dir, estimate):
 def test_other_models_and_lobes(capture_dir, tmp_path):
     import mifaces
     from mifaces.reflectance.estimate import fit_brdf
-    from mifaces.reflectance.fitting import Schedule
+    from mifaces.reflectance.fitting import SubsetSchedule
     from mifaces.capture import load_capture
     from mifaces.reflectance.samples import capture_samples
     from mifaces.geometry import load_geometry
@@ -110,7 +110,7 @@ def test_other_models_and_lobes(capture_dir, tmp_path):
     capture = load_capture(capture_dir)
     face, shapes = load_geometry(capture)
     samples = capture_samples(capture, shapes, face, 64, progress=False)
-    quick = Schedule(iterations=5, final_iterations=15)
+    quick = SubsetSchedule(iterations=5, final_iterations=15)
     for model, lobes in (("phong", 1), ("ward", 1), ("lafortune", 2)):
         with pytest.warns(UserWarning):
             result = fit_brdf(capture, model, lobes=lobes, resolution=64, samples=samples, schedule=quick,

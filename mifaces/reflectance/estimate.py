@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import brdf as brdf_models
-from .fitting import REFRACTIVE_INDEX, RegionFit, Schedule, fit_regions
+from .fitting import RegionFit, SubsetSchedule, fit_regions
 from ..capture import GROUND_TRUTH, Capture, load_capture
 from .diffuse import DiffuseMap, refine_diffuse
 from ..files import atomic_path, atomic_write, write_exr, write_json, write_png
@@ -109,7 +109,7 @@ class BRDFEstimate:
 
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
              resolution: int = 512, lobes: int = 1, options: dict | None = None, fixed: dict | None = None,
-             schedule: Schedule | None = None, samples: ReflectanceSamples | None = None, measurements=None,
+             schedule: SubsetSchedule | None = None, samples: ReflectanceSamples | None = None, measurements=None,
              out=None, seed: int = 0, progress: bool = True) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture.
 
@@ -128,10 +128,10 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     options : dict, optional
         Further model options (``fresnel=``, ``normalization=``, …).
     fixed : dict, optional
-        Parameters held fixed in every region (default: Cook-Torrance's η
-        at each region's published value,
-        :data:`mifaces.reflectance.fitting.REFRACTIVE_INDEX`).
-    schedule : Schedule, optional
+        Parameters held fixed in every region (default: the model's
+        ``fixed_in_region``, e.g. Cook-Torrance's η at each region's published
+        value, :data:`mifaces.brdf.materials.REFRACTIVE_INDEX`).
+    schedule : SubsetSchedule, optional
         The LM subset hierarchy.
     samples : ReflectanceSamples, optional
         Samples computed before (skips step 1; must match ``resolution``).
@@ -147,10 +147,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     t0 = time.perf_counter()
     capture = capture if isinstance(capture, Capture) else load_capture(capture)
     options = dict(options or {})
-    if model == "lafortune" and lobes != 1:
-        options["lobes"] = int(lobes)
-    elif lobes != 1:
-        raise ValueError(f"lobes={lobes}: only the lafortune model has several lobes")
+    if lobes != 1:
+        options["lobes"] = int(lobes)  # brdf_models.model refuses it for a model with one lobe
     brdf = brdf_models.model(model, **options)
     face, shapes = load_geometry(capture, geometry, face_model)
     if samples is None:
@@ -166,9 +164,9 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     on_face = np.isin(label, list(names))
     light, view, r, sigma, texel, label = (a[on_face] for a in (samples.light, samples.view, samples.reflectance,
                                                                 samples.sigma, samples.texel, label))
-    # Cook-Torrance's index of refraction is fixed per region at its published value unless given
-    per_region = ({name: {"eta": REFRACTIVE_INDEX[name]} for name in names.values() if name in REFRACTIVE_INDEX}
-                  if brdf.name == "cooktorrance" and (fixed is None or "eta" not in fixed) else None)
+    # parameters with a published value per region (Cook-Torrance's η) are fixed at it unless given
+    per_region = {name: {k: v for k, v in brdf.fixed_in_region(name).items() if fixed is None or k not in fixed}
+                  for name in names.values()}
     fits = fit_regions(brdf, light, view, r, sigma, label, names, progress=progress, fixed=fixed,
                        fixed_by_region=per_region, schedule=schedule, seed=seed)
     t_fit = time.perf_counter()
