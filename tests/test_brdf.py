@@ -325,8 +325,8 @@ def test_cooktorrance_holds_eta_at_the_published_value():
 def test_models_from_a_generic_lobe(name):
     """from_lobe: a lobe of albedo a at normal incidence and Beckmann width m
     becomes the model's parameters: Ward α = m; the Phong and Lafortune
-    exponent n = 1/(2m²); the Phong ρ_s = a; the Lafortune C^n = 2π a/(n + 2),
-    the relation the simulator's docstring states."""
+    exponent n = 1/(2m²); the Phong ρ_s = a; the Lafortune C^n = a (n + 2)/2π,
+    the Phong lobe's value, so its albedo C^n 2π/(n + 2) is a."""
     albedo_rgb, m = [0.04, 0.03, 0.02], 0.35
     params = brdf.model(name).from_lobe(albedo_rgb, m)
     n = 1.0 / (2.0 * m * m)
@@ -336,7 +336,7 @@ def test_models_from_a_generic_lobe(name):
         assert params == {"specular_reflectance": albedo_rgb, "exponent": pytest.approx(n)}
     else:
         assert params["exponent"] == pytest.approx(n)
-        np.testing.assert_allclose(np.array(params["cz"]) ** n, 2 * np.pi * np.array(albedo_rgb) / (n + 2), rtol=1e-12)
+        np.testing.assert_allclose(np.array(params["cz"]) ** n, np.array(albedo_rgb) * (n + 2) / (2 * np.pi), rtol=1e-12)
         assert params["cxy"] == [-c for c in params["cz"]]
     with pytest.raises(NotImplementedError):
         brdf.model("cooktorrance").from_lobe(albedo_rgb, m)

@@ -127,11 +127,11 @@ class Lafortune(BRDFModel):
     def from_lobe(self, albedo, roughness):
         """One forward-scattering lobe, C_z = -C_xy = c, as wide as the
         Beckmann lobe (:func:`~mifaces.brdf.cosine_lobe.exponent_of_slope`),
-        with c^n = 2π a/(n + 2) for albedo a (the relation
-        :mod:`mifaces.studio.simulate` states for the ground truth; note that
-        the lobe's albedo estimate c^n 2π/(n + 2) is then (2π/(n + 2))² a)."""
+        with c^n = a (n + 2)/2π for albedo a, so that the lobe's albedo at
+        normal incidence, c^n 2π/(n + 2), is a: the normalised Phong lobe
+        a (n + 2)/2π cos^n α written as a Lafortune lobe."""
         n = cosine_lobe.exponent_of_slope(roughness)
-        c = [float((2 * np.pi * a / (n + 2)) ** (1.0 / n)) for a in albedo]
+        c = [float((a * (n + 2) / (2 * np.pi)) ** (1.0 / n)) for a in albedo]
         return {"cxy": [-x for x in c], "cz": c, "exponent": n}
 
     def _lobe(self, j, params):

@@ -42,7 +42,7 @@ matches the width of the lobe (cos^n α ≈ exp(-n α²/2) around the mirror
 direction, Beckmann exp(-θh²/m²), α = 2θh in the plane of incidence);
 the Phong and Ward ρ_s, and the Lafortune coefficients (a lobe
 C_xy = -C, C_z = C is the modified Phong lobe, Lafortune et al. 1997, with
-C^n = 2π ρ_s / (n + 2)), take the Cook–Torrance lobe's albedo at normal
+C^n = ρ_s (n + 2) / 2π), take the Cook–Torrance lobe's albedo at normal
 incidence, computed with the array API of :mod:`mifaces.brdf`.
 """
 
