@@ -232,11 +232,11 @@ class FaceScene:
             scene["environment"] = environment
         return scene
 
-    def scene(self, brdf: dict, albedo: np.ndarray, camera, *args, **kwargs) -> dict:
+    def scene(self, brdf: dict, albedo: np.ndarray, camera, light_position=None, intensity=None, envmap=None,
+              envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4) -> dict:
         """:meth:`description` with the meshes and the ``albedo`` array (R, R, 3)
-        in memory in place of their files: a dict for ``mi.load_dict``. The
-        further arguments are :meth:`description`'s."""
-        scene = self.description(brdf, camera, *args, **kwargs)
+        in memory in place of their files: a dict for ``mi.load_dict``."""
+        scene = self.description(brdf, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth)
         texture = {k: v for k, v in scene.pop(ALBEDO).items() if k != "filename"}
         texture = mi.load_dict({**texture, "bitmap": mi.Bitmap(np.ascontiguousarray(albedo, np.float32))})
         for key, part in self.meshes.items():
