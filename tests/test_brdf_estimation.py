@@ -15,6 +15,7 @@ from click.testing import CliRunner
 from skimage.transform import resize
 
 from mifaces.capture import load_capture
+from mifaces.capture.ground_truth import ground_truth_folder
 from mifaces.cli import main
 from mifaces.files import read_exr
 from mifaces.geometry import load_geometry
@@ -230,7 +231,7 @@ def test_brdf_moves_to_another_face(estimate, other_dir, tmp_path):
     result, out = estimate
     capture = load_capture(other_dir)
     face, shapes = load_geometry(capture)
-    own_brdf = other_dir / "ground_truth"  # the other face's brdf.json and albedo.exr
+    own_brdf = ground_truth_folder(other_dir)  # the other face's brdf.json and albedo.exr
     own = read_exr(render_fitted(own_brdf, capture, tmp_path / "own", spp=4)["exr"])
     moved = read_exr(render_fitted(out, capture, tmp_path / "moved", spp=4)["exr"])
     on_face = own.mean(axis=2) > 0
