@@ -196,7 +196,7 @@ def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, 
            light_position, envmap: str | None, envmap_scale: float, spp: int) -> None:
     """Render the BRDF fitted in BRDF_DIR on a face of CAPTURE: novel poses, lights, environment maps, or
     another person's face (BRDF transfer)."""
-    from .reflectance.estimate import render_fitted
+    from .reflectance.render import render_fitted
 
     paths = render_fitted(brdf_dir, capture, out_stem, measurement, geometry, yaw=yaw,
                           light_position=light_position, envmap=envmap, envmap_scale=envmap_scale, spp=spp)

@@ -23,8 +23,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 import scipy.ndimage
+import skimage.morphology
+from tqdm import tqdm
+
+from ..files import atomic_path
+from ..model.geometry import tangent_frames
+from ..model.mesh import mitsuba_mesh
+from ..model.regions import texel_regions_of_mesh
+from ..model.texture_space import rasterize
 
 #: Samples seen or lit at cos θ below this are dropped (θ > 80°).
 MIN_COSINE = np.cos(np.radians(80.0))
@@ -112,8 +122,6 @@ def valid_samples(light_z, view_z, lit, visible, erosion: int = 1, min_cosine: f
     lit, visible : ndarray (R, R) of bool
         Not in cast shadow; seen by the camera.
     """
-    import skimage.morphology
-
     light_z, view_z = np.asarray(light_z), np.asarray(view_z)
     with np.errstate(invalid="ignore"):
         mask = np.asarray(lit, bool) & np.asarray(visible, bool) & (light_z >= min_cosine) & (view_z >= min_cosine)
@@ -190,8 +198,6 @@ class ReflectanceSamples:
 
     def save(self, path) -> None:
         """Write as a compressed ``.npz``, atomically."""
-        from ..files import atomic_path
-
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
                 np.savez_compressed(f, light=self.light, view=self.view, reflectance=self.reflectance,
@@ -226,8 +232,6 @@ def texel_geometry(vertices, triangles, uv, coverage) -> TexelGeometry:
     """Interpolate positions and the per-vertex shading frames of
     :func:`mifaces.model.geometry.tangent_frames` at the texel centres that
     ``coverage`` (:func:`mifaces.model.texture_space.rasterize`) finds."""
-    from ..model.geometry import tangent_frames
-
     vertices = np.asarray(vertices, np.float64)
     triangles = np.asarray(triangles, np.int64)
     tangent, _, normal = (np.asarray(a, np.float64) for a in tangent_frames(vertices, triangles, uv))
@@ -250,9 +254,6 @@ def texel_geometry(vertices, triangles, uv, coverage) -> TexelGeometry:
 def _unoccluded(scene, origin, target, normal, offset: float) -> np.ndarray:
     """True where the segment from ``origin`` (pushed ``offset`` along the
     normal) to ``target`` hits nothing in ``scene``."""
-    import drjit as dr
-    import mitsuba as mi
-
     if len(origin) == 0:
         return np.zeros(0, bool)
     start = origin + offset * normal
@@ -292,11 +293,6 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
         Valid texels only: visible from the camera, not in cast shadow, not
         grazing, inside the image, unsaturated; σ by eq. 10.
     """
-    import mitsuba as mi
-    import scipy.ndimage as ndi
-
-    from ..model.mesh import mitsuba_mesh
-
     pixels = np.asarray(pixels, np.float32)
     if pixels.shape != (camera.height, camera.width, 3):
         raise ValueError(f"image of shape {pixels.shape} does not match the camera's "
@@ -323,12 +319,12 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
     xy = camera.project(p)
     inside = (xy[:, 0] >= 0) & (xy[:, 0] <= camera.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= camera.height - 1)
     coords = [xy[:, 1], xy[:, 0]]
-    radiance = np.stack([ndi.map_coordinates(pixels[..., c], coords, order=1, mode="nearest")
+    radiance = np.stack([scipy.ndimage.map_coordinates(pixels[..., c], coords, order=1, mode="nearest")
                          for c in range(3)], axis=1)
     ok = inside
     if saturated is not None:
-        near = ndi.binary_dilation(np.asarray(saturated, bool))  # bilinear taps touch the neighbours
-        ok &= ~ndi.map_coordinates(near.astype(np.uint8), coords, order=0, mode="nearest").astype(bool)
+        near = scipy.ndimage.binary_dilation(np.asarray(saturated, bool))  # bilinear taps touch the neighbours
+        ok &= ~scipy.ndimage.map_coordinates(near.astype(np.uint8), coords, order=0, mode="nearest").astype(bool)
     r = reflectance(radiance, dist_light, intensity, cos_l, scale)
 
     def image(values, fill):
@@ -385,11 +381,6 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
         A measurement without geometry, geometry of another model (wrong
         vertex count), an uncalibrated light.
     """
-    from tqdm import tqdm
-
-    from ..model.regions import texel_regions_of_mesh
-    from ..model.texture_space import rasterize
-
     if resolution < 8:
         raise ValueError(f"texture resolution must be at least 8, got {resolution}")
     names = [m.name for m in capture.measurements]
