@@ -25,7 +25,8 @@ from .capture import Capture, load_capture
 from .files import write_json
 from .geometry import load_geometry
 from .model import load_model
-from .reflectance import capture_samples, fit_brdf, render_estimate
+from .reflectance import capture_samples, fit_brdf, write_estimate
+from .render import FaceScene
 from .report import ground_truth_errors, write_markdown, write_picture
 from .shape import fit_shape, shapes_in_world
 from .studio import simulate
@@ -117,9 +118,10 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     timings["reflectance_samples"] = time.perf_counter() - t
     first = next(m for m in capture.measurements if m.name in shapes)
     novel = novel_light(capture, np.asarray(shapes[first.name]).mean(axis=0))
+    scene = FaceScene(face, shapes[first.name])  # the first photograph's face, built once for every model
     panels = []
     for model in models:
-        entry, panel = _fit_model(out, capture, model, face, shapes, samples, first, novel, resolution, spp,
+        entry, panel = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, resolution, spp,
                                   timings, progress)
         report["models"][model] = entry
         panels.append(panel)
@@ -164,23 +166,24 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
     return face, shapes
 
 
-def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, first, novel, resolution: int,
-               spp: int, timings: dict, progress: bool):
-    """Fit one BRDF model, render it in the first photograph's place and under
-    the novel light; the report's entry and picture row."""
+def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, scene: FaceScene, first,
+               novel, resolution: int, spp: int, timings: dict, progress: bool):
+    """Fit one BRDF model, write it, render it in the first photograph's place
+    and under the novel light; the report's entry and picture row."""
     t = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
-                            out=out / "brdf" / model, progress=progress)
+                            progress=progress)
+    lamp = capture.light(first.light)
+    write_estimate(estimate, out / "brdf" / model, scene, capture.camera, lamp.position, lamp.intensity)
     timings[f"fit_brdf_{model}"] = time.perf_counter() - t
     entry = estimate.to_json()
     entry["warnings"] = [str(w.message) for w in caught]
     entry["ground_truth"] = ground_truth_errors(estimate, capture)
-    lamp = capture.light(first.light)
-    vertices = shapes[first.name]
-    rendered = render_estimate(estimate, face, vertices, capture.camera, lamp.position, lamp.intensity, spp=spp)
-    relit = render_estimate(estimate, face, vertices, capture.camera, novel, lamp.intensity, spp=spp)
+    brdf, albedo = estimate.to_json(), estimate.albedo.albedo
+    rendered = scene.render(brdf, albedo, capture.camera, lamp.position, lamp.intensity, spp=spp)
+    relit = scene.render(brdf, albedo, capture.camera, novel, lamp.intensity, spp=spp)
     photo = first.image.pixels
     face_pixels = photo.mean(axis=2) > 0.02 * photo.max()
     entry["image_relative_rmse"] = float(np.sqrt(np.mean((rendered[face_pixels] - photo[face_pixels]) ** 2))

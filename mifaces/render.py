@@ -22,10 +22,10 @@ from pathlib import Path
 
 import mitsuba as mi
 import numpy as np
-from tqdm import tqdm
 
 from . import brdf as brdf_models
 from .files import atomic_path, write_exr, write_png
+from .progress import progress
 from .model.mesh import mitsuba_mesh
 from .model.regions import REGIONS, triangle_regions
 
@@ -44,7 +44,7 @@ def render_passes(scene, spp: int, passes: int = 8, desc: str = "rendering") -> 
     passes = max(1, min(passes, spp))
     per_pass = [spp // passes + (1 if i < spp % passes else 0) for i in range(passes)]
     total = None
-    for seed, n in enumerate(tqdm(per_pass, desc=desc, unit="pass", leave=False)):
+    for seed, n in enumerate(progress(per_pass, desc=desc, unit="pass", leave=False, detail=True)):
         image = np.array(mi.render(scene, spp=n, seed=seed), dtype=np.float64)
         total = image * n if total is None else total + image * n
     return (total / spp).astype(np.float32)

@@ -148,7 +148,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     if len(samples) == 0:
         raise ValueError("no valid reflectance samples: every texel is hidden, shadowed, grazing or saturated")
     t_samples = time.perf_counter()
-    region_map = texel_regions_of_mesh(face.region_map, face.uv, face.triangles, resolution)
+    region_map = (samples.region_map if samples.region_map is not None
+                  else texel_regions_of_mesh(face.region_map, face.uv, face.triangles, resolution))
     label = samples.label if samples.label is not None else samples.region(region_map)
     names = {REGIONS[n]: n for n in regions_present(face.region_map)}
     on_face = np.isin(label, list(names))

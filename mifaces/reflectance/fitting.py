@@ -25,10 +25,10 @@ from dataclasses import asdict, dataclass, field
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-from tqdm import tqdm
 
 from .. import brdf as brdf_models
 from ..brdf.model import BRDFModel, Parameter
+from ..progress import progress as progress_bar
 from ..status import AT_BOUND, CONVERGED, PRIOR
 from .levenberg_marquardt import levenberg_marquardt
 
@@ -471,7 +471,7 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     counts = {name: int(np.count_nonzero(region == label)) for label, name in region_names.items()}
     fits: dict[str, RegionFit] = {}
     fitted = [(label, name) for label, name in region_names.items() if counts[name] >= needed]
-    bar = tqdm(fitted, desc=f"fitting {model.name}", unit="region", disable=not progress)
+    bar = progress_bar(fitted, desc=f"fitting {model.name}", unit="region", enabled=progress)
     held = {}  # region name -> its fixed parameters
     for label, name in bar:
         bar.set_postfix_str(f"{name}: {counts[name]} samples")

@@ -28,11 +28,11 @@ import mitsuba as mi
 import numpy as np
 import scipy.ndimage
 import skimage.morphology
-from tqdm import tqdm
 
 from ..files import atomic_path
 from ..model.geometry import tangent_frames
 from ..model.mesh import mitsuba_mesh
+from ..progress import progress as progress_bar
 from ..model.regions import texel_regions_of_mesh
 from ..model.texture_space import rasterize
 
@@ -155,6 +155,9 @@ class ReflectanceSamples:
     label : (N,) uint8 or None
         Region label of each sample (:data:`mifaces.model.regions.REGIONS`),
         from the face model's a-priori region map (sec. 4.4).
+    region_map : (R, R) uint8 or None
+        That region map: the region of every texel, as the rendered face
+        assigns materials (computed once, with the samples).
     """
 
     light: np.ndarray
@@ -166,6 +169,7 @@ class ReflectanceSamples:
     resolution: int
     measurement_names: tuple = ()
     label: np.ndarray | None = None
+    region_map: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.sigma)
@@ -194,7 +198,8 @@ class ReflectanceSamples:
             *(np.concatenate([getattr(p, k) for p in parts]) for k in ("light", "view", "reflectance", "sigma", "texel")),
             measurement=np.concatenate([p.measurement + o for p, o in zip(parts, offsets)]).astype(np.int16),
             resolution=parts[0].resolution, measurement_names=tuple(names),
-            label=np.concatenate([p.label for p in parts]) if labelled else None)
+            label=np.concatenate([p.label for p in parts]) if labelled else None,
+            region_map=parts[0].region_map)
 
     def save(self, path) -> None:
         """Write as a compressed ``.npz``, atomically."""
@@ -406,7 +411,7 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     scale = capture.white_target.reflectance_scale()
     parts = []
     chosen = [m for m in capture.measurements if m.name in wanted]
-    for m in tqdm(chosen, desc="reflectance samples", unit="photo", disable=not progress):
+    for m in progress_bar(chosen, desc="reflectance samples", unit="photo", enabled=progress):
         light = capture.light(m.light)
         if light.position is None:
             raise ValueError(f"measurement {m.name!r}: light {light.name!r} has no position "
@@ -417,4 +422,5 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
                                          min_cosine=min_cosine, name=m.name))
     samples = ReflectanceSamples.concatenate(parts)
     samples.label = samples.region(region_map).astype(np.uint8)
+    samples.region_map = region_map
     return samples

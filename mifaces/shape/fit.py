@@ -11,9 +11,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from ..model import MorphableModel, load_model
+from ..progress import progress as progress_bar
 from ..status import CONVERGED, DIVERGED, NOT_CONVERGED
 from .fitter import Fitter
 from .io import as_capture, write_fit, write_index
@@ -51,7 +51,7 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
         ``'not_converged'`` (see :attr:`ShapeFit.status`).
     seed : int
         Seeds the choice of sample vertices.
-    progress : bool or tqdm
+    progress : bool or progress bar
         Show a progress bar (or update the one given).
     lr : (float, float)
         Adam's step (in natural units of each parameter) at the start and the end of the image levels.
@@ -90,8 +90,8 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
                      light_world=light_position, fit_focal=fit_focal, initial_color=initial_color,
                      initial=initial, fixed=fixed, distances=distances)
     own_bar = progress is True
-    bar = tqdm(total=schedule.pose_iterations + (sum(int(l[0]) for l in schedule.levels) if images else 0),
-               desc=f"fit {measurement.name}", unit="it", leave=False) if own_bar else (progress or None)
+    bar = progress_bar(total=schedule.pose_iterations + (sum(int(l[0]) for l in schedule.levels) if images else 0),
+                       desc=f"fit {measurement.name}", unit="it", leave=False, detail=True) if own_bar else (progress or None)
     try:
         theta, terms, history, iterations, status, message = fitter.run(bar, lr=lr,
                                                                        visibility_interval=visibility_interval)
@@ -182,7 +182,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     iterations : float or ShapeSchedule, optional
         A :class:`ShapeSchedule`, or a factor on the default schedule's iteration counts.
     progress : bool
-        Show progress bars (tqdm).
+        Show progress (:func:`mifaces.progress.progress`).
     weights : Weights, optional
     use_diffuse : bool
         Use the companion diffuse-light image where present.
@@ -216,7 +216,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     todo = _measurements(capture, measurements, model)
     reference = reference_measurement(capture) if model.has_texture else None
     fits, initial_color = {}, None
-    bar = tqdm(total=len(todo), desc="fit-shape", unit="image", disable=not progress)
+    bar = progress_bar(total=len(todo), desc="fit-shape", unit="image", enabled=bool(progress))
     for m in sorted(todo, key=lambda m: m.name != reference):
         light = capture.light(m.light).position if m.light else None
         fit = fit_measurement(m, capture.camera, model, light_position=light, schedule=schedule, weights=weights,
