@@ -5,21 +5,48 @@ Each command is one API call that a script could make.
 
 from __future__ import annotations
 
+import inspect
+import json
+import warnings
+
 import click
+
+import mifaces
 
 from .brdf import NAMES as BRDF_MODELS
 from .capture.ground_truth import ground_truth_folder
+from .files import write_json
+from .gallery import render_gallery
+from .landmarks import NoFaceError, detect_landmarks
+from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
+from .reflectance import fit_brdf as fit_brdf_model, render_fitted
+from .shape import fit_shape as fit_shapes
 from .status import CONVERGED
+from .studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
 
 
-@click.group()
+def default(function, name: str):
+    """The default of parameter ``name`` of API ``function``: the CLI states no default of its own."""
+    return inspect.signature(function).parameters[name].default
+
+
+class Commands(click.Group):
+    """The command group: the library's errors (bad input, missing files, a
+    failed stage) end a command with their message and exit code 1, not a
+    traceback."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except (ValueError, KeyError, TypeError, OSError) as error:
+            message = error.args[0] if isinstance(error, KeyError) and error.args else str(error)
+            raise click.ClickException(str(message)) from None
+
+
+@click.group(cls=Commands)
 @click.option("--variant", default=None, help="Mitsuba variant (default: cuda_ad_rgb with a GPU, else llvm_ad_rgb).")
 def main(variant: str | None) -> None:
     """Measure the reflectance of human faces from photographs."""
-    import warnings
-
-    import mifaces
-
     # warnings read as messages on the command line, not as source excerpts
     warnings.formatwarning = lambda message, category, *args, **kwargs: f"warning: {message}\n"
     mifaces.set_variant(variant)
@@ -29,15 +56,14 @@ def main(variant: str | None) -> None:
 
 
 @main.command()
-@click.option("--out", "out_dir", default="out/gallery", show_default=True, type=click.Path(file_okay=False),
+@click.option("--out", "out_dir", default=default(render_gallery, "out_dir"), show_default=True, type=click.Path(file_okay=False),
               help="Folder for gallery.exr and gallery.png.")
-@click.option("--spp", default=128, show_default=True, type=click.IntRange(1), help="Samples per pixel.")
-@click.option("--size", default=(1200, 340), show_default=True, type=(click.IntRange(8), click.IntRange(8)),
+@click.option("--spp", default=default(render_gallery, "spp"), show_default=True, type=click.IntRange(1),
+              help="Samples per pixel.")
+@click.option("--size", default=(default(render_gallery, "width"), default(render_gallery, "height")), show_default=True, type=(click.IntRange(8), click.IntRange(8)),
               help="Image width and height.")
 def gallery(out_dir: str, spp: int, size: tuple[int, int]) -> None:
     """Render the BSDF gallery: one sphere per plugin (phong, cooktorrance, ward, lafortune)."""
-    from .gallery import render_gallery
-
     result = render_gallery(out_dir, spp=spp, width=size[0], height=size[1])
     click.echo(f"rendered the gallery in {result['seconds']:.1f} s ({result['variant']}, {spp} spp)")
     click.echo(f"  {result['exr']}\n  {result['png']}")
@@ -53,29 +79,28 @@ def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
 
 @main.command()
 @click.argument("out", type=click.Path(file_okay=False))
-@click.option("--model", "face_model", default="builtin", show_default=True,
+@click.option("--model", "face_model", default=default(simulate_capture, "model"), show_default=True,
               help="Face model: 'builtin' or a model file (see mifaces.load_model).")
-@click.option("--brdf", "brdf_model", default="cooktorrance", show_default=True,
+@click.option("--brdf", "brdf_model", default=default(simulate_capture, "brdf"), show_default=True,
               type=click.Choice(BRDF_MODELS), help="Ground-truth BRDF plugin.")
 @click.option("--brdf-params", type=click.Path(exists=True, dir_okay=False), default=None,
               help='JSON overrides: {"model": ..., "regions": {region: {parameter: value}}} (docs/capture.md).')
-@click.option("--measurements", default=6, show_default=True, type=click.IntRange(1),
+@click.option("--measurements", default=default(simulate_capture, "measurements"), show_default=True, type=click.IntRange(1),
               help="Number of measurements (three poses per light).")
-@click.option("--resolution", default="512x512", show_default=True, callback=_width_x_height,
+@click.option("--resolution", default="{}x{}".format(*default(simulate_capture, "resolution")), show_default=True,
+              callback=_width_x_height,
               help="Image size WxH.")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(0), help="Seed of everything random.")
-@click.option("--preset", type=click.Choice(["paper"]), default=None,
+@click.option("--seed", default=default(simulate_capture, "seed"), show_default=True, type=click.IntRange(0),
+              help="Seed of everything random.")
+@click.option("--preset", type=click.Choice(sorted(PRESETS)), default=None,
               help="'paper': the paper's 22 measurements (overrides --measurements).")
-@click.option("--spp", default=64, show_default=True, type=click.IntRange(1), help="Samples per pixel.")
-@click.option("--companion", default="diffuse", show_default=True, type=click.Choice(["diffuse", "exposures", "both"]),
+@click.option("--spp", default=default(simulate_capture, "spp"), show_default=True, type=click.IntRange(1), help="Samples per pixel.")
+@click.option("--companion", default=default(simulate_capture, "companion"), show_default=True,
+              type=click.Choice(COMPANIONS),
               help="Companion of each point-light photograph.")
 def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None, measurements: int,
              resolution: tuple[int, int], seed: int, preset: str | None, spp: int, companion: str) -> None:
     """Simulate a capture session with ground truth into folder OUT (paper sec. 3)."""
-    import json
-
-    from .studio.simulate import simulate as simulate_capture
-
     overrides = None
     if brdf_params is not None:
         try:
@@ -83,12 +108,8 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
                 overrides = json.load(f)
         except (json.JSONDecodeError, UnicodeDecodeError) as e:
             raise click.BadParameter(f"{brdf_params} is not valid JSON: {e}", param_hint="--brdf-params") from None
-    try:
-        result = simulate_capture(out, model=face_model, brdf=brdf_model, brdf_params=overrides,
-                                  measurements=measurements, resolution=resolution, seed=seed, preset=preset,
-                                  spp=spp, companion=companion)
-    except ValueError as e:  # invalid options and BRDF parameters, named by the API
-        raise click.ClickException(str(e)) from None
+    result = simulate_capture(out, model=face_model, brdf=brdf_model, brdf_params=overrides, measurements=measurements,
+                              resolution=resolution, seed=seed, preset=preset, spp=spp, companion=companion)
     click.echo(f"simulated {result.measurements} measurement{'s' * (result.measurements != 1)} under "
                f"{result.lights} light{'s' * (result.lights != 1)} in {result.seconds:.1f} s "
                f"({result.seconds_per_measurement:.1f} s per measurement)")
@@ -99,7 +120,7 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
 @click.argument("capture", type=click.Path(exists=True))
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Folder for <measurement>.npy/.json and shapes.json.")
-@click.option("--model", "face_model", default="builtin", show_default=True,
+@click.option("--model", "face_model", default=default(fit_shapes, "model"), show_default=True,
               help="Face model: 'builtin' or a model file (Surrey npz/bin, Basel mat/h5).")
 @click.option("--measurements", multiple=True, help="Fit only these measurements (repeatable; default: all).")
 @click.option("--iterations", default=None, type=click.FloatRange(min=0.01),
@@ -109,9 +130,7 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
 def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[str, ...], iterations: float | None,
               no_diffuse: bool, fixed_focal: bool) -> None:
     """Fit the face model to every photograph of CAPTURE (paper sec. 4.2)."""
-    from .shape.fit import fit_shape as fit
-
-    fits = fit(capture, face_model, measurements=list(measurements) or None, out=out_dir, iterations=iterations,
+    fits = fit_shapes(capture, face_model, measurements=list(measurements) or None, out=out_dir, iterations=iterations,
                progress=True, use_diffuse=not no_diffuse, fit_focal=not fixed_focal)
     for f in fits:
         click.echo(f"  {f.measurement}: {f.status:13s} landmarks {f.loss.get('feature_rms_px', float('nan')):.2f} px, "
@@ -124,22 +143,21 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
 
 @main.command("fit-brdf")
 @click.argument("capture", type=click.Path(exists=True))
-@click.option("--model", "brdf_model", default="cooktorrance", show_default=True,
+@click.option("--model", "brdf_model", default=default(fit_brdf_model, "model"), show_default=True,
               type=click.Choice(BRDF_MODELS), help="BRDF model to fit per region.")
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Folder for brdf.json, albedo.exr and scene.xml.")
-@click.option("--geometry", default="ground-truth", show_default=True,
+@click.option("--geometry", default=default(fit_brdf_model, "geometry"), show_default=True,
               help="'ground-truth' (a simulated capture's) or the folder mifaces fit-shape wrote.")
-@click.option("--resolution", default=512, show_default=True, type=click.IntRange(8),
+@click.option("--resolution", default=default(fit_brdf_model, "resolution"), show_default=True, type=click.IntRange(8),
               help="Texture-space resolution R (R x R texels).")
-@click.option("--lobes", default=1, show_default=True, type=click.IntRange(1), help="Lafortune lobes.")
+@click.option("--lobes", default=default(fit_brdf_model, "lobes"), show_default=True, type=click.IntRange(1),
+              help="Lafortune lobes.")
 @click.option("--face-model", default=None, help="Face model of the geometry (default: the one it names).")
 def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolution: int, lobes: int,
              face_model: str | None) -> None:
     """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
-    from .reflectance.estimate import fit_brdf as fit
-
-    estimate = fit(capture, brdf_model, geometry, face_model=face_model, resolution=resolution, lobes=lobes,
+    estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, resolution=resolution, lobes=lobes,
                    out=out_dir)
     click.echo(f"fitted {estimate.model} to {estimate.samples} samples of {len(estimate.measurements)} "
                f"photographs in {estimate.seconds['total']:.1f} s")
@@ -161,14 +179,13 @@ def _short(value) -> str:
               help="Output folder (capture/, shapes/, brdf/<model>/, report.md/json/png).")
 @click.option("--model", "models", multiple=True, type=click.Choice(BRDF_MODELS),
               help="BRDF model(s) to fit (default: all four).")
-@click.option("--geometry", default="fitted", show_default=True, type=click.Choice(["fitted", "ground-truth"]),
+@click.option("--geometry", default=default(measure_capture, "geometry"), show_default=True, type=click.Choice(GEOMETRIES),
               help="Fit the face model to each photograph, or use a simulated capture's true shapes.")
-@click.option("--resolution", default=512, show_default=True, type=click.IntRange(8), help="Texture resolution R.")
+@click.option("--resolution", default=default(measure_capture, "resolution"), show_default=True, type=click.IntRange(8),
+              help="Texture resolution R.")
 def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
-    from .pipeline import MODELS, measure as run
-
-    report = run(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution)
+    report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution)
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")
@@ -183,21 +200,21 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
 @click.option("--out", "out_stem", required=True, type=click.Path(dir_okay=False),
               help="Output image path without suffix: writes OUT.exr and OUT.png.")
 @click.option("--measurement", default=None, help="Measurement whose face geometry to use (default: the first).")
-@click.option("--geometry", default="ground-truth", show_default=True,
+@click.option("--geometry", default=default(render_fitted, "geometry"), show_default=True,
               help="'ground-truth' or the folder mifaces fit-shape wrote.")
-@click.option("--yaw", default=0.0, show_default=True, help="Turn the face by this many degrees (a novel pose).")
+@click.option("--yaw", default=default(render_fitted, "yaw"), show_default=True, type=float, help="Turn the face by this many degrees (a novel pose).")
 @click.option("--light", "light_position", default=None, type=(float, float, float),
               help="Point light position x y z (world, mm; default: the measurement's light).")
 @click.option("--envmap", default=None, type=click.Path(exists=True, dir_okay=False),
               help="Light by this equirectangular environment map (EXR) instead.")
-@click.option("--envmap-scale", default=1.0, show_default=True, help="Scale of the environment map.")
-@click.option("--spp", default=64, show_default=True, type=click.IntRange(1), help="Samples per pixel.")
+@click.option("--envmap-scale", default=default(render_fitted, "envmap_scale"), show_default=True, type=float,
+              help="Scale of the environment map.")
+@click.option("--spp", default=default(render_fitted, "spp"), show_default=True, type=click.IntRange(1),
+              help="Samples per pixel.")
 def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, geometry: str, yaw: float,
            light_position, envmap: str | None, envmap_scale: float, spp: int) -> None:
     """Render the BRDF fitted in BRDF_DIR on a face of CAPTURE: novel poses, lights, environment maps, or
     another person's face (BRDF transfer)."""
-    from .reflectance.render import render_fitted
-
     paths = render_fitted(brdf_dir, capture, out_stem, measurement, geometry, yaw=yaw,
                           light_position=light_position, envmap=envmap, envmap_scale=envmap_scale, spp=spp)
     click.echo(f"wrote {paths['exr']} and {paths['png']}")
@@ -211,9 +228,6 @@ def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, 
               help="Face box X0 Y0 X1 Y1 for every image (pixels, X1 Y1 inside), skipping the face detector.")
 def landmarks(images: tuple[str, ...], out_path: str, box) -> None:
     """Find the 68 iBUG landmarks of the face in each of IMAGES (pixel centres at integers)."""
-    from .files import write_json
-    from .landmarks import NoFaceError, detect_landmarks
-
     found, failed = {}, []
     for image in images:
         try:
