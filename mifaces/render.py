@@ -185,7 +185,8 @@ class FaceScene:
         return f"{MESH_FOLDER}/{key}.ply"
 
     def description(self, brdf: dict, camera, light_position=None, intensity=None, envmap=None,
-                    envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, albedo: str = "albedo.exr") -> dict:
+                    envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, albedo: str = "albedo.exr", *,
+                    light_direction=None) -> dict:
         """The Mitsuba scene dict of the face with a per-region BRDF over an
         albedo map, as ``camera`` sees it; meshes and albedo map named by
         file (:meth:`mesh_file`, ``albedo``), relative to the scene's folder.
@@ -196,7 +197,10 @@ class FaceScene:
             The ``brdf.json`` layout: ``model``, ``options``, ``regions``.
         camera : mifaces.capture.Camera
         light_position, intensity : (3,) arrays, optional
-            A point light (world, mm) and its radiant intensity.
+            A point light (world, mm) and its radiant intensity; with
+            ``light_direction`` instead, ``intensity`` is the directional
+            light's irradiance (pixel units: a white Lambertian surface facing
+            it shows intensity/π).
         envmap : path or (H, W, 3) array, optional
             An equirectangular environment map (linear RGB) instead of, or
             besides, the point light, scaled by ``envmap_scale``. A scene
@@ -207,9 +211,15 @@ class FaceScene:
         albedo : str
             The albedo map's file: diffuse albedo in the model's texture space
             (row 0 at v = 0), linear.
+        light_direction : (3,) array, optional
+            A directional (distant) light instead of the point light: unit
+            vector in the world frame from the face towards the light.
         """
-        if light_position is None and envmap is None:
-            raise ValueError("a face scene needs a light: a point light position or an environment map")
+        if light_position is None and light_direction is None and envmap is None:
+            raise ValueError("a face scene needs a light: a point light position, a light direction or an "
+                             "environment map")
+        if light_position is not None and light_direction is not None:
+            raise ValueError("give a point light position or a light direction, not both")
         scene = {"type": "scene", "integrator": {"type": "path", "max_depth": int(max_depth)},
                  "sensor": mitsuba_sensor(camera, spp),
                  ALBEDO: {"type": "bitmap", "filename": albedo, "raw": True, "filter_type": "bilinear",
@@ -221,6 +231,16 @@ class FaceScene:
                 raise ValueError("a point light needs its intensity")
             scene["light"] = {"type": "point", "position": [float(x) for x in light_position],
                               "intensity": rgb(intensity)}
+        if light_direction is not None:
+            if intensity is None:
+                raise ValueError("a directional light needs its irradiance (intensity)")
+            towards = np.asarray(light_direction, np.float64)
+            norm = float(np.linalg.norm(towards)) if towards.shape == (3,) else 0.0
+            if not np.isfinite(norm) or norm == 0:
+                raise ValueError(f"light direction must be a finite, non-zero 3-vector, got {light_direction!r}")
+            # Mitsuba's directional emitter takes the direction light travels in
+            scene["light"] = {"type": "directional", "direction": [float(-x / norm) for x in towards],
+                              "irradiance": rgb(intensity)}
         if envmap is not None:
             environment = {"type": "envmap", "scale": float(envmap_scale)}
             if isinstance(envmap, (str, os.PathLike)):
@@ -233,10 +253,11 @@ class FaceScene:
         return scene
 
     def scene(self, brdf: dict, albedo: np.ndarray, camera, light_position=None, intensity=None, envmap=None,
-              envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4) -> dict:
+              envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, *, light_direction=None) -> dict:
         """:meth:`description` with the meshes and the ``albedo`` array (R, R, 3)
         in memory in place of their files: a dict for ``mi.load_dict``."""
-        scene = self.description(brdf, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth)
+        scene = self.description(brdf, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth,
+                                 light_direction=light_direction)
         texture = {k: v for k, v in scene.pop(ALBEDO).items() if k != "filename"}
         texture = mi.load_dict({**texture, "bitmap": mi.Bitmap(np.ascontiguousarray(albedo, np.float32))})
         for key, part in self.meshes.items():
@@ -245,9 +266,11 @@ class FaceScene:
         return scene
 
     def render(self, brdf: dict, albedo: np.ndarray, camera, light_position=None, intensity=None, envmap=None,
-               envmap_scale: float = 1.0, spp: int = 64, seed: int = 0, max_depth: int = 4) -> np.ndarray:
+               envmap_scale: float = 1.0, spp: int = 64, seed: int = 0, max_depth: int = 4, *,
+               light_direction=None) -> np.ndarray:
         """Render :meth:`scene`: (H, W, 3) float32 linear radiance."""
-        scene = self.scene(brdf, albedo, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth)
+        scene = self.scene(brdf, albedo, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth,
+                           light_direction=light_direction)
         return np.array(mi.render(mi.load_dict(scene), spp=spp, seed=seed), dtype=np.float32)[..., :3]
 
     def write_meshes(self, folder: str | os.PathLike) -> dict[str, Path]:
@@ -261,21 +284,22 @@ class FaceScene:
 
 
 def face_scene(brdf: dict, albedo: np.ndarray, face_model, vertices: np.ndarray, camera, light_position=None,
-               intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4) -> dict:
+               intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, *,
+               light_direction=None) -> dict:
     """The Mitsuba scene (a dict for ``mi.load_dict``) of a face with a
     per-region BRDF over an albedo map, as ``camera`` sees it: a
     :class:`FaceScene` of ``face_model`` and ``vertices`` (world, mm) built
     for one scene; see :meth:`FaceScene.description` for the arguments."""
     return FaceScene(face_model, vertices).scene(brdf, albedo, camera, light_position, intensity, envmap,
-                                                 envmap_scale, spp, max_depth)
+                                                 envmap_scale, spp, max_depth, light_direction=light_direction)
 
 
 def render_face(brdf: dict, albedo: np.ndarray, face_model, vertices: np.ndarray, camera, light_position=None,
                 intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64, seed: int = 0,
-                max_depth: int = 4) -> np.ndarray:
+                max_depth: int = 4, *, light_direction=None) -> np.ndarray:
     """Render :func:`face_scene`: (H, W, 3) float32 linear radiance."""
     return FaceScene(face_model, vertices).render(brdf, albedo, camera, light_position, intensity, envmap,
-                                                  envmap_scale, spp, seed, max_depth)
+                                                  envmap_scale, spp, seed, max_depth, light_direction=light_direction)
 
 
 # --------------------------------------------------------------------------------------------

@@ -22,14 +22,16 @@ from .io import load_estimate
 
 def render_estimate(estimate: BRDFEstimate, face_model: MorphableModel, vertices: np.ndarray, camera,
                     light_position=None, intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64,
-                    seed: int = 0) -> np.ndarray:
+                    seed: int = 0, *, light_direction=None) -> np.ndarray:
     """Render the fitted face (linear RGB, (H, W, 3)) on geometry ``vertices``
     (world frame) seen by ``camera``, under a point light and/or an
-    environment map: for novel poses, novel lights and comparisons with
-    held-out photographs. To render one face several times, build its
+    environment map, or a directional light (``light_direction``, world frame,
+    towards the light, with ``intensity`` its irradiance): for novel poses,
+    novel lights and comparisons with held-out photographs. To render one face several times, build its
     :class:`~mifaces.render.FaceScene` once and call its ``render``."""
     return FaceScene(face_model, vertices).render(estimate.to_json(), estimate.albedo.albedo, camera, light_position,
-                                                  intensity, envmap, envmap_scale, spp, seed)
+                                                  intensity, envmap, envmap_scale, spp, seed,
+                                                  light_direction=light_direction)
 
 
 def turn(vertices: np.ndarray, yaw: float, up: np.ndarray) -> np.ndarray:
@@ -42,7 +44,7 @@ def turn(vertices: np.ndarray, yaw: float, up: np.ndarray) -> np.ndarray:
 
 def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geometry="ground-truth",
                   face_model=None, yaw: float = 0.0, light_position=None, envmap=None, envmap_scale: float = 1.0,
-                  spp: int = 64) -> dict[str, Path]:
+                  spp: int = 64, light_direction=None, intensity=None) -> dict[str, Path]:
     """Render a fitted BRDF (a ``fit-brdf`` output folder) on a face of a capture,
     in a novel pose and light, and write ``out``.exr / .png.
 
@@ -50,8 +52,13 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     model's texture parameterization, so the albedo map and the regions move
     with it (paper sec. 6). ``yaw`` turns the face about the camera's up
     direction (degrees, about the face's centroid, :func:`turn`); the light is
-    the measurement's point light unless ``light_position`` (world, mm) or an
-    ``envmap`` is given.
+    the measurement's light unless ``light_position`` (a point light, world,
+    mm), ``light_direction`` (a directional light, world frame, towards the
+    light; :meth:`mifaces.capture.Camera.direction` turns an azimuth and
+    elevation into one) or an ``envmap`` is given; its intensity is the
+    measurement light's unless ``intensity`` is given. Rendered in the
+    capture's camera and units, the image compares pixel for pixel with a
+    photograph taken under that light.
     """
     capture = capture if isinstance(capture, Capture) else load_capture(capture)
     data = load_estimate(brdf_dir)
@@ -68,11 +75,12 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     if yaw:
         vertices = turn(vertices, yaw, -capture.camera.rotation[1])  # the camera's up direction in the world frame
     lamp = capture.light(next(m.light for m in capture.measurements if m.name == name))
-    if light_position is None and envmap is None:
-        light_position = lamp.position
-    image = FaceScene(face, vertices).render(data, albedo, capture.camera, light_position,
-                                             None if light_position is None else lamp.intensity, envmap,
-                                             envmap_scale, spp)
+    if light_position is None and light_direction is None and envmap is None:
+        light_position, light_direction = lamp.position, lamp.direction
+    if intensity is None and (light_position is not None or light_direction is not None):
+        intensity = lamp.intensity
+    image = FaceScene(face, vertices).render(data, albedo, capture.camera, light_position, intensity, envmap,
+                                             envmap_scale, spp, light_direction=light_direction)
     return save_image(image, out)
 
 

@@ -50,9 +50,11 @@ def reflectance(radiance, light_distance, intensity, cos_light, scale: float = n
     radiance : array (..., 3)
         Observed radiance R.
     light_distance : array (...)
-        Distance d from the surface point to the light.
+        Distance d from the surface point to the light; ``inf`` for a
+        directional light, whose ``intensity`` is then the irradiance E at
+        normal incidence (r = scale · R / (E cos θl)).
     intensity : array (3,) or (..., 3)
-        Radiant intensity I of the point light.
+        Radiant intensity I of the point light (irradiance E of a directional one).
     cos_light : array (...)
         cos θl = l̂ · n (> 0 where used; other samples are invalid).
     scale : float
@@ -64,7 +66,8 @@ def reflectance(radiance, light_distance, intensity, cos_light, scale: float = n
         Reflectance; NaN where cos θl <= 0.
     """
     radiance = np.asarray(radiance, np.float64)
-    d2 = np.square(np.asarray(light_distance, np.float64))[..., None]
+    d = np.asarray(light_distance, np.float64)
+    d2 = np.where(np.isinf(d), 1.0, np.square(d))[..., None]  # a directional light does not fall off
     cos_light = np.asarray(cos_light, np.float64)[..., None]
     with np.errstate(divide="ignore", invalid="ignore"):
         r = scale * radiance * d2 / (np.asarray(intensity, np.float64) * cos_light)
@@ -273,15 +276,17 @@ def _unoccluded(scene, origin, target, normal, offset: float) -> np.ndarray:
 
 def measurement_samples(camera, light_position, intensity, pixels, vertices, triangles, uv, coverage, *,
                         saturated=None, scale: float = np.pi, erosion: int = 1, min_cosine: float = MIN_COSINE,
-                        name: str = "", offset: float | None = None) -> ReflectanceSamples:
+                        name: str = "", offset: float | None = None, light_direction=None) -> ReflectanceSamples:
     """Reflectance samples of one photograph (paper sec. 4.3, 5.3).
 
     Parameters
     ----------
     camera : mifaces.capture.Camera
         Calibrated camera (world frame in mm, OpenCV pixel conventions).
-    light_position : (3,) world position of the point light, mm.
-    intensity : (3,) its radiant intensity, in the units of ``pixels``·mm².
+    light_position : (3,) world position of the point light, mm; None for a
+        directional light (``light_direction``).
+    intensity : (3,) its radiant intensity, in the units of ``pixels``·mm²;
+        a directional light's irradiance, in the units of ``pixels``.
     pixels : (H, W, 3) linear radiance image.
     vertices : (V, 3) the face in world coordinates for this measurement.
     triangles, uv : the model's triangles and texture coordinates.
@@ -291,6 +296,9 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
         Scale of eq. 4 (π: a white Lambertian target has r = 1).
     erosion : int
         Texels eroded from the borders of the valid region.
+    light_direction : (3,) array, optional
+        A directional light instead of the point light: unit vector in the
+        world frame towards the light.
 
     Returns
     -------
@@ -311,15 +319,22 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
     offset = 1e-4 * size if offset is None else offset
     scene = mi.load_dict({"type": "scene", "face": mitsuba_mesh(vertices, triangles, uv)})
     to_camera = camera.position[None, :] - p
-    to_light = np.asarray(light_position, np.float64)[None, :] - p
-    dist_light = np.linalg.norm(to_light, axis=1)
-    l_world = to_light / dist_light[:, None]
+    if light_direction is not None:  # a distant light: one direction, no falloff
+        l_world = np.broadcast_to(np.asarray(light_direction, np.float64) /
+                                  np.linalg.norm(light_direction), p.shape).copy()
+        dist_light = np.full(len(p), np.inf)
+        light_target = p + l_world * (10.0 * size)  # far beyond the face: shadow rays leave it
+    else:
+        to_light = np.asarray(light_position, np.float64)[None, :] - p
+        dist_light = np.linalg.norm(to_light, axis=1)
+        l_world = to_light / dist_light[:, None]
+        light_target = np.broadcast_to(np.asarray(light_position, np.float64), p.shape)
     v_world = to_camera / np.linalg.norm(to_camera, axis=1, keepdims=True)
     cos_l, cos_v = np.sum(l_world * n, 1), np.sum(v_world * n, 1)
     front = (cos_l > 0) & (cos_v > 0)
     visible, lit = np.zeros(len(p), bool), np.zeros(len(p), bool)
     visible[front] = _unoccluded(scene, p[front], np.broadcast_to(camera.position, p[front].shape), n[front], offset)
-    lit[front] = _unoccluded(scene, p[front], np.broadcast_to(light_position, p[front].shape), n[front], offset)
+    lit[front] = _unoccluded(scene, p[front], light_target[front], n[front], offset)
     # the photograph at each texel's projection (bilinear; pixel centres at integers)
     xy = camera.project(p)
     inside = (xy[:, 0] >= 0) & (xy[:, 0] <= camera.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= camera.height - 1)
@@ -361,8 +376,10 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     capture : mifaces.capture.Capture
         The photographs, their lights and the white target. Each point-light
         photograph is turned into reflectance by eq. 4 with the scale the
-        white target gives (:meth:`~mifaces.capture.WhiteTarget.reflectance_scale`);
-        its saturated pixels give no sample.
+        white target gives (:meth:`~mifaces.capture.WhiteTarget.reflectance_scale`;
+        without one, π: reflectance relative to the lights' intensities);
+        its saturated pixels give no sample. Directional lights give every
+        texel the same direction and no falloff.
     geometry : mapping
         Measurement name -> (V, 3) vertices of ``face_model``'s topology in
         the capture's world frame (mm): fitted shapes, or the simulator's
@@ -408,18 +425,19 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     coverage = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
     region_map = texel_regions_of_mesh(face_model.region_map, face_model.uv, face_model.triangles, resolution,
                                        coverage)
-    scale = capture.white_target.reflectance_scale()
+    # without a white target the scale is π: r is then the albedo relative to the lights' stated intensities
+    scale = capture.white_target.reflectance_scale() if capture.white_target is not None else np.pi
     parts = []
     chosen = [m for m in capture.measurements if m.name in wanted]
     for m in progress_bar(chosen, desc="reflectance samples", unit="photo", enabled=progress):
         light = capture.light(m.light)
-        if light.position is None:
+        if light.position is None and not light.directional:
             raise ValueError(f"measurement {m.name!r}: light {light.name!r} has no position "
                              "(load the capture with calibrate=True)")
         parts.append(measurement_samples(capture.camera, light.position, light.intensity, m.image.pixels,
                                          geometry[m.name], face_model.triangles, face_model.uv, coverage,
                                          saturated=m.image.saturated, scale=scale, erosion=erosion,
-                                         min_cosine=min_cosine, name=m.name))
+                                         min_cosine=min_cosine, name=m.name, light_direction=light.direction))
     samples = ReflectanceSamples.concatenate(parts)
     samples.label = samples.region(region_map).astype(np.uint8)
     samples.region_map = region_map
