@@ -13,6 +13,7 @@ from mifaces.capture import MANIFEST, CaptureError, load_capture, read_image
 from mifaces.capture import loader
 from mifaces.capture.feature_points import DETECTED_POINTS
 from mifaces.model.landmarks import FEATURE_POINTS
+from test_capture import _set
 
 WIDTH, HEIGHT = 64, 48
 #: Seven named points, enough for a measurement (FEATURE_POINT_RANGE).
@@ -97,41 +98,32 @@ def test_read_image_channels(tmp_path):
     assert read_image(tmp_path / "colour.png").channels == 3 and not read_image(tmp_path / "colour.png").greyscale
 
 
-def _set(path, value):
-    """A change of the manifest: set (or with ``KeyError`` delete) the entry at ``path``."""
-    def change(data):
-        node = data
-        for key in path[:-1]:
-            node = node[key]
-        if value is KeyError:
-            del node[path[-1]]
-        else:
-            node[path[-1]] = value
-    return change
-
-
 BAD = {
-    "zero direction": (_set(["lights", 0, "direction"], [0, 0, 0]), "lights[0] (top).direction: must be non-zero"),
-    "NaN direction": (_set(["lights", 0, "direction"], [0, float("nan"), 1]), "lights[0] (top).direction: must be finite"),
-    "short direction": (_set(["lights", 0, "direction"], [0, 1]), "lights[0] (top).direction: must have shape 3"),
-    "text direction": (_set(["lights", 1, "direction"], "up"), "lights[1] (side).direction: must be a list of 3 numbers"),
-    "direction and position": (_set(["lights", 0, "position_mm"], [0, 0, 1000]),
+    "zero direction": (_set("lights", 0, "direction", value=[0, 0, 0]), "lights[0] (top).direction: must be non-zero"),
+    "NaN direction": (_set("lights", 0, "direction", value=[0, float("nan"), 1]),
+                      "lights[0] (top).direction: must be finite"),
+    "short direction": (_set("lights", 0, "direction", value=[0, 1]), "lights[0] (top).direction: must have shape 3"),
+    "text direction": (_set("lights", 1, "direction", value="up"),
+                       "lights[1] (side).direction: must be a list of 3 numbers"),
+    "direction and position": (_set("lights", 0, "position_mm", value=[0, 0, 1000]),
                                "lights[0] (top): give 'direction' (a directional light) or 'position_mm'"),
-    "negative intensity": (_set(["lights", 1, "intensity"], -1), "lights[1] (side).intensity: must be finite and positive"),
-    "relative not a flag": (_set(["lights", 1, "relative"], "yes"), "lights[1] (side).relative: must be true or false"),
-    "calibrated not a flag": (_set(["camera", "calibrated"], "no"), "camera.calibrated: must be true or false"),
-    "focal guess of a calibrated camera": (_set(["camera", "calibrated"], True),
+    "negative intensity": (_set("lights", 1, "intensity", value=-1),
+                           "lights[1] (side).intensity: must be finite and positive"),
+    "relative not a flag": (_set("lights", 1, "relative", value="yes"),
+                            "lights[1] (side).relative: must be true or false"),
+    "calibrated not a flag": (_set("camera", "calibrated", value="no"), "camera.calibrated: must be true or false"),
+    "focal guess of a calibrated camera": (_set("camera", "calibrated", value=True),
                                            "camera.focal_guess_px: only for an uncalibrated camera"),
-    "focal guess and fx": (_set(["camera", "fx"], 100), "camera: give either focal_guess_px or fx and fy"),
+    "focal guess and fx": (_set("camera", "fx", value=100), "camera: give either focal_guess_px or fx and fy"),
     "calibrated camera without cx": (lambda d: d.update(camera={"width": WIDTH, "height": HEIGHT, "fx": 1, "fy": 1,
                                                                  "cy": 1}), "camera: missing 'cx'"),
-    "white target not an object": (_set(["white_target"], 5), "white_target: must be an object, got 5"),
-    "one distance": (_set(["distances"], [{"from": "chin", "to": "nose_tip", "mm": 60}]),
+    "white target not an object": (_set("white_target", value=5), "white_target: must be an object, got 5"),
+    "one distance": (_set("distances", value=[{"from": "chin", "to": "nose_tip", "mm": 60}]),
                      "distances: need a list of at least three"),
-    "capture face box": (_set(["face_box"], [0, 0, 10]), "face_box: must be [x0, y0, x1, y1]"),
-    "measurement face box": (_set(["measurements", 1, "face_box"], [10, 0, 5, 20]),
+    "capture face box": (_set("face_box", value=[0, 0, 10]), "face_box: must be [x0, y0, x1, y1]"),
+    "measurement face box": (_set("measurements", 1, "face_box", value=[10, 0, 5, 20]),
                              "measurements[1] (m1).face_box: must be [x0, y0, x1, y1]"),
-    "too few given points": (_set(["measurements", 0, "feature_points"], dict(list(POINTS.items())[:3])),
+    "too few given points": (_set("measurements", 0, "feature_points", value=dict(list(POINTS.items())[:3])),
                              "measurements[0] (m0).feature_points: has 3 feature points"),
 }
 

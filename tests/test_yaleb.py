@@ -124,7 +124,8 @@ def test_import_subject_loads(imported, monkeypatch):
     for m in capture.measurements:
         assert m.pose == yaleb.POSE and m.face_box == (0, 0, 167, 191)
         assert m.diffuse.path.name == "yaleB01_P00A+000E+00.pgm"  # nearest the camera axis, a training one
-        assert m.image.path.parent == out / "images" and m.image.path.read_bytes() == (folder / m.image.path.name).read_bytes()
+        assert m.image.path.parent == out / "images"
+        assert m.image.path.read_bytes() == (folder / m.image.path.name).read_bytes()  # copied as is
         light = capture.light(m.light)
         assert m.name.endswith(m.light) and light.directional and light.relative
         points = m.feature_points
