@@ -241,3 +241,30 @@ def landmarks(images: tuple[str, ...], out_path: str, box) -> None:
     click.echo(f"wrote the landmarks of {len(found)} of {len(images)} images to {out_path}")
     if failed:
         raise SystemExit(1)
+
+
+@main.group("import")
+def import_() -> None:
+    """Convert public data sets into captures."""
+
+
+@import_.command("yaleb")
+@click.argument("subject_dir", type=click.Path(exists=True, file_okay=False))
+@click.argument("out", type=click.Path(file_okay=False))
+@click.option("--train", "count", default=None, type=click.IntRange(1),
+              help="Number of training lights, spread over the directions (default 8).")
+@click.option("--train-lights", default=None, help="Training lights instead: stems or tags, e.g. A+000E+00,A+035E-20.")
+@click.option("--force", is_flag=True, help="Write over an existing capture at OUT.")
+def yaleb(subject_dir: str, out: str, count: int | None, train_lights: str | None, force: bool) -> None:
+    """Write the Extended Yale B subject in SUBJECT_DIR as a capture at OUT: the training photographs with
+    their directional lights, the held-out ones named in OUT/split.json."""
+    from .importers.yaleb import SPLIT, import_subject
+
+    if count is not None and train_lights is not None:
+        raise click.UsageError("give --train or --train-lights, not both")
+    train = [s.strip() for s in train_lights.split(",") if s.strip()] if train_lights is not None else count or 8
+    try:
+        path = import_subject(subject_dir, out, train, force=force)
+    except (FileExistsError, FileNotFoundError, ValueError) as error:
+        raise click.ClickException(str(error)) from None
+    click.echo(f"wrote the capture {path} and {path / SPLIT}")
