@@ -118,14 +118,16 @@ class Camera:
         return cls(int(entry["width"]), int(entry["height"]), float(entry["fx"]), float(entry["fy"]),
                    float(entry["cx"]), float(entry["cy"]), np.asarray(entry.get("distortion", []), np.float64),
                    np.asarray(entry.get("rotation", np.eye(3)), np.float64),
-                   np.asarray(entry.get("translation", np.zeros(3)), np.float64))
+                   np.asarray(entry.get("translation", np.zeros(3)), np.float64),
+                   bool(entry.get("calibrated", True)))
 
     def to_json(self) -> dict:
         """The manifest's ``camera`` entry."""
         return {"width": int(self.width), "height": int(self.height), "fx": float(self.fx), "fy": float(self.fy),
                 "cx": float(self.cx), "cy": float(self.cy), "distortion": [float(d) for d in self.distortion],
                 "rotation": np.asarray(self.rotation, float).tolist(),
-                "translation": [float(t) for t in self.translation]}
+                "translation": [float(t) for t in self.translation],
+                **({} if self.calibrated else {"calibrated": False})}
 
 
 def camera_frame_direction(azimuth: float, elevation: float) -> np.ndarray:

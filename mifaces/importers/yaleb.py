@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..capture.camera import camera_frame_direction
 from ..capture.images import read_codes
 from ..capture.types import FORMAT, MANIFEST, VERSION
 from ..files import atomic_write, write_json
@@ -78,8 +79,7 @@ class YaleImage:
 
 def light_direction(azimuth: float, elevation: float) -> np.ndarray:
     """Unit vector towards a Yale light in the camera frame (x right, y down, z forward)."""
-    az, el = np.radians(azimuth), np.radians(elevation)
-    return np.array([-np.cos(el) * np.sin(az), -np.sin(el), -np.cos(el) * np.cos(az)])
+    return camera_frame_direction(azimuth, elevation)
 
 
 def _pixels(path: Path) -> np.ndarray:
