@@ -173,7 +173,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         first = next(m for m in capture.measurements if m.name == estimate.measurements[0])
         lamp = capture.light(first.light)
         write_estimate(estimate, out, FaceScene(face, shapes[first.name]), capture.camera, lamp.position,
-                       lamp.intensity)
+                       lamp.intensity, light_direction=lamp.direction)
     return estimate
 
 

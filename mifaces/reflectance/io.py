@@ -31,7 +31,8 @@ SCENE_SPP = 64
 SPP_PATH = ("sensor", "sampler", "sample_count")
 
 
-def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_position, intensity) -> dict[str, Path]:
+def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_position, intensity, *,
+                   light_direction=None) -> dict[str, Path]:
     """Write ``brdf.json``, ``albedo.exr`` (+ ``albedo.png``), ``meshes/*.ply``
     and ``scene.xml`` into folder ``out``, each atomically; ``scene.xml``
     last, so a scene never names a file not yet written.
@@ -45,6 +46,9 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
     camera : mifaces.capture.Camera
     light_position, intensity : (3,) arrays
         The point light of the scene (world, mm) and its radiant intensity.
+    light_direction : (3,) array, optional
+        A directional light instead (world frame, towards the light;
+        ``intensity`` is then its irradiance).
     """
     out = Path(out)
     paths = {key: out / name for key, name in FILES.items()}
@@ -53,7 +57,8 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
     write_exr(paths["albedo"], estimate.albedo.albedo)
     write_png(paths["preview"], estimate.albedo.albedo)
     face.write_meshes(out)
-    scene = face.description(document, camera, light_position, intensity, spp=SCENE_SPP, albedo=FILES["albedo"])
+    scene = face.description(document, camera, light_position, intensity, spp=SCENE_SPP, albedo=FILES["albedo"],
+                             light_direction=light_direction)
     comment = (f"The face as fitted by mifaces fit-brdf: per-region {estimate.model} BSDFs over the refined albedo "
                "map, seen by the capture's camera under the light of its first measurement. Render: "
                "mitsuba.load_file(path, spp=N) after `import mifaces` (which registers the plugins). Units: mm.")
