@@ -104,8 +104,12 @@ def spherical_cap(n=96, radius=80.0, centre_z=260.0, half=50.0):
     return vertices, triangles, uv
 
 
-def render_photo(camera, vertices, triangles, uv, light, intensity, bsdf, spp=64):
+def render_photo(camera, vertices, triangles, uv, light, intensity, bsdf, spp=64, directional=False):
     fov = np.degrees(2 * np.arctan(camera.width / (2 * camera.fx)))
+    emitter = ({"type": "directional", "direction": [-float(x) for x in light],
+                "irradiance": {"type": "rgb", "value": list(map(float, intensity))}} if directional else
+               {"type": "point", "position": list(map(float, light)),
+                "intensity": {"type": "rgb", "value": list(map(float, intensity))}})
     scene = mi.load_dict({
         "type": "scene", "integrator": {"type": "direct"},
         "sensor": {"type": "perspective", "fov": fov, "fov_axis": "x",
@@ -113,8 +117,7 @@ def render_photo(camera, vertices, triangles, uv, light, intensity, bsdf, spp=64
                    "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
                             "rfilter": {"type": "box"}},
                    "sampler": {"type": "independent", "sample_count": spp}},
-        "light": {"type": "point", "position": list(map(float, light)),
-                  "intensity": {"type": "rgb", "value": list(map(float, intensity))}},
+        "light": emitter,
         "face": mitsuba_mesh(vertices, triangles, uv, bsdf=bsdf)})
     return np.array(mi.render(scene), dtype=np.float32)
 
@@ -137,6 +140,30 @@ def test_resampled_reflectance_matches_the_brdf(jit_variant):
     model = brdf.model("cooktorrance")
     p = {"diffuse_reflectance": mi.Color3f(*params["diffuse_reflectance"]), "specular_reflectance": 1.5,
          "roughness": 0.35, "eta": 1.4}
+    expected = np.pi * np.array(model.eval(mi.Vector3f(samples.light.T), mi.Vector3f(samples.view.T), p)).T
+    rel = np.abs(samples.reflectance - expected) / expected
+    assert np.median(rel) < 0.01, np.median(rel)
+    assert np.percentile(rel, 95) < 0.05, np.percentile(rel, 95)
+
+
+def test_directional_light_reflectance_matches_the_brdf(jit_variant):
+    """Under a directional light of irradiance E the samples' reflectance is
+    π f of the rendered BRDF: one direction for every texel, no falloff."""
+    camera = Camera(width=160, height=160, fx=230.0, fy=230.0, cx=79.5, cy=79.5)
+    vertices, triangles, uv = spherical_cap()
+    towards = np.array([-0.6, -0.45, -0.66])
+    towards /= np.linalg.norm(towards)
+    irradiance = np.array([0.8, 0.7, 0.6])
+    bsdf = {"type": "cooktorrance", "diffuse_reflectance": {"type": "rgb", "value": [0.5, 0.35, 0.3]},
+            "specular_reflectance": 1.5, "roughness": 0.35}
+    photo = render_photo(camera, vertices, triangles, uv, towards, irradiance, bsdf, directional=True)
+    coverage = rasterize(uv, triangles, (128, 128))
+    samples = measurement_samples(camera, None, irradiance, photo, vertices, triangles, uv, coverage, name="m0",
+                                  light_direction=towards)
+    assert len(samples) > 0.4 * 128 * 128
+    model = brdf.model("cooktorrance")
+    p = {"diffuse_reflectance": mi.Color3f(0.5, 0.35, 0.3), "specular_reflectance": 1.5, "roughness": 0.35,
+         "eta": 1.4}
     expected = np.pi * np.array(model.eval(mi.Vector3f(samples.light.T), mi.Vector3f(samples.view.T), p)).T
     rel = np.abs(samples.reflectance - expected) / expected
     assert np.median(rel) < 0.01, np.median(rel)

@@ -102,3 +102,24 @@ def test_face_scene_description_names_files_and_loads_in_memory(face, tmp_path):
                                   np.array(mi.traverse(loaded["face_skin_1"])["vertex_positions"]))
     image = scene.render(brdf, albedo, camera(), [0.0, 300.0, 1000.0], [1e6] * 3, spp=2)
     assert image.shape == (64, 48, 3) and (image.mean(axis=2) > 0).mean() > 0.2
+
+
+def test_directional_light_lights_a_white_face_at_e_over_pi(face):
+    """A directional light of irradiance E from the camera's side shows a white Lambertian face
+    facing it as E/π (the photographs' units of a capture with relative intensities)."""
+    model, scene = face
+    brdf = {"model": "phong", "options": {}, "regions": {"skin": {"specular_reflectance": 0.0, "exponent": 10.0}}}
+    towards = np.array([0.0, 0.0, 1.0])  # from the face to the camera
+    description = scene.description(brdf, camera(), None, [2.0] * 3, spp=2, light_direction=towards * 3)
+    assert description["light"] == {"type": "directional", "direction": [-0.0, -0.0, -1.0],
+                                    "irradiance": rgb(2.0)}
+    albedo = np.ones((16, 16, 3), np.float32)
+    image = scene.render(brdf, albedo, camera(), None, [2.0] * 3, spp=16, light_direction=towards)
+    centre = image[28:36, 20:28].mean(axis=(0, 1))  # the nose's neighbourhood faces the camera
+    assert np.all(centre > 0.5 * 2.0 / np.pi) and np.all(centre <= 2.0 / np.pi * 1.02)
+    with pytest.raises(ValueError, match="not both"):
+        scene.description(brdf, camera(), [0.0, 0.0, 1000.0], [1.0] * 3, light_direction=towards)
+    with pytest.raises(ValueError, match="finite, non-zero"):
+        scene.description(brdf, camera(), None, [1.0] * 3, light_direction=[0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="needs a light"):
+        scene.description(brdf, camera(), None, [1.0] * 3)
