@@ -14,6 +14,7 @@ import click
 import mifaces
 
 from .brdf import NAMES as BRDF_MODELS
+from .capture import load_capture
 from .capture.ground_truth import ground_truth_folder
 from .files import write_json
 from .gallery import render_gallery
@@ -202,9 +203,18 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
 @click.option("--measurement", default=None, help="Measurement whose face geometry to use (default: the first).")
 @click.option("--geometry", default=default(render_fitted, "geometry"), show_default=True,
               help="'ground-truth' or the folder mifaces fit-shape wrote.")
-@click.option("--yaw", default=default(render_fitted, "yaw"), show_default=True, type=float, help="Turn the face by this many degrees (a novel pose).")
+@click.option("--yaw", default=default(render_fitted, "yaw"), show_default=True, type=float,
+              help="Turn the face by this many degrees (a novel pose).")
 @click.option("--light", "light_position", default=None, type=(float, float, float),
               help="Point light position x y z (world, mm; default: the measurement's light).")
+@click.option("--light-direction", default=None, type=(float, float, float),
+              help="A directional light instead: x y z towards the light (world frame).")
+@click.option("--light-angles", default=None, type=(float, float),
+              help="A directional light at azimuth and elevation (degrees) about the camera's axis: 0 0 from the "
+                   "camera, positive azimuth towards the image's left, positive elevation above (as the Yale "
+                   "database names its lights).")
+@click.option("--intensity", default=None, type=float,
+              help="The light's intensity (irradiance for a directional light; default: the measurement light's).")
 @click.option("--envmap", default=None, type=click.Path(exists=True, dir_okay=False),
               help="Light by this equirectangular environment map (EXR) instead.")
 @click.option("--envmap-scale", default=default(render_fitted, "envmap_scale"), show_default=True, type=float,
@@ -212,11 +222,19 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
 @click.option("--spp", default=default(render_fitted, "spp"), show_default=True, type=click.IntRange(1),
               help="Samples per pixel.")
 def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, geometry: str, yaw: float,
-           light_position, envmap: str | None, envmap_scale: float, spp: int) -> None:
-    """Render the BRDF fitted in BRDF_DIR on a face of CAPTURE: novel poses, lights, environment maps, or
-    another person's face (BRDF transfer)."""
-    paths = render_fitted(brdf_dir, capture, out_stem, measurement, geometry, yaw=yaw,
-                          light_position=light_position, envmap=envmap, envmap_scale=envmap_scale, spp=spp)
+           light_position, light_direction, light_angles, intensity: float | None, envmap: str | None,
+           envmap_scale: float, spp: int) -> None:
+    """Render the BRDF fitted in BRDF_DIR on a face of CAPTURE, in the capture's camera and units: novel poses,
+    point or directional lights, environment maps, or another person's face (BRDF transfer)."""
+    if sum(x is not None for x in (light_position, light_direction, light_angles)) > 1:
+        raise click.UsageError("give one of --light, --light-direction and --light-angles")
+    loaded = load_capture(capture)
+    if light_angles is not None:
+        light_direction = loaded.camera.direction(*light_angles)
+    paths = render_fitted(brdf_dir, loaded, out_stem, measurement, geometry, yaw=yaw,
+                          light_position=light_position, light_direction=light_direction,
+                          intensity=None if intensity is None else [intensity] * 3, envmap=envmap,
+                          envmap_scale=envmap_scale, spp=spp)
     click.echo(f"wrote {paths['exr']} and {paths['png']}")
 
 
