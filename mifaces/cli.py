@@ -5,19 +5,49 @@ Each command is one API call that a script could make.
 
 from __future__ import annotations
 
+import inspect
+import json
+import warnings
+
 import click
 
+import mifaces
+
+from .brdf import NAMES as BRDF_MODELS
+from .capture import load_capture
+from .capture.ground_truth import ground_truth_folder
+from .files import write_json
+from .gallery import render_gallery
+from .landmarks import NoFaceError, detect_landmarks
+from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
+from .reflectance import fit_brdf as fit_brdf_model, render_fitted
+from .shape import fit_shape as fit_shapes
 from .status import CONVERGED
+from .studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
 
 
-@click.group()
+def default(function, name: str):
+    """The default of parameter ``name`` of API ``function``: the CLI states no default of its own."""
+    return inspect.signature(function).parameters[name].default
+
+
+class Commands(click.Group):
+    """The command group: the library's errors (bad input, missing files, a
+    failed stage) end a command with their message and exit code 1, not a
+    traceback."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except (ValueError, KeyError, TypeError, OSError) as error:
+            message = error.args[0] if isinstance(error, KeyError) and error.args else str(error)
+            raise click.ClickException(str(message)) from None
+
+
+@click.group(cls=Commands)
 @click.option("--variant", default=None, help="Mitsuba variant (default: cuda_ad_rgb with a GPU, else llvm_ad_rgb).")
 def main(variant: str | None) -> None:
     """Measure the reflectance of human faces from photographs."""
-    import warnings
-
-    import mifaces
-
     # warnings read as messages on the command line, not as source excerpts
     warnings.formatwarning = lambda message, category, *args, **kwargs: f"warning: {message}\n"
     mifaces.set_variant(variant)
@@ -27,15 +57,14 @@ def main(variant: str | None) -> None:
 
 
 @main.command()
-@click.option("--out", "out_dir", default="out/gallery", show_default=True, type=click.Path(file_okay=False),
+@click.option("--out", "out_dir", default=default(render_gallery, "out_dir"), show_default=True, type=click.Path(file_okay=False),
               help="Folder for gallery.exr and gallery.png.")
-@click.option("--spp", default=128, show_default=True, type=click.IntRange(1), help="Samples per pixel.")
-@click.option("--size", default=(1200, 340), show_default=True, type=(click.IntRange(8), click.IntRange(8)),
+@click.option("--spp", default=default(render_gallery, "spp"), show_default=True, type=click.IntRange(1),
+              help="Samples per pixel.")
+@click.option("--size", default=(default(render_gallery, "width"), default(render_gallery, "height")), show_default=True, type=(click.IntRange(8), click.IntRange(8)),
               help="Image width and height.")
 def gallery(out_dir: str, spp: int, size: tuple[int, int]) -> None:
     """Render the BSDF gallery: one sphere per plugin (phong, cooktorrance, ward, lafortune)."""
-    from .gallery import render_gallery
-
     result = render_gallery(out_dir, spp=spp, width=size[0], height=size[1])
     click.echo(f"rendered the gallery in {result['seconds']:.1f} s ({result['variant']}, {spp} spp)")
     click.echo(f"  {result['exr']}\n  {result['png']}")
@@ -51,29 +80,28 @@ def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
 
 @main.command()
 @click.argument("out", type=click.Path(file_okay=False))
-@click.option("--model", "face_model", default="builtin", show_default=True,
+@click.option("--model", "face_model", default=default(simulate_capture, "model"), show_default=True,
               help="Face model: 'builtin' or a model file (see mifaces.load_model).")
-@click.option("--brdf", "brdf_model", default="cooktorrance", show_default=True,
-              type=click.Choice(["phong", "cooktorrance", "ward", "lafortune"]), help="Ground-truth BRDF plugin.")
+@click.option("--brdf", "brdf_model", default=default(simulate_capture, "brdf"), show_default=True,
+              type=click.Choice(BRDF_MODELS), help="Ground-truth BRDF plugin.")
 @click.option("--brdf-params", type=click.Path(exists=True, dir_okay=False), default=None,
               help='JSON overrides: {"model": ..., "regions": {region: {parameter: value}}} (docs/capture.md).')
-@click.option("--measurements", default=6, show_default=True, type=click.IntRange(1),
+@click.option("--measurements", default=default(simulate_capture, "measurements"), show_default=True, type=click.IntRange(1),
               help="Number of measurements (three poses per light).")
-@click.option("--resolution", default="512x512", show_default=True, callback=_width_x_height,
+@click.option("--resolution", default="{}x{}".format(*default(simulate_capture, "resolution")), show_default=True,
+              callback=_width_x_height,
               help="Image size WxH.")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(0), help="Seed of everything random.")
-@click.option("--preset", type=click.Choice(["paper"]), default=None,
+@click.option("--seed", default=default(simulate_capture, "seed"), show_default=True, type=click.IntRange(0),
+              help="Seed of everything random.")
+@click.option("--preset", type=click.Choice(sorted(PRESETS)), default=None,
               help="'paper': the paper's 22 measurements (overrides --measurements).")
-@click.option("--spp", default=64, show_default=True, type=click.IntRange(1), help="Samples per pixel.")
-@click.option("--companion", default="diffuse", show_default=True, type=click.Choice(["diffuse", "exposures", "both"]),
+@click.option("--spp", default=default(simulate_capture, "spp"), show_default=True, type=click.IntRange(1), help="Samples per pixel.")
+@click.option("--companion", default=default(simulate_capture, "companion"), show_default=True,
+              type=click.Choice(COMPANIONS),
               help="Companion of each point-light photograph.")
 def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None, measurements: int,
              resolution: tuple[int, int], seed: int, preset: str | None, spp: int, companion: str) -> None:
     """Simulate a capture session with ground truth into folder OUT (paper sec. 3)."""
-    import json
-
-    from .studio.simulate import simulate as simulate_capture
-
     overrides = None
     if brdf_params is not None:
         try:
@@ -81,23 +109,19 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
                 overrides = json.load(f)
         except (json.JSONDecodeError, UnicodeDecodeError) as e:
             raise click.BadParameter(f"{brdf_params} is not valid JSON: {e}", param_hint="--brdf-params") from None
-    try:
-        result = simulate_capture(out, model=face_model, brdf=brdf_model, brdf_params=overrides,
-                                  measurements=measurements, resolution=resolution, seed=seed, preset=preset,
-                                  spp=spp, companion=companion)
-    except ValueError as e:  # invalid options and BRDF parameters, named by the API
-        raise click.ClickException(str(e)) from None
+    result = simulate_capture(out, model=face_model, brdf=brdf_model, brdf_params=overrides, measurements=measurements,
+                              resolution=resolution, seed=seed, preset=preset, spp=spp, companion=companion)
     click.echo(f"simulated {result.measurements} measurement{'s' * (result.measurements != 1)} under "
                f"{result.lights} light{'s' * (result.lights != 1)} in {result.seconds:.1f} s "
                f"({result.seconds_per_measurement:.1f} s per measurement)")
-    click.echo(f"  capture:      {result.path}\n  ground truth: {result.path / 'ground_truth'}")
+    click.echo(f"  capture:      {result.path}\n  ground truth: {ground_truth_folder(result.path)}")
 
 
 @main.command("fit-shape")
 @click.argument("capture", type=click.Path(exists=True))
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Folder for <measurement>.npy/.json and shapes.json.")
-@click.option("--model", "face_model", default="builtin", show_default=True,
+@click.option("--model", "face_model", default=default(fit_shapes, "model"), show_default=True,
               help="Face model: 'builtin' or a model file (Surrey npz/bin, Basel mat/h5).")
 @click.option("--measurements", multiple=True, help="Fit only these measurements (repeatable; default: all).")
 @click.option("--iterations", default=None, type=click.FloatRange(min=0.01),
@@ -107,9 +131,7 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
 def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[str, ...], iterations: float | None,
               no_diffuse: bool, fixed_focal: bool) -> None:
     """Fit the face model to every photograph of CAPTURE (paper sec. 4.2)."""
-    from .shape.fit import fit_shape as fit
-
-    fits = fit(capture, face_model, measurements=list(measurements) or None, out=out_dir, iterations=iterations,
+    fits = fit_shapes(capture, face_model, measurements=list(measurements) or None, out=out_dir, iterations=iterations,
                progress=True, use_diffuse=not no_diffuse, fit_focal=not fixed_focal)
     for f in fits:
         click.echo(f"  {f.measurement}: {f.status:13s} landmarks {f.loss.get('feature_rms_px', float('nan')):.2f} px, "
@@ -122,22 +144,21 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
 
 @main.command("fit-brdf")
 @click.argument("capture", type=click.Path(exists=True))
-@click.option("--model", "brdf_model", default="cooktorrance", show_default=True,
-              type=click.Choice(["phong", "cooktorrance", "ward", "lafortune"]), help="BRDF model to fit per region.")
+@click.option("--model", "brdf_model", default=default(fit_brdf_model, "model"), show_default=True,
+              type=click.Choice(BRDF_MODELS), help="BRDF model to fit per region.")
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Folder for brdf.json, albedo.exr and scene.xml.")
-@click.option("--geometry", default="ground-truth", show_default=True,
+@click.option("--geometry", default=default(fit_brdf_model, "geometry"), show_default=True,
               help="'ground-truth' (a simulated capture's) or the folder mifaces fit-shape wrote.")
-@click.option("--resolution", default=512, show_default=True, type=click.IntRange(8),
+@click.option("--resolution", default=default(fit_brdf_model, "resolution"), show_default=True, type=click.IntRange(8),
               help="Texture-space resolution R (R x R texels).")
-@click.option("--lobes", default=1, show_default=True, type=click.IntRange(1), help="Lafortune lobes.")
+@click.option("--lobes", default=default(fit_brdf_model, "lobes"), show_default=True, type=click.IntRange(1),
+              help="Lafortune lobes.")
 @click.option("--face-model", default=None, help="Face model of the geometry (default: the one it names).")
 def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolution: int, lobes: int,
              face_model: str | None) -> None:
     """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
-    from .reflectance.estimate import fit_brdf as fit
-
-    estimate = fit(capture, brdf_model, geometry, face_model=face_model, resolution=resolution, lobes=lobes,
+    estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, resolution=resolution, lobes=lobes,
                    out=out_dir)
     click.echo(f"fitted {estimate.model} to {estimate.samples} samples of {len(estimate.measurements)} "
                f"photographs in {estimate.seconds['total']:.1f} s")
@@ -157,16 +178,15 @@ def _short(value) -> str:
 @click.argument("capture", required=False, type=click.Path(exists=True))
 @click.option("--out", "out_dir", default="out/measure", show_default=True, type=click.Path(file_okay=False),
               help="Output folder (capture/, shapes/, brdf/<model>/, report.md/json/png).")
-@click.option("--model", "models", multiple=True, type=click.Choice(["phong", "cooktorrance", "ward", "lafortune"]),
+@click.option("--model", "models", multiple=True, type=click.Choice(BRDF_MODELS),
               help="BRDF model(s) to fit (default: all four).")
-@click.option("--geometry", default="fitted", show_default=True, type=click.Choice(["fitted", "ground-truth"]),
+@click.option("--geometry", default=default(measure_capture, "geometry"), show_default=True, type=click.Choice(GEOMETRIES),
               help="Fit the face model to each photograph, or use a simulated capture's true shapes.")
-@click.option("--resolution", default=512, show_default=True, type=click.IntRange(8), help="Texture resolution R.")
+@click.option("--resolution", default=default(measure_capture, "resolution"), show_default=True, type=click.IntRange(8),
+              help="Texture resolution R.")
 def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
-    from .pipeline import MODELS, measure as run
-
-    report = run(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution)
+    report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution)
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")
@@ -181,23 +201,40 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
 @click.option("--out", "out_stem", required=True, type=click.Path(dir_okay=False),
               help="Output image path without suffix: writes OUT.exr and OUT.png.")
 @click.option("--measurement", default=None, help="Measurement whose face geometry to use (default: the first).")
-@click.option("--geometry", default="ground-truth", show_default=True,
+@click.option("--geometry", default=default(render_fitted, "geometry"), show_default=True,
               help="'ground-truth' or the folder mifaces fit-shape wrote.")
-@click.option("--yaw", default=0.0, show_default=True, help="Turn the face by this many degrees (a novel pose).")
+@click.option("--yaw", default=default(render_fitted, "yaw"), show_default=True, type=float,
+              help="Turn the face by this many degrees (a novel pose).")
 @click.option("--light", "light_position", default=None, type=(float, float, float),
               help="Point light position x y z (world, mm; default: the measurement's light).")
+@click.option("--light-direction", default=None, type=(float, float, float),
+              help="A directional light instead: x y z towards the light (world frame).")
+@click.option("--light-angles", default=None, type=(float, float),
+              help="A directional light at azimuth and elevation (degrees) about the camera's axis: 0 0 from the "
+                   "camera, positive azimuth towards the image's left, positive elevation above (as the Yale "
+                   "database names its lights).")
+@click.option("--intensity", default=None, type=float,
+              help="The light's intensity (irradiance for a directional light; default: the measurement light's).")
 @click.option("--envmap", default=None, type=click.Path(exists=True, dir_okay=False),
               help="Light by this equirectangular environment map (EXR) instead.")
-@click.option("--envmap-scale", default=1.0, show_default=True, help="Scale of the environment map.")
-@click.option("--spp", default=64, show_default=True, type=click.IntRange(1), help="Samples per pixel.")
+@click.option("--envmap-scale", default=default(render_fitted, "envmap_scale"), show_default=True, type=float,
+              help="Scale of the environment map.")
+@click.option("--spp", default=default(render_fitted, "spp"), show_default=True, type=click.IntRange(1),
+              help="Samples per pixel.")
 def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, geometry: str, yaw: float,
-           light_position, envmap: str | None, envmap_scale: float, spp: int) -> None:
-    """Render the BRDF fitted in BRDF_DIR on a face of CAPTURE: novel poses, lights, environment maps, or
-    another person's face (BRDF transfer)."""
-    from .reflectance.estimate import render_fitted
-
-    paths = render_fitted(brdf_dir, capture, out_stem, measurement, geometry, yaw=yaw,
-                          light_position=light_position, envmap=envmap, envmap_scale=envmap_scale, spp=spp)
+           light_position, light_direction, light_angles, intensity: float | None, envmap: str | None,
+           envmap_scale: float, spp: int) -> None:
+    """Render the BRDF fitted in BRDF_DIR on a face of CAPTURE, in the capture's camera and units: novel poses,
+    point or directional lights, environment maps, or another person's face (BRDF transfer)."""
+    if sum(x is not None for x in (light_position, light_direction, light_angles)) > 1:
+        raise click.UsageError("give one of --light, --light-direction and --light-angles")
+    loaded = load_capture(capture)
+    if light_angles is not None:
+        light_direction = loaded.camera.direction(*light_angles)
+    paths = render_fitted(brdf_dir, loaded, out_stem, measurement, geometry, yaw=yaw,
+                          light_position=light_position, light_direction=light_direction,
+                          intensity=None if intensity is None else [intensity] * 3, envmap=envmap,
+                          envmap_scale=envmap_scale, spp=spp)
     click.echo(f"wrote {paths['exr']} and {paths['png']}")
 
 
@@ -209,9 +246,6 @@ def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, 
               help="Face box X0 Y0 X1 Y1 for every image (pixels, X1 Y1 inside), skipping the face detector.")
 def landmarks(images: tuple[str, ...], out_path: str, box) -> None:
     """Find the 68 iBUG landmarks of the face in each of IMAGES (pixel centres at integers)."""
-    from .files import write_json
-    from .landmarks import NoFaceError, detect_landmarks
-
     found, failed = {}, []
     for image in images:
         try:
@@ -225,3 +259,30 @@ def landmarks(images: tuple[str, ...], out_path: str, box) -> None:
     click.echo(f"wrote the landmarks of {len(found)} of {len(images)} images to {out_path}")
     if failed:
         raise SystemExit(1)
+
+
+@main.group("import")
+def import_() -> None:
+    """Convert public data sets into captures."""
+
+
+@import_.command("yaleb")
+@click.argument("subject_dir", type=click.Path(exists=True, file_okay=False))
+@click.argument("out", type=click.Path(file_okay=False))
+@click.option("--train", "count", default=None, type=click.IntRange(1),
+              help="Number of training lights, spread over the directions (default 8).")
+@click.option("--train-lights", default=None, help="Training lights instead: stems or tags, e.g. A+000E+00,A+035E-20.")
+@click.option("--force", is_flag=True, help="Write over an existing capture at OUT.")
+def yaleb(subject_dir: str, out: str, count: int | None, train_lights: str | None, force: bool) -> None:
+    """Write the Extended Yale B subject in SUBJECT_DIR as a capture at OUT: the training photographs with
+    their directional lights, the held-out ones named in OUT/split.json."""
+    from .importers.yaleb import SPLIT, import_subject
+
+    if count is not None and train_lights is not None:
+        raise click.UsageError("give --train or --train-lights, not both")
+    train = [s.strip() for s in train_lights.split(",") if s.strip()] if train_lights is not None else count or 8
+    try:
+        path = import_subject(subject_dir, out, train, force=force)
+    except (FileExistsError, FileNotFoundError, ValueError) as error:
+        raise click.ClickException(str(error)) from None
+    click.echo(f"wrote the capture {path} and {path / SPLIT}")

@@ -8,11 +8,12 @@ from pathlib import Path
 
 import mitsuba as mi
 
+from .brdf import NAMES
 from .render import render_passes, save_image
 from .scenes import scene_path
 
 #: Plugins in the gallery, left to right.
-ORDER = ("phong", "cooktorrance", "ward", "lafortune")
+ORDER = NAMES
 
 
 def render_gallery(out_dir: str | os.PathLike = "out/gallery", spp: int = 128,

@@ -20,17 +20,19 @@ from pathlib import Path
 
 import numpy as np
 
+from .brdf import NAMES
 from .capture import Capture, load_capture
 from .files import write_json
 from .geometry import load_geometry
 from .model import load_model
-from .reflectance import capture_samples, fit_brdf, render_estimate
+from .reflectance import capture_samples, fit_brdf, write_estimate
+from .render import FaceScene
 from .report import ground_truth_errors, write_markdown, write_picture
 from .shape import fit_shape, shapes_in_world
 from .studio import simulate
 
 #: Models ``measure`` fits unless told otherwise.
-MODELS = ("cooktorrance", "ward", "phong", "lafortune")
+MODELS = NAMES
 #: Where the face geometry comes from.
 GEOMETRIES = ("fitted", "ground-truth")
 
@@ -39,7 +41,37 @@ class NoUsableShapeError(ValueError):
     """No photograph of a capture got a shape fit that the next stages can use."""
 
 
-def novel_light(capture, centre: np.ndarray) -> np.ndarray:
+def novel_light(capture, centre: np.ndarray) -> dict:
+    """A light none of the measurements used, as keyword arguments of
+    :meth:`mifaces.render.FaceScene.render`: :func:`novel_point_light` for
+    point lights, :func:`novel_direction` for directional ones."""
+    first = capture.lights[0]
+    if first.directional:
+        return {"light_direction": novel_direction(capture), "intensity": first.intensity}
+    return {"light_position": novel_point_light(capture, centre), "intensity": first.intensity}
+
+
+def novel_direction(capture) -> np.ndarray:
+    """A light direction none of the measurements used: the mean of the
+    capture's directions mirrored left-right in the camera's view (or
+    turned 40° sideways where it is frontal)."""
+    mean = np.mean([light.direction for light in capture.lights if light.directional], axis=0)
+    return capture.camera.rotation.T @ _mirrored(capture.camera.rotation @ (mean / np.linalg.norm(mean)))
+
+
+def _mirrored(direction: np.ndarray) -> np.ndarray:
+    """``direction`` (camera frame, unit) mirrored left-right, or turned 40°
+    sideways where it is nearly frontal."""
+    direction = np.array(direction, np.float64)
+    if abs(direction[0]) > 0.15:
+        direction[0] = -direction[0]
+        return direction
+    angle = np.radians(40.0)
+    return np.array([direction[0] * np.cos(angle) + direction[2] * np.sin(angle), direction[1],
+                     -direction[0] * np.sin(angle) + direction[2] * np.cos(angle)])
+
+
+def novel_point_light(capture, centre: np.ndarray) -> np.ndarray:
     """A light position none of the measurements used: the mean direction of
     the capture's lights from ``centre`` (the head, world frame) mirrored
     left-right in the camera's view (or turned 40° sideways where it is
@@ -47,13 +79,7 @@ def novel_light(capture, centre: np.ndarray) -> np.ndarray:
     offsets = np.array([light.position for light in capture.lights]) - centre
     distance = float(np.mean(np.linalg.norm(offsets, axis=1)))
     direction = capture.camera.rotation @ offsets.mean(axis=0)  # camera frame: x right
-    direction /= np.linalg.norm(direction)
-    if abs(direction[0]) > 0.15:
-        direction[0] = -direction[0]
-    else:
-        angle = np.radians(40.0)
-        direction = np.array([direction[0] * np.cos(angle) + direction[2] * np.sin(angle), direction[1],
-                              -direction[0] * np.sin(angle) + direction[2] * np.cos(angle)])
+    direction = _mirrored(direction / np.linalg.norm(direction))
     return centre + distance * (capture.camera.rotation.T @ direction)
 
 
@@ -116,15 +142,16 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     timings["reflectance_samples"] = time.perf_counter() - t
     first = next(m for m in capture.measurements if m.name in shapes)
     novel = novel_light(capture, np.asarray(shapes[first.name]).mean(axis=0))
+    scene = FaceScene(face, shapes[first.name])  # the first photograph's face, built once for every model
     panels = []
     for model in models:
-        entry, panel = _fit_model(out, capture, model, face, shapes, samples, first, novel, resolution, spp,
+        entry, panel = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, resolution, spp,
                                   timings, progress)
         report["models"][model] = entry
         panels.append(panel)
     timings["total"] = time.perf_counter() - t0
     report["seconds"] = timings
-    report["novel_light_mm"] = novel.tolist()
+    report["novel_light"] = {key: np.asarray(value).tolist() for key, value in novel.items()}
     write_json(out / "report.json", report)
     write_picture(out / "report.png", panels, first.name)
     write_markdown(out / "report.md", report, first.name)
@@ -163,23 +190,26 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
     return face, shapes
 
 
-def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, first, novel, resolution: int,
-               spp: int, timings: dict, progress: bool):
-    """Fit one BRDF model, render it in the first photograph's place and under
-    the novel light; the report's entry and picture row."""
+def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, scene: FaceScene, first,
+               novel, resolution: int, spp: int, timings: dict, progress: bool):
+    """Fit one BRDF model, write it, render it in the first photograph's place
+    and under the novel light; the report's entry and picture row."""
     t = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
-                            out=out / "brdf" / model, progress=progress)
+                            progress=progress)
+    lamp = capture.light(first.light)
+    write_estimate(estimate, out / "brdf" / model, scene, capture.camera, lamp.position, lamp.intensity,
+                   light_direction=lamp.direction)
     timings[f"fit_brdf_{model}"] = time.perf_counter() - t
     entry = estimate.to_json()
     entry["warnings"] = [str(w.message) for w in caught]
     entry["ground_truth"] = ground_truth_errors(estimate, capture)
-    lamp = capture.light(first.light)
-    vertices = shapes[first.name]
-    rendered = render_estimate(estimate, face, vertices, capture.camera, lamp.position, lamp.intensity, spp=spp)
-    relit = render_estimate(estimate, face, vertices, capture.camera, novel, lamp.intensity, spp=spp)
+    brdf, albedo = estimate.to_json(), estimate.albedo.albedo
+    rendered = scene.render(brdf, albedo, capture.camera, lamp.position, lamp.intensity, spp=spp,
+                            light_direction=lamp.direction)
+    relit = scene.render(brdf, albedo, capture.camera, spp=spp, **novel)
     photo = first.image.pixels
     face_pixels = photo.mean(axis=2) > 0.02 * photo.max()
     entry["image_relative_rmse"] = float(np.sqrt(np.mean((rendered[face_pixels] - photo[face_pixels]) ** 2))

@@ -65,6 +65,10 @@ class LineProgress:
     def set_postfix_str(self, text: str, refresh: bool = True) -> None:
         self.postfix = text
 
+    def set_postfix(self, ordered_dict=None, refresh: bool = True, **values) -> None:
+        values = {**(ordered_dict or {}), **values}
+        self.postfix = ", ".join(f"{k}={v}" for k, v in values.items())
+
     def close(self) -> None:
         if not self.closed:
             self.closed = True
@@ -86,13 +90,16 @@ class LineProgress:
 
 
 def progress(iterable=None, desc: str = "", unit: str = "it", total: int | None = None, enabled: bool = True,
-             leave: bool = True):
+             leave: bool = True, detail: bool = False):
     """Report progress over ``iterable`` (or, without one, of ``total`` steps
     advanced by ``update``): a tqdm bar on a terminal, else plain lines (see
-    the module docstring). ``enabled=False`` reports nothing."""
+    the module docstring). ``enabled=False`` reports nothing; ``detail=True``
+    marks an inner loop (the iterations of one photograph's fit, the passes of
+    one render), shown as a bar on a terminal and left out of logs, where the
+    enclosing loop's lines say enough."""
     if enabled and _on_terminal(sys.stderr):
         return tqdm(iterable, desc=desc, unit=unit, total=total, leave=leave)
-    return LineProgress(iterable, desc, unit, total, enabled=enabled)
+    return LineProgress(iterable, desc, unit, total, enabled=enabled and not detail)
 
 
 __all__ = ["progress", "LineProgress"]

@@ -1,18 +1,40 @@
 """Rendering with Mitsuba: the capture's camera as a sensor, a face with its
 fitted (or ground-truth) BRDF per region, lit by a point light or an
-environment map; rendering in passes with progress; writing EXR and PNG."""
+environment map; rendering in passes with progress; writing EXR and PNG.
+
+A face scene is described once, by :meth:`FaceScene.description`: a Mitsuba
+scene dict whose meshes (``meshes/<key>.ply``) and albedo map
+(``albedo.exr``) are named by file. :meth:`FaceScene.scene` puts the
+in-memory meshes and albedo in place of those files and gives the dict to
+``mi.load_dict``; :func:`scene_xml` writes the same dict as Mitsuba XML
+(the ``scene.xml`` of ``mifaces fit-brdf``). Units are mm, the frame the
+capture's world frame.
+"""
 
 from __future__ import annotations
 
 import math
 import os
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 import mitsuba as mi
 import numpy as np
-from tqdm import tqdm
 
-from .files import write_exr, write_png
+from . import brdf as brdf_models
+from .files import atomic_path, write_exr, write_png
+from .progress import progress
+from .model.mesh import mitsuba_mesh
+from .model.regions import REGIONS, triangle_regions
+
+#: Id of the albedo texture in a face scene; its BSDFs refer to it.
+ALBEDO = "albedo"
+#: The reference to the albedo texture a region's BSDF holds as its diffuse reflectance.
+ALBEDO_REF = {"type": "ref", "id": ALBEDO}
+#: Folder of a face scene's meshes, beside its ``scene.xml``.
+MESH_FOLDER = "meshes"
 
 
 def render_passes(scene, spp: int, passes: int = 8, desc: str = "rendering") -> np.ndarray:
@@ -22,7 +44,7 @@ def render_passes(scene, spp: int, passes: int = 8, desc: str = "rendering") -> 
     passes = max(1, min(passes, spp))
     per_pass = [spp // passes + (1 if i < spp % passes else 0) for i in range(passes)]
     total = None
-    for seed, n in enumerate(tqdm(per_pass, desc=desc, unit="pass", leave=False)):
+    for seed, n in enumerate(progress(per_pass, desc=desc, unit="pass", leave=False, detail=True)):
         image = np.array(mi.render(scene, spp=n, seed=seed), dtype=np.float64)
         total = image * n if total is None else total + image * n
     return (total / spp).astype(np.float32)
@@ -68,11 +90,9 @@ def rgb(value) -> dict:
 
 def _bsdf(truth: dict, region: str, texture) -> dict:
     """The plugin dict of one region: its parameters over the albedo texture."""
-    from . import brdf
-
     model = truth["model"]
     options = dict(truth["options"])
-    instance = brdf.model(model, **options)
+    instance = brdf_models.model(model, **options)
     params = truth["regions"].get(region, truth["regions"]["skin"])
     d = {"type": model} if texture is None else {"type": model, "diffuse_reflectance": texture}
     for k, v in options.items():
@@ -84,84 +104,301 @@ def _bsdf(truth: dict, region: str, texture) -> dict:
     return d
 
 
-def face_shapes(model, vertices: np.ndarray, truth: dict, texture=None, normals: np.ndarray | None = None) -> dict:
-    """One Mitsuba mesh per region (triangles labelled by the region map at their uv centroid),
-    each with its region's BSDF from ``truth`` (the ``brdf.json`` layout) over the albedo
-    ``texture`` (the plugin's default diffuse if None); shading normals from the whole face
-    (``normals``, default the model's vertex normals of ``vertices``) so seams stay invisible.
-    Keys are ``face_<region>_<label>``."""
-    from .model.mesh import mitsuba_mesh
-    from .model.regions import REGIONS, triangle_regions
+# --------------------------------------------------------------------------------------------
+# The face's meshes, one per material region
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RegionMesh:
+    """The triangles of a face in one material region (world frame, mm), with
+    the shading normals of the whole face so that seams stay invisible."""
 
+    region: str
+    vertices: np.ndarray
+    triangles: np.ndarray
+    uv: np.ndarray
+    normals: np.ndarray
+
+    def mesh(self, bsdf) -> mi.Mesh:
+        """A ``mi.Mesh`` of this region with BSDF ``bsdf`` (a dict or a loaded BSDF)."""
+        return mitsuba_mesh(self.vertices, self.triangles, self.uv, normals=self.normals, bsdf=bsdf,
+                            name=f"face_{self.region}")
+
+
+def region_meshes(model, vertices: np.ndarray, normals: np.ndarray | None = None) -> dict[str, RegionMesh]:
+    """The face ``vertices`` of ``model`` cut into one mesh per region: triangles
+    labelled by the region map at their uv centroid, shading normals from the
+    whole face (``normals``, default the model's vertex normals of
+    ``vertices``). Keys are ``face_<region>_<label>``."""
     vertices = np.asarray(vertices, np.float32)
     normals = model.vertex_normals(vertices) if normals is None else normals
     names = {label: name for name, label in REGIONS.items()}
     labels = triangle_regions(model.region_map, model.uv, model.triangles)
-    shapes = {}
+    meshes = {}
     for label in np.unique(labels):
         name = names.get(int(label), "skin")
         name = "skin" if name == "background" else name
         tri = model.triangles[labels == label]
         used, inverse = np.unique(tri, return_inverse=True)
-        shapes[f"face_{name}_{int(label)}"] = mitsuba_mesh(
-            vertices[used], inverse.reshape(-1, 3), model.uv[used], normals=normals[used],
-            bsdf=_bsdf(truth, name, texture), name=f"face_{name}")
-    return shapes
+        meshes[f"face_{name}_{int(label)}"] = RegionMesh(name, vertices[used], inverse.reshape(-1, 3), model.uv[used],
+                                                         normals[used])
+    return meshes
 
 
-def face_scene(brdf: dict, albedo: np.ndarray, face_model, vertices: np.ndarray, camera, light_position=None,
-               intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4) -> dict:
-    """The Mitsuba scene (a dict for ``mi.load_dict``) of a face with a
-    per-region BRDF over an albedo map, as ``camera`` sees it.
+def face_shapes(model, vertices: np.ndarray, truth: dict, texture=None, normals: np.ndarray | None = None) -> dict:
+    """One Mitsuba mesh per region (:func:`region_meshes`), each with its
+    region's BSDF from ``truth`` (the ``brdf.json`` layout) over the albedo
+    ``texture`` (the plugin's default diffuse if None). Keys are
+    ``face_<region>_<label>``."""
+    return {key: part.mesh(_bsdf(truth, part.region, texture))
+            for key, part in region_meshes(model, vertices, normals).items()}
+
+
+# --------------------------------------------------------------------------------------------
+# One face scene: the description, in memory, rendered, written
+# --------------------------------------------------------------------------------------------
+class FaceScene:
+    """A face's region meshes, built once, in scenes under any per-region
+    BRDF, albedo map, camera and light.
 
     Parameters
     ----------
-    brdf : dict
-        The ``brdf.json`` layout: ``model``, ``options``, ``regions``.
-    albedo : (R, R, 3) array
-        Diffuse albedo in the model's texture space (row 0 at v = 0).
     face_model : MorphableModel
     vertices : (V, 3) array
         The face in world coordinates (mm).
-    camera : mifaces.capture.Camera
-    light_position, intensity : (3,) arrays, optional
-        A point light (world, mm) and its radiant intensity.
-    envmap : path or (H, W, 3) array, optional
-        An equirectangular environment map (linear RGB) instead of, or
-        besides, the point light, scaled by ``envmap_scale``. A scene holds
-        only the emitters it is given.
-    spp, max_depth : int
-        Samples per pixel and the path tracer's depth (shadows and
-        interreflection).
-    """
-    import mitsuba as mi
+    normals : (V, 3) array, optional
+        Shading normals (default: the model's vertex normals of ``vertices``).
 
-    if light_position is None and envmap is None:
-        raise ValueError("render_face needs a light: a point light position or an environment map")
-    texture = mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(albedo, np.float32)),
-                            "raw": True, "filter_type": "bilinear", "wrap_mode": "clamp"})
-    scene = {"type": "scene", "integrator": {"type": "path", "max_depth": int(max_depth)},
-             "sensor": mitsuba_sensor(camera, spp), **face_shapes(face_model, vertices, brdf, texture)}
-    if light_position is not None:
-        if intensity is None:
-            raise ValueError("a point light needs its intensity")
-        scene["light"] = {"type": "point", "position": [float(x) for x in light_position], "intensity": rgb(intensity)}
-    if envmap is not None:
-        environment = {"type": "envmap", "scale": float(envmap_scale)}
-        if isinstance(envmap, (str, os.PathLike)):
-            if not Path(envmap).is_file():
-                raise FileNotFoundError(f"environment map not found: {envmap}")
-            environment["filename"] = str(envmap)
-        else:
-            environment["bitmap"] = mi.Bitmap(np.ascontiguousarray(envmap, np.float32))
-        scene["environment"] = environment
-    return scene
+    Attributes
+    ----------
+    meshes : dict
+        ``face_<region>_<label>`` -> :class:`RegionMesh`. Only arrays: a
+        scene's Mitsuba objects (meshes, BSDFs, emitters) live as long as
+        that scene does.
+    """
+
+    def __init__(self, face_model, vertices: np.ndarray, normals: np.ndarray | None = None):
+        self.meshes = region_meshes(face_model, vertices, normals)
+
+    @staticmethod
+    def mesh_file(key: str) -> str:
+        """The file of mesh ``key``, relative to the scene's folder."""
+        return f"{MESH_FOLDER}/{key}.ply"
+
+    def description(self, brdf: dict, camera, light_position=None, intensity=None, envmap=None,
+                    envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, albedo: str = "albedo.exr", *,
+                    light_direction=None) -> dict:
+        """The Mitsuba scene dict of the face with a per-region BRDF over an
+        albedo map, as ``camera`` sees it; meshes and albedo map named by
+        file (:meth:`mesh_file`, ``albedo``), relative to the scene's folder.
+
+        Parameters
+        ----------
+        brdf : dict
+            The ``brdf.json`` layout: ``model``, ``options``, ``regions``.
+        camera : mifaces.capture.Camera
+        light_position, intensity : (3,) arrays, optional
+            A point light (world, mm) and its radiant intensity; with
+            ``light_direction`` instead, ``intensity`` is the directional
+            light's irradiance (pixel units: a white Lambertian surface facing
+            it shows intensity/π).
+        envmap : path or (H, W, 3) array, optional
+            An equirectangular environment map (linear RGB) instead of, or
+            besides, the point light, scaled by ``envmap_scale``. A scene
+            holds only the emitters it is given.
+        spp, max_depth : int
+            Samples per pixel and the path tracer's depth (shadows and
+            interreflection).
+        albedo : str
+            The albedo map's file: diffuse albedo in the model's texture space
+            (row 0 at v = 0), linear.
+        light_direction : (3,) array, optional
+            A directional (distant) light instead of the point light: unit
+            vector in the world frame from the face towards the light.
+        """
+        if light_position is None and light_direction is None and envmap is None:
+            raise ValueError("a face scene needs a light: a point light position, a light direction or an "
+                             "environment map")
+        if light_position is not None and light_direction is not None:
+            raise ValueError("give a point light position or a light direction, not both")
+        scene = {"type": "scene", "integrator": {"type": "path", "max_depth": int(max_depth)},
+                 "sensor": mitsuba_sensor(camera, spp),
+                 ALBEDO: {"type": "bitmap", "filename": albedo, "raw": True, "filter_type": "bilinear",
+                          "wrap_mode": "clamp"}}
+        for key, part in self.meshes.items():
+            scene[key] = {"type": "ply", "filename": self.mesh_file(key), "bsdf": _bsdf(brdf, part.region, ALBEDO_REF)}
+        if light_position is not None:
+            if intensity is None:
+                raise ValueError("a point light needs its intensity")
+            scene["light"] = {"type": "point", "position": [float(x) for x in light_position],
+                              "intensity": rgb(intensity)}
+        if light_direction is not None:
+            if intensity is None:
+                raise ValueError("a directional light needs its irradiance (intensity)")
+            towards = np.asarray(light_direction, np.float64)
+            norm = float(np.linalg.norm(towards)) if towards.shape == (3,) else 0.0
+            if not np.isfinite(norm) or norm == 0:
+                raise ValueError(f"light direction must be a finite, non-zero 3-vector, got {light_direction!r}")
+            # Mitsuba's directional emitter takes the direction light travels in
+            scene["light"] = {"type": "directional", "direction": [float(-x / norm) for x in towards],
+                              "irradiance": rgb(intensity)}
+        if envmap is not None:
+            environment = {"type": "envmap", "scale": float(envmap_scale)}
+            if isinstance(envmap, (str, os.PathLike)):
+                if not Path(envmap).is_file():
+                    raise FileNotFoundError(f"environment map not found: {envmap}")
+                environment["filename"] = str(envmap)
+            else:
+                environment["bitmap"] = mi.Bitmap(np.ascontiguousarray(envmap, np.float32))
+            scene["environment"] = environment
+        return scene
+
+    def scene(self, brdf: dict, albedo: np.ndarray, camera, light_position=None, intensity=None, envmap=None,
+              envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, *, light_direction=None) -> dict:
+        """:meth:`description` with the meshes and the ``albedo`` array (R, R, 3)
+        in memory in place of their files: a dict for ``mi.load_dict``."""
+        scene = self.description(brdf, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth,
+                                 light_direction=light_direction)
+        texture = {k: v for k, v in scene.pop(ALBEDO).items() if k != "filename"}
+        texture = mi.load_dict({**texture, "bitmap": mi.Bitmap(np.ascontiguousarray(albedo, np.float32))})
+        for key, part in self.meshes.items():
+            bsdf = {k: texture if v == ALBEDO_REF else v for k, v in scene[key]["bsdf"].items()}
+            scene[key] = part.mesh(bsdf)
+        return scene
+
+    def render(self, brdf: dict, albedo: np.ndarray, camera, light_position=None, intensity=None, envmap=None,
+               envmap_scale: float = 1.0, spp: int = 64, seed: int = 0, max_depth: int = 4, *,
+               light_direction=None) -> np.ndarray:
+        """Render :meth:`scene`: (H, W, 3) float32 linear radiance."""
+        scene = self.scene(brdf, albedo, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth,
+                           light_direction=light_direction)
+        return np.array(mi.render(mi.load_dict(scene), spp=spp, seed=seed), dtype=np.float32)[..., :3]
+
+    def write_meshes(self, folder: str | os.PathLike) -> dict[str, Path]:
+        """Write each region mesh as ``<folder>/``:meth:`mesh_file` (PLY), atomically."""
+        paths = {}
+        for key, part in self.meshes.items():
+            paths[key] = Path(folder) / self.mesh_file(key)
+            with atomic_path(paths[key]) as tmp:
+                part.mesh({"type": "diffuse"}).write_ply(str(tmp))
+        return paths
+
+
+def face_scene(brdf: dict, albedo: np.ndarray, face_model, vertices: np.ndarray, camera, light_position=None,
+               intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, *,
+               light_direction=None) -> dict:
+    """The Mitsuba scene (a dict for ``mi.load_dict``) of a face with a
+    per-region BRDF over an albedo map, as ``camera`` sees it: a
+    :class:`FaceScene` of ``face_model`` and ``vertices`` (world, mm) built
+    for one scene; see :meth:`FaceScene.description` for the arguments."""
+    return FaceScene(face_model, vertices).scene(brdf, albedo, camera, light_position, intensity, envmap,
+                                                 envmap_scale, spp, max_depth, light_direction=light_direction)
 
 
 def render_face(brdf: dict, albedo: np.ndarray, face_model, vertices: np.ndarray, camera, light_position=None,
                 intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64, seed: int = 0,
-                max_depth: int = 4) -> np.ndarray:
+                max_depth: int = 4, *, light_direction=None) -> np.ndarray:
     """Render :func:`face_scene`: (H, W, 3) float32 linear radiance."""
-    scene = face_scene(brdf, albedo, face_model, vertices, camera, light_position, intensity, envmap, envmap_scale,
-                       spp, max_depth)
-    return np.array(mi.render(mi.load_dict(scene), spp=spp, seed=seed), dtype=np.float32)[..., :3]
+    return FaceScene(face_model, vertices).render(brdf, albedo, camera, light_position, intensity, envmap,
+                                                  envmap_scale, spp, seed, max_depth, light_direction=light_direction)
+
+
+# --------------------------------------------------------------------------------------------
+# A scene dict as Mitsuba XML
+# --------------------------------------------------------------------------------------------
+#: Mitsuba object type -> XML tag.
+_TAGS = {mi.ObjectType.Shape: "shape", mi.ObjectType.BSDF: "bsdf", mi.ObjectType.Emitter: "emitter",
+         mi.ObjectType.Sensor: "sensor", mi.ObjectType.Film: "film", mi.ObjectType.ReconstructionFilter: "rfilter",
+         mi.ObjectType.Sampler: "sampler", mi.ObjectType.Integrator: "integrator",
+         mi.ObjectType.Texture: "texture", mi.ObjectType.Medium: "medium", mi.ObjectType.Volume: "volume",
+         mi.ObjectType.PhaseFunction: "phase"}
+
+
+def _tag(plugin: str) -> str:
+    """The XML tag of plugin ``plugin``; Python plugins are unknown to Mitsuba's
+    plugin manager, and those of mifaces are BSDFs."""
+    kind = mi.PluginManager.instance().plugin_type(plugin)
+    if kind in _TAGS:
+        return _TAGS[kind]
+    if plugin in brdf_models.MODELS:
+        return "bsdf"
+    raise ValueError(f"unknown Mitsuba plugin {plugin!r}")
+
+
+def _numbers(values) -> str:
+    return ", ".join(repr(float(x)) for x in values)
+
+
+def _element(key: str, value, path: tuple[str, ...], parameters: Mapping[tuple[str, ...], str],
+             top: bool) -> ET.Element:
+    """The XML element of ``value`` under name (or, at the top, id) ``key``."""
+    name = {"id" if top else "name": key}
+    if path in parameters:
+        return ET.Element("integer" if isinstance(value, int) else "float", name=key, value=f"${parameters[path]}")
+    if isinstance(value, dict) and value.get("type") == "ref":
+        return ET.Element("ref", id=value["id"], name=key)
+    if isinstance(value, dict) and value.get("type") == "rgb":
+        v = np.broadcast_to(np.asarray(value["value"], np.float64), 3)
+        return ET.Element("rgb", name=key, value=_numbers(v))
+    if isinstance(value, dict):
+        element = ET.Element(_tag(value["type"]), type=value["type"], **name)
+        for k, v in value.items():
+            if k != "type":
+                element.append(_element(k, v, path + (k,), parameters, False))
+        return element
+    if isinstance(value, (bool, np.bool_)):
+        return ET.Element("boolean", name=key, value=str(bool(value)).lower())
+    if isinstance(value, (int, np.integer)):
+        return ET.Element("integer", name=key, value=str(int(value)))
+    if isinstance(value, (float, np.floating)):
+        return ET.Element("float", name=key, value=repr(float(value)))
+    if isinstance(value, str):
+        return ET.Element("string", name=key, value=value)
+    if isinstance(value, (list, tuple, np.ndarray)) and np.shape(value) == (3,):
+        return ET.Element("point", name=key, value=_numbers(value))
+    if isinstance(value, mi.ScalarTransform4f):
+        element = ET.Element("transform", name=key)
+        ET.SubElement(element, "matrix", value=" ".join(repr(float(x)) for x in np.ravel(value.matrix)))
+        return element
+    raise TypeError(f"{'.'.join(path)}: a {type(value).__name__} has no Mitsuba XML form (write it to a file "
+                    "and name the file)")
+
+
+def scene_xml(scene: dict, parameters: Mapping[str, tuple[str, ...]] | None = None, comment: str = "") -> str:
+    """A Mitsuba scene dict (``mi.load_dict``'s layout) as Mitsuba XML text.
+
+    Values may be nested plugin dicts, ``rgb`` and ``ref`` dicts, booleans,
+    numbers, strings, 3-vectors (written as points) and
+    ``mi.ScalarTransform4f``; meshes, bitmaps and other data must be named by
+    file. Top-level keys become ids, nested keys names.
+
+    Parameters
+    ----------
+    scene : dict
+        ``{"type": "scene", ...}``.
+    parameters : mapping, optional
+        Name -> key path of a value that ``mi.load_file(path, name=...)`` may
+        override, e.g. ``{"spp": ("sensor", "sampler", "sample_count")}``:
+        written as ``<default name="spp" value="..."/>`` and ``$spp``.
+    comment : str
+        A comment written before the scene.
+    """
+    if scene.get("type") != "scene":
+        raise ValueError(f"not a scene dict: type {scene.get('type')!r}")
+    parameters = dict(parameters or {})
+    root = ET.Element("scene", version="3.0.0")
+    for name, path in parameters.items():
+        value = scene
+        for key in path:
+            value = value[key]
+        ET.SubElement(root, "default", name=name, value=str(value))
+    by_path = {tuple(path): name for name, path in parameters.items()}
+    for key, value in scene.items():
+        if key != "type":
+            root.append(_element(key, value, (key,), by_path, True))
+    ET.indent(root, space="    ")
+    header = f"<!-- {comment} -->\n" if comment else ""
+    return header + ET.tostring(root, encoding="unicode") + "\n"
+
+
+__all__ = ["ALBEDO", "ALBEDO_REF", "MESH_FOLDER", "render_passes", "save_image", "mitsuba_sensor", "rgb",
+           "RegionMesh", "region_meshes", "face_shapes", "FaceScene", "face_scene", "render_face", "scene_xml"]

@@ -1,23 +1,18 @@
 """Mitsuba 3 BSDF plugins of mifaces, written in Python.
 
-``register()`` makes them known to Mitsuba's scene loader under their XML
-names in the current variant; :func:`mifaces.set_variant` calls it.
+One plugin per model of :data:`mifaces.brdf.MODELS`, each the generic
+:class:`~mifaces.plugins.analytic.AnalyticBSDF` built from the model's
+description. ``register()`` makes them known to Mitsuba's scene loader under
+their XML names in the current variant; :func:`mifaces.set_variant` calls it.
 """
 
 from __future__ import annotations
 
-import importlib
-
 import mitsuba as mi
 
-#: XML plugin name -> module of this package that defines the plugin class.
-PLUGINS = {
-    "phong": "phong",
-    "cooktorrance": "cooktorrance",
-    "ward": "ward",
-    "lafortune": "lafortune",
-}
+from mifaces.brdf import MODELS
 
+from .analytic import behaviour
 
 _classes: dict[tuple[str, str], type] = {}
 
@@ -29,20 +24,20 @@ def plugin_class(name: str) -> type:
     C++ side, e.g. by a shape in ``scalar_rgb``)."""
     key = (name, mi.variant())
     if key not in _classes:
-        behaviour = importlib.import_module(f"{__name__}.{PLUGINS[name]}").PLUGIN
+        klass = behaviour(MODELS[name])
         # nanobind types take a single base: copy the behaviour's methods in.
         namespace = {}
-        for klass in reversed(behaviour.__mro__[:-1]):
-            namespace.update({k: v for k, v in vars(klass).items() if k not in ("__dict__", "__weakref__")})
-        _classes[key] = type(behaviour.__name__, (mi.BSDF,), namespace)
+        for base in reversed(klass.__mro__[:-1]):
+            namespace.update({k: v for k, v in vars(base).items() if k not in ("__dict__", "__weakref__")})
+        _classes[key] = type(klass.__name__, (mi.BSDF,), namespace)
     return _classes[key]
 
 
 def register() -> None:
     """Register every mifaces BSDF in the current Mitsuba variant."""
-    for name in PLUGINS:
-        try:
-            cls = plugin_class(name)
-        except ModuleNotFoundError:
-            continue
+    for name in MODELS:
+        cls = plugin_class(name)
         mi.register_bsdf(name, lambda props, cls=cls: cls(props))
+
+
+__all__ = ["plugin_class", "register"]

@@ -1,5 +1,10 @@
 """A Mitsuba BSDF around one of the analytic models of :mod:`mifaces.brdf`.
 
+One generic plugin serves every model: :func:`behaviour` builds it from the
+model's class, whose :meth:`~mifaces.brdf.model.BRDFModel.from_properties`
+reads the options (and, for Lafortune, the lobes) from the scene, and whose
+parameters, formula and sources make the plugin's documentation.
+
 The plugin reads the model's options and parameters from the scene's
 properties, exposes every parameter through ``traverse`` (differentiable),
 evaluates the model's formulas (the same functions the fitters call) and
@@ -15,6 +20,10 @@ flag is not set.
 """
 
 from __future__ import annotations
+
+import functools
+import sys
+from typing import ClassVar
 
 import drjit as dr
 import mitsuba as mi
@@ -34,22 +43,35 @@ def _value_is_zero(value) -> bool:
     return not dr.grad_enabled(value) and bool(dr.all(value == 0, axis=None))
 
 
-def plugin_docstring(model: BRDFModel, summary: str, example: str) -> str:
-    """Plugin documentation: summary, the model's formula and sources (from
-    its module), a parameter table built from the model's parameters, and an
-    XML example."""
-    import sys
+def xml_example(model: BRDFModel) -> str:
+    """A ``<bsdf>`` element of ``model``, indented for a docstring: every
+    parameter at the value a fit starts from (a weak lobe of medium width),
+    every option at its default."""
+    lines = [f'<bsdf type="{model.name}">']
+    for p in model.parameters():
+        lines.append(f'    <{p.kind} name="{p.name}" value="{p.default if p.start is None else p.start:g}"/>')
+    for key, value in model.default_options().items():
+        lines.append(f'    <string name="{key}" value="{value}"/>')
+    return "\n".join("    " + line for line in lines + ["</bsdf>"])
 
+
+def plugin_docstring(cls: type[BRDFModel]) -> str:
+    """Plugin documentation of model ``cls``: a summary, the model's formula
+    and sources (its module's docstring), a table of its options and
+    parameters, and an XML example (of :attr:`~mifaces.brdf.model.BRDFModel.EXAMPLE_OPTIONS`)."""
+    model = cls(**cls.EXAMPLE_OPTIONS)
+    summary = f"{cls.title} BSDF (``<bsdf type=\"{cls.name}\">``)" + (", one or more lobes." if cls.SEVERAL_LOBES
+                                                                     else ".")
+    opts = [f"    {k:<22} string one of {', '.join(v)} (default {v[0]})" for k, v in cls.OPTIONS.items()]
     rows = [f"    {p.name:<22} {p.kind:<6} default {p.default:<8g} {p.doc}" for p in model.parameters()]
-    opts = [f"    {k:<22} string one of {', '.join(v)} (default {v[0]})"
-            for k, v in getattr(type(model), "OPTIONS", {}).items()]
-    formula = sys.modules[type(model).__module__].__doc__ or ""
+    formula = sys.modules[cls.__module__].__doc__ or ""
     return (f"{summary}\n\n{formula.strip()}\n\nParameters (XML / mi.traverse names)\n"
-            + "\n".join(opts + rows) + f"\n\nExample::\n\n{example}\n")
+            + "\n".join(opts + rows) + f"\n\nExample::\n\n{xml_example(model)}\n")
 
 
 class AnalyticBSDF:
-    """The plugin's behaviour; subclasses set :meth:`make_model`.
+    """The plugin's behaviour for the model class :attr:`MODEL`, which
+    :func:`behaviour` sets.
 
     Mitsuba's ``BSDF`` base class differs per variant, so this class holds
     the behaviour only; :func:`mifaces.plugins.plugin_class` builds the
@@ -57,18 +79,14 @@ class AnalyticBSDF:
     therefore call base classes explicitly, not through ``super()``.
     """
 
-    #: Default of ``diffuse_reflectance`` when the scene gives none.
-    DIFFUSE_DEFAULT = 0.5
-
-    @classmethod
-    def make_model(cls, props: mi.Properties) -> BRDFModel:
-        """The model with the options given in ``props``."""
-        raise NotImplementedError
+    MODEL: ClassVar[type[BRDFModel]]
 
     def __init__(self, props: mi.Properties):
         mi.BSDF.__init__(self, props)
-        self.model = self.make_model(props)
-        self.diffuse = props.get_texture(DIFFUSE.name, self.DIFFUSE_DEFAULT)
+        #: the model as the scene describes it; ``model`` leaves out its zero lobes
+        self.full_model = self.MODEL.from_properties(props.keys(), props.get)
+        self.model = self.full_model
+        self.diffuse = props.get_texture(DIFFUSE.name, DIFFUSE.default)
         self.values = {}
         for p in self.model.specular_parameters():
             value = props.get(p.name, p.default)
@@ -107,10 +125,14 @@ class AnalyticBSDF:
         self.m_flags = flags
 
     def _specular_active(self) -> bool:
-        """Whether the glossy part has non-zero weight; models with several
-        lobes override this to drop the zero ones."""
-        weight = self.values.get("specular_reflectance")
-        return weight is None or not _value_is_zero(weight)
+        """Whether the glossy part has non-zero weight; only the lobes with
+        a non-zero scale (:meth:`~mifaces.brdf.model.BRDFModel.lobe_scales`)
+        are evaluated."""
+        active = [j for j, scales in self.full_model.lobe_scales().items()
+                  if not all(name in self.values and _value_is_zero(self.values[name]) for name in scales)]
+        if active:
+            self.model = self.full_model.only_lobes(active)
+        return bool(active)
 
     def _component_index(self, part: str) -> int:
         return (0 if part == "specular" else int(self.has_specular))
@@ -206,3 +228,10 @@ class AnalyticBSDF:
         lines = [f"  {DIFFUSE.name} = {self.diffuse}"]
         lines += [f"  {k} = {v}" for k, v in self.values.items()]
         return f"{type(self).__name__}[\n  model = {self.model!r},\n" + ",\n".join(lines) + "\n]"
+
+
+@functools.cache
+def behaviour(cls: type[BRDFModel]) -> type:
+    """The plugin behaviour of model class ``cls``: :class:`AnalyticBSDF`
+    with that model and its documentation (:func:`plugin_docstring`)."""
+    return type(f"{cls.__name__}BSDF", (AnalyticBSDF,), {"MODEL": cls, "__doc__": plugin_docstring(cls)})

@@ -189,7 +189,9 @@ CORRUPTIONS = {
                        "camera.distortion: must be 0, 4, 5 or 8"),
     "missing width": (_edit(_set("camera", "width", value=KeyError)), "camera: missing 'width'"),
     "width not an integer": (_edit(_set("camera", "width", value="384")), "camera.width: must be int"),
-    "no white target": (_edit(_set("white_target", value=KeyError)), "white_target: missing or not an object"),
+    "white target not an object": (_edit(_set("white_target", value=[1, 1, 1])), "white_target: must be an object"),
+    "direction of a point light": (_edit(_set("lights", 1, "direction", value=[0, 0, 1])),
+                                   "lights[1] (L01): give 'direction' (a directional light) or 'spheres'"),
     "white target not positive": (_edit(_set("white_target", "value", value=[1, 0, 1])),
                                   "white_target.value: must be finite and positive"),
     "white target incidence": (_edit(_set("white_target", "cos_incidence", value=1.5)),
@@ -259,3 +261,19 @@ def test_given_light_positions_are_not_calibrated(studio, tmp_path):
     capture = load_capture(copy)
     np.testing.assert_array_equal(capture.light("L00").position, [1.0, 2.0, 3.0])
     assert capture.light("L00").calibration is None and capture.light("L01").calibration is not None
+
+
+def test_white_target_and_distances_are_optional(studio, tmp_path):
+    """Without them reflectance is relative and there is no absolute scale (real setups)."""
+    copy = copy_capture(studio, tmp_path / "capture")
+    _edit(lambda d: (d.pop("white_target"), d.update(distances=[])))(copy)
+    capture = load_capture(copy, calibrate=False)
+    assert capture.white_target is None and capture.distances == () and capture.relative_reflectance
+    assert load_capture(studio, calibrate=False).white_target is not None
+
+
+def test_point_lights_and_colour_images_stay_as_they_were(studio):
+    capture = load_capture(studio, calibrate=False)
+    assert not any(light.directional or light.relative for light in capture.lights)
+    assert capture.camera.calibrated and not capture.greyscale
+    assert all(m.image.channels == 3 and m.feature_points for m in capture.measurements)

@@ -200,7 +200,7 @@ def test_builtin_landmarks_on_their_regions(builtin):
 
 def test_builtin_is_a_face(builtin):
     """Proportions: measured on the mean face, the anthropometric means the generator used."""
-    from mifaces.model.builtin import TEMPLATE
+    from mifaces.model.generator import TEMPLATE
 
     p = builtin.landmark_positions()
     n_gn = p[28][1] - p[9][1]
@@ -233,7 +233,7 @@ def test_builtin_cache_round_trip(builtin, tmp_path):
 
 
 def test_builtin_is_deterministic(builtin):
-    from mifaces.model import builtin as gen
+    from mifaces.model import generator as gen
 
     grid = gen.template_grid()
     h0, phi0 = np.meshgrid(grid.h[::37], grid.phi[::41], indexing="ij")
@@ -363,7 +363,7 @@ def test_region_map_from_landmarks_polygons():
     g = np.linspace(0, 1, 41)
     uu, vv = np.meshgrid(g, g)
     uv = np.stack([uu.ravel(), vv.ravel()], 1)
-    from mifaces.model.builtin import grid_triangles
+    from mifaces.model.generator import grid_triangles
 
     tri = grid_triangles(41, 41)
 

@@ -73,12 +73,33 @@ def test_novel_light_is_not_a_capture_light(capture_dir):
 
     capture = load_capture(capture_dir)
     centre = np.zeros(3)
-    light = novel_light(capture, centre)
+    novel = novel_light(capture, centre)
+    light = novel["light_position"]
+    np.testing.assert_array_equal(novel["intensity"], capture.lights[0].intensity)
     for lamp in capture.lights:
         cos = light @ lamp.position / (np.linalg.norm(light) * np.linalg.norm(lamp.position))
         assert cos < np.cos(np.radians(10))
     distances = [np.linalg.norm(lamp.position) for lamp in capture.lights]
     assert np.linalg.norm(light) == pytest.approx(np.mean(distances), rel=0.3)
+
+
+def test_novel_direction_for_directional_lights(capture_dir):
+    """A capture lit by directional lights gets a novel direction, unit, away from every capture light."""
+    import dataclasses
+
+    from mifaces.capture import load_capture
+    from mifaces.pipeline import novel_light
+
+    capture = load_capture(capture_dir)
+    lights = tuple(dataclasses.replace(lamp, position=None, direction=lamp.position / np.linalg.norm(lamp.position))
+                   for lamp in capture.lights)
+    capture = dataclasses.replace(capture, lights=lights)
+    novel = novel_light(capture, np.zeros(3))
+    assert set(novel) == {"light_direction", "intensity"}
+    direction = novel["light_direction"]
+    assert np.linalg.norm(direction) == pytest.approx(1.0)
+    for lamp in lights:
+        assert direction @ lamp.direction < np.cos(np.radians(10))
 
 
 def test_cli_fit_shape_then_fit_brdf_on_the_fitted_shape(capture_dir, tmp_path):
@@ -102,7 +123,7 @@ def test_cli_fit_shape_then_fit_brdf_on_the_fitted_shape(capture_dir, tmp_path):
     assert data["measurements"] == ["m00"] and data["fit"]["skin"]["samples"] > 100
     missing = runner.invoke(main, ["fit-brdf", str(capture_dir), "--geometry", str(tmp_path), "--out",
                                    str(tmp_path / "x")])
-    assert missing.exit_code != 0 and "no fitted shapes" in str(missing.exception)
+    assert missing.exit_code == 1 and "no fitted shapes" in missing.output and "Traceback" not in missing.output
 
 
 def test_measure_names_the_failed_shape_fits(capture_dir, tmp_path, monkeypatch):

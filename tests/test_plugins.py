@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import re
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
 from conftest import REPO
+from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
 
+import mifaces
 from mifaces import brdf
+from mifaces.plugins import plugin_class
 
-PLUGINS = ["phong", "cooktorrance", "ward", "lafortune"]
+PLUGINS = list(brdf.NAMES)
 
 # Rough, medium and sharp settings of each plugin's glossy lobe, with a diffuse part.
 SETTINGS = {
@@ -31,9 +36,12 @@ def direction(theta_deg, phi_deg=20.0):
 
 
 def bsdf_dict(name, **params):
+    """A plugin with a coloured diffuse part and, where the model has one, a
+    coloured ``specular_reflectance`` given as RGB (whose channel mean sets
+    how often the glossy part is sampled)."""
     d = {"type": name, "diffuse_reflectance": {"type": "rgb", "value": [0.3, 0.25, 0.2]}}
-    if name != "lafortune":
-        d["specular_reflectance"] = {"type": "rgb", "value": [0.5, 0.5, 0.5]} if False else 0.5
+    if any(p.name == "specular_reflectance" for p in brdf.model(name).specular_parameters()):
+        d["specular_reflectance"] = {"type": "rgb", "value": [0.6, 0.5, 0.4]}
     d.update(params)
     return d
 
@@ -43,8 +51,6 @@ def bsdf_dict(name, **params):
 @pytest.mark.parametrize("name", PLUGINS)
 def test_chi2_sampling(jit_variant, name, setting, incidence):
     """Mitsuba's chi-square test: sample() draws from the density pdf() states."""
-    from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
-
     sample_func, pdf_func = BSDFAdapter(name, bsdf_dict(name, **SETTINGS[name][setting]),
                                         wi=direction(INCIDENCE[incidence]))
     chi2 = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
@@ -95,7 +101,7 @@ def test_cooktorrance_smith_matches_roughconductor(jit_variant):
 @pytest.mark.parametrize("name", PLUGINS)
 def test_pure_diffuse_matches_builtin_diffuse(variant, name):
     """With the glossy part switched off every plugin is Mitsuba's diffuse."""
-    zero = {"specular_reflectance": 0.0} if name != "lafortune" else {"cxy": 0.0, "cz": 0.0}
+    zero = {scale: 0.0 for scale in brdf.model(name).lobe_scales()[1]}
     ours = mi.load_dict({"type": name, "diffuse_reflectance": {"type": "rgb", "value": [0.7, 0.4, 0.2]}, **zero})
     ref = mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.4, 0.2]}})
     assert ours.flags() == ref.flags()
@@ -203,7 +209,7 @@ def test_gradient_of_render_with_respect_to_roughness(jit_variant):
 @pytest.mark.parametrize("name", PLUGINS)
 def test_zero_parts_are_left_out(variant, name):
     """A zero-weight part sets no flag and is neither evaluated nor sampled."""
-    glossy_off = {"specular_reflectance": 0.0} if name != "lafortune" else {"cxy": 0.0, "cz": 0.0}
+    glossy_off = {scale: 0.0 for scale in brdf.model(name).lobe_scales()[1]}
     only_glossy = mi.load_dict({"type": name, "diffuse_reflectance": 0.0})
     only_diffuse = mi.load_dict({"type": name, **glossy_off})
     both = mi.load_dict({"type": name})
@@ -264,12 +270,19 @@ def test_bitmap_diffuse_reflectance(jit_variant, tmp_path):
     np.testing.assert_allclose(value, np.array([[0.8, 0.1, 0.1], [0.1, 0.1, 0.8]]) / np.pi, rtol=1e-5)
 
 
-def test_xml_documentation_is_present():
-    from mifaces.plugins import plugin_class
-
+def test_xml_documentation_is_present(variant):
+    """help() of every plugin shows the formula, a row per option and
+    parameter, and an XML example that loads as that plugin."""
     for name in PLUGINS:
         doc = plugin_class(name).__doc__
+        cls = brdf.MODELS[name]
         assert "f(wi, wo)" in doc and "Example" in doc and "diffuse_reflectance" in doc
+        model = cls(**cls.EXAMPLE_OPTIONS)
+        for key in [*cls.OPTIONS, *(p.name for p in model.parameters())]:
+            assert re.search(rf"^    {key} +", doc, re.M), (name, key)
+        example = doc[doc.index("<bsdf", doc.index("Example::")):doc.index("</bsdf>") + len("</bsdf>")]
+        bsdf = mi.load_string(example.replace("<bsdf ", '<bsdf version="3.0.0" ', 1))
+        assert type(bsdf.model) is cls and bsdf.model.options == model.options
 
 
 # --------------------------------------------------------------------------
@@ -316,8 +329,6 @@ def analytic_sphere_image(scene_args, model, params, res):
 @pytest.mark.parametrize("render_variant", ["llvm_ad_rgb", "scalar_rgb"])
 @pytest.mark.parametrize("name", PLUGINS)
 def test_sphere_scene_matches_array_api(render_variant, name):
-    import mifaces
-
     mifaces.set_variant(render_variant)
     res = 64 if render_variant == "llvm_ad_rgb" else 24
     args = {"light_x": -0.35, "light_y": 0.35, "light_z": 0.6, "intensity": 1.0}

@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+import mitsuba as mi
 import numpy as np
 import pytest
 
-from mifaces.reflectance.samples import (MIN_COSINE, confidence, confidence_with_distance, d_max,
-                                         distance_to_missing, reflectance, valid_samples)
+from mifaces import brdf
+from mifaces.capture import Camera
+from mifaces.model.mesh import mitsuba_mesh
+from mifaces.model.texture_space import rasterize
+from mifaces.reflectance.samples import (MIN_COSINE, ReflectanceSamples, confidence, confidence_with_distance,
+                                         d_max, distance_to_missing, measurement_samples, reflectance, unsaturated,
+                                         valid_samples)
 
 
 def test_white_lambertian_target_has_reflectance_one():
@@ -75,8 +81,6 @@ def test_valid_samples_drop_shadow_grazing_and_borders():
 
 
 def test_saturated_pixels_are_dropped():
-    from mifaces.reflectance.samples import unsaturated
-
     pixels = np.array([[0.2, 0.3, 0.4], [0.2, 0.99, 0.4], [1.0, 1.0, 1.0], [0.5, 0.97, 0.1]])
     np.testing.assert_array_equal(unsaturated(pixels, 1.0), [True, False, False, True])
 
@@ -100,12 +104,12 @@ def spherical_cap(n=96, radius=80.0, centre_z=260.0, half=50.0):
     return vertices, triangles, uv
 
 
-def render_photo(camera, vertices, triangles, uv, light, intensity, bsdf, spp=64):
-    import mitsuba as mi
-
-    from mifaces.model.mesh import mitsuba_mesh
-
+def render_photo(camera, vertices, triangles, uv, light, intensity, bsdf, spp=64, directional=False):
     fov = np.degrees(2 * np.arctan(camera.width / (2 * camera.fx)))
+    emitter = ({"type": "directional", "direction": [-float(x) for x in light],
+                "irradiance": {"type": "rgb", "value": list(map(float, intensity))}} if directional else
+               {"type": "point", "position": list(map(float, light)),
+                "intensity": {"type": "rgb", "value": list(map(float, intensity))}})
     scene = mi.load_dict({
         "type": "scene", "integrator": {"type": "direct"},
         "sensor": {"type": "perspective", "fov": fov, "fov_axis": "x",
@@ -113,8 +117,7 @@ def render_photo(camera, vertices, triangles, uv, light, intensity, bsdf, spp=64
                    "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
                             "rfilter": {"type": "box"}},
                    "sampler": {"type": "independent", "sample_count": spp}},
-        "light": {"type": "point", "position": list(map(float, light)),
-                  "intensity": {"type": "rgb", "value": list(map(float, intensity))}},
+        "light": emitter,
         "face": mitsuba_mesh(vertices, triangles, uv, bsdf=bsdf)})
     return np.array(mi.render(scene), dtype=np.float32)
 
@@ -122,13 +125,6 @@ def render_photo(camera, vertices, triangles, uv, light, intensity, bsdf, spp=64
 def test_resampled_reflectance_matches_the_brdf(jit_variant):
     """Render a surface of known BRDF, resample the picture into texture
     space: every sample's reflectance is π f(l̂, v̂) of that BRDF."""
-    import mitsuba as mi
-
-    from mifaces import brdf
-    from mifaces.capture import Camera
-    from mifaces.model.texture_space import rasterize
-    from mifaces.reflectance.samples import measurement_samples
-
     camera = Camera(width=160, height=160, fx=230.0, fy=230.0, cx=79.5, cy=79.5)
     vertices, triangles, uv = spherical_cap()
     light, intensity = np.array([-120.0, -90.0, 20.0]), np.array([3e4, 2.5e4, 2e4])
@@ -150,13 +146,33 @@ def test_resampled_reflectance_matches_the_brdf(jit_variant):
     assert np.percentile(rel, 95) < 0.05, np.percentile(rel, 95)
 
 
+def test_directional_light_reflectance_matches_the_brdf(jit_variant):
+    """Under a directional light of irradiance E the samples' reflectance is
+    π f of the rendered BRDF: one direction for every texel, no falloff."""
+    camera = Camera(width=160, height=160, fx=230.0, fy=230.0, cx=79.5, cy=79.5)
+    vertices, triangles, uv = spherical_cap()
+    towards = np.array([-0.6, -0.45, -0.66])
+    towards /= np.linalg.norm(towards)
+    irradiance = np.array([0.8, 0.7, 0.6])
+    bsdf = {"type": "cooktorrance", "diffuse_reflectance": {"type": "rgb", "value": [0.5, 0.35, 0.3]},
+            "specular_reflectance": 1.5, "roughness": 0.35}
+    photo = render_photo(camera, vertices, triangles, uv, towards, irradiance, bsdf, directional=True)
+    coverage = rasterize(uv, triangles, (128, 128))
+    samples = measurement_samples(camera, None, irradiance, photo, vertices, triangles, uv, coverage, name="m0",
+                                  light_direction=towards)
+    assert len(samples) > 0.4 * 128 * 128
+    model = brdf.model("cooktorrance")
+    p = {"diffuse_reflectance": mi.Color3f(0.5, 0.35, 0.3), "specular_reflectance": 1.5, "roughness": 0.35,
+         "eta": 1.4}
+    expected = np.pi * np.array(model.eval(mi.Vector3f(samples.light.T), mi.Vector3f(samples.view.T), p)).T
+    rel = np.abs(samples.reflectance - expected) / expected
+    assert np.median(rel) < 0.01, np.median(rel)
+    assert np.percentile(rel, 95) < 0.05, np.percentile(rel, 95)
+
+
 def test_shadowed_and_hidden_texels_give_no_sample(jit_variant):
     """A light behind the surface lights nothing; texels outside the image
     give nothing either."""
-    from mifaces.capture import Camera
-    from mifaces.model.texture_space import rasterize
-    from mifaces.reflectance.samples import measurement_samples
-
     camera = Camera(width=64, height=64, fx=60.0, fy=60.0, cx=31.5, cy=31.5)
     vertices, triangles, uv = spherical_cap(n=40)
     coverage = rasterize(uv, triangles, (48, 48))
@@ -173,10 +189,6 @@ def test_shadowed_and_hidden_texels_give_no_sample(jit_variant):
 
 
 def test_bad_photographs_are_named(jit_variant):
-    from mifaces.capture import Camera
-    from mifaces.model.texture_space import rasterize
-    from mifaces.reflectance.samples import measurement_samples
-
     camera = Camera(width=64, height=64, fx=60.0, fy=60.0, cx=31.5, cy=31.5)
     vertices, triangles, uv = spherical_cap(n=20)
     coverage = rasterize(uv, triangles, (16, 16))
@@ -189,8 +201,6 @@ def test_bad_photographs_are_named(jit_variant):
 
 
 def test_samples_round_trip_and_concatenate(tmp_path):
-    from mifaces.reflectance.samples import ReflectanceSamples
-
     rng = np.random.default_rng(0)
 
     def part(n, name):

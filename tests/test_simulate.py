@@ -293,6 +293,14 @@ def test_default_brdf_uses_each_plugins_parameters(model):
         assert skin["exponent"] == pytest.approx(1 / (2 * m * m), rel=1e-4)
     if model in ("phong", "ward"):  # the lobe albedo of a Fresnel lobe with eta = 1.38: a few percent
         assert 0.01 < skin["specular_reflectance"][0] < 0.1
+    if model in ("phong", "lafortune"):  # every derived lobe reflects what the Cook-Torrance lobe does
+        from mifaces.brdf.albedo import glossy_albedo
+
+        instance = brdf.model(model, **truth["options"])
+        grey = {k: (v[0] if isinstance(v, list) else v) for k, v in skin.items()}
+        albedo, error = glossy_albedo(instance, [(1.0, grey)], samples=1 << 16)
+        expected = default_brdf("phong")["regions"]["skin"]["specular_reflectance"][0]
+        assert albedo[0] == pytest.approx(expected, rel=0.05, abs=3 * error[0])
 
 
 def test_brdf_overrides_replace_the_defaults():

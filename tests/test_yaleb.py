@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from mifaces.capture import MANIFEST
 from mifaces.importers import yaleb
 
 YALE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "yaleb"
@@ -85,3 +87,94 @@ def test_explicit_split(subject):
 def test_missing_folder(tmp_path):
     with pytest.raises(FileNotFoundError, match="no Yale light images"):
         yaleb.read_subject(tmp_path)
+
+
+# --------------------------------------------------------------------------------------------
+# A subject as a capture
+# --------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def imported(tmp_path_factory):
+    """yaleB01 imported with the default split, and its folder."""
+    folder = YALE / "yaleB01"
+    if not folder.is_dir():
+        pytest.skip(f"Yale faces not found at {folder}")
+    return yaleb.import_subject(folder, tmp_path_factory.mktemp("yale") / "capture"), folder
+
+
+def test_import_subject_loads(imported, monkeypatch):
+    pytest.importorskip("dlib")
+    from mifaces.capture import loader
+
+    out, folder = imported
+    calls = []
+    detect = loader.detect_feature_points
+    monkeypatch.setattr(loader, "detect_feature_points", lambda *a, **k: calls.append(a) or detect(*a, **k))
+    capture = loader.load_capture(out)
+    assert len(calls) == 1  # the eight measurements share their companion: detected once
+    assert len(capture.measurements) == 8 and len(capture.lights) == 8
+    assert not capture.camera.calibrated and capture.white_target is None and capture.distances == ()
+    assert capture.greyscale and capture.relative_reflectance
+    assert (capture.camera.width, capture.camera.height) == (168, 192)
+    assert capture.camera.fx == capture.camera.fy == yaleb.FOCAL_GUESS * 192
+    assert (capture.camera.cx, capture.camera.cy) == (83.5, 95.5)
+    np.testing.assert_array_equal(capture.camera.rotation, np.eye(3))
+    np.testing.assert_array_equal(capture.camera.position, np.zeros(3))
+    train = json.loads((out / yaleb.SPLIT).read_text())["train"]
+    assert [m.name for m in capture.measurements] == train
+    for m in capture.measurements:
+        assert m.pose == yaleb.POSE and m.face_box == (0, 0, 167, 191)
+        assert m.diffuse.path.name == "yaleB01_P00A+000E+00.pgm"  # nearest the camera axis, a training one
+        assert m.image.path.parent == out / "images"
+        assert m.image.path.read_bytes() == (folder / m.image.path.name).read_bytes()  # copied as is
+        light = capture.light(m.light)
+        assert m.name.endswith(m.light) and light.directional and light.relative
+        points = m.feature_points
+        assert len(points) >= 12
+        for xy in points.values():
+            assert 0 <= xy[0] <= 167 and 0 <= xy[1] <= 191
+        eyes = [points[n][1] for n in ("right_eye_outer", "right_eye_inner", "left_eye_inner", "left_eye_outer")]
+        mouth = [points[n][1] for n in ("mouth_right", "mouth_left", "upper_lip")]
+        assert max(eyes) + 40 < min(mouth) and points["nose_tip"][1] < min(mouth)
+        assert points["right_eye_outer"][0] < points["right_eye_inner"][0] < points["left_eye_inner"][0] \
+            < points["left_eye_outer"][0]  # the subject's right eye on the image's left
+    # known stems: at the camera, and 50 degrees to the subject's right (the image's left, -x)
+    np.testing.assert_allclose(capture.light("A+000E+00").direction, [0, 0, -1], atol=1e-12)
+    a = np.radians(50)
+    np.testing.assert_allclose(capture.light("A+050E+00").direction, [-np.sin(a), 0, -np.cos(a)], atol=1e-12)
+    c, s = np.cos(np.radians(20)), np.sin(np.radians(20))
+    np.testing.assert_allclose(capture.light("A-085E+20").direction,
+                               [c * np.sin(np.radians(85)), -s, -c * np.cos(np.radians(85))], atol=1e-12)
+
+
+def test_import_subject_split(imported):
+    out, folder = imported
+    split = json.loads((out / yaleb.SPLIT).read_text())
+    present = {p.stem for p in folder.glob("*_P00A*E*.pgm")}
+    assert len(split["train"]) == 8 and not set(split["train"]) & set(split["heldout"])
+    assert set(split["train"]) | set(split["heldout"]) == present
+    assert len(split["train"]) + len(split["heldout"]) == len(present)
+    assert sorted(p.stem for p in (out / "images").iterdir()) == sorted(split["train"])  # held-out ones not copied
+
+
+def test_import_subject_refuses_to_overwrite(imported, tmp_path):
+    out, folder = imported
+    before = (out / MANIFEST).read_bytes()
+    with pytest.raises(FileExistsError, match="holds a capture already"):
+        yaleb.import_subject(folder, out, train=3)
+    assert (out / MANIFEST).read_bytes() == before
+    # --force and --train-lights through the command line; the companion is the training light nearest the axis
+    from click.testing import CliRunner
+
+    from mifaces.cli import main
+
+    copy = tmp_path / "capture"
+    args = ["import", "yaleb", str(folder), str(copy), "--train-lights", "A+035E-20,A+010E+00"]
+    assert CliRunner().invoke(main, args).exit_code == 0
+    assert CliRunner().invoke(main, args).exit_code != 0
+    result = CliRunner().invoke(main, args + ["--force", "--train", "3"])
+    assert result.exit_code != 0 and "not both" in result.output
+    assert CliRunner().invoke(main, args + ["--force"]).exit_code == 0
+    data = json.loads((copy / MANIFEST).read_text())
+    assert [m["light"] for m in data["measurements"]] == ["A+035E-20", "A+010E+00"]
+    assert {m["diffuse"]["path"] for m in data["measurements"]} == {"images/yaleB01_P00A+010E+00.pgm"}
+    assert json.loads((copy / yaleb.SPLIT).read_text())["train"] == ["yaleB01_P00A+035E-20", "yaleB01_P00A+010E+00"]

@@ -28,8 +28,8 @@ import numpy as np
 import scipy.optimize
 
 from mifaces import brdf
-from mifaces.reflectance.fitting import (DEFAULT_FIXED, FULL_DATA, ParameterSpace, Schedule, _Problem,
-                                  fit_region, linear_start)
+from mifaces.reflectance.fitting import (FULL_DATA, ParameterSpace, SubsetSchedule, _Problem,
+                                         fit_region, linear_start)
 from mifaces.files import atomic_path, write_json
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -61,7 +61,7 @@ def samples(model, truth, n, seed=0, noise=0.03):
 
 
 def scipy_fit(model, light, view, r, sigma, jacobian: str):
-    space = ParameterSpace(model, DEFAULT_FIXED.get(model.name, {}))
+    space = ParameterSpace(model, model.fixed_defaults())
     problem = _Problem(model, space, light, view, r, sigma)
     trace, t0 = [], time.perf_counter()
 
@@ -75,7 +75,7 @@ def scipy_fit(model, light, view, r, sigma, jacobian: str):
         return problem.residuals_and_jacobian(x)[1].astype(np.float64)
 
     # the same start as mifaces' fit (its lobe-width grid search), timed with scipy
-    x0 = space.vector(linear_start(model, light, view, r, sigma, DEFAULT_FIXED.get(model.name, {})))
+    x0 = space.vector(linear_start(model, light, view, r, sigma, model.fixed_defaults()))
     # residuals are float32: finite differences need a step well above its precision
     result = scipy.optimize.least_squares(residuals, x0, method="lm", diff_step=1e-3,
                                           jac=jac if jacobian == "drjit" else "2-point")
@@ -101,9 +101,9 @@ def main():
         # one throw-away fit compiles the kernels, for everyone's benefit
         fit_region(model, light[:1000], view[:1000], r[:1000], sigma[:1000], schedule=FULL_DATA)
         runs = {}
-        space = ParameterSpace(model, DEFAULT_FIXED.get(model.name, {}))
+        space = ParameterSpace(model, model.fixed_defaults())
         full = _Problem(model, space, light, view, r, sigma)
-        for label, schedule in [("hierarchical LM", Schedule()), ("full-data LM", FULL_DATA)]:
+        for label, schedule in [("hierarchical LM", SubsetSchedule()), ("full-data LM", FULL_DATA)]:
             trace = []
             fit = fit_region(model, light, view, r, sigma, schedule=schedule, trace=trace)
             # the full-data loss along the way, evaluated after the timed run

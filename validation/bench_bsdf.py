@@ -17,7 +17,6 @@ Writes validation/results/bench_bsdf.json and prints the tables.
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -166,7 +165,7 @@ def bench_array_api(sizes, repeats):
 def bench_render(res, spp, repeats):
     rows = []
     times = {}
-    for name in ["roughplastic", "phong", "cooktorrance", "ward", "lafortune"]:
+    for name in ["roughplastic", *brdf.NAMES]:
         scene = mi.load_file(str(scene_path("sphere")), bsdf=name, res=res, spp=spp)
 
         def render():
@@ -174,7 +173,7 @@ def bench_render(res, spp, repeats):
             dr.sync_thread()
 
         times[name] = timed(render, repeats)
-    for name in ["phong", "cooktorrance", "ward", "lafortune"]:
+    for name in brdf.NAMES:
         rows.append({"plugin": name, "seconds": times[name], "roughplastic_seconds": times["roughplastic"],
                      "ratio": times[name] / times["roughplastic"]})
         print(f"  {name:<13} {times[name] * 1e3:8.1f} ms vs roughplastic {times['roughplastic'] * 1e3:8.1f} ms"

@@ -35,7 +35,7 @@ from skimage.transform import resize
 
 from mifaces import brdf
 from mifaces.geometry import load_geometry
-from mifaces.reflectance.estimate import fit_brdf, render_estimate
+from mifaces.reflectance import fit_brdf, render_estimate
 from mifaces.report import ground_truth_errors
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.files import write_json

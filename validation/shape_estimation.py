@@ -45,7 +45,6 @@ Writes validation/results/shape_estimation.{json,png} and prints a table.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -56,7 +55,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from mifaces import shape as se
-from mifaces.capture import load_capture
+from mifaces.capture import load_capture, read_ground_truth
 from mifaces.files import atomic_path, write_json
 from mifaces.model.landmarks import FEATURE_POINTS
 
@@ -80,10 +79,11 @@ def ensure_capture(path: Path, **kw) -> Path:
     return path
 
 
-def truth(capture_path: Path, name: str) -> tuple[np.ndarray, dict]:
-    scene = json.loads((capture_path / "ground_truth" / "scene.json").read_text())
-    entry = next(m for m in scene["measurements"] if m["name"] == name)
-    return np.load(capture_path / "ground_truth" / "shapes" / f"{name}.npy").astype(np.float64), entry
+def truth(capture_path: Path, name: str):
+    """The true vertices (world, mm) of measurement ``name`` and its ground-truth record."""
+    gt = read_ground_truth(capture_path)
+    entry = next(m for m in gt.measurements if m.name == name)
+    return entry.vertices.astype(np.float64), entry, gt.head_center
 
 
 def evaluated(model, vertices_world, camera) -> np.ndarray:
@@ -198,19 +198,19 @@ def run_capture(label: str, path: Path, model_source, eos: Eos, iterations, out_
     same = model.name == eos.sfm.name
     rows = {}
     for fit, m in zip(fits, capture.measurements):
-        gt, entry = truth(path, m.name)
+        gt, entry, head_center = truth(path, m.name)
         mask = evaluated(model, gt, camera)
         ibug = model.ibug_landmarks
         # mifaces
         ours = {"status": fit.status, "seconds": fit.seconds, "iterations": fit.iterations,
-                "landmark_px": landmark_error(entry["feature_points"], camera.project, fit.vertices_world, ibug),
+                "landmark_px": landmark_error(entry.feature_points, camera.project, fit.vertices_world, ibug),
                 **same_topology_metrics(model, fit.vertices_world.astype(np.float64), gt, camera, mask)}
-        ours["yaw_pitch_roll_error_deg"] = (fit.yaw_pitch_roll - np.array(entry["yaw_pitch_roll_deg"])).tolist()
+        ours["yaw_pitch_roll_error_deg"] = (fit.yaw_pitch_roll - np.asarray(entry.yaw_pitch_roll)).tolist()
         # the mean face at the true pose
-        rot, head, tr = (np.array(entry["rotation"]), np.array(entry["rotation_center_mm"]),
-                         np.array(entry["translation_mm"]))
+        rot, head, tr = (np.asarray(entry.rotation), np.asarray(head_center),
+                         np.asarray(entry.translation))
         mean_world = (model.shape_mean.astype(np.float64) - head) @ rot.T + head + tr
-        mean_face = {"landmark_px": landmark_error(entry["feature_points"], camera.project, mean_world, ibug),
+        mean_face = {"landmark_px": landmark_error(entry.feature_points, camera.project, mean_world, ibug),
                      **same_topology_metrics(model, mean_world, gt, camera, mask)}
         # eos
         e = eos.fit(m, camera)
@@ -220,7 +220,7 @@ def run_capture(label: str, path: Path, model_source, eos: Eos, iterations, out_
 
         sfm_ibug = eos.sfm.ibug_landmarks
         theirs = {"seconds": e["seconds"],
-                  "landmark_px": landmark_error(entry["feature_points"], eos_project, e["vertices"], sfm_ibug)}
+                  "landmark_px": landmark_error(entry.feature_points, eos_project, e["vertices"], sfm_ibug)}
         eos_normals_model = eos.sfm.vertex_normals(e["vertices"])
         gt_normals_camera = model.vertex_normals(gt) @ camera.rotation.T
         if same:
@@ -264,7 +264,7 @@ def sweep(path: Path, model_source, factors, name="m00") -> list[dict]:
     capture = load_capture(path)
     model = mifaces.load_model(model_source)
     m = next(x for x in capture.measurements if x.name == name)
-    gt, entry = truth(path, name)
+    gt, entry, head_center = truth(path, name)
     mask = evaluated(model, gt, capture.camera)
     out = []
     for factor in factors:
@@ -272,7 +272,7 @@ def sweep(path: Path, model_source, factors, name="m00") -> list[dict]:
                                  schedule=se.ShapeSchedule.scaled(factor), progress=False, distances=capture.distances)
         row = {"resolution": capture.camera.width, "factor": factor, "iterations": fit.iterations,
                "seconds": fit.seconds, "status": fit.status,
-               "landmark_px": landmark_error(entry["feature_points"], capture.camera.project, fit.vertices_world,
+               "landmark_px": landmark_error(entry.feature_points, capture.camera.project, fit.vertices_world,
                                              model.ibug_landmarks),
                **same_topology_metrics(model, fit.vertices_world.astype(np.float64), gt, capture.camera, mask)}
         print(f"  sweep {capture.camera.width}px x{factor}: {fit.iterations} it {fit.seconds:.1f}s "
@@ -291,12 +291,11 @@ def brdf_growth(path: Path, fits: Path, model_source, resolution: int = 256) -> 
     from skimage.transform import resize
 
     from mifaces.reflectance.estimate import fit_brdf
-    from mifaces.files import read_exr
 
     capture = load_capture(path)
     model = mifaces.load_model(model_source)
-    truth_brdf = json.loads((path / "ground_truth" / "brdf.json").read_text())
-    albedo_truth = read_exr(path / "ground_truth" / "albedo.exr")
+    ground_truth = read_ground_truth(path)
+    truth_brdf, albedo_truth = ground_truth.brdf, ground_truth.albedo
     out = {}
     for label, geometry in (("true_shapes", "ground-truth"), ("fitted_shapes", fits)):
         t0 = time.perf_counter()

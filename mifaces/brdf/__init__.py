@@ -23,18 +23,26 @@ from .model import BRDFModel, Parameter
 from .phong import Phong
 from .ward import Ward
 
-#: XML / ``brdf.json`` model name -> model class.
+#: XML / ``brdf.json`` model name -> model class, in the order the CLI, the
+#: gallery, the pipeline and the reports list them.
 MODELS = {cls.name: cls for cls in (Phong, CookTorrance, Ward, Lafortune)}
+#: The model names, in that order.
+NAMES = tuple(MODELS)
 
 
 def model(name: str, **options) -> BRDFModel:
-    """The BRDF model ``name`` (``phong``, ``cooktorrance``, ``ward``,
-    ``lafortune``) with the given options (e.g. ``fresnel='schlick'``,
-    ``normalization='ward1992'``, ``lobes=2``)."""
+    """The BRDF model ``name`` (one of :data:`NAMES`) with the given options
+    (e.g. ``fresnel='schlick'``, ``normalization='ward1992'``, ``lobes=2``).
+    ``lobes=1`` is accepted by every model."""
     try:
         cls = MODELS[name]
     except KeyError:
         raise ValueError(f"unknown BRDF model {name!r}; known: {sorted(MODELS)}") from None
+    if "lobes" in options and not cls.SEVERAL_LOBES:
+        lobes = options.pop("lobes")
+        if lobes != 1:
+            several = " and ".join(n for n, c in MODELS.items() if c.SEVERAL_LOBES)
+            raise ValueError(f"lobes={lobes}: only the {several} model has several lobes")
     return cls(**options)
 
 
@@ -43,5 +51,5 @@ def evaluate(name: str, wi, wo, params, **options):
     return model(name, **options).eval(wi, wo, params)
 
 
-__all__ = ["BRDFModel", "Parameter", "MODELS", "model", "evaluate",
+__all__ = ["BRDFModel", "Parameter", "MODELS", "NAMES", "model", "evaluate",
            "Phong", "CookTorrance", "Ward", "Lafortune"]

@@ -6,7 +6,8 @@ Source: Cook & Torrance, "A reflectance model for computer graphics", ACM
 TOG 1(1), 1982 (eqs. 2-5). ``specular_reflectance`` ρ_s scales the lobe;
 D is Beckmann with RMS slope m = ``roughness``; F is the unpolarised
 dielectric Fresnel term with relative index ``eta`` (default 1.4, skin:
-Tuchin's tissue optics, and Weyrich et al. 2006 fit η ≈ 1.38 for faces),
+Tuchin's tissue optics; a fit holds it at the published value of each face
+region, :data:`mifaces.brdf.materials.REFRACTIVE_INDEX`),
 Schlick's approximation, or 1; G is the V-cavity term of the original paper
 or the separable Smith term of Walter et al. 2007. With F = 1, Smith G and
 ρ_s = 1 this is Mitsuba's ``roughconductor`` (Beckmann) with a perfect
@@ -19,7 +20,12 @@ import drjit as dr
 import mitsuba as mi
 
 from . import microfacet
-from .model import BRDFModel, COS_EPSILON, Parameter, dot, mean
+from .materials import REFRACTIVE_INDEX, SKIN_REFRACTIVE_INDEX
+from .model import SLOPE_GRID, BRDFModel, COS_EPSILON, Parameter, dot, mean
+
+#: The index of refraction of the Fresnel term; a fit starts it at skin's.
+ETA = Parameter("eta", "float", 1.4, 1.0, 3.0, "relative index of refraction of the Fresnel term",
+                start=SKIN_REFRACTIVE_INDEX)
 
 
 class CookTorrance(BRDFModel):
@@ -27,14 +33,24 @@ class CookTorrance(BRDFModel):
     ``geometry`` (vcavity | smith)."""
 
     name = "cooktorrance"
+    title = "Cook-Torrance"
     OPTIONS = {"fresnel": ("dielectric", "schlick", "none"), "geometry": ("vcavity", "smith")}
+    WIDTH_GRID = ("roughness", SLOPE_GRID)
 
     def specular_parameters(self):
         return (
             Parameter("specular_reflectance", "rgb", 1.0, 0.0, 10.0, "scale ρ_s of the microfacet lobe"),
             Parameter("roughness", "float", 0.3, 1e-3, 1.0, "Beckmann RMS slope m"),
-            Parameter("eta", "float", 1.4, 1.0, 3.0, "relative index of refraction of the Fresnel term"),
+            ETA,
         )
+
+    def fixed_defaults(self):
+        """η, at skin's: it trades off against the lobe scale, and skin's is known."""
+        return {ETA.name: SKIN_REFRACTIVE_INDEX}
+
+    def fixed_in_region(self, region):
+        """η at the region's published value, where there is one."""
+        return {ETA.name: REFRACTIVE_INDEX[region]} if region in REFRACTIVE_INDEX else {}
 
     def fresnel_term(self, cos_theta, eta):
         """F at incidence cosine ``cos_theta`` for this model's ``fresnel`` option."""
@@ -52,13 +68,13 @@ class CookTorrance(BRDFModel):
             g = microfacet.vcavity_g(wi, wo, h)
         else:
             g = microfacet.smith_g(wi, wo, h, m)
-        f = self.fresnel_term(dot(wi, h), params.get("eta", 1.4))
+        f = self.fresnel_term(dot(wi, h), params.get(ETA.name, ETA.default))
         cos_i = dr.maximum(wi.z, COS_EPSILON)
         cos_o = dr.maximum(wo.z, COS_EPSILON)
         return mi.Color3f(params["specular_reflectance"]) * (d * f * g / (4.0 * cos_i * cos_o))
 
     def specular_weight(self, wi, params):
-        f = self.fresnel_term(wi.z, params.get("eta", 1.4))
+        f = self.fresnel_term(wi.z, params.get(ETA.name, ETA.default))
         return mean(mi.Color3f(params["specular_reflectance"])) * f
 
     def sample_specular(self, wi, sample1, sample2, params):

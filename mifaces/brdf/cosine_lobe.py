@@ -28,3 +28,14 @@ def sample(axis, exponent, sample2):
 def pdf(axis, exponent, wo):
     """Density of :func:`sample` at ``wo`` (per unit solid angle)."""
     return (exponent + 1.0) * dr.inv_two_pi * power(dot(axis, wo), exponent)
+
+
+def exponent_of_slope(roughness: float) -> float:
+    """The exponent n of a cosine lobe around the mirror direction as wide
+    as a Beckmann lobe of RMS slope m = ``roughness``: n = 1/(2m²).
+
+    Near its peak the Beckmann lobe is exp(-tan²θh/m²) ≈ exp(-θh²/m²); the
+    angle to the mirror direction is α ≈ 2θh, and cos^n α ≈ exp(-nα²/2) =
+    exp(-2nθh²), so the two agree for 2n = 1/m².
+    """
+    return 1.0 / (2.0 * roughness * roughness)

@@ -19,16 +19,19 @@ proportion to |s_j|^{n_j} 2π/(n_j + 2), an estimate of their albedo.
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from . import cosine_lobe
-from .model import BRDFModel, Parameter, dot, mean, power
+from .model import EXPONENT_GRID, BRDFModel, Parameter, dot, mean, power
 
 #: Largest lobe albedo estimate used to weight sampling (keeps weights finite).
 _MAX_WEIGHT = 1e4
+#: Prefixes of the parameters of lobes j >= 2 (``cxy_2``, ...).
+_PREFIXES = ("cxy_", "cz_", "exponent_")
 
 
 def lobe_names(lobe: int) -> tuple[str, str, str]:
@@ -37,10 +40,32 @@ def lobe_names(lobe: int) -> tuple[str, str, str]:
     return f"cxy{suffix}", f"cz{suffix}", f"exponent{suffix}"
 
 
+def lobes_named(keys: Iterable[str]) -> list[int]:
+    """Lobe numbers among parameter names ``keys``: 1, plus every j of a
+    ``cxy_j``, ``cz_j`` or ``exponent_j``."""
+    lobes = {1}
+    for key in keys:
+        for prefix in _PREFIXES:
+            if key.startswith(prefix) and key[len(prefix):].isdigit():
+                lobes.add(int(key[len(prefix):]))
+    return sorted(lobes)
+
+
+def energy_bound(exponent, log, exp):
+    """c_max = ((n + 2) / 2π)^{1/n}: the largest coefficient magnitude whose
+    lobe keeps an albedo estimate |s|^n 2π/(n + 2) of at most 1 (``log`` and
+    ``exp`` numpy's or Dr.Jit's)."""
+    return exp(log((exponent + 2.0) / (2.0 * np.pi)) / exponent)
+
+
 class Lafortune(BRDFModel):
     """Lafortune with the lobes numbered in ``lobes`` (1-based), default one."""
 
     name = "lafortune"
+    title = "Lafortune"
+    SEVERAL_LOBES = True
+    EXAMPLE_OPTIONS = {"lobes": 2}
+    WIDTH_GRID = ("exponent", EXPONENT_GRID)
 
     def __init__(self, lobes: int | Sequence[int] = 1):
         super().__init__()
@@ -49,16 +74,65 @@ class Lafortune(BRDFModel):
             raise ValueError(f"lafortune: lobes must be a count >= 1 or 1-based lobe numbers, got {lobes!r}")
         self.options = {"lobes": self.lobes}
 
+    @classmethod
+    def from_properties(cls, keys, get):
+        """The lobes a scene names: 1, plus every j with ``cxy_j``, ``cz_j`` or ``exponent_j``."""
+        return cls(lobes=lobes_named(keys))
+
     def specular_parameters(self):
+        # The fit starts lobe 1 as a weak forward-scattering lobe, the others weaker and wider.
         out = []
         for j in self.lobes:
             cxy, cz, n = lobe_names(j)
+            c = 0.75 if j == 1 else 0.5
             out += [
-                Parameter(cxy, "rgb", -1.0, -10.0, 10.0, f"C_xy of lobe {j}"),
-                Parameter(cz, "rgb", 1.0, -10.0, 10.0, f"C_z of lobe {j}"),
-                Parameter(n, "float", 20.0, 1.0, 1e5, f"exponent n of lobe {j}"),
+                Parameter(cxy, "rgb", -1.0, -10.0, 10.0, f"C_xy of lobe {j}", start=-c),
+                Parameter(cz, "rgb", 1.0, -10.0, 10.0, f"C_z of lobe {j}", start=c),
+                Parameter(n, "float", 20.0, 1.0, 1e5, f"exponent n of lobe {j}", start=10.0 if j == 1 else 3.0),
             ]
         return tuple(out)
+
+    # -- fitting -----------------------------------------------------------
+    def unit_lobe(self):
+        """Lobe 1 as (-x·x - y·y + z·z)^n, whose scale c^n is b; the other lobes zero."""
+        unit = {"cxy": -1.0, "cz": 1.0}
+        for j in self.lobes:
+            if j != 1:
+                cxy, cz, _ = lobe_names(j)
+                unit.update({cxy: 0.0, cz: 0.0})
+        return unit
+
+    def scaled_lobe(self, scales, width):
+        """C_z = -C_xy = b^{1/n} of the channels' mean scale b; lobes j >= 2 keep their start."""
+        c = max(float(np.mean(scales)), 1e-6) ** (1.0 / width)
+        return {"cxy": [-c] * 3, "cz": [c] * 3}
+
+    def energy_coupled(self):
+        """Every lobe's C_xy and C_z, bounded by :meth:`coefficient_bound` of its exponent."""
+        out = {}
+        for j in self.lobes:
+            cxy, cz, n = lobe_names(j)
+            out[cxy] = out[cz] = n
+        return out
+
+    def coefficient_bound(self, exponent, log, exp):
+        return energy_bound(exponent, log, exp)
+
+    def lobe_scales(self):
+        return {j: lobe_names(j)[:2] for j in self.lobes}
+
+    def only_lobes(self, lobes):
+        return Lafortune(lobes=lobes)
+
+    def from_lobe(self, albedo, roughness):
+        """One forward-scattering lobe, C_z = -C_xy = c, as wide as the
+        Beckmann lobe (:func:`~mifaces.brdf.cosine_lobe.exponent_of_slope`),
+        with c^n = a (n + 2)/2π for albedo a, so that the lobe's albedo at
+        normal incidence, c^n 2π/(n + 2), is a: the normalised Phong lobe
+        a (n + 2)/2π cos^n α written as a Lafortune lobe."""
+        n = cosine_lobe.exponent_of_slope(roughness)
+        c = [float((a * (n + 2) / (2 * np.pi)) ** (1.0 / n)) for a in albedo]
+        return {"cxy": [-x for x in c], "cz": c, "exponent": n}
 
     def _lobe(self, j, params):
         cxy, cz, n = lobe_names(j)

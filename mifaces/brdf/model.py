@@ -21,10 +21,11 @@ Conventions, held by every model
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar, Mapping
+from typing import Callable, ClassVar, Iterable, Mapping, Sequence
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 #: Cosines below this are treated as this in divisions (θ > 89.99994°).
 COS_EPSILON = 1e-6
@@ -46,6 +47,9 @@ class Parameter:
         The physically valid range, for fitting and validation.
     doc : str
         One line for the docs.
+    start : float, optional
+        Value a fit starts from when it knows nothing better: a weak lobe of
+        medium width, far from any sharp minimum (default: ``default``).
     """
 
     name: str
@@ -54,10 +58,22 @@ class Parameter:
     lower: float
     upper: float
     doc: str
+    start: float | None = None
+
+    def start_value(self):
+        """:attr:`start` (or :attr:`default`): a float, or three for an RGB parameter."""
+        value = float(self.default if self.start is None else self.start)
+        return [value] * 3 if self.kind == "rgb" else value
 
 
 DIFFUSE = Parameter("diffuse_reflectance", "rgb", 0.5, 0.0, 1.0,
                     "albedo of the Lambertian term ρ_d/π")
+
+#: Grids of lobe widths :func:`mifaces.reflectance.fitting.linear_start`
+#: searches: RMS slopes (Beckmann roughness, Ward's α) and cosine-lobe
+#: exponents, each from a near-mirror to a near-diffuse lobe.
+SLOPE_GRID = np.geomspace(0.01, 1.0, 15)
+EXPONENT_GRID = np.geomspace(1.0, 1e5, 21)
 
 
 def dot(a, b):
@@ -111,11 +127,33 @@ class BRDFModel:
     object serves a plugin and a fitter alike. Subclasses implement
     :meth:`specular`, :meth:`sample_specular`, :meth:`pdf_specular` and
     :meth:`specular_weight`.
+
+    The model also answers what the plugin and the fitters would otherwise
+    ask by its name, as pbrt's BxDFs carry their own behaviour: how it is
+    read from a scene (:meth:`from_properties`), where a fit starts
+    (:meth:`start_values`, :attr:`WIDTH_GRID`, :meth:`unit_lobe`,
+    :meth:`scaled_lobe`), which parameters a fit holds
+    (:meth:`fixed_defaults`, :meth:`fixed_in_region`), how coefficients are
+    kept energy-bounded (:meth:`energy_coupled`, :meth:`coefficient_bound`),
+    which lobes can be dropped (:meth:`lobe_scales`, :meth:`only_lobes`)
+    and how it is derived from a generic glossy lobe (:meth:`from_lobe`).
+    The defaults here fit a model with one lobe scaled by
+    ``specular_reflectance``.
     """
 
     name: ClassVar[str]
+    #: Name in prose and figure labels.
+    title: ClassVar[str]
     #: option name -> allowed values; the first is the default.
     OPTIONS: ClassVar[Mapping[str, tuple[str, ...]]] = {}
+    #: Whether the model takes a ``lobes`` option (several glossy lobes).
+    SEVERAL_LOBES: ClassVar[bool] = False
+    #: Options of the instance the plugin documentation shows.
+    EXAMPLE_OPTIONS: ClassVar[Mapping] = {}
+    #: (parameter, grid): the parameter that sets the lobe's width and the
+    #: values :func:`~mifaces.reflectance.fitting.linear_start` tries; None:
+    #: the model has no such parameter and a fit starts from :meth:`start_values`.
+    WIDTH_GRID: ClassVar[tuple[str, np.ndarray] | None] = None
 
     def __init__(self, **options):
         unknown = set(options) - set(self.OPTIONS)
@@ -123,12 +161,26 @@ class BRDFModel:
             raise ValueError(f"{self.name}: unknown option(s) {sorted(unknown)}; "
                              f"known: {sorted(self.OPTIONS)}")
         self.options = {}
-        for key, choices in self.OPTIONS.items():
-            value = options.get(key, choices[0])
+        for key, default in self.default_options().items():
+            choices = self.OPTIONS[key]
+            value = options.get(key, default)
             if value not in choices:
                 raise ValueError(f"{self.name}: option {key}={value!r} is not one of {choices}")
             self.options[key] = value
             setattr(self, key, value)
+
+    @classmethod
+    def default_options(cls) -> dict:
+        """Option name -> its default, the first of its :attr:`OPTIONS`."""
+        return {key: choices[0] for key, choices in cls.OPTIONS.items()}
+
+    @classmethod
+    def from_properties(cls, keys: Iterable[str], get: Callable) -> BRDFModel:
+        """The model described by a scene's properties: ``keys`` are the
+        names given, ``get(name, default)`` reads one (Mitsuba's
+        ``Properties.keys`` and ``Properties.get``); an option the scene
+        does not give takes its :meth:`default_options` value."""
+        return cls(**{key: get(key, default) for key, default in cls.default_options().items()})
 
     # -- description ----------------------------------------------------
     def specular_parameters(self) -> tuple[Parameter, ...]:
@@ -139,6 +191,10 @@ class BRDFModel:
         """All parameters: ``diffuse_reflectance`` then the glossy ones."""
         return (DIFFUSE,) + self.specular_parameters()
 
+    def parameter(self, name: str) -> Parameter:
+        """The parameter called ``name``."""
+        return next(p for p in self.parameters() if p.name == name)
+
     def defaults(self) -> dict:
         """Default value of every parameter (floats)."""
         return {p.name: p.default for p in self.parameters()}
@@ -146,6 +202,59 @@ class BRDFModel:
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self.options.items())
         return f"{type(self).__name__}({opts})"
+
+    # -- fitting -----------------------------------------------------------
+    def start_values(self) -> dict:
+        """Start of a fit's glossy parameters when nothing better is known:
+        each parameter's :attr:`Parameter.start` (floats, RGB as three)."""
+        return {p.name: p.start_value() for p in self.specular_parameters()}
+
+    def fixed_defaults(self) -> dict:
+        """Parameters a fit holds fixed unless the caller frees them (none)."""
+        return {}
+
+    def fixed_in_region(self, region: str) -> dict:
+        """Parameters a fit holds fixed in face region ``region`` at a
+        published value, on top of :meth:`fixed_defaults` (none)."""
+        return {}
+
+    def unit_lobe(self) -> dict:
+        """Glossy parameters that make the lobe's scale 1, given every
+        parameter's default and the width on :attr:`WIDTH_GRID`: the lobe g
+        of r ≈ ρ_d + b·g in :func:`~mifaces.reflectance.fitting.linear_start`."""
+        return {"specular_reflectance": 1.0}
+
+    def scaled_lobe(self, scales: Sequence[float], width: float) -> dict:
+        """Glossy parameters of the unit lobe at ``width`` scaled by ``scales``
+        (b per colour channel, >= 0), kept inside the valid range."""
+        spec = self.parameter("specular_reflectance")
+        return {spec.name: [float(np.clip(b, spec.upper * 1e-4, spec.upper * 0.999)) for b in scales]}
+
+    def energy_coupled(self) -> dict[str, str]:
+        """Coefficient name -> name of the exponent whose
+        :meth:`coefficient_bound` limits it (none)."""
+        return {}
+
+    def coefficient_bound(self, exponent, log, exp):
+        """Largest magnitude of a coefficient of :meth:`energy_coupled` for
+        ``exponent``, written with the given ``log`` and ``exp`` (numpy's or
+        Dr.Jit's)."""
+        raise NotImplementedError(f"{self.name} has no energy-coupled coefficients")
+
+    def lobe_scales(self) -> dict[int, tuple[str, ...]]:
+        """Lobe number -> the parameters that scale it: a lobe whose scales
+        are all zero reflects nothing and can be left out."""
+        return {1: ("specular_reflectance",)}
+
+    def only_lobes(self, lobes: Sequence[int]) -> BRDFModel:
+        """This model with only the lobes numbered ``lobes`` evaluated."""
+        return self
+
+    def from_lobe(self, albedo: Sequence[float], roughness: float) -> dict:
+        """Glossy parameters of this model for a generic glossy lobe: one of
+        directional albedo ``albedo`` (RGB) at normal incidence and as wide
+        as a Beckmann lobe of RMS slope ``roughness``."""
+        raise NotImplementedError(f"{self.name} is not derived from a generic lobe")
 
     # -- the formulas ----------------------------------------------------
     def specular(self, wi, wo, params):

@@ -16,7 +16,7 @@ import drjit as dr
 import mitsuba as mi
 
 from . import cosine_lobe
-from .model import BRDFModel, Parameter, mean, power
+from .model import EXPONENT_GRID, BRDFModel, Parameter, mean, power
 
 
 class Phong(BRDFModel):
@@ -24,12 +24,20 @@ class Phong(BRDFModel):
     ``exponent`` (n >= 0)."""
 
     name = "phong"
+    title = "Modified Phong"
+    WIDTH_GRID = ("exponent", EXPONENT_GRID)
 
     def specular_parameters(self):
         return (
-            Parameter("specular_reflectance", "rgb", 0.2, 0.0, 1.0, "albedo ρ_s of the lobe at normal incidence"),
-            Parameter("exponent", "float", 30.0, 1.0, 1e5, "Phong exponent n"),
+            Parameter("specular_reflectance", "rgb", 0.2, 0.0, 1.0, "albedo ρ_s of the lobe at normal incidence",
+                      start=0.05),
+            Parameter("exponent", "float", 30.0, 1.0, 1e5, "Phong exponent n", start=10.0),
         )
+
+    def from_lobe(self, albedo, roughness):
+        """ρ_s = the albedo (the lobe reflects exactly ρ_s at normal
+        incidence), n from :func:`~mifaces.brdf.cosine_lobe.exponent_of_slope`."""
+        return {"specular_reflectance": list(albedo), "exponent": cosine_lobe.exponent_of_slope(roughness)}
 
     def specular(self, wi, wo, params):
         n = params["exponent"]

@@ -2,11 +2,14 @@
 
 A capture is a folder with a JSON manifest, ``capture.json``, and the images it
 names (paper sec. 3; the format is documented in ``docs/capture.md``). It
-holds the calibrated camera, the light conditions (a light position and
-intensity, or the two steel-sphere pictures to compute the position from),
-and per measurement the point-light image, its companion diffuse-light image
-or exposure series, and named feature points; plus three metric distances on
-the face and the value of the white calibration target.
+holds the camera (calibrated, or only a guess of its intrinsics), the light
+conditions (a point light's position and intensity, the two steel-sphere
+pictures to compute the position from, or a directional light's direction,
+possibly of unknown absolute intensity), and per measurement the
+point-light image (colour or greyscale), its companion diffuse-light image
+or exposure series, and named feature points (detected automatically where
+the capture gives none, :mod:`mifaces.capture.feature_points`); optionally
+metric distances on the face and the value of the white calibration target.
 
 :func:`load_capture` reads and validates a capture and returns a
 :class:`Capture`, a plain dataclass of arrays. Every problem found is named

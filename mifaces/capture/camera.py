@@ -45,6 +45,14 @@ class Camera:
         """The 3x3 intrinsic matrix K."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
+    def direction(self, azimuth: float, elevation: float) -> np.ndarray:
+        """The world-frame unit vector from the subject towards a light at
+        ``azimuth`` and ``elevation`` (degrees) about the camera's optical
+        axis, as the Yale face database names its lights: (0, 0) points at
+        the camera, positive azimuth towards the image's left (a frontal
+        subject's right), positive elevation above."""
+        return self.rotation.T @ camera_frame_direction(azimuth, elevation)
+
     @property
     def position(self) -> np.ndarray:
         """Centre of projection in world coordinates, ``-R^T t``."""
@@ -110,11 +118,20 @@ class Camera:
         return cls(int(entry["width"]), int(entry["height"]), float(entry["fx"]), float(entry["fy"]),
                    float(entry["cx"]), float(entry["cy"]), np.asarray(entry.get("distortion", []), np.float64),
                    np.asarray(entry.get("rotation", np.eye(3)), np.float64),
-                   np.asarray(entry.get("translation", np.zeros(3)), np.float64))
+                   np.asarray(entry.get("translation", np.zeros(3)), np.float64),
+                   bool(entry.get("calibrated", True)))
 
     def to_json(self) -> dict:
         """The manifest's ``camera`` entry."""
         return {"width": int(self.width), "height": int(self.height), "fx": float(self.fx), "fy": float(self.fy),
                 "cx": float(self.cx), "cy": float(self.cy), "distortion": [float(d) for d in self.distortion],
                 "rotation": np.asarray(self.rotation, float).tolist(),
-                "translation": [float(t) for t in self.translation]}
+                "translation": [float(t) for t in self.translation],
+                **({} if self.calibrated else {"calibrated": False})}
+
+
+def camera_frame_direction(azimuth: float, elevation: float) -> np.ndarray:
+    """:meth:`Camera.direction` in the camera frame (OpenCV: x right, y down,
+    z forward, so towards the camera is -z)."""
+    az, el = np.radians(azimuth), np.radians(elevation)
+    return np.array([-np.cos(el) * np.sin(az), -np.sin(el), -np.cos(el) * np.cos(az)])

@@ -130,7 +130,8 @@ def read_image(path: str | os.PathLike, transfer: str = "linear", gamma: float =
     EXR files must be linear. Integer images (PNG, TIFF, PGM/PPM, JPEG; 8 or
     16 bit, read at their true depth by :func:`read_codes`) are decoded with
     ``transfer``; their saturated pixels are those at the largest code. ``saturation`` (linear value, before dividing by the
-    exposure) marks saturated pixels of float images.
+    exposure) marks saturated pixels of float images. A greyscale file (one channel) gives
+    ``channels=1``, its value repeated in the three channels of ``pixels``.
     """
     path = Path(path)
     if not path.is_file():
@@ -147,6 +148,7 @@ def read_image(path: str | os.PathLike, transfer: str = "linear", gamma: float =
         data = data[:, :, None]
     if data.ndim != 3 or data.shape[2] not in (1, 3, 4):
         raise ValueError(f"{path.name}: expected 1, 3 or 4 channels, got shape {data.shape}")
+    channels = 1 if data.shape[2] == 1 else 3
     data = data[:, :, :3] if data.shape[2] >= 3 else np.repeat(data, 3, axis=2)
     if top is not None:
         saturated = np.any(data >= top, axis=2)
@@ -155,5 +157,5 @@ def read_image(path: str | os.PathLike, transfer: str = "linear", gamma: float =
     else:
         saturated = np.zeros(data.shape[:2], bool)
     pixels = decode(data, transfer, gamma) / np.float32(exposure)
-    return Image(pixels=pixels, saturated=saturated, exposure=float(exposure), path=path)
+    return Image(pixels=pixels, saturated=saturated, exposure=float(exposure), path=path, channels=channels)
 

@@ -5,13 +5,16 @@ from __future__ import annotations
 import json
 import math
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from ..landmarks import NoFaceError
 from ..model.landmarks import FEATURE_POINTS
 from .calibration import CalibrationError, calibrate_light
 from .camera import Camera
+from .feature_points import detect_feature_points
 from .images import read_image
 from .types import (FEATURE_POINT_RANGE, FORMAT, IMAGE_SUFFIXES, MANIFEST, TRANSFERS, VERSION,
                     Capture, CaptureError, Distance, Image, Light, Measurement, SpherePictures, WhiteTarget)
@@ -99,10 +102,10 @@ def _camera(entry, problems: _Problems) -> Camera | None:
     for name, v in (("width", width), ("height", height)):
         if v is not None and v <= 0:
             problems.append(f"camera.{name}: must be positive, got {v}")
-    fx = problems.number(entry, "fx", where, positive=True)
-    fy = problems.number(entry, "fy", where, positive=True)
-    cx = problems.number(entry, "cx", where)
-    cy = problems.number(entry, "cy", where)
+    calibrated = entry.get("calibrated", True)
+    if not isinstance(calibrated, bool):
+        problems.append(f"camera.calibrated: must be true or false, got {calibrated!r}")
+    fx, fy, cx, cy = _intrinsics(entry, calibrated is not False, width, height, problems)
     distortion = entry.get("distortion", [])
     try:
         distortion = np.asarray(distortion, np.float64).ravel()
@@ -119,7 +122,27 @@ def _camera(entry, problems: _Problems) -> Camera | None:
     translation = problems.vector(entry, "translation", where, 3, required=False, default=np.zeros(3))
     if len(problems) > n:
         return None
-    return Camera(width, height, fx, fy, cx, cy, distortion, rotation, translation)
+    return Camera(width, height, fx, fy, cx, cy, distortion, rotation, translation, calibrated)
+
+
+def _intrinsics(entry: dict, calibrated: bool, width, height, problems: _Problems):
+    """``fx, fy, cx, cy`` of a manifest's camera. An uncalibrated camera's are a guess: one
+    ``focal_guess_px`` may stand for both focal lengths, and ``cx, cy`` default to the image centre."""
+    where = "camera"
+    if "focal_guess_px" in entry:
+        if calibrated:
+            problems.append("camera.focal_guess_px: only for an uncalibrated camera (\"calibrated\": false); "
+                            "a calibrated one gives fx and fy")
+        if "fx" in entry or "fy" in entry:
+            problems.append("camera: give either focal_guess_px or fx and fy, not both")
+        fx = fy = problems.number(entry, "focal_guess_px", where, positive=True)
+    else:
+        fx = problems.number(entry, "fx", where, positive=True)
+        fy = problems.number(entry, "fy", where, positive=True)
+    centre = [None if v is None else (v - 1) / 2 for v in (width, height)]
+    cx = problems.number(entry, "cx", where, default=centre[0], required=calibrated)
+    cy = problems.number(entry, "cy", where, default=centre[1], required=calibrated)
+    return fx, fy, cx, cy
 
 
 def _image(entry, where: str, root: Path, camera: Camera | None, problems: _Problems) -> Image | None:
@@ -171,7 +194,7 @@ def _feature_points(entry, where: str, camera: Camera | None, problems: _Problem
         return {}
     out = {}
     lo, hi = FEATURE_POINT_RANGE
-    if not lo <= len(entry) <= hi:
+    if entry and not lo <= len(entry) <= hi:
         problems.append(f"{where}: has {len(entry)} feature points, a measurement needs {lo} to {hi}")
     for name, xy in entry.items():
         if name not in FEATURE_POINTS:
@@ -187,7 +210,23 @@ def _feature_points(entry, where: str, camera: Camera | None, problems: _Problem
     return out
 
 
-def load_capture(path: str | os.PathLike, calibrate: bool = True) -> Capture:
+def _face_box(obj: dict, where: str, problems: _Problems) -> tuple[float, ...] | None:
+    """The optional ``face_box`` of ``obj``, ``[x0, y0, x1, y1]`` in pixels (``x1, y1`` the last inside)."""
+    value = obj.get("face_box")
+    if value is None:
+        return None
+    try:
+        box = np.asarray(value, np.float64)
+        valid = box.shape == (4,) and np.all(np.isfinite(box)) and box[2] > box[0] and box[3] > box[1]
+    except (TypeError, ValueError):
+        valid = False
+    if not valid:
+        problems.append(f"{where}: must be [x0, y0, x1, y1] in pixels with x1 > x0 and y1 > y0, got {value!r}"[:300])
+        return None
+    return tuple(float(v) for v in box)
+
+
+def load_capture(path: str | os.PathLike, calibrate: bool = True, detect: bool = True) -> Capture:
     """Load and validate the capture in folder ``path`` (or its ``capture.json``).
 
     Parameters
@@ -198,6 +237,11 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True) -> Capture:
         Compute the position of lights given by steel-sphere pictures
         (:func:`mifaces.capture.calibration.calibrate_light`). Without it such lights
         have ``position=None``.
+    detect : bool
+        Find the feature points of measurements whose manifest gives none
+        with the landmark detector
+        (:func:`mifaces.capture.feature_points.detect_feature_points`). Without
+        it their ``feature_points`` stay empty.
 
     Returns
     -------
@@ -208,8 +252,10 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True) -> Capture:
     CaptureError
         Naming every problem: a corrupted or incomplete manifest, missing or
         unreadable images, images of the wrong size, NaN or infinite pixels,
-        malformed calibration, unknown feature points, lights that cannot be
-        calibrated.
+        malformed calibration or light directions, unknown feature points,
+        lights that cannot be calibrated, faces the detector does not find.
+    ImportError
+        Where feature points are to be detected without the ``landmarks`` extra.
     """
     root, data = _read_manifest(Path(path))
     problems = _Problems()
@@ -226,8 +272,10 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True) -> Capture:
         raise CaptureError(root, problems)
     if calibrate:
         lights = _calibrate(lights, camera, problems)
-        if problems:
-            raise CaptureError(root, problems)
+    if detect:
+        measurements = _detect(measurements, root, problems)
+    if problems:
+        raise CaptureError(root, problems)
     metadata = data.get("metadata", {})
     return Capture(root, camera, tuple(lights), tuple(measurements), tuple(distances), white,
                    dict(metadata) if isinstance(metadata, dict) else {})
@@ -249,8 +297,11 @@ def _read_manifest(path: Path) -> tuple[Path, dict]:
 
 
 def _white_target(wt, problems: _Problems) -> WhiteTarget | None:
+    """The white target, or None where the manifest has none (reflectance then only relative)."""
+    if wt is None:
+        return None
     if not isinstance(wt, dict):
-        problems.append("white_target: missing or not an object")
+        problems.append(f"white_target: must be an object, got {wt!r}"[:300])
         return None
     n = len(problems)
     value = problems.vector(wt, "value", "white_target", 3, positive=True, scalar_ok=True)
@@ -264,7 +315,10 @@ def _white_target(wt, problems: _Problems) -> WhiteTarget | None:
 
 
 def _distances(entries, problems: _Problems) -> list[Distance]:
+    """The metric distances: none (absent or empty: no absolute scale), or at least three."""
     distances = []
+    if entries is None or entries == []:
+        return distances
     if not isinstance(entries, list) or len(entries) < 3:
         problems.append(f"distances: need a list of at least three metric distances on the face, got {entries!r}"[:300])
         entries = entries if isinstance(entries, list) else []
@@ -285,28 +339,62 @@ def _lights(data: dict, root: Path, camera: Camera | None, problems: _Problems) 
     for i, e, where in problems.objects(data, "lights", " of light conditions"):
         name = problems.need(e, "name", where, str)
         where = f"lights[{i}] ({name})" if name else where
-        intensity = problems.vector(e, "intensity", where, 3, positive=True, scalar_ok=True)
-        position = problems.vector(e, "position_mm", where, 3, required=False)
-        spheres = None
-        if "spheres" in e:
-            s = e["spheres"]
-            sw = f"{where}.spheres"
-            radius = problems.number(s, "radius_mm", sw, positive=True)
-            hl = _image(s.get("highlight") if isinstance(s, dict) else None, f"{sw}.highlight", root, camera, problems)
-            ol = _image(s.get("outline") if isinstance(s, dict) else None, f"{sw}.outline", root, camera, problems)
-            if radius is not None and hl is not None and ol is not None:
-                spheres = SpherePictures(radius, hl, ol)
-        elif position is None and "position_mm" not in e:
-            problems.append(f"{where}: needs 'position_mm' or 'spheres' (the steel-sphere pictures)")
-        if name is not None and intensity is not None:
-            lights.append(Light(name, position, intensity, spheres))
+        relative = e.get("relative", False)
+        if not isinstance(relative, bool):
+            problems.append(f"{where}.relative: must be true or false, got {relative!r}")
+        if "direction" in e:
+            light = _directional_light(e, name, where, relative, problems)
+        else:
+            light = _point_light(e, name, where, relative, root, camera, problems)
+        if light is not None:
+            lights.append(light)
     problems.unique("lights", [l.name for l in lights])
     return lights
+
+
+def _directional_light(e: dict, name, where: str, relative, problems: _Problems) -> Light | None:
+    """A distant light: ``direction`` towards it (world frame), ``intensity`` optional (then 1, relative)."""
+    for key in ("position_mm", "spheres"):
+        if key in e:
+            problems.append(f"{where}: give 'direction' (a directional light) or '{key}' (a point light), not both")
+    direction = problems.vector(e, "direction", where, 3)
+    if direction is not None and np.linalg.norm(direction) < 1e-12:
+        problems.append(f"{where}.direction: must be non-zero, got {e['direction']!r}")
+        direction = None
+    intensity = problems.vector(e, "intensity", where, 3, positive=True, scalar_ok=True, required=False)
+    if "intensity" not in e:
+        intensity, relative = np.ones(3), True
+    if name is None or direction is None or intensity is None:
+        return None
+    return Light(name, None, intensity, direction=direction / np.linalg.norm(direction), relative=relative is True)
+
+
+def _point_light(e: dict, name, where: str, relative, root: Path, camera: Camera | None,
+                 problems: _Problems) -> Light | None:
+    """A point light: ``intensity`` and ``position_mm`` or the steel-sphere pictures to calibrate it from."""
+    intensity = problems.vector(e, "intensity", where, 3, positive=True, scalar_ok=True)
+    position = problems.vector(e, "position_mm", where, 3, required=False)
+    spheres = None
+    if "spheres" in e:
+        s = e["spheres"]
+        sw = f"{where}.spheres"
+        radius = problems.number(s, "radius_mm", sw, positive=True)
+        hl = _image(s.get("highlight") if isinstance(s, dict) else None, f"{sw}.highlight", root, camera, problems)
+        ol = _image(s.get("outline") if isinstance(s, dict) else None, f"{sw}.outline", root, camera, problems)
+        if radius is not None and hl is not None and ol is not None:
+            spheres = SpherePictures(radius, hl, ol)
+    elif position is None and "position_mm" not in e:
+        problems.append(f"{where}: needs 'position_mm' or 'spheres' (the steel-sphere pictures), "
+                        "or 'direction' for a directional light")
+    if name is None or intensity is None:
+        return None
+    return Light(name, position, intensity, spheres, relative=relative is True)
 
 
 def _measurements(data: dict, root: Path, camera: Camera | None, lights: list[str],
                   problems: _Problems) -> list[Measurement]:
     measurements = []
+    capture_box = _face_box(data, "face_box", problems)
     for i, e, where in problems.objects(data, "measurements", ""):
         name = problems.need(e, "name", where, str) or f"#{i}"
         where = f"measurements[{i}] ({name})"
@@ -327,10 +415,11 @@ def _measurements(data: dict, root: Path, camera: Camera | None, lights: list[st
                             "(an exposure series)")
         if len(series) == 1:
             problems.append(f"{where}.exposures: an exposure series needs at least two pictures")
-        points = _feature_points(e.get("feature_points"), f"{where}.feature_points", camera, problems)
+        points = _feature_points(e.get("feature_points") or {}, f"{where}.feature_points", camera, problems)
+        box = _face_box(e, f"{where}.face_box", problems) if "face_box" in e else capture_box
         if isinstance(image, Image) and light is not None and None not in exposures:
             measurements.append(Measurement(name, light, None if pose is None else str(pose), image, diffuse,
-                                            tuple(exposures), points))
+                                            tuple(exposures), points, box))
     problems.unique("measurements", [m.name for m in measurements])
     return measurements
 
@@ -346,6 +435,40 @@ def _calibrate(lights: list[Light], camera: Camera, problems: _Problems) -> list
                 problems.append(f"light {light.name!r}: steel-sphere calibration failed: {e}")
                 calibrated.append(light)
                 continue
-            light = Light(light.name, cal.position, light.intensity, light.spheres, cal)
+            light = replace(light, position=cal.position, calibration=cal)
         calibrated.append(light)
     return calibrated
+
+
+# --------------------------------------------------------------------------------------------
+# Detecting feature points
+# --------------------------------------------------------------------------------------------
+def _detect(measurements: list[Measurement], root: Path, problems: _Problems) -> list[Measurement]:
+    """The measurements, those without feature points given the detected ones (on the diffuse
+    companion, evenly lit, where there is one, else the photograph); each picture detected once."""
+    found: dict[tuple, dict | None] = {}
+    out = []
+    for i, m in enumerate(measurements):
+        if m.feature_points:
+            out.append(m)
+            continue
+        picture = m.diffuse if m.diffuse is not None else m.image
+        where = f"measurements[{i}] ({m.name})"
+        rel = os.path.relpath(picture.path, root)
+        key = (picture.path, m.face_box)
+        if key not in found:
+            try:
+                found[key] = detect_feature_points(picture, m.face_box, rel)
+            except NoFaceError:
+                found[key] = None
+        points = found[key]
+        if points is None:
+            problems.append(f"{where}: no feature points given and no face found in {rel}"
+                            f"{'' if m.face_box else ' (give a face_box)'}")
+        elif len(points) < FEATURE_POINT_RANGE[0]:
+            problems.append(f"{where}: only {len(points)} detected feature points lie inside {rel}, "
+                            f"a measurement needs {FEATURE_POINT_RANGE[0]}")
+        else:
+            m = replace(m, feature_points={k: v.copy() for k, v in points.items()})
+        out.append(m)
+    return out

@@ -21,7 +21,7 @@ GROUND_TRUTH = "ground_truth"
 FEATURE_POINT_RANGE = (7, 20)
 #: Transfer curves of integer images.
 TRANSFERS = ("linear", "srgb", "gamma")
-IMAGE_SUFFIXES = (".exr", ".png", ".tif", ".tiff", ".jpg", ".jpeg")
+IMAGE_SUFFIXES = (".exr", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".pgm", ".ppm", ".pnm")
 
 
 class CaptureError(ValueError):
@@ -148,8 +148,9 @@ class Measurement:
         Companion exposure series (may be empty).
     feature_points : dict
         Feature point name (see :data:`mifaces.model.landmarks.FEATURE_POINTS`)
-        -> pixel position (2,) float64. Empty where the capture gives none:
-        the shape stage then detects them (:mod:`mifaces.landmarks`).
+        -> pixel position (2,) float64. Where the capture gives none,
+        :func:`mifaces.capture.load_capture` detects them
+        (:mod:`mifaces.landmarks`); empty only when loaded with ``detect=False``.
     face_box : (x0, y0, x1, y1) or None
         Where the face is in the photograph (pixels), for the landmark
         detector on tight crops; None: the detector finds it.

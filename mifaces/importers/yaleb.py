@@ -16,6 +16,10 @@ the face towards the light in the camera frame of :mod:`mifaces.capture`
 
 so the light at the camera, ``A+000E+00``, is ``(0, 0, -1)``, a light
 above has negative y and one on the subject's right negative x.
+
+:func:`import_subject` (``mifaces import yaleb``) writes a subject's
+training photographs as a capture (:mod:`mifaces.capture`) whose world
+frame is that camera frame, with the held-out lights named in ``split.json``.
 """
 
 from __future__ import annotations
@@ -27,10 +31,19 @@ from pathlib import Path
 
 import numpy as np
 
+from ..capture.camera import camera_frame_direction
 from ..capture.images import read_codes
+from ..capture.types import FORMAT, MANIFEST, VERSION
+from ..files import atomic_write, write_json
 
 #: ``yaleBxx_P00A+035E-20``: azimuth and elevation in degrees.
 _LIGHT = re.compile(r"_P00A([+-]\d+)E([+-]\d+)$")
+#: File of an imported capture naming its training and held-out photographs.
+SPLIT = "split.json"
+#: Focal length guess of :func:`import_subject`, in image heights (a long lens; see there).
+FOCAL_GUESS = 4.0
+#: Label of the one pose of every Yale photograph.
+POSE = "frontal"
 #: Training lights of :func:`default_split`: elevation and azimuth limits (degrees), so each lights most of the face.
 MAX_ELEVATION = 60.0
 MAX_AZIMUTH = 90.0
@@ -66,8 +79,7 @@ class YaleImage:
 
 def light_direction(azimuth: float, elevation: float) -> np.ndarray:
     """Unit vector towards a Yale light in the camera frame (x right, y down, z forward)."""
-    az, el = np.radians(azimuth), np.radians(elevation)
-    return np.array([-np.cos(el) * np.sin(az), -np.sin(el), -np.cos(el) * np.cos(az)])
+    return camera_frame_direction(azimuth, elevation)
 
 
 def _pixels(path: Path) -> np.ndarray:
@@ -156,3 +168,87 @@ def _farthest_points(images: list[YaleImage], count: int) -> list[int]:
         chosen.append(best)
         nearest = np.maximum(nearest, directions @ directions[best])
     return [candidates[i] for i in chosen]
+
+
+def import_subject(subject_dir: str | os.PathLike, out: str | os.PathLike, train: int | list[str] = 8,
+                   force: bool = False) -> Path:
+    """Write one subject's training photographs as a capture, the held-out ones named in ``split.json``.
+
+    The capture at ``out`` (``capture.json``, ``images/``, ``split.json``):
+
+    * **World frame** = the camera frame (camera at the origin, identity
+      rotation, OpenCV axes: x right, y down, z forward).
+    * **Camera**: uncalibrated (``"calibrated": false``), the shape fit
+      estimates it. The crops are 168 x 192 pixels of a larger frame taken by
+      an unknown lens at an unknown offset, so the guess is a long lens,
+      ``focal_guess_px`` = :data:`FOCAL_GUESS` x the image height (a field
+      of view of 14 degrees over the crop: the face about four face heights
+      away, nearly orthographic, which a face filling a crop of a distant
+      camera's frame is), and the principal point at the crop's centre (the
+      crop is centred on the face; with a long lens an offset principal point
+      trades against the face's position).
+    * **Lights**: one directional light per training photograph, named by its
+      tag (``A+035E-20``), ``direction`` from the file name
+      (:func:`light_direction`), intensity 1, ``relative`` (the database's
+      strobes are equal, their absolute power unknown).
+    * **Measurements**: one per training photograph, named by its stem, the
+      PGM file copied into ``images/`` as is (``transfer`` linear: the
+      codes are taken as proportional to radiance, the camera's response being
+      unknown); all of pose :data:`POSE`; their ``diffuse`` companion is the
+      training photograph whose light is nearest the camera axis (evenly lit
+      for the landmark detector; never a held-out one).
+    * No white target and no distances (reflectance only up to a factor, and
+      no absolute scale); no feature points: :func:`mifaces.capture.load_capture`
+      detects them in the companion, inside the capture-level ``face_box``
+      of the whole image (the detector misses faces on these tight crops).
+    * ``split.json``: ``{"train": [stems], "heldout": [stems]}``, the held-out
+      photographs for relighting to be compared with (they stay in ``subject_dir``).
+
+    Parameters
+    ----------
+    subject_dir : path
+        A subject's folder (``yaleBxx_P00A{az}E{el}.pgm``).
+    out : path
+        The capture folder to write.
+    train : int or list of str
+        The training lights: a count for :func:`default_split`, or stems or light tags.
+    force : bool
+        Write over an existing capture at ``out``.
+
+    Returns
+    -------
+    Path
+        ``out``.
+
+    Raises
+    ------
+    FileExistsError
+        Where ``out`` holds a capture already and ``force`` is False.
+    FileNotFoundError, ValueError
+        From :func:`read_subject` and :func:`default_split`.
+    """
+    folder, out = Path(subject_dir), Path(out)
+    if (out / MANIFEST).exists() and not force:
+        raise FileExistsError(f"{out} holds a capture already ({MANIFEST}); use force=True (--force) to replace it")
+    images = read_subject(folder)
+    training, held_out = default_split(images, train)
+    companion = max(training, key=lambda image: -image.direction[2])  # nearest the camera axis, (0, 0, -1)
+    height, width = images[0].pixels.shape
+    for image in training:
+        with atomic_write(out / "images" / f"{image.stem}.pgm") as f:
+            f.write((folder / f"{image.stem}.pgm").read_bytes())
+    write_json(out / SPLIT, {"train": [i.stem for i in training], "heldout": [i.stem for i in held_out]})
+    write_json(out / MANIFEST, {
+        "format": FORMAT, "version": VERSION,
+        "camera": {"width": width, "height": height, "calibrated": False, "focal_guess_px": FOCAL_GUESS * height},
+        "face_box": [0, 0, width - 1, height - 1],
+        "lights": [{"name": i.light, "direction": (i.direction + 0.0).tolist(), "intensity": 1.0, "relative": True}
+                   for i in training],
+        "measurements": [{"name": i.stem, "light": i.light, "pose": POSE,
+                          "image": {"path": f"images/{i.stem}.pgm", "transfer": "linear"},
+                          "diffuse": {"path": f"images/{companion.stem}.pgm", "transfer": "linear"}}
+                         for i in training],
+        "metadata": {"source": "Extended Yale Face Database B, cropped (Georghiades et al. 2001; Lee et al. 2005)",
+                     "subject": folder.name, "subject_dir": str(folder.resolve()), "split": SPLIT},
+    })
+    return out

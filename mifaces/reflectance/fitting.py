@@ -27,276 +27,15 @@ import mitsuba as mi
 import numpy as np
 
 from .. import brdf as brdf_models
-from ..brdf.model import BRDFModel, Parameter
+from ..brdf.model import BRDFModel
+from ..progress import progress as progress_bar
 from ..status import AT_BOUND, CONVERGED, PRIOR
 from .levenberg_marquardt import levenberg_marquardt
-
-
-#: Parameters held fixed unless the caller frees them: the index of
-#: refraction trades off against the lobe scale, and skin's is known:
-#: η = 1.38 (Weyrich et al., "Analysis of human faces using a
-#: measurement-based skin reflectance model", SIGGRAPH 2006, sec. 5).
-DEFAULT_FIXED = {"cooktorrance": {"eta": 1.38}}
-#: Index of refraction per face region, for Cook-Torrance's Fresnel term:
-#: skin 1.38 (Weyrich et al. 2006); the cornea 1.376 (Le Grand's schematic
-#: eye; Atchison & Smith, "Optics of the Human Eye", 2000); hair keratin 1.55
-#: (Marschner et al., "Light scattering from human hair fibers", SIGGRAPH 2003).
-REFRACTIVE_INDEX = {"skin": 1.38, "lips": 1.38, "nostrils": 1.38, "beard": 1.38, "eyes": 1.376,
-                    "eyebrows": 1.55, "hair": 1.55}
-
-
-@dataclass(frozen=True)
-class _Free:
-    name: str
-    channel: int | None  # colour channel of an RGB parameter, or None
-    lower: float
-    upper: float
-    log: bool
-
-
-def _is_log(p: Parameter) -> bool:
-    return p.lower > 0 and p.upper / p.lower >= 100
-
-
-class ParameterSpace:
-    """The free parameters of a model and their map to an unconstrained vector.
-
-    Parameters
-    ----------
-    model : BRDFModel
-    fixed : dict, optional
-        Parameter name -> value held constant (floats or RGB triples).
-    bounds : dict, optional
-        Parameter name -> (lower, upper) narrowing the model's valid range.
-
-    Lafortune lobes are kept energy-bounded: the coefficients of lobe j lie
-    in [-c_max, c_max] with c_max = ((n_j + 2) / 2π)^{1/n_j}, so the lobe's
-    peak, at most max(|C_xy|, |C_z|)^n, stays below (n + 2)/2π and its albedo
-    estimate |s|^n 2π/(n + 2) below 1. Without it a lobe fitted to the
-    directions a capture observes may grow without limit towards those it
-    does not (the over-fitting Fuchs et al. 2005, sec. 6.1, report).
-    """
-
-    def __init__(self, model: BRDFModel, fixed: dict | None = None, bounds: dict | None = None):
-        self.model = model
-        self.fixed = dict(fixed or {})
-        bounds = bounds or {}
-        unknown = (set(self.fixed) | set(bounds)) - {p.name for p in model.parameters()}
-        if unknown:
-            raise ValueError(f"{model.name}: no parameter(s) {sorted(unknown)}")
-        self.coupled = _energy_coupled(model)
-        self.free: list[_Free] = []
-        for p in model.parameters():
-            if p.name in self.fixed:
-                continue
-            lo, hi = bounds.get(p.name, (p.lower, p.upper))
-            if p.name in self.coupled:
-                lo, hi = -1.0, 1.0  # a fraction of the energy bound c_max(n)
-            channels = (0, 1, 2) if p.kind == "rgb" else (None,)
-            self.free += [_Free(p.name, c, lo, hi, _is_log(p)) for c in channels]
-
-    def __len__(self) -> int:
-        return len(self.free)
-
-    def _forward(self, x, f: _Free, sigmoid, log, exp):
-        s = sigmoid(x)
-        if f.log:
-            return exp(log(f.lower) + (log(f.upper) - log(f.lower)) * s)
-        return f.lower + (f.upper - f.lower) * s
-
-    def values(self, x: np.ndarray) -> dict:
-        """Parameter values (floats, or lists of three) for the vector ``x``."""
-        out = {k: (list(map(float, v)) if np.ndim(v) else float(v)) for k, v in self.fixed.items()}
-        sig = lambda t: 0.5 * (1.0 + np.tanh(0.5 * t))  # the logistic function, without overflow  # noqa: E731
-        for xi, f in zip(x, self.free):
-            v = float(self._forward(xi, f, sig, np.log, np.exp))
-            if f.channel is None:
-                out[f.name] = v
-            else:
-                out.setdefault(f.name, [0.0, 0.0, 0.0])[f.channel] = v
-        for name, exponent in self.coupled.items():
-            if name not in self.fixed:
-                bound = float(energy_bound(out[exponent], np.log, np.exp))
-                out[name] = [v * bound for v in out[name]] if np.ndim(out[name]) else out[name] * bound
-        return out
-
-    def at_bounds(self, x: np.ndarray, margin: float = 1e-3) -> list[str]:
-        """Names of the free parameters that ``x`` puts within ``margin`` (a
-        fraction of their range, in the reparameterised scale) of their upper
-        bound, or Lafortune coefficients whose lobe is within 1 % of its energy
-        bound. Lower bounds are legitimate answers (no glossy lobe, a black
-        albedo) and not listed."""
-        t = 0.5 * (1.0 + np.tanh(0.5 * np.asarray(x, np.float64)))
-        values = self.values(x)
-        out = []
-        for f, ti in zip(self.free, t):
-            if f.name in self.coupled:
-                # a lobe at its energy bound: albedo estimate |C|^n 2π/(n+2) within 1 % of 1
-                n = float(values[self.coupled[f.name]])
-                ratio = abs(2.0 * ti - 1.0)
-                hit = n * np.log(max(ratio, 1e-300)) > np.log(0.99)
-            else:
-                hit = ti > 1 - margin
-            if hit:
-                out.append(f.name if f.channel is None else f"{f.name}[{f.channel}]")
-        return out
-
-    def vector(self, values: dict) -> np.ndarray:
-        """The unconstrained vector whose :meth:`values` are ``values``
-        (clipped just inside the bounds)."""
-        x = []
-        for f in self.free:
-            v = values[f.name]
-            v = float(v[f.channel] if f.channel is not None and np.ndim(v) else v)
-            if f.name in self.coupled:
-                v /= float(energy_bound(float(values[self.coupled[f.name]]), np.log, np.exp))
-            if f.log:
-                t = (np.log(v) - np.log(f.lower)) / (np.log(f.upper) - np.log(f.lower))
-            else:
-                t = (v - f.lower) / (f.upper - f.lower)
-            t = float(np.clip(t, 1e-6, 1 - 1e-6))
-            x.append(np.log(t / (1 - t)))
-        return np.array(x)
-
-    def drjit_params(self, u: list) -> dict:
-        """Model parameters as Dr.Jit values from the free variables ``u``
-        (differentiable)."""
-        out = {}
-        for k, v in self.fixed.items():
-            out[k] = mi.Color3f(*v) if np.ndim(v) else mi.Float(v)
-        rgb = {}
-        for ui, f in zip(u, self.free):
-            v = self._forward(ui, f, lambda t: 1.0 / (1.0 + dr.exp(-t)), dr.log, dr.exp)
-            if f.channel is None:
-                out[f.name] = v
-            else:
-                rgb.setdefault(f.name, [None, None, None])[f.channel] = v
-        for name, (r, g, b) in rgb.items():
-            out[name] = mi.Color3f(r, g, b)
-        for name, exponent in self.coupled.items():
-            if name not in self.fixed:
-                out[name] = out[name] * energy_bound(out[exponent], dr.log, dr.exp)
-        return out
-
-
-def energy_bound(exponent, log, exp):
-    """c_max = ((n + 2) / 2π)^{1/n}: the largest Lafortune coefficient
-    magnitude whose lobe keeps an albedo estimate of at most 1."""
-    return exp(log((exponent + 2.0) / (2.0 * np.pi)) / exponent)
-
-
-def _energy_coupled(model: BRDFModel) -> dict:
-    """Lafortune coefficient name -> its lobe's exponent name (see :class:`ParameterSpace`)."""
-    if model.name != "lafortune":
-        return {}
-    from ..brdf.lafortune import lobe_names
-
-    out = {}
-    for j in model.lobes:
-        cxy, cz, n = lobe_names(j)
-        out[cxy] = out[cz] = n
-    return out
-
-
-def conservative_start(model: BRDFModel, reflectance: np.ndarray) -> dict:
-    """A start far from any sharp minimum: the diffuse albedo at the 40th
-    percentile of the observed reflectance (highlights lie above it), a weak
-    glossy lobe of medium width."""
-    diffuse = np.clip(np.percentile(reflectance, 40, axis=0), 0.01, 0.95)
-    start = {"diffuse_reflectance": list(map(float, diffuse))}
-    for p in model.specular_parameters():
-        if p.name == "specular_reflectance":
-            start[p.name] = [1.0] * 3 if model.name == "cooktorrance" else [0.05] * 3
-        elif p.name in ("roughness", "alpha"):
-            start[p.name] = 0.3
-        elif p.name == "eta":
-            start[p.name] = 1.38
-        elif p.name.startswith("exponent"):
-            start[p.name] = 10.0 if p.name == "exponent" else 3.0
-        elif p.name.startswith("cxy"):
-            start[p.name] = [-0.75] * 3 if p.name == "cxy" else [-0.5] * 3
-        elif p.name.startswith("cz"):
-            start[p.name] = [0.75] * 3 if p.name == "cz" else [0.5] * 3
-    return start
-
-
-#: The parameter that sets each model's lobe width, and the grid
-#: :func:`linear_start` searches it on.
-WIDTH_GRID = {
-    "cooktorrance": ("roughness", np.geomspace(0.01, 1.0, 15)),
-    "ward": ("alpha", np.geomspace(0.01, 1.0, 15)),
-    "phong": ("exponent", np.geomspace(1.0, 1e5, 21)),
-    "lafortune": ("exponent", np.geomspace(1.0, 1e5, 21)),
-}
-
-
-def linear_start(model: BRDFModel, light, view, reflectance, sigma, fixed: dict | None = None,
-                 max_samples: int = 50_000, seed: int = 0) -> dict:
-    """Start values from a grid search over the lobe width.
-
-    For a fixed width the models are linear in the diffuse albedo and the
-    lobe's scale: r ≈ ρ_d + b g(l̂, v̂) with g = π f_s of a unit lobe (for
-    Lafortune, the lobe (c(-x·x - y·y + z·z))^n has scale b = c^n). So for
-    each width on :data:`WIDTH_GRID` the best ρ_d and b follow from a 2×2
-    weighted least-squares problem per channel (with b >= 0), and the width
-    with the lowest error wins. This finds sharp lobes that a local method
-    started from a medium width misses. Uses at most ``max_samples`` random
-    samples. Extra Lafortune lobes keep their conservative start.
-    """
-    start = conservative_start(model, reflectance)
-    if model.name not in WIDTH_GRID:
-        return start
-    width_name, grid = WIDTH_GRID[model.name]
-    n = len(sigma)
-    idx = np.sort(np.random.default_rng(seed).permutation(n)[:max_samples]) if n > max_samples else np.arange(n)
-    wi = mi.Vector3f(np.ascontiguousarray(np.asarray(light, np.float32)[idx].T))
-    wo = mi.Vector3f(np.ascontiguousarray(np.asarray(view, np.float32)[idx].T))
-    r = np.asarray(reflectance, np.float64)[idx]
-    w = 1.0 / np.square(np.asarray(sigma, np.float64)[idx])
-    unit = {**model.defaults(), **(fixed or {})}
-    if model.name == "lafortune":
-        unit.update({"cxy": -1.0, "cz": 1.0})
-        # only the first lobe: the others' coefficients are zero
-        unit.update({p.name: 0.0 for p in model.specular_parameters()
-                     if p.name.startswith(("cxy_", "cz_"))})
-    else:
-        unit["specular_reflectance"] = 1.0
-    best = None
-    sw = w.sum()
-    for width in grid:
-        params = {**unit, width_name: float(width)}
-        g = np.pi * np.array(model.eval(wi, wo, params, diffuse=False))[0].astype(np.float64)
-        # weighted normal equations of [1, g] per channel
-        sg, sgg = (w * g).sum(), (w * g * g).sum()
-        det = sw * sgg - sg * sg
-        error, fit = 0.0, []
-        for c in range(3):
-            sr, sgr = (w * r[:, c]).sum(), (w * g * r[:, c]).sum()
-            b = (sw * sgr - sg * sr) / det if det > 1e-300 else 0.0
-            if b < 0:
-                b = 0.0
-            a = (sr - b * sg) / sw
-            error += float((w * np.square(r[:, c] - a - b * g)).sum())
-            fit.append((a, b))
-        if np.isfinite(error) and (best is None or error < best[0]):
-            best = (error, width, fit)
-    if best is None:
-        return start
-    _, width, fit = best
-    start["diffuse_reflectance"] = [float(np.clip(a, 0.005, 0.995)) for a, _ in fit]
-    scale = float(np.mean([b for _, b in fit]))
-    start[width_name] = float(width)
-    if model.name == "lafortune":
-        c = max(scale, 1e-6) ** (1.0 / width)
-        start["cxy"], start["cz"] = [-c] * 3, [c] * 3
-    else:
-        spec = next(p for p in model.specular_parameters() if p.name == "specular_reflectance")
-        start["specular_reflectance"] = [float(np.clip(b, spec.upper * 1e-4, spec.upper * 0.999)) for _, b in fit]
-    return start
+from .parameters import ParameterSpace, conservative_start, linear_start
 
 
 @dataclass
-class Schedule:
+class SubsetSchedule:
     """The hierarchy of random subsets: ``first`` samples, then ``growth``
     times more per stage until all are used; at most ``iterations`` LM
     iterations per stage and ``final_iterations`` on the full set."""
@@ -317,7 +56,7 @@ class Schedule:
 
 
 #: One LM stage over all samples.
-FULL_DATA = Schedule(first=1 << 62)
+FULL_DATA = SubsetSchedule(first=1 << 62)
 
 
 @dataclass
@@ -397,7 +136,7 @@ def min_samples(model: BRDFModel, fixed: dict | None = None) -> int:
 
 
 def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start: dict | None = None,
-               fixed: dict | None = None, bounds: dict | None = None, schedule: Schedule | None = None,
+               fixed: dict | None = None, bounds: dict | None = None, schedule: SubsetSchedule | None = None,
                seed: int = 0, ftol: float = 1e-7, trace: list | None = None) -> RegionFit:
     """Fit ``model`` to one region's samples by hierarchical Levenberg-Marquardt.
 
@@ -414,9 +153,9 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     start : dict, optional
         Initial values; the rest come from :func:`linear_start`.
     fixed, bounds : dict, optional
-        See :class:`ParameterSpace`; ``fixed`` defaults to
-        :data:`DEFAULT_FIXED` for the model.
-    schedule : Schedule, optional
+        See :class:`ParameterSpace`; ``fixed`` defaults to the model's
+        :meth:`~mifaces.brdf.model.BRDFModel.fixed_defaults`.
+    schedule : SubsetSchedule, optional
         The subset hierarchy; :data:`FULL_DATA` fits all samples at once.
     seed : int
         Seed of the random subsets.
@@ -434,13 +173,13 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     light, view = np.asarray(light, np.float32), np.asarray(view, np.float32)
     reflectance, sigma = np.asarray(reflectance, np.float32), np.asarray(sigma, np.float32)
     validate_samples(light, view, reflectance, sigma)
-    fixed = DEFAULT_FIXED.get(model.name, {}) if fixed is None else fixed
+    fixed = model.fixed_defaults() if fixed is None else fixed
     space = ParameterSpace(model, fixed, bounds)
     if len(sigma) < len(space):
         raise ValueError(f"{model.name} has {len(space)} free parameters but only {len(sigma)} samples were given")
     start = {**linear_start(model, light, view, reflectance, sigma, fixed, seed=seed), **(start or {})}
     x = space.vector(start)
-    schedule = schedule or Schedule()
+    schedule = schedule or SubsetSchedule()
     order = np.random.default_rng(seed).permutation(len(sigma))
     history, iterations, result = [], 0, None
     sizes = schedule.sizes(len(sigma))
@@ -461,7 +200,7 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     if bounded and status == CONVERGED:
         # the best fit lies outside the valid range: the samples do not support this model there
         status, reason = AT_BOUND, f"{reason}; at the bound of its range: {', '.join(bounded)}"
-    if model.name == "lafortune" and len(model.lobes) > 1:
+    if len(model.lobe_scales()) > 1:
         params, loss, pruned = prune_lobes(model, space, problem, params, loss)
         if pruned:
             reason += f"; lobe(s) {pruned} explained no sample and were set to zero"
@@ -472,22 +211,21 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
 
 def prune_lobes(model: BRDFModel, space: ParameterSpace, problem: _Problem, params: dict, loss: float,
                 rtol: float = 1e-4) -> tuple[dict, float, list[int]]:
-    """Zero the Lafortune lobes the samples do not need.
+    """Zero the lobes the samples do not need, of a model with several.
 
     A lobe whose removal raises the loss by less than ``rtol`` (relative)
     explains no sample: typically it has drifted to a sharp spike where no
     sample lies, where it would only add a highlight no photograph showed.
-    Such lobes get C_xy = C_z = 0 (the plugin then leaves them out). Returns
-    the parameters, their loss and the numbers of the lobes removed.
+    Such lobes get their scales (:meth:`~mifaces.brdf.model.BRDFModel.lobe_scales`,
+    a Lafortune lobe's C_xy and C_z) set to 0; the plugin then leaves them
+    out. Returns the parameters, their loss and the numbers of the lobes
+    removed.
     """
-    from ..brdf.lafortune import lobe_names
-
     pruned = []
-    for j in model.lobes:
-        cxy, cz, _ = lobe_names(j)
-        if cxy in space.fixed or cz in space.fixed:
+    for j, scales in model.lobe_scales().items():
+        if any(name in space.fixed for name in scales):
             continue
-        trial = {**params, cxy: [0.0] * 3, cz: [0.0] * 3}
+        trial = {**params, **{name: [0.0] * 3 if model.parameter(name).kind == "rgb" else 0.0 for name in scales}}
         trial_loss = problem.loss(space.vector(trial))
         if np.isfinite(trial_loss) and trial_loss <= loss * (1 + rtol):
             params, loss = space.values(space.vector(trial)), min(loss, trial_loss)
@@ -524,23 +262,21 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     ``fixed_by_region`` (name -> parameters) holds parameters fixed in one
     region on top of ``fixed``.
     """
-    from tqdm import tqdm
-
     model = brdf_models.model(model) if isinstance(model, str) else model
     neighbours = NEIGHBOURS if neighbours is None else neighbours
     region = np.asarray(region)
     fixed = options.get("fixed")
-    needed = min_samples(model, DEFAULT_FIXED.get(model.name, {}) if fixed is None else fixed)
+    needed = min_samples(model, model.fixed_defaults() if fixed is None else fixed)
     counts = {name: int(np.count_nonzero(region == label)) for label, name in region_names.items()}
     fits: dict[str, RegionFit] = {}
     fitted = [(label, name) for label, name in region_names.items() if counts[name] >= needed]
-    bar = tqdm(fitted, desc=f"fitting {model.name}", unit="region", disable=not progress)
+    bar = progress_bar(fitted, desc=f"fitting {model.name}", unit="region", enabled=progress)
     held = {}  # region name -> its fixed parameters
     for label, name in bar:
         bar.set_postfix_str(f"{name}: {counts[name]} samples")
         mask = region == label
         region_options = dict(options)
-        held[name] = DEFAULT_FIXED.get(model.name, {}) if fixed is None else fixed
+        held[name] = model.fixed_defaults() if fixed is None else fixed
         if fixed_by_region and name in fixed_by_region:
             held[name] = region_options["fixed"] = {**held[name], **fixed_by_region[name]}
         fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask], **region_options)
@@ -567,7 +303,7 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
         if name in fits:
             continue
         donor = donor_of(name)
-        params = fits[donor].params if donor else {**model.defaults(), **DEFAULT_FIXED.get(model.name, {})}
+        params = fits[donor].params if donor else {**model.defaults(), **model.fixed_defaults()}
         source = f"the fit of {donor!r}" if donor else "the model's defaults"
         reason = f"{counts[name]} samples, fewer than the {needed} a {model.name} fit needs: {source}"
         if counts[name] > 0:
@@ -576,5 +312,6 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     return fits
 
 
-__all__ = ["ParameterSpace", "Schedule", "FULL_DATA", "RegionFit", "fit_region", "fit_regions",
-           "conservative_start", "min_samples", "NEIGHBOURS", "REFRACTIVE_INDEX", "CONVERGED", "AT_BOUND"]
+__all__ = ["ParameterSpace", "SubsetSchedule", "FULL_DATA", "RegionFit", "fit_region", "fit_regions",
+           "conservative_start", "linear_start", "prune_lobes", "min_samples", "NEIGHBOURS", "CONVERGED",
+           "AT_BOUND"]

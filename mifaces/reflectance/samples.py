@@ -23,8 +23,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 import scipy.ndimage
+import skimage.morphology
+
+from ..files import atomic_path
+from ..model.geometry import tangent_frames
+from ..model.mesh import mitsuba_mesh
+from ..progress import progress as progress_bar
+from ..model.regions import texel_regions_of_mesh
+from ..model.texture_space import rasterize
 
 #: Samples seen or lit at cos θ below this are dropped (θ > 80°).
 MIN_COSINE = np.cos(np.radians(80.0))
@@ -40,9 +50,11 @@ def reflectance(radiance, light_distance, intensity, cos_light, scale: float = n
     radiance : array (..., 3)
         Observed radiance R.
     light_distance : array (...)
-        Distance d from the surface point to the light.
+        Distance d from the surface point to the light; ``inf`` for a
+        directional light, whose ``intensity`` is then the irradiance E at
+        normal incidence (r = scale · R / (E cos θl)).
     intensity : array (3,) or (..., 3)
-        Radiant intensity I of the point light.
+        Radiant intensity I of the point light (irradiance E of a directional one).
     cos_light : array (...)
         cos θl = l̂ · n (> 0 where used; other samples are invalid).
     scale : float
@@ -54,7 +66,8 @@ def reflectance(radiance, light_distance, intensity, cos_light, scale: float = n
         Reflectance; NaN where cos θl <= 0.
     """
     radiance = np.asarray(radiance, np.float64)
-    d2 = np.square(np.asarray(light_distance, np.float64))[..., None]
+    d = np.asarray(light_distance, np.float64)
+    d2 = np.where(np.isinf(d), 1.0, np.square(d))[..., None]  # a directional light does not fall off
     cos_light = np.asarray(cos_light, np.float64)[..., None]
     with np.errstate(divide="ignore", invalid="ignore"):
         r = scale * radiance * d2 / (np.asarray(intensity, np.float64) * cos_light)
@@ -112,8 +125,6 @@ def valid_samples(light_z, view_z, lit, visible, erosion: int = 1, min_cosine: f
     lit, visible : ndarray (R, R) of bool
         Not in cast shadow; seen by the camera.
     """
-    import skimage.morphology
-
     light_z, view_z = np.asarray(light_z), np.asarray(view_z)
     with np.errstate(invalid="ignore"):
         mask = np.asarray(lit, bool) & np.asarray(visible, bool) & (light_z >= min_cosine) & (view_z >= min_cosine)
@@ -147,6 +158,9 @@ class ReflectanceSamples:
     label : (N,) uint8 or None
         Region label of each sample (:data:`mifaces.model.regions.REGIONS`),
         from the face model's a-priori region map (sec. 4.4).
+    region_map : (R, R) uint8 or None
+        That region map: the region of every texel, as the rendered face
+        assigns materials (computed once, with the samples).
     """
 
     light: np.ndarray
@@ -158,6 +172,7 @@ class ReflectanceSamples:
     resolution: int
     measurement_names: tuple = ()
     label: np.ndarray | None = None
+    region_map: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.sigma)
@@ -186,12 +201,11 @@ class ReflectanceSamples:
             *(np.concatenate([getattr(p, k) for p in parts]) for k in ("light", "view", "reflectance", "sigma", "texel")),
             measurement=np.concatenate([p.measurement + o for p, o in zip(parts, offsets)]).astype(np.int16),
             resolution=parts[0].resolution, measurement_names=tuple(names),
-            label=np.concatenate([p.label for p in parts]) if labelled else None)
+            label=np.concatenate([p.label for p in parts]) if labelled else None,
+            region_map=parts[0].region_map)
 
     def save(self, path) -> None:
         """Write as a compressed ``.npz``, atomically."""
-        from ..files import atomic_path
-
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
                 np.savez_compressed(f, light=self.light, view=self.view, reflectance=self.reflectance,
@@ -226,8 +240,6 @@ def texel_geometry(vertices, triangles, uv, coverage) -> TexelGeometry:
     """Interpolate positions and the per-vertex shading frames of
     :func:`mifaces.model.geometry.tangent_frames` at the texel centres that
     ``coverage`` (:func:`mifaces.model.texture_space.rasterize`) finds."""
-    from ..model.geometry import tangent_frames
-
     vertices = np.asarray(vertices, np.float64)
     triangles = np.asarray(triangles, np.int64)
     tangent, _, normal = (np.asarray(a, np.float64) for a in tangent_frames(vertices, triangles, uv))
@@ -250,9 +262,6 @@ def texel_geometry(vertices, triangles, uv, coverage) -> TexelGeometry:
 def _unoccluded(scene, origin, target, normal, offset: float) -> np.ndarray:
     """True where the segment from ``origin`` (pushed ``offset`` along the
     normal) to ``target`` hits nothing in ``scene``."""
-    import drjit as dr
-    import mitsuba as mi
-
     if len(origin) == 0:
         return np.zeros(0, bool)
     start = origin + offset * normal
@@ -267,15 +276,17 @@ def _unoccluded(scene, origin, target, normal, offset: float) -> np.ndarray:
 
 def measurement_samples(camera, light_position, intensity, pixels, vertices, triangles, uv, coverage, *,
                         saturated=None, scale: float = np.pi, erosion: int = 1, min_cosine: float = MIN_COSINE,
-                        name: str = "", offset: float | None = None) -> ReflectanceSamples:
+                        name: str = "", offset: float | None = None, light_direction=None) -> ReflectanceSamples:
     """Reflectance samples of one photograph (paper sec. 4.3, 5.3).
 
     Parameters
     ----------
     camera : mifaces.capture.Camera
         Calibrated camera (world frame in mm, OpenCV pixel conventions).
-    light_position : (3,) world position of the point light, mm.
-    intensity : (3,) its radiant intensity, in the units of ``pixels``·mm².
+    light_position : (3,) world position of the point light, mm; None for a
+        directional light (``light_direction``).
+    intensity : (3,) its radiant intensity, in the units of ``pixels``·mm²;
+        a directional light's irradiance, in the units of ``pixels``.
     pixels : (H, W, 3) linear radiance image.
     vertices : (V, 3) the face in world coordinates for this measurement.
     triangles, uv : the model's triangles and texture coordinates.
@@ -285,6 +296,9 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
         Scale of eq. 4 (π: a white Lambertian target has r = 1).
     erosion : int
         Texels eroded from the borders of the valid region.
+    light_direction : (3,) array, optional
+        A directional light instead of the point light: unit vector in the
+        world frame towards the light.
 
     Returns
     -------
@@ -292,11 +306,6 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
         Valid texels only: visible from the camera, not in cast shadow, not
         grazing, inside the image, unsaturated; σ by eq. 10.
     """
-    import mitsuba as mi
-    import scipy.ndimage as ndi
-
-    from ..model.mesh import mitsuba_mesh
-
     pixels = np.asarray(pixels, np.float32)
     if pixels.shape != (camera.height, camera.width, 3):
         raise ValueError(f"image of shape {pixels.shape} does not match the camera's "
@@ -310,25 +319,32 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
     offset = 1e-4 * size if offset is None else offset
     scene = mi.load_dict({"type": "scene", "face": mitsuba_mesh(vertices, triangles, uv)})
     to_camera = camera.position[None, :] - p
-    to_light = np.asarray(light_position, np.float64)[None, :] - p
-    dist_light = np.linalg.norm(to_light, axis=1)
-    l_world = to_light / dist_light[:, None]
+    if light_direction is not None:  # a distant light: one direction, no falloff
+        l_world = np.broadcast_to(np.asarray(light_direction, np.float64) /
+                                  np.linalg.norm(light_direction), p.shape).copy()
+        dist_light = np.full(len(p), np.inf)
+        light_target = p + l_world * (10.0 * size)  # far beyond the face: shadow rays leave it
+    else:
+        to_light = np.asarray(light_position, np.float64)[None, :] - p
+        dist_light = np.linalg.norm(to_light, axis=1)
+        l_world = to_light / dist_light[:, None]
+        light_target = np.broadcast_to(np.asarray(light_position, np.float64), p.shape)
     v_world = to_camera / np.linalg.norm(to_camera, axis=1, keepdims=True)
     cos_l, cos_v = np.sum(l_world * n, 1), np.sum(v_world * n, 1)
     front = (cos_l > 0) & (cos_v > 0)
     visible, lit = np.zeros(len(p), bool), np.zeros(len(p), bool)
     visible[front] = _unoccluded(scene, p[front], np.broadcast_to(camera.position, p[front].shape), n[front], offset)
-    lit[front] = _unoccluded(scene, p[front], np.broadcast_to(light_position, p[front].shape), n[front], offset)
+    lit[front] = _unoccluded(scene, p[front], light_target[front], n[front], offset)
     # the photograph at each texel's projection (bilinear; pixel centres at integers)
     xy = camera.project(p)
     inside = (xy[:, 0] >= 0) & (xy[:, 0] <= camera.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= camera.height - 1)
     coords = [xy[:, 1], xy[:, 0]]
-    radiance = np.stack([ndi.map_coordinates(pixels[..., c], coords, order=1, mode="nearest")
+    radiance = np.stack([scipy.ndimage.map_coordinates(pixels[..., c], coords, order=1, mode="nearest")
                          for c in range(3)], axis=1)
     ok = inside
     if saturated is not None:
-        near = ndi.binary_dilation(np.asarray(saturated, bool))  # bilinear taps touch the neighbours
-        ok &= ~ndi.map_coordinates(near.astype(np.uint8), coords, order=0, mode="nearest").astype(bool)
+        near = scipy.ndimage.binary_dilation(np.asarray(saturated, bool))  # bilinear taps touch the neighbours
+        ok &= ~scipy.ndimage.map_coordinates(near.astype(np.uint8), coords, order=0, mode="nearest").astype(bool)
     r = reflectance(radiance, dist_light, intensity, cos_l, scale)
 
     def image(values, fill):
@@ -360,8 +376,10 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     capture : mifaces.capture.Capture
         The photographs, their lights and the white target. Each point-light
         photograph is turned into reflectance by eq. 4 with the scale the
-        white target gives (:meth:`~mifaces.capture.WhiteTarget.reflectance_scale`);
-        its saturated pixels give no sample.
+        white target gives (:meth:`~mifaces.capture.WhiteTarget.reflectance_scale`;
+        without one, π: reflectance relative to the lights' intensities);
+        its saturated pixels give no sample. Directional lights give every
+        texel the same direction and no falloff.
     geometry : mapping
         Measurement name -> (V, 3) vertices of ``face_model``'s topology in
         the capture's world frame (mm): fitted shapes, or the simulator's
@@ -385,11 +403,6 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
         A measurement without geometry, geometry of another model (wrong
         vertex count), an uncalibrated light.
     """
-    from tqdm import tqdm
-
-    from ..model.regions import texel_regions_of_mesh
-    from ..model.texture_space import rasterize
-
     if resolution < 8:
         raise ValueError(f"texture resolution must be at least 8, got {resolution}")
     names = [m.name for m in capture.measurements]
@@ -412,18 +425,20 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     coverage = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
     region_map = texel_regions_of_mesh(face_model.region_map, face_model.uv, face_model.triangles, resolution,
                                        coverage)
-    scale = capture.white_target.reflectance_scale()
+    # without a white target the scale is π: r is then the albedo relative to the lights' stated intensities
+    scale = capture.white_target.reflectance_scale() if capture.white_target is not None else np.pi
     parts = []
     chosen = [m for m in capture.measurements if m.name in wanted]
-    for m in tqdm(chosen, desc="reflectance samples", unit="photo", disable=not progress):
+    for m in progress_bar(chosen, desc="reflectance samples", unit="photo", enabled=progress):
         light = capture.light(m.light)
-        if light.position is None:
+        if light.position is None and not light.directional:
             raise ValueError(f"measurement {m.name!r}: light {light.name!r} has no position "
                              "(load the capture with calibrate=True)")
         parts.append(measurement_samples(capture.camera, light.position, light.intensity, m.image.pixels,
                                          geometry[m.name], face_model.triangles, face_model.uv, coverage,
                                          saturated=m.image.saturated, scale=scale, erosion=erosion,
-                                         min_cosine=min_cosine, name=m.name))
+                                         min_cosine=min_cosine, name=m.name, light_direction=light.direction))
     samples = ReflectanceSamples.concatenate(parts)
     samples.label = samples.region(region_map).astype(np.uint8)
+    samples.region_map = region_map
     return samples

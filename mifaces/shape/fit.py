@@ -13,9 +13,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from ..model import MorphableModel, load_model
+from ..progress import progress as progress_bar
 from ..status import CONVERGED, DIVERGED, NOT_CONVERGED
 from .fitter import Fitter
 from .io import as_capture, write_fit, write_index
@@ -91,7 +91,7 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
         success: ``'diverged'`` or ``'not_converged'`` (see :attr:`ShapeFit.status`).
     seed : int
         Seeds the choice of sample vertices.
-    progress : bool or tqdm
+    progress : bool or progress bar
         Show a progress bar (or update the one given).
     lr : (float, float)
         Adam's step (in natural units of each parameter) at the start and the end of the image levels.
@@ -143,8 +143,8 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
     greyscale = bool(used) and all(getattr(image, "greyscale", False) for image in used.values())
     fitter.energy.greyscale = greyscale  # read by Energy._shade
     own_bar = progress is True
-    bar = tqdm(total=schedule.pose_iterations + (sum(int(l[0]) for l in schedule.levels) if images else 0),
-               desc=f"fit {measurement.name}", unit="it", leave=False) if own_bar else (progress or None)
+    bar = progress_bar(total=schedule.pose_iterations + (sum(int(l[0]) for l in schedule.levels) if images else 0),
+                       desc=f"fit {measurement.name}", unit="it", leave=False, detail=True) if own_bar else (progress or None)
     try:
         theta, terms, history, iterations, status, message = fitter.run(bar, lr=lr,
                                                                        visibility_interval=visibility_interval)
@@ -252,7 +252,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     iterations : float or ShapeSchedule, optional
         A :class:`ShapeSchedule`, or a factor on the default schedule's iteration counts.
     progress : bool
-        Show progress bars (tqdm).
+        Show progress (:func:`mifaces.progress.progress`).
     weights : Weights, optional
     use_diffuse : bool
         Use the companion diffuse-light image where present.
@@ -286,7 +286,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     reference = reference_measurement(capture) if model.has_texture else None
     groups = sorted(pose_groups(capture, todo), key=lambda g: g[0].name != reference)
     fits, initial_color = {}, None
-    bar = tqdm(total=len(todo), desc="fit-shape", unit="image", disable=not progress)
+    bar = progress_bar(total=len(todo), desc="fit-shape", unit="image", enabled=bool(progress))
     for leader, *others in groups:
         light = capture.light(leader.light) if leader.light else None
         fit = fit_measurement(leader, capture.camera, model, light=light, schedule=schedule, weights=weights,

@@ -42,7 +42,7 @@ matches the width of the lobe (cos^n α ≈ exp(-n α²/2) around the mirror
 direction, Beckmann exp(-θh²/m²), α = 2θh in the plane of incidence);
 the Phong and Ward ρ_s, and the Lafortune coefficients (a lobe
 C_xy = -C, C_z = C is the modified Phong lobe, Lafortune et al. 1997, with
-C^n = 2π ρ_s / (n + 2)), take the Cook–Torrance lobe's albedo at normal
+C^n = ρ_s (n + 2) / 2π), take the Cook–Torrance lobe's albedo at normal
 incidence, computed with the array API of :mod:`mifaces.brdf`.
 """
 
@@ -55,10 +55,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from ..capture import write_ground_truth
 from ..model import load_model
+from ..progress import progress as progress_bar
 from ..render import face_shapes
 from .photograph import albedo_texture, annotate, photograph_face, photograph_spheres, visible_feature_points
 from .scene import set_up_studio
@@ -135,7 +135,7 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     studio = set_up_studio(width, height, subject.head, measurements, rng, spp)
     seeds = itertools.count(seed * 1000 + 1)  # Monte Carlo seed of each render, in order
     frames = measurements * (1 + (companion in ("diffuse", "both")) + (companion in ("exposures", "both")))
-    bar = tqdm(total=frames + 2 * len(studio.per_light), desc="simulating", unit="frame", disable=not progress)
+    bar = progress_bar(total=frames + 2 * len(studio.per_light), desc="simulating", unit="frame", enabled=progress)
 
     lights = []
     for li in range(len(studio.per_light)):

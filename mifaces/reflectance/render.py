@@ -1,0 +1,87 @@
+"""Rendering a fitted BRDF (paper sec. 6): on the face it was fitted to or
+on another face of the same model (BRDF transfer: all faces of a model share
+its texture parameterization, so the albedo map and the regions move with
+the BRDF), in a novel pose, under a novel point light or an environment map,
+with Mitsuba's path tracer as the simulator renders photographs
+(:class:`mifaces.render.FaceScene`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..capture import Capture, load_capture
+from ..geometry import load_geometry
+from ..model import MorphableModel
+from ..render import FaceScene, save_image
+from .estimate import BRDFEstimate
+from .io import load_estimate
+
+
+def render_estimate(estimate: BRDFEstimate, face_model: MorphableModel, vertices: np.ndarray, camera,
+                    light_position=None, intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64,
+                    seed: int = 0, *, light_direction=None) -> np.ndarray:
+    """Render the fitted face (linear RGB, (H, W, 3)) on geometry ``vertices``
+    (world frame) seen by ``camera``, under a point light and/or an
+    environment map, or a directional light (``light_direction``, world frame,
+    towards the light, with ``intensity`` its irradiance): for novel poses,
+    novel lights and comparisons with held-out photographs. To render one face several times, build its
+    :class:`~mifaces.render.FaceScene` once and call its ``render``."""
+    return FaceScene(face_model, vertices).render(estimate.to_json(), estimate.albedo.albedo, camera, light_position,
+                                                  intensity, envmap, envmap_scale, spp, seed,
+                                                  light_direction=light_direction)
+
+
+def turn(vertices: np.ndarray, yaw: float, up: np.ndarray) -> np.ndarray:
+    """``vertices`` (V, 3) turned by ``yaw`` degrees about the axis ``up``
+    (unit, world frame) through their centroid (right-handed)."""
+    vertices = np.asarray(vertices, np.float64)
+    centre = vertices.mean(axis=0)
+    return Rotation.from_rotvec(np.radians(yaw) * np.asarray(up, np.float64)).apply(vertices - centre) + centre
+
+
+def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geometry="ground-truth",
+                  face_model=None, yaw: float = 0.0, light_position=None, envmap=None, envmap_scale: float = 1.0,
+                  spp: int = 64, light_direction=None, intensity=None) -> dict[str, Path]:
+    """Render a fitted BRDF (a ``fit-brdf`` output folder) on a face of a capture,
+    in a novel pose and light, and write ``out``.exr / .png.
+
+    The BRDF may come from another face than the geometry: both share the
+    model's texture parameterization, so the albedo map and the regions move
+    with it (paper sec. 6). ``yaw`` turns the face about the camera's up
+    direction (degrees, about the face's centroid, :func:`turn`); the light is
+    the measurement's light unless ``light_position`` (a point light, world,
+    mm), ``light_direction`` (a directional light, world frame, towards the
+    light; :meth:`mifaces.capture.Camera.direction` turns an azimuth and
+    elevation into one) or an ``envmap`` is given; its intensity is the
+    measurement light's unless ``intensity`` is given. Rendered in the
+    capture's camera and units, the image compares pixel for pixel with a
+    photograph taken under that light.
+    """
+    capture = capture if isinstance(capture, Capture) else load_capture(capture)
+    data = load_estimate(brdf_dir)
+    if data["albedo"] is None:
+        raise FileNotFoundError(f"{brdf_dir}: no albedo map beside brdf.json")
+    face, shapes = load_geometry(capture, geometry, face_model)
+    name = measurement or next(m.name for m in capture.measurements if m.name in shapes)
+    if name not in shapes:
+        raise ValueError(f"no geometry for measurement {name!r}; have {sorted(shapes)}")
+    albedo = data["albedo"]
+    if albedo.ndim != 3 or albedo.shape[0] != albedo.shape[1]:
+        raise ValueError(f"{brdf_dir}: the albedo map must be a square RGB image, got shape {albedo.shape}")
+    vertices = np.asarray(shapes[name], np.float64)
+    if yaw:
+        vertices = turn(vertices, yaw, -capture.camera.rotation[1])  # the camera's up direction in the world frame
+    lamp = capture.light(next(m.light for m in capture.measurements if m.name == name))
+    if light_position is None and light_direction is None and envmap is None:
+        light_position, light_direction = lamp.position, lamp.direction
+    if intensity is None and (light_position is not None or light_direction is not None):
+        intensity = lamp.intensity
+    image = FaceScene(face, vertices).render(data, albedo, capture.camera, light_position, intensity, envmap,
+                                             envmap_scale, spp, light_direction=light_direction)
+    return save_image(image, out)
+
+
+__all__ = ["render_estimate", "render_fitted", "turn"]

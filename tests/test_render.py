@@ -1,0 +1,125 @@
+"""mifaces.render: one face-scene description, loaded in memory and written as Mitsuba XML."""
+
+from __future__ import annotations
+
+import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mifaces.capture import Camera
+from mifaces.files import write_exr
+from mifaces.model import load_model
+from mifaces.render import ALBEDO, ALBEDO_REF, FaceScene, region_meshes, rgb, scene_xml
+
+SPP_PATH = ("sensor", "sampler", "sample_count")
+
+
+def small_scene(texture_file) -> dict:
+    """A sphere in a plugin BSDF over a bitmap texture referenced by id, a point light."""
+    mifaces.set_variant("llvm_ad_rgb")
+    return {"type": "scene", "integrator": {"type": "path", "max_depth": 3, "hide_emitters": False},
+            "sensor": {"type": "perspective", "fov": 40.0,
+                       "to_world": mi.ScalarTransform4f().look_at([0, 0, 5], [0, 0, 0], [0, 1, 0]),
+                       "film": {"type": "hdrfilm", "width": 24, "height": 16, "pixel_format": "rgb",
+                                "rfilter": {"type": "gaussian", "stddev": 0.5}},
+                       "sampler": {"type": "independent", "sample_count": 3}},
+            "tex": {"type": "bitmap", "filename": str(texture_file), "raw": True, "filter_type": "bilinear"},
+            "ball": {"type": "sphere", "center": [0.0, 0.1, 0.0], "radius": 1.0,
+                     "bsdf": {"type": "cooktorrance", "diffuse_reflectance": {"type": "ref", "id": "tex"},
+                              "specular_reflectance": rgb([0.2, 0.3, 0.4]), "roughness": 0.45, "eta": 1.4}},
+            "light": {"type": "point", "position": [2.0, 3.0, 4.0], "intensity": rgb(30.0)}}
+
+
+def test_scene_xml_renders_as_the_dict(tmp_path):
+    texture = tmp_path / "tex.exr"
+    write_exr(texture, np.linspace(0.1, 0.9, 8 * 8 * 3, dtype=np.float32).reshape(8, 8, 3))
+    scene = small_scene(texture)
+    path = tmp_path / "scene.xml"
+    path.write_text(scene_xml(scene, {"spp": SPP_PATH}, comment="a sphere"))
+    from_file = np.array(mi.render(mi.load_file(str(path)), seed=2))
+    from_dict = np.array(mi.render(mi.load_dict(scene), seed=2))
+    assert from_dict.shape == (16, 24, 3) and from_dict.max() > 0
+    np.testing.assert_allclose(from_file, from_dict, rtol=1e-5, atol=1e-6)
+    # the sample count is a parameter of the file, with the dict's value as its default
+    assert mi.load_file(str(path)).sensors()[0].sampler().sample_count() == 3
+    assert mi.load_file(str(path), spp=7).sensors()[0].sampler().sample_count() == 7
+    assert path.read_text().startswith("<!-- a sphere -->")
+
+
+def test_scene_xml_refuses_what_it_cannot_write(tmp_path):
+    scene = small_scene(tmp_path / "tex.exr")
+    scene["tex"] = {"type": "bitmap", "bitmap": mi.Bitmap(np.ones((2, 2, 3), np.float32))}
+    with pytest.raises(TypeError, match=r"tex\.bitmap: a Bitmap has no Mitsuba XML form"):
+        scene_xml(scene)
+    with pytest.raises(ValueError, match="not a scene dict"):
+        scene_xml(scene["ball"])
+
+
+def camera() -> Camera:
+    """A camera 1.2 m in front of the model's face (world = model frame, mm), looking at it."""
+    rotation = np.diag([1.0, -1.0, -1.0])  # OpenCV axes: x right, y down, z forward (world -z)
+    position = np.array([0.0, 0.0, 1200.0])
+    return Camera(48, 64, 500.0, 500.0, 23.5, 31.5, np.zeros(5), rotation, -rotation @ position)
+
+
+@pytest.fixture(scope="module")
+def face():
+    mifaces.set_variant("llvm_ad_rgb")
+    model = load_model()
+    return model, FaceScene(model, model.shape_mean)
+
+
+def test_region_meshes_cover_the_face_once(face):
+    model, scene = face
+    meshes = region_meshes(model, model.shape_mean)
+    assert list(meshes) == list(scene.meshes) and "face_skin_1" in meshes
+    assert sum(len(m.triangles) for m in meshes.values()) == len(model.triangles)
+    for key, part in meshes.items():
+        assert key.startswith(f"face_{part.region}_")
+        assert part.vertices.shape == part.normals.shape and len(part.uv) == len(part.vertices)
+        assert part.triangles.max() == len(part.vertices) - 1
+
+
+def test_face_scene_description_names_files_and_loads_in_memory(face, tmp_path):
+    model, scene = face
+    brdf = {"model": "ward", "options": {}, "regions": {"skin": {"specular_reflectance": 0.05, "alpha": 0.3}}}
+    description = scene.description(brdf, camera(), [0.0, 300.0, 1000.0], [1e6] * 3, spp=2, albedo="a.exr")
+    assert description[ALBEDO]["filename"] == "a.exr"
+    for key in scene.meshes:
+        assert description[key]["filename"] == FaceScene.mesh_file(key)
+        assert description[key]["bsdf"]["diffuse_reflectance"] == ALBEDO_REF
+        assert description[key]["bsdf"]["alpha"] == 0.3  # regions without parameters take skin's
+    assert "environment" not in description
+    albedo = np.full((16, 16, 3), 0.5, np.float32)
+    loaded = scene.scene(brdf, albedo, camera(), [0.0, 300.0, 1000.0], [1e6] * 3, spp=2)
+    assert ALBEDO not in loaded and all(isinstance(loaded[key], mi.Mesh) for key in scene.meshes)
+    # the written meshes are the ones in memory
+    paths = scene.write_meshes(tmp_path)
+    written = mi.load_dict({"type": "ply", "filename": str(paths["face_skin_1"])})
+    np.testing.assert_array_equal(np.array(mi.traverse(written)["vertex_positions"]),
+                                  np.array(mi.traverse(loaded["face_skin_1"])["vertex_positions"]))
+    image = scene.render(brdf, albedo, camera(), [0.0, 300.0, 1000.0], [1e6] * 3, spp=2)
+    assert image.shape == (64, 48, 3) and (image.mean(axis=2) > 0).mean() > 0.2
+
+
+def test_directional_light_lights_a_white_face_at_e_over_pi(face):
+    """A directional light of irradiance E from the camera's side shows a white Lambertian face
+    facing it as E/π (the photographs' units of a capture with relative intensities)."""
+    model, scene = face
+    brdf = {"model": "phong", "options": {}, "regions": {"skin": {"specular_reflectance": 0.0, "exponent": 10.0}}}
+    towards = np.array([0.0, 0.0, 1.0])  # from the face to the camera
+    description = scene.description(brdf, camera(), None, [2.0] * 3, spp=2, light_direction=towards * 3)
+    assert description["light"] == {"type": "directional", "direction": [-0.0, -0.0, -1.0],
+                                    "irradiance": rgb(2.0)}
+    albedo = np.ones((16, 16, 3), np.float32)
+    image = scene.render(brdf, albedo, camera(), None, [2.0] * 3, spp=16, light_direction=towards)
+    centre = image[28:36, 20:28].mean(axis=(0, 1))  # the nose's neighbourhood faces the camera
+    assert np.all(centre > 0.5 * 2.0 / np.pi) and np.all(centre <= 2.0 / np.pi * 1.02)
+    with pytest.raises(ValueError, match="not both"):
+        scene.description(brdf, camera(), [0.0, 0.0, 1000.0], [1.0] * 3, light_direction=towards)
+    with pytest.raises(ValueError, match="finite, non-zero"):
+        scene.description(brdf, camera(), None, [1.0] * 3, light_direction=[0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="needs a light"):
+        scene.description(brdf, camera(), None, [1.0] * 3)
