@@ -19,6 +19,7 @@ so kernels are cached across iterations.
 
 from __future__ import annotations
 
+import copy
 import math
 
 import drjit as dr
@@ -101,6 +102,9 @@ class Energy:
         The rotation centre (model space, mm).
     light_distance : float
         Distance (mm) of the point image's lamp from the face centre; inf for a directional light.
+    freeze : bool
+        Replay the kernels of an evaluation (``dr.freeze``) instead of tracing it again, while
+        the arrays keep their sizes (recorded anew per sample set).
 
     Notes
     -----
@@ -112,11 +116,12 @@ class Energy:
     scatter-adds into one accumulator (:data:`SLOTS`), read back with the gradient once per
     evaluation. What differs between the photographs of a capture (the number of feature
     points and distances, the lamp's distance) enters as opaque values, so a second
-    photograph of the same size reuses the first one's kernels.
+    photograph of the same size reuses the first one's kernels. The Dr.Jit arrays are the
+    attributes named ``dr_*``: the frozen evaluation takes them as its input.
     """
 
     def __init__(self, model, camera, layout: Layout, weights: Weights, images: dict, feature_vertices,
-                 feature_pixels, distances, centre, light_distance: float = math.inf):
+                 feature_pixels, distances, centre, light_distance: float = math.inf, freeze: bool = True):
         self.model, self.camera, self.layout, self.weights = model, camera, layout, weights
         self.images = images
         self.image_names = list(images)
@@ -131,6 +136,8 @@ class Energy:
         self.slots = {name: i for i, name in enumerate(
             [f"{k}.{s}" for k in self.image_names for s in ("num", "den")] +
             ["features", "distances", "prior", "albedo"])}
+        # opaque indices: a literal index into an evaluated array would be read on the host
+        self.dr_index = [dr.opaque(mi.UInt32, i) for i in range(max(len(self.slots), 8))]
         # per measurement, opaque: the kernels do not depend on them
         self.dr_inv_features = dr.opaque(mi.Float, 1.0 / len(feature_vertices))
         self.dr_inv_distances = dr.opaque(mi.Float, 1.0 / max(len(distances), 1))
@@ -139,6 +146,9 @@ class Energy:
         self.dr_feature_v = mi.Float(np.asarray(feature_pixels, np.float32)[:, 1])
         self.dr_distance_mm = mi.Float(np.array([d for _, _, d in distances], np.float32))
         self._prior_weights()
+        # the widths are literals of the recorded kernels: a new sample set records anew
+        self._frozen = dr.freeze(self._evaluate, enabled=freeze, warn_after=20,
+                                 state_fn=lambda arrays, *args: (dr.width(arrays["dr_mean"]), self.n_samples))
 
     def _prior_weights(self):
         """Indices into theta and weights of the quadratic prior: the Mahalanobis norms of the
@@ -301,23 +311,33 @@ class Energy:
         part of E_P), ``feature_rms_px`` and, with the image term, ``image_rms``; and the gradient.
         """
         theta = mi.Float(theta_np.astype(np.float32))
-        if grad:
-            dr.enable_grad(theta)
         # the weights change every iteration while E_F fades: data, so kernels stay cached
         fade = mi.Float(np.array([feature_weight * self.weights.feature, image_weight], np.float32))
-        energy, packed = self.energy(theta, fade, image_weight > 0)
-        g = None
-        if grad:
-            dr.backward(energy)
-            g = dr.grad(theta)
-            dr.eval(packed, g)
-            g = np.asarray(g, np.float64)
-        values = np.asarray(packed, np.float64)
+        arrays = {k: v for k, v in vars(self).items() if k.startswith("dr_")}
+        out = self._frozen(arrays, theta, fade, image_weight > 0, grad)
+        values = np.asarray(out[0], np.float64)
+        g = np.asarray(out[1], np.float64) if grad else None
         terms = dict(zip(("E", "E_I", "E_F", "E_P", "E_D"), values[:5].tolist()))
         terms["feature_rms_px"] = math.sqrt(max(values[5], 0.0) / len(self.feature_vertices)) * self.scale_px
         if image_weight > 0:
             terms["image_rms"] = math.sqrt(values[6] / max(values[7], 1.0) / 3.0)
         return terms, g
+
+    def _evaluate(self, arrays: dict, theta, fade, use_image: bool, grad: bool):
+        """The packed terms (see :meth:`energy`) and, with ``grad``, dE/dtheta, evaluated; the
+        Dr.Jit arrays read from ``arrays`` (the input of the frozen function)."""
+        energy_of = copy.copy(self)
+        vars(energy_of).update(arrays)
+        if grad:
+            dr.enable_grad(theta)
+        energy, packed = energy_of.energy(theta, fade, use_image)
+        if not grad:
+            dr.eval(packed)
+            return (packed,)
+        dr.backward(energy)
+        g = dr.grad(theta)
+        dr.eval(packed, g)
+        return packed, g
 
     def energy(self, theta, fade, use_image: bool):
         """E (differentiable, one value) for parameters ``theta`` and fading weights ``fade``
@@ -333,7 +353,7 @@ class Energy:
             self._image_sums(acc, theta, pos)
 
         def slot(name):
-            return dr.gather(mi.Float, acc, self.slots[name])
+            return dr.gather(mi.Float, acc, self.dr_index[self.slots[name]])
 
         w = self.weights
         e_f = slot("features") * self.dr_inv_features / w.feature_sigma ** 2
@@ -345,10 +365,12 @@ class Energy:
                 e_i = e_i + slot(f"{key}.num") / dr.maximum(slot(f"{key}.den"), 1.0)
                 num, den = num + slot(f"{key}.num"), den + slot(f"{key}.den")
             e_i = e_i / (len(self.image_names) * w.image_sigma ** 2)
-        energy = dr.gather(mi.Float, fade, 1) * e_i + dr.gather(mi.Float, fade, 0) * e_f + e_p
-        packed = dr.zeros(mi.Float, 8)
-        for i, value in enumerate((energy, e_i, e_f, e_p, e_d, slot("features"), num, den)):
-            dr.scatter(packed, dr.detach(value), i)
+        energy = (dr.gather(mi.Float, fade, self.dr_index[1]) * e_i +
+                  dr.gather(mi.Float, fade, self.dr_index[0]) * e_f + e_p)
+        values = (energy, e_i, e_f, e_p, e_d, slot("features"), num, den)
+        lane, packed = dr.arange(mi.UInt32, len(values)), mi.Float(0.0)
+        for i, value in enumerate(values):
+            packed = dr.select(lane == i, dr.detach(value), packed)
         return energy, packed
 
     def _feature_sums(self, acc, theta, pos):
