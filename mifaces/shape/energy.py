@@ -67,6 +67,22 @@ class Layout:
         return self.slices[name]
 
 
+def device_array(dtype, values):
+    """``values`` as a flat Dr.Jit array (``mi.Float`` for float32, ``mi.UInt32`` for uint32) in
+    64-byte aligned memory.
+
+    Dr.Jit's LLVM backend maps a NumPy array's memory and writes whether it is aligned into the
+    code of the kernels that load from it; unless aligned here, that is chance, and the same
+    kernel of a second photograph (or a frozen evaluation's input) differs and is compiled again.
+    """
+    values = np.ascontiguousarray(values, dtype).ravel()
+    buffer = np.empty(values.size + 64 // values.itemsize, dtype)
+    start = (-buffer.ctypes.data % 64) // values.itemsize
+    aligned = buffer[start:start + values.size]
+    aligned[:] = values
+    return (mi.Float if dtype == np.float32 else mi.UInt32)(aligned)
+
+
 def adjacency(triangles: np.ndarray, vertex_count: int) -> np.ndarray:
     """(N, D) triangle indices adjacent to each vertex, padded with -1."""
     t = np.asarray(triangles, np.int64)
@@ -142,9 +158,9 @@ class Energy:
         self.dr_inv_features = dr.opaque(mi.Float, 1.0 / len(feature_vertices))
         self.dr_inv_distances = dr.opaque(mi.Float, 1.0 / max(len(distances), 1))
         self.dr_light_distance = dr.opaque(mi.Float, light_distance if math.isfinite(light_distance) else 0.0)
-        self.dr_feature_u = mi.Float(np.asarray(feature_pixels, np.float32)[:, 0])
-        self.dr_feature_v = mi.Float(np.asarray(feature_pixels, np.float32)[:, 1])
-        self.dr_distance_mm = mi.Float(np.array([d for _, _, d in distances], np.float32))
+        self.dr_feature_u = device_array(np.float32, np.asarray(feature_pixels)[:, 0])
+        self.dr_feature_v = device_array(np.float32, np.asarray(feature_pixels)[:, 1])
+        self.dr_distance_mm = device_array(np.float32, [d for _, _, d in distances])
         self._prior_weights()
         # the widths are literals of the recorded kernels: a new sample set records anew
         self._frozen = dr.freeze(self._evaluate, enabled=freeze, warn_after=20,
@@ -160,8 +176,8 @@ class Energy:
             if name in L.slices:
                 index.extend(range(L[name].start, L[name].stop))
                 weight.extend([value] * (L[name].stop - L[name].start))
-        self.dr_prior_index = mi.UInt32(np.array(index, np.uint32))
-        self.dr_prior_weight = mi.Float(np.array(weight, np.float32))
+        self.dr_prior_index = device_array(np.uint32, index)
+        self.dr_prior_weight = device_array(np.float32, weight)
 
     # ---- the sample set and the image level ---------------------------------------------------
     def set_samples(self, samples: np.ndarray):
@@ -183,39 +199,39 @@ class Energy:
             columns.append(m.expression_basis[rows] * np.sqrt(m.expression_variance))
         basis = np.concatenate(columns, axis=1).astype(np.float32)
         self.n_modes = basis.shape[1]
-        self.dr_mean = mi.Float(m.shape_mean[needed].astype(np.float32).ravel())
-        self.dr_basis = [mi.Float(np.ascontiguousarray(basis[:, k])) for k in range(self.n_modes)]
-        self.dr_sample_local = mi.UInt32(local[samples].astype(np.uint32))
-        self.dr_feature_local = mi.UInt32(local[self.feature_vertices].astype(np.uint32))
-        self.dr_distance_local = [mi.UInt32(local[self.distance_vertices[:, k]].astype(np.uint32))
+        self.dr_mean = device_array(np.float32, m.shape_mean[needed])
+        self.dr_basis = [device_array(np.float32, basis[:, k]) for k in range(self.n_modes)]
+        self.dr_sample_local = device_array(np.uint32, local[samples])
+        self.dr_feature_local = device_array(np.uint32, local[self.feature_vertices])
+        self.dr_distance_local = [device_array(np.uint32, local[self.distance_vertices[:, k]])
                                   for k in range(2)]
         corners = np.where(valid[..., None], local[ring_tris], 0).astype(np.uint32)  # (S, D, 3)
-        self.dr_corners = [[mi.UInt32(np.ascontiguousarray(corners[:, j, c])) for c in range(3)]
+        self.dr_corners = [[device_array(np.uint32, corners[:, j, c]) for c in range(3)]
                            for j in range(self.degree)]
-        self.dr_slot_valid = [mi.Float(valid[:, j].astype(np.float32)) for j in range(self.degree)]
+        self.dr_slot_valid = [device_array(np.float32, valid[:, j]) for j in range(self.degree)]
         if m.has_texture:
             crow = (3 * samples[:, None] + np.arange(3)).ravel()
             cbasis = (m.color_basis[crow] * np.sqrt(m.color_variance)).astype(np.float32).reshape(len(samples), 3, -1)
             cmean = m.color_mean[samples].astype(np.float32)
-            self.dr_color_mean = [mi.Float(np.ascontiguousarray(cmean[:, c])) for c in range(3)]
-            self.dr_color_basis = [[mi.Float(np.ascontiguousarray(cbasis[:, c, k])) for c in range(3)]
+            self.dr_color_mean = [device_array(np.float32, cmean[:, c]) for c in range(3)]
+            self.dr_color_basis = [[device_array(np.float32, cbasis[:, c, k]) for c in range(3)]
                                    for k in range(m.color_dim)]
-        self.dr_sample_vertex = mi.UInt32(samples.astype(np.uint32))
+        self.dr_sample_vertex = device_array(np.uint32, samples)
         self.dr_inv_samples = dr.opaque(mi.Float, 1.0 / len(samples))
         ones = np.ones(len(samples), np.float32)
         self.set_visibility(ones, ones)
 
     def set_visibility(self, seen: np.ndarray, lit: np.ndarray):
         """Per sample: seen by the camera (every image), lit by the point image's lamp (0 or 1)."""
-        self.dr_visible = mi.Float(np.asarray(seen, np.float32))
-        self.dr_shadow = mi.Float(np.asarray(lit, np.float32))
+        self.dr_visible = device_array(np.float32, seen)
+        self.dr_shadow = device_array(np.float32, lit)
 
     def set_level(self, blur: float):
         """The photographs blurred by ``blur`` px at 512 px image height, on the Dr.Jit side."""
         self.dr_images = {}
         for key, image in self.images.items():
             b = blurred(image, blur * self.scale_px)
-            self.dr_images[key] = mi.Float(np.ascontiguousarray(b, np.float32).ravel())
+            self.dr_images[key] = device_array(np.float32, b)
 
     # ---- parameters and geometry ---------------------------------------------------------------
     @staticmethod
@@ -310,9 +326,9 @@ class Energy:
         evaluated). Returns the terms ``E, E_I, E_F, E_P, E_D`` (E_D, the metric distances, is
         part of E_P), ``feature_rms_px`` and, with the image term, ``image_rms``; and the gradient.
         """
-        theta = mi.Float(theta_np.astype(np.float32))
+        theta = device_array(np.float32, theta_np)
         # the weights change every iteration while E_F fades: data, so kernels stay cached
-        fade = mi.Float(np.array([feature_weight * self.weights.feature, image_weight], np.float32))
+        fade = device_array(np.float32, [feature_weight * self.weights.feature, image_weight])
         arrays = {k: v for k, v in vars(self).items() if k.startswith("dr_")}
         out = self._frozen(arrays, theta, fade, image_weight > 0, grad)
         values = np.asarray(out[0], np.float64)
