@@ -69,18 +69,23 @@ class Layout:
 
 def device_array(dtype, values):
     """``values`` as a flat Dr.Jit array (``mi.Float`` for float32, ``mi.UInt32`` for uint32) in
-    64-byte aligned memory.
+    memory Dr.Jit owns, evaluated.
 
-    Dr.Jit's LLVM backend maps a NumPy array's memory and writes whether it is aligned into the
-    code of the kernels that load from it; unless aligned here, that is chance, and the same
-    kernel of a second photograph (or a frozen evaluation's input) differs and is compiled again.
+    Dr.Jit's LLVM backend maps a NumPy array's memory instead of copying it, and writes whether
+    it is aligned into the code of the kernels that load from it: by chance, so the same kernel
+    of a second photograph would differ and be compiled again; and releasing mapped memory
+    cannot happen while a frozen function records. So the values are copied into a 64-byte
+    aligned buffer, and from there by a kernel (always the same) into Dr.Jit's own memory.
     """
     values = np.ascontiguousarray(values, dtype).ravel()
     buffer = np.empty(values.size + 64 // values.itemsize, dtype)
     start = (-buffer.ctypes.data % 64) // values.itemsize
     aligned = buffer[start:start + values.size]
     aligned[:] = values
-    return (mi.Float if dtype == np.float32 else mi.UInt32)(aligned)
+    array_type = mi.Float if dtype == np.float32 else mi.UInt32
+    owned = array_type(aligned) + dr.opaque(array_type, 0)
+    dr.eval(owned)
+    return owned
 
 
 def adjacency(triangles: np.ndarray, vertex_count: int) -> np.ndarray:
@@ -160,7 +165,8 @@ class Energy:
         self.dr_light_distance = dr.opaque(mi.Float, light_distance if math.isfinite(light_distance) else 0.0)
         self.dr_feature_u = device_array(np.float32, np.asarray(feature_pixels)[:, 0])
         self.dr_feature_v = device_array(np.float32, np.asarray(feature_pixels)[:, 1])
-        self.dr_distance_mm = device_array(np.float32, [d for _, _, d in distances])
+        if len(distances):  # (an empty array cannot enter a frozen function)
+            self.dr_distance_mm = device_array(np.float32, [d for _, _, d in distances])
         self._prior_weights()
         # the widths are literals of the recorded kernels: a new sample set records anew
         self._frozen = dr.freeze(self._evaluate, enabled=freeze, warn_after=20,
@@ -203,8 +209,9 @@ class Energy:
         self.dr_basis = [device_array(np.float32, basis[:, k]) for k in range(self.n_modes)]
         self.dr_sample_local = device_array(np.uint32, local[samples])
         self.dr_feature_local = device_array(np.uint32, local[self.feature_vertices])
-        self.dr_distance_local = [device_array(np.uint32, local[self.distance_vertices[:, k]])
-                                  for k in range(2)]
+        if len(self.distances):
+            self.dr_distance_local = [device_array(np.uint32, local[self.distance_vertices[:, k]])
+                                      for k in range(2)]
         corners = np.where(valid[..., None], local[ring_tris], 0).astype(np.uint32)  # (S, D, 3)
         self.dr_corners = [[device_array(np.uint32, corners[:, j, c]) for c in range(3)]
                            for j in range(self.degree)]
