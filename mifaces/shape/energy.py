@@ -13,8 +13,9 @@ Dr.Jit side and differentiable (reverse mode).
   distances on the identity shape, and for a model without colour model the
   per-vertex albedo's deviation from its mean.
 
-Parameters enter as one opaque array and the fading weights are opaque too,
-so kernels are cached across iterations.
+One evaluation (E, its terms and dE/dtheta) is a few kernels, frozen with
+``dr.freeze`` and reused across iterations and photographs (see
+:class:`Energy`); ``validation/bench_shape_kernels.py`` counts them.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ from .targets import FRONTAL, blurred
 
 #: Phong exponent of the specular lobe (fixed; its strength is fitted).
 PHONG_EXPONENT = 16.0
+#: The needed vertices' rows on the Dr.Jit side are padded to a multiple of this.
+ROWS = 1024
 #: Rec. 601 luminance weights of the colour-contrast operator (Blanz and Vetter 1999).
 LUMINANCE = (0.3, 0.59, 0.11)
 
@@ -67,6 +70,10 @@ class Layout:
         return self.slices[name]
 
 
+#: An opaque zero per array type (see :func:`device_array`).
+_ZERO = {}
+
+
 def device_array(dtype, values):
     """``values`` as a flat Dr.Jit array (``mi.Float`` for float32, ``mi.UInt32`` for uint32) in
     memory Dr.Jit owns, evaluated.
@@ -83,7 +90,9 @@ def device_array(dtype, values):
     aligned = buffer[start:start + values.size]
     aligned[:] = values
     array_type = mi.Float if dtype == np.float32 else mi.UInt32
-    owned = array_type(aligned) + dr.opaque(array_type, 0)
+    if array_type not in _ZERO:  # made once: an opaque value is a launch
+        _ZERO[array_type] = dr.opaque(array_type, 0)
+    owned = array_type(aligned) + _ZERO[array_type]
     dr.eval(owned)
     return owned
 
@@ -159,6 +168,7 @@ class Energy:
             ["features", "distances", "prior", "albedo"])}
         # opaque indices: a literal index into an evaluated array would be read on the host
         self.dr_index = [dr.opaque(mi.UInt32, i) for i in range(max(len(self.slots), 8))]
+        self.dr_fade_index = [dr.opaque(mi.UInt32, layout.size + k) for k in range(2)]
         # per measurement, opaque: the kernels do not depend on them
         self.dr_inv_features = dr.opaque(mi.Float, 1.0 / len(feature_vertices))
         self.dr_inv_distances = dr.opaque(mi.Float, 1.0 / max(len(distances), 1))
@@ -203,9 +213,12 @@ class Energy:
         columns = [m.shape_basis[rows] * sigma]
         if m.has_expressions:
             columns.append(m.expression_basis[rows] * np.sqrt(m.expression_variance))
-        basis = np.concatenate(columns, axis=1).astype(np.float32)
+        # rows padded with zeros to a multiple of ROWS: the backward kernels' scatter into the
+        # positions' gradient has their number as a literal, the same for most sample draws
+        pad = (-len(needed)) % ROWS
+        basis = np.pad(np.concatenate(columns, axis=1).astype(np.float32), ((0, 3 * pad), (0, 0)))
         self.n_modes = basis.shape[1]
-        self.dr_mean = device_array(np.float32, m.shape_mean[needed])
+        self.dr_mean = device_array(np.float32, np.pad(m.shape_mean[needed], ((0, pad), (0, 0))))
         self.dr_basis = [device_array(np.float32, basis[:, k]) for k in range(self.n_modes)]
         self.dr_sample_local = device_array(np.uint32, local[samples])
         self.dr_feature_local = device_array(np.uint32, local[self.feature_vertices])
@@ -333,38 +346,42 @@ class Energy:
         evaluated). Returns the terms ``E, E_I, E_F, E_P, E_D`` (E_D, the metric distances, is
         part of E_P), ``feature_rms_px`` and, with the image term, ``image_rms``; and the gradient.
         """
-        theta = device_array(np.float32, theta_np)
-        # the weights change every iteration while E_F fades: data, so kernels stay cached
-        fade = device_array(np.float32, [feature_weight * self.weights.feature, image_weight])
+        # theta, then the weights that change every iteration while E_F fades: one upload, data,
+        # so kernels stay cached
+        size = len(theta_np)
+        inputs = device_array(np.float32, np.concatenate([theta_np, [feature_weight * self.weights.feature,
+                                                                     image_weight]]))
         arrays = {k: v for k, v in vars(self).items() if k.startswith("dr_")}
-        out = self._frozen(arrays, theta, fade, image_weight > 0, grad)
+        out = self._frozen(arrays, inputs, image_weight > 0, grad)
         values = np.asarray(out[0], np.float64)
-        g = np.asarray(out[1], np.float64) if grad else None
+        g = np.asarray(out[1], np.float64)[:size] if grad else None
         terms = dict(zip(("E", "E_I", "E_F", "E_P", "E_D"), values[:5].tolist()))
         terms["feature_rms_px"] = math.sqrt(max(values[5], 0.0) / len(self.feature_vertices)) * self.scale_px
         if image_weight > 0:
             terms["image_rms"] = math.sqrt(values[6] / max(values[7], 1.0) / 3.0)
         return terms, g
 
-    def _evaluate(self, arrays: dict, theta, fade, use_image: bool, grad: bool):
-        """The packed terms (see :meth:`energy`) and, with ``grad``, dE/dtheta, evaluated; the
-        Dr.Jit arrays read from ``arrays`` (the input of the frozen function)."""
+    def _evaluate(self, arrays: dict, inputs, use_image: bool, grad: bool):
+        """The packed terms (see :meth:`energy`) and, with ``grad``, dE/d(inputs), evaluated, for
+        ``inputs``: theta followed by the fading weights ``[feature, image]``; the Dr.Jit arrays
+        read from ``arrays`` (the input of the frozen function)."""
         energy_of = copy.copy(self)
         vars(energy_of).update(arrays)
         if grad:
-            dr.enable_grad(theta)
-        energy, packed = energy_of.energy(theta, fade, use_image)
+            dr.enable_grad(inputs)
+        fade = [dr.gather(mi.Float, inputs, i) for i in energy_of.dr_fade_index]
+        energy, packed = energy_of.energy(inputs, fade, use_image)
         if not grad:
             dr.eval(packed)
             return (packed,)
         dr.backward(energy)
-        g = dr.grad(theta)
+        g = dr.grad(inputs)
         dr.eval(packed, g)
         return packed, g
 
     def energy(self, theta, fade, use_image: bool):
         """E (differentiable, one value) for parameters ``theta`` and fading weights ``fade``
-        (``[feature, image]``), and the detached terms packed as ``E, E_I, E_F, E_P, E_D, sum of
+        (``[feature, image]``, single values), and the detached terms packed as ``E, E_I, E_F, E_P, E_D, sum of
         squared feature distances, sum of weighted image residuals, sum of image weights``."""
         acc = dr.zeros(mi.Float, len(self.slots))
         pos = self.positions(theta)
@@ -388,8 +405,7 @@ class Energy:
                 e_i = e_i + slot(f"{key}.num") / dr.maximum(slot(f"{key}.den"), 1.0)
                 num, den = num + slot(f"{key}.num"), den + slot(f"{key}.den")
             e_i = e_i / (len(self.image_names) * w.image_sigma ** 2)
-        energy = (dr.gather(mi.Float, fade, self.dr_index[1]) * e_i +
-                  dr.gather(mi.Float, fade, self.dr_index[0]) * e_f + e_p)
+        energy = fade[1] * e_i + fade[0] * e_f + e_p
         values = (energy, e_i, e_f, e_p, e_d, slot("features"), num, den)
         lane, packed = dr.arange(mi.UInt32, len(values)), mi.Float(0.0)
         for i, value in enumerate(values):
