@@ -282,6 +282,66 @@ def test_shapes_in_world_equals_what_is_read_back(model, camera, posed, tmp_path
     assert not np.allclose(in_memory["posed"], fits[0].vertices_camera, atol=1.0)
 
 
+def test_kernel_launches_per_iteration(model, camera, posed):
+    """An iteration of the fit is a few large kernels (issue 11: at most 40 launches), counted
+    with Dr.Jit's kernel history over the steady iterations of every stage."""
+    _, _, _, m = posed
+    per_iteration, stages = [], []
+
+    class Hook:  # the fit's progress hook: called once per iteration
+        stage = None
+
+        def update(self, n=1):
+            per_iteration.append(len(dr.kernel_history()))
+            stages.append(self.stage)
+
+        def set_postfix(self, stage=None, **_):
+            stages[-1] = self.stage = stage
+
+    schedule = ShapeSchedule(levels=((12, 800, 3.0), (12, 1500, 1.0)), pose_iterations=12)
+    fit_measurement(m, camera, model, schedule=schedule, progress=False)  # warm: kernels compiled
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()
+        fit_measurement(m, camera, model, schedule=schedule, progress=Hook())
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    counts = {s: sorted(c for c, t in zip(per_iteration, stages) if t == s) for s in dict.fromkeys(stages)}
+    assert set(counts) == {"pose", "level0", "level1"}
+    # the first iteration of a stage also sets it up (samples, blur, visibility): the median is the steady state
+    assert all(c[len(c) // 2] <= 40 for c in counts.values()), counts
+
+
+def test_second_photograph_reuses_kernels(model, camera, posed):
+    """The energy's kernels of a second photograph of the same size (other feature points, other
+    samples) all come from the cache: nothing of the measurement is a literal of the code."""
+    _, _, v, m = posed
+    shifted = {n: np.asarray(p) + 1.5 for n, p in m.feature_points.items()}
+    other = measurement("other", model, camera, v, (m.image.pixels[::-1].copy(), m.diffuse.pixels), shifted)
+    compiled = []
+    for i, meas in enumerate((m, other)):
+        fitter = Fitter(model, camera, {"point": meas.image.pixels, "diffuse": meas.diffuse.pixels},
+                        feature_targets(meas, model), Weights(), SCHEDULE, np.random.default_rng(i),
+                        light_world=np.array([300.0, -400.0, -200.0]))
+        fitter.set_samples(700)
+        fitter.energy.set_level(2.0)
+        theta = fitter.initial()
+        fitter.update_visibility(theta)
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        try:
+            dr.kernel_history()
+            for _ in range(2):
+                fitter.energy.evaluate(theta, 1.0, 1.0)
+            fitter.energy.evaluate(theta, 1.0, 1.0, grad=False)
+            history = dr.kernel_history()
+        finally:
+            dr.set_flag(dr.JitFlag.KernelHistory, False)
+        jit = [e for e in history if str(e["type"]).endswith("JIT")]
+        assert jit
+        compiled.append([(e["size"], e["operation_count"]) for e in jit if not e["cache_hit"]])
+    assert not compiled[1], f"(size, operations) of the kernels compiled per photograph: {compiled}"
+
+
 # ---- real setups (issue 12): face-relative limit, greyscale, uncalibrated camera, directional lights, poses ----
 
 YALE = Path(__file__).resolve().parents[2] / "shared" / "data" / "yaleb"

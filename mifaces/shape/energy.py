@@ -13,12 +13,14 @@ Dr.Jit side and differentiable (reverse mode).
   distances on the identity shape, and for a model without colour model the
   per-vertex albedo's deviation from its mean.
 
-Parameters enter as one opaque array and the fading weights are opaque too,
-so kernels are cached across iterations.
+One evaluation (E, its terms and dE/dtheta) is a few kernels, frozen with
+``dr.freeze`` and reused across iterations and photographs (see
+:class:`Energy`); ``validation/bench_shape_kernels.py`` counts them.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 
 import drjit as dr
@@ -30,6 +32,8 @@ from .targets import FRONTAL, blurred
 
 #: Phong exponent of the specular lobe (fixed; its strength is fitted).
 PHONG_EXPONENT = 16.0
+#: The needed vertices' rows on the Dr.Jit side are padded to a multiple of this.
+ROWS = 1024
 #: Rec. 601 luminance weights of the colour-contrast operator (Blanz and Vetter 1999).
 LUMINANCE = (0.3, 0.59, 0.11)
 
@@ -64,6 +68,33 @@ class Layout:
 
     def __getitem__(self, name):
         return self.slices[name]
+
+
+#: An opaque zero per array type (see :func:`device_array`).
+_ZERO = {}
+
+
+def device_array(dtype, values):
+    """``values`` as a flat Dr.Jit array (``mi.Float`` for float32, ``mi.UInt32`` for uint32) in
+    memory Dr.Jit owns, evaluated.
+
+    Dr.Jit's LLVM backend maps a NumPy array's memory instead of copying it, and writes whether
+    it is aligned into the code of the kernels that load from it: by chance, so the same kernel
+    of a second photograph would differ and be compiled again; and releasing mapped memory
+    cannot happen while a frozen function records. So the values are copied into a 64-byte
+    aligned buffer, and from there by a kernel (always the same) into Dr.Jit's own memory.
+    """
+    values = np.ascontiguousarray(values, dtype).ravel()
+    buffer = np.empty(values.size + 64 // values.itemsize, dtype)
+    start = (-buffer.ctypes.data % 64) // values.itemsize
+    aligned = buffer[start:start + values.size]
+    aligned[:] = values
+    array_type = mi.Float if dtype == np.float32 else mi.UInt32
+    if array_type not in _ZERO:  # made once: an opaque value is a launch
+        _ZERO[array_type] = dr.opaque(array_type, 0)
+    owned = array_type(aligned) + _ZERO[array_type]
+    dr.eval(owned)
+    return owned
 
 
 def adjacency(triangles: np.ndarray, vertex_count: int) -> np.ndarray:
@@ -101,10 +132,26 @@ class Energy:
         The rotation centre (model space, mm).
     light_distance : float
         Distance (mm) of the point image's lamp from the face centre; inf for a directional light.
+    freeze : bool
+        Replay the kernels of an evaluation (``dr.freeze``) instead of tracing it again, while
+        the arrays keep their sizes (recorded anew per sample set).
+
+    Notes
+    -----
+    One evaluation is a handful of kernels, one per array width (the needed vertices, the
+    samples, the feature points, the distances, the prior's coefficients), forward and
+    backward. Every parameter is gathered from ``theta`` at the width of the array it enters
+    (:meth:`_param`), never broadcast from a single value, so its gradient is a scatter-add
+    inside the backward kernel instead of a reduction of its own; the sums of E are
+    scatter-adds into one accumulator (:data:`SLOTS`), read back with the gradient once per
+    evaluation. What differs between the photographs of a capture (the number of feature
+    points and distances, the lamp's distance) enters as opaque values, so a second
+    photograph of the same size reuses the first one's kernels. The Dr.Jit arrays are the
+    attributes named ``dr_*``: the frozen evaluation takes them as its input.
     """
 
     def __init__(self, model, camera, layout: Layout, weights: Weights, images: dict, feature_vertices,
-                 feature_pixels, distances, centre, light_distance: float = math.inf):
+                 feature_pixels, distances, centre, light_distance: float = math.inf, freeze: bool = True):
         self.model, self.camera, self.layout, self.weights = model, camera, layout, weights
         self.images = images
         self.image_names = list(images)
@@ -115,6 +162,38 @@ class Energy:
         self.light_distance = light_distance
         self.scale_px = camera.height / 512.0  # px per "512-px pixel"
         self.adjacency = adjacency(model.triangles, model.vertex_count)
+        # accumulator slots: per image (sum of w r, sum of w), then the other sums of E
+        self.slots = {name: i for i, name in enumerate(
+            [f"{k}.{s}" for k in self.image_names for s in ("num", "den")] +
+            ["features", "distances", "prior", "albedo"])}
+        # opaque indices: a literal index into an evaluated array would be read on the host
+        self.dr_index = [dr.opaque(mi.UInt32, i) for i in range(max(len(self.slots), 8))]
+        self.dr_fade_index = [dr.opaque(mi.UInt32, layout.size + k) for k in range(2)]
+        # per measurement, opaque: the kernels do not depend on them
+        self.dr_inv_features = dr.opaque(mi.Float, 1.0 / len(feature_vertices))
+        self.dr_inv_distances = dr.opaque(mi.Float, 1.0 / max(len(distances), 1))
+        self.dr_light_distance = dr.opaque(mi.Float, light_distance if math.isfinite(light_distance) else 0.0)
+        self.dr_feature_u = device_array(np.float32, np.asarray(feature_pixels)[:, 0])
+        self.dr_feature_v = device_array(np.float32, np.asarray(feature_pixels)[:, 1])
+        if len(distances):  # (an empty array cannot enter a frozen function)
+            self.dr_distance_mm = device_array(np.float32, [d for _, _, d in distances])
+        self._prior_weights()
+        # the widths are literals of the recorded kernels: a new sample set records anew
+        self._frozen = dr.freeze(self._evaluate, enabled=freeze, warn_after=20,
+                                 state_fn=lambda arrays, *args: (dr.width(arrays["dr_mean"]), self.n_samples))
+
+    def _prior_weights(self):
+        """Indices into theta and weights of the quadratic prior: the Mahalanobis norms of the
+        coefficients (Blanz and Vetter 1999, eq. 3; coefficients in standard deviations) and log
+        focal length around the calibration (standard deviation ``Weights.focal``)."""
+        L, w = self.layout, self.weights
+        index, weight = [L["log_focal"].start], [1.0 / w.focal ** 2]
+        for name, value in (("shape", w.shape), ("expression", w.expression), ("color", w.texture)):
+            if name in L.slices:
+                index.extend(range(L[name].start, L[name].stop))
+                weight.extend([value] * (L[name].stop - L[name].start))
+        self.dr_prior_index = device_array(np.uint32, index)
+        self.dr_prior_weight = device_array(np.float32, weight)
 
     # ---- the sample set and the image level ---------------------------------------------------
     def set_samples(self, samples: np.ndarray):
@@ -134,53 +213,60 @@ class Energy:
         columns = [m.shape_basis[rows] * sigma]
         if m.has_expressions:
             columns.append(m.expression_basis[rows] * np.sqrt(m.expression_variance))
-        basis = np.concatenate(columns, axis=1).astype(np.float32)
+        # rows padded with zeros to a multiple of ROWS: the backward kernels' scatter into the
+        # positions' gradient has their number as a literal, the same for most sample draws
+        pad = (-len(needed)) % ROWS
+        basis = np.pad(np.concatenate(columns, axis=1).astype(np.float32), ((0, 3 * pad), (0, 0)))
         self.n_modes = basis.shape[1]
-        self.dr_mean = mi.Float(m.shape_mean[needed].astype(np.float32).ravel())
-        self.dr_basis = [mi.Float(np.ascontiguousarray(basis[:, k])) for k in range(self.n_modes)]
-        self.dr_sample_local = mi.UInt32(local[samples].astype(np.uint32))
-        self.dr_feature_local = mi.UInt32(local[self.feature_vertices].astype(np.uint32))
+        self.dr_mean = device_array(np.float32, np.pad(m.shape_mean[needed], ((0, pad), (0, 0))))
+        self.dr_basis = [device_array(np.float32, basis[:, k]) for k in range(self.n_modes)]
+        self.dr_sample_local = device_array(np.uint32, local[samples])
+        self.dr_feature_local = device_array(np.uint32, local[self.feature_vertices])
         if len(self.distances):
-            self.dr_distance_local = [mi.UInt32(local[self.distance_vertices[:, k]].astype(np.uint32))
+            self.dr_distance_local = [device_array(np.uint32, local[self.distance_vertices[:, k]])
                                       for k in range(2)]
-            self.dr_distance_mm = mi.Float(np.array([d for _, _, d in self.distances], np.float32))
-        corners = local[ring_tris]  # (S, D, 3)
-        corners = np.where(valid[..., None], corners, 0).astype(np.uint32)
-        self.dr_corners = [mi.UInt32(np.ascontiguousarray(corners[..., c].ravel())) for c in range(3)]
-        self.dr_slot_valid = mi.Float(valid.astype(np.float32).ravel())
+        corners = np.where(valid[..., None], local[ring_tris], 0).astype(np.uint32)  # (S, D, 3)
+        self.dr_corners = [[device_array(np.uint32, corners[:, j, c]) for c in range(3)]
+                           for j in range(self.degree)]
+        self.dr_slot_valid = [device_array(np.float32, valid[:, j]) for j in range(self.degree)]
         if m.has_texture:
             crow = (3 * samples[:, None] + np.arange(3)).ravel()
-            cbasis = m.color_basis[crow] * np.sqrt(m.color_variance)
-            self.dr_color_mean = mi.Float(m.color_mean[samples].astype(np.float32).ravel())
-            self.dr_color_basis = [mi.Float(np.ascontiguousarray(cbasis[:, k].astype(np.float32)))
+            cbasis = (m.color_basis[crow] * np.sqrt(m.color_variance)).astype(np.float32).reshape(len(samples), 3, -1)
+            cmean = m.color_mean[samples].astype(np.float32)
+            self.dr_color_mean = [device_array(np.float32, cmean[:, c]) for c in range(3)]
+            self.dr_color_basis = [[device_array(np.float32, cbasis[:, c, k]) for c in range(3)]
                                    for k in range(m.color_dim)]
-        self.dr_sample_vertex = mi.UInt32(samples.astype(np.uint32))
+        self.dr_sample_vertex = device_array(np.uint32, samples)
+        self.dr_inv_samples = dr.opaque(mi.Float, 1.0 / len(samples))
         ones = np.ones(len(samples), np.float32)
         self.set_visibility(ones, ones)
 
     def set_visibility(self, seen: np.ndarray, lit: np.ndarray):
         """Per sample: seen by the camera (every image), lit by the point image's lamp (0 or 1)."""
-        self.dr_visible = {k: mi.Float(np.asarray(seen, np.float32)) for k in self.image_names}
-        self.dr_shadow = mi.Float(np.asarray(lit, np.float32))
+        self.dr_visible = device_array(np.float32, seen)
+        self.dr_shadow = device_array(np.float32, lit)
 
     def set_level(self, blur: float):
         """The photographs blurred by ``blur`` px at 512 px image height, on the Dr.Jit side."""
         self.dr_images = {}
         for key, image in self.images.items():
             b = blurred(image, blur * self.scale_px)
-            self.dr_images[key] = mi.Float(np.ascontiguousarray(b, np.float32).ravel())
+            self.dr_images[key] = device_array(np.float32, b)
 
-    # ---- synthesis -----------------------------------------------------------------------------
-    def _scalar(self, theta, i: int):
-        return dr.gather(mi.Float, theta, mi.UInt32(i))
+    # ---- parameters and geometry ---------------------------------------------------------------
+    @staticmethod
+    def _param(theta, i: int, width: int):
+        """``theta[i]`` on ``width`` lanes: its gradient is a scatter-add in the kernel that uses it,
+        not a reduction of its own as a broadcast single value's would be."""
+        return dr.gather(mi.Float, theta, dr.full(mi.UInt32, i, width))
 
-    def _block(self, theta, name: str):
+    def _block(self, theta, name: str, width: int):
         s = self.layout[name]
-        return [self._scalar(theta, i) for i in range(s.start, s.stop)]
+        return [self._param(theta, i, width) for i in range(s.start, s.stop)]
 
-    def _rotation(self, theta):
-        """Rows of ``R0 R_y R_x R_z`` as Dr.Jit scalars (row-major 3x3 list)."""
-        yaw, pitch, roll = self._block(theta, "rotation")
+    def _rotation(self, theta, width: int):
+        """Rows of ``R0 R_y R_x R_z`` on ``width`` lanes (row-major 3x3 list)."""
+        yaw, pitch, roll = self._block(theta, "rotation", width)
         cy, sy, cp, sp, cr, sr = dr.cos(yaw), dr.sin(yaw), dr.cos(pitch), dr.sin(pitch), dr.cos(roll), dr.sin(roll)
         # R_y R_x R_z, expanded
         r = [[cy * cr + sy * sp * sr, -cy * sr + sy * sp * cr, sy * cp],
@@ -189,17 +275,31 @@ class Energy:
         return [[float(FRONTAL[i, i]) * r[i][j] for j in range(3)] for i in range(3)]
 
     def positions(self, theta):
-        """Model-space positions of the needed vertices (flat Floats ``x0, y0, z0, ...``):
-        ``(with expression, identity only)``. The expression block follows the shape block
-        in the parameter vector, and its columns follow the shape columns in the basis."""
+        """Model-space positions of the needed vertices (flat Float ``x0, y0, z0, ...``), with
+        expression; evaluated, as the samples, their rings and the feature points gather from it."""
         p = self.dr_mean
-        s = self.layout["shape"].start
-        identity = p
-        for k in range(self.n_modes):
-            p = p + self.dr_basis[k] * self._scalar(theta, s + k)
-            if k == self.model.shape_dim - 1:
-                identity = p
-        return p, identity
+        s, width = self.layout["shape"].start, dr.width(self.dr_mean)
+        for k in range(self.n_modes):  # the expression block follows the shape block, as its columns do
+            p = p + self.dr_basis[k] * self._param(theta, s + k, width)
+        dr.eval(p)
+        return p
+
+    def identity_positions(self, theta, end: int):
+        """Model-space positions of the ``end``-th (0, 1) vertices of the metric distances on the
+        identity shape (without expression), as a Vector3f."""
+        s, width, idx = self.layout["shape"].start, len(self.distances), self.dr_distance_local[end]
+        p = []
+        for c in range(3):
+            x = dr.gather(mi.Float, self.dr_mean, 3 * idx + c)
+            for k in range(self.model.shape_dim):
+                x = x + dr.gather(mi.Float, self.dr_basis[k], 3 * idx + c) * self._param(theta, s + k, width)
+            p.append(x)
+        return mi.Vector3f(*p)
+
+    def _pose(self, theta, width: int):
+        """Rotation, translation and focal-length factor of ``theta`` on ``width`` lanes."""
+        return (self._rotation(theta, width), self._block(theta, "translation", width),
+                dr.exp(self._param(theta, self.layout["log_focal"].start, width)))
 
     def _to_camera(self, p, R, t):
         """Camera-space coordinates ``R (p - c) + t`` of model-space points ``p`` (3 Floats)."""
@@ -238,7 +338,7 @@ class Energy:
         bottom = at(i0 + w) * (1 - fx) + at(i0 + w + 1) * fx
         return top * (1 - fy) + bottom * fy, inside
 
-    # ---- the terms -----------------------------------------------------------------------------
+    # ---- the energy ----------------------------------------------------------------------------
     def evaluate(self, theta_np: np.ndarray, feature_weight: float, image_weight: float, grad: bool = True):
         """E and its terms for parameters ``theta_np``; with ``grad``, also dE/dtheta (numpy).
 
@@ -246,76 +346,101 @@ class Energy:
         evaluated). Returns the terms ``E, E_I, E_F, E_P, E_D`` (E_D, the metric distances, is
         part of E_P), ``feature_rms_px`` and, with the image term, ``image_rms``; and the gradient.
         """
-        L, w = self.layout, self.weights
-        theta = mi.Float(theta_np.astype(np.float32))
-        if grad:
-            dr.enable_grad(theta)
-        R = self._rotation(theta)
-        t = self._block(theta, "translation")
-        focal = dr.exp(self._scalar(theta, L["log_focal"].start))
-        pos, neutral = self.positions(theta)
-        e_f, f_sq = self._feature_term(pos, R, t, focal)
-        e_p = self._coefficient_prior(theta)
-        e_d = mi.Float(0.0)
-        if len(self.distances):
-            e_d = self._distance_term(neutral)
-            e_p = e_p + e_d
-        e_i, stats = mi.Float(0.0), {}
+        # theta, then the weights that change every iteration while E_F fades: one upload, data,
+        # so kernels stay cached
+        size = len(theta_np)
+        inputs = device_array(np.float32, np.concatenate([theta_np, [feature_weight * self.weights.feature,
+                                                                     image_weight]]))
+        arrays = {k: v for k, v in vars(self).items() if k.startswith("dr_")}
+        out = self._frozen(arrays, inputs, image_weight > 0, grad)
+        values = np.asarray(out[0], np.float64)
+        g = np.asarray(out[1], np.float64)[:size] if grad else None
+        terms = dict(zip(("E", "E_I", "E_F", "E_P", "E_D"), values[:5].tolist()))
+        terms["feature_rms_px"] = math.sqrt(max(values[5], 0.0) / len(self.feature_vertices)) * self.scale_px
         if image_weight > 0:
-            e_i, albedo_prior, stats = self._image_term(theta, pos, R, t, focal)
-            if albedo_prior is not None:
-                e_p = e_p + albedo_prior
-        # the weights change every iteration while E_F fades: opaque, so kernels stay cached
-        energy = (dr.opaque(mi.Float, image_weight) * e_i +
-                  dr.opaque(mi.Float, feature_weight * w.feature) * e_f + e_p)
-        if grad:
-            dr.backward(energy)
-            g = np.asarray(dr.grad(theta), np.float64)
-        else:
-            g = None
-        frms = math.sqrt(float(dr.sum(f_sq)[0]) / len(self.feature_vertices)) * self.scale_px
-        terms = {"E": float(energy[0]), "E_I": float(e_i[0]), "E_F": float(e_f[0]), "E_P": float(e_p[0]),
-                 "E_D": float(e_d[0]), "feature_rms_px": frms}
-        if stats:
-            num = sum(float(dr.sum(r * wt)[0]) for r, wt in stats.values())
-            den = sum(float(dr.sum(wt)[0]) for r, wt in stats.values())
-            terms["image_rms"] = math.sqrt(num / max(den, 1.0) / 3.0)
+            terms["image_rms"] = math.sqrt(values[6] / max(values[7], 1.0) / 3.0)
         return terms, g
 
-    def _feature_term(self, pos, R, t, focal):
-        """E_F: mean squared distance (px at 512 px height) of the projected feature points from the
-        clicked ones, over ``feature_sigma``^2; and the per-point squared distances."""
+    def _evaluate(self, arrays: dict, inputs, use_image: bool, grad: bool):
+        """The packed terms (see :meth:`energy`) and, with ``grad``, dE/d(inputs), evaluated, for
+        ``inputs``: theta followed by the fading weights ``[feature, image]``; the Dr.Jit arrays
+        read from ``arrays`` (the input of the frozen function)."""
+        energy_of = copy.copy(self)
+        vars(energy_of).update(arrays)
+        if grad:
+            dr.enable_grad(inputs)
+        fade = [dr.gather(mi.Float, inputs, i) for i in energy_of.dr_fade_index]
+        energy, packed = energy_of.energy(inputs, fade, use_image)
+        if not grad:
+            dr.eval(packed)
+            return (packed,)
+        dr.backward(energy)
+        g = dr.grad(inputs)
+        dr.eval(packed, g)
+        return packed, g
+
+    def energy(self, theta, fade, use_image: bool):
+        """E (differentiable, one value) for parameters ``theta`` and fading weights ``fade``
+        (``[feature, image]``, single values), and the detached terms packed as ``E, E_I, E_F, E_P, E_D, sum of
+        squared feature distances, sum of weighted image residuals, sum of image weights``."""
+        acc = dr.zeros(mi.Float, len(self.slots))
+        pos = self.positions(theta)
+        self._feature_sums(acc, theta, pos)
+        self._prior_sums(acc, theta)
+        if len(self.distances):
+            self._distance_sums(acc, theta)
+        if use_image:
+            self._image_sums(acc, theta, pos)
+
+        def slot(name):
+            return dr.gather(mi.Float, acc, self.dr_index[self.slots[name]])
+
+        w = self.weights
+        e_f = slot("features") * self.dr_inv_features / w.feature_sigma ** 2
+        e_d = slot("distances") * self.dr_inv_distances / w.distance_sigma ** 2
+        e_p = slot("prior") + e_d + slot("albedo") * (w.albedo * self.dr_inv_samples)
+        e_i, num, den = mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)
+        if use_image:
+            for key in self.image_names:
+                e_i = e_i + slot(f"{key}.num") / dr.maximum(slot(f"{key}.den"), 1.0)
+                num, den = num + slot(f"{key}.num"), den + slot(f"{key}.den")
+            e_i = e_i / (len(self.image_names) * w.image_sigma ** 2)
+        energy = fade[1] * e_i + fade[0] * e_f + e_p
+        values = (energy, e_i, e_f, e_p, e_d, slot("features"), num, den)
+        lane, packed = dr.arange(mi.UInt32, len(values)), mi.Float(0.0)
+        for i, value in enumerate(values):
+            packed = dr.select(lane == i, dr.detach(value), packed)
+        return energy, packed
+
+    def _feature_sums(self, acc, theta, pos):
+        """Squared distances (px at 512 px height) of the projected feature points from the clicked
+        ones into slot ``features`` (E_F is their mean over ``feature_sigma``^2)."""
+        width = len(self.feature_vertices)
+        R, t, focal = self._pose(theta, width)
         fp = dr.gather(mi.Vector3f, pos, self.dr_feature_local)
         fu, fv = self._project(self._to_camera(fp, R, t), focal)
-        tu = mi.Float(self.feature_pixels[:, 0].astype(np.float32))
-        tv = mi.Float(self.feature_pixels[:, 1].astype(np.float32))
-        f_sq = (dr.square(fu - tu) + dr.square(fv - tv)) / (self.scale_px ** 2)
-        return dr.sum(f_sq) / len(self.feature_vertices) / self.weights.feature_sigma ** 2, f_sq
+        f_sq = (dr.square(fu - self.dr_feature_u) + dr.square(fv - self.dr_feature_v)) / (self.scale_px ** 2)
+        dr.scatter_add(acc, f_sq, dr.full(mi.UInt32, self.slots["features"], width))
 
-    def _coefficient_prior(self, theta):
-        """The Mahalanobis part of E_P (Blanz and Vetter 1999, eq. 3; coefficients in standard
-        deviations) plus the prior of log focal length around the calibration."""
-        L, w = self.layout, self.weights
-        e_p = mi.Float(0.0)
-        for name, weight in (("shape", w.shape), ("expression", w.expression), ("color", w.texture)):
-            if name in L.slices and L[name].stop > L[name].start:
-                s = L[name]
-                vals = dr.gather(mi.Float, theta, dr.arange(mi.UInt32, s.start, s.stop))
-                e_p = e_p + weight * dr.sum(dr.square(vals))
-        log_f = self._scalar(theta, L["log_focal"].start)
-        return e_p + dr.square(log_f / w.focal)
+    def _prior_sums(self, acc, theta):
+        """The quadratic prior of E_P (see :meth:`_prior_weights`) into slot ``prior``."""
+        values = dr.gather(mi.Float, theta, self.dr_prior_index)
+        dr.scatter_add(acc, self.dr_prior_weight * dr.square(values),
+                       dr.full(mi.UInt32, self.slots["prior"], dr.width(values)))
 
-    def _distance_term(self, neutral):
+    def _distance_sums(self, acc, theta):
         """The metric distances between feature points (the capture's tape measurements, mm),
-        measured on the face at rest: the identity shape, without expression."""
-        length = dr.norm(dr.gather(mi.Vector3f, neutral, self.dr_distance_local[0]) -
-                         dr.gather(mi.Vector3f, neutral, self.dr_distance_local[1]))
-        return (dr.sum(dr.square((length - self.dr_distance_mm) / self.weights.distance_sigma))
-                / len(self.distances))
+        measured on the face at rest (the identity shape, without expression): squared errors
+        into slot ``distances``."""
+        length = dr.norm(self.identity_positions(theta, 0) - self.identity_positions(theta, 1))
+        dr.scatter_add(acc, dr.square(length - self.dr_distance_mm),
+                       dr.full(mi.UInt32, self.slots["distances"], len(self.distances)))
 
-    def _image_term(self, theta, pos, R, t, focal):
-        """E_I, the mean over the photographs; the albedo prior (None for a model with a colour
-        model); and per photograph the sample residuals and weights."""
+    def _image_sums(self, acc, theta, pos):
+        """E_I's sums per photograph (weighted squared residuals and weights) and, for a model
+        without colour model, the albedo prior's squared deviations from the mean."""
+        width = self.n_samples
+        R, t, focal = self._pose(theta, width)
         sp = dr.gather(mi.Vector3f, pos, self.dr_sample_local)
         n = self._normals(pos)
         pc = self._to_camera(sp, R, t)
@@ -324,61 +449,66 @@ class Energy:
         view = dr.normalize(-pcv)
         u, v = self._project(pc, focal)
         facing = dr.maximum(dr.dot(nc, view), 0.0)
-        albedo, albedo_prior = self._albedo(theta)
-        total = mi.Float(0.0)
-        stats = {}
+        albedo = self._albedo(acc, theta)
         for key in self.image_names:
             colour = self._shade(theta, key, albedo, nc, view, pcv, t)
             observed, inside = self._bilinear(self.dr_images[key], u, v)
-            weight = self.dr_visible[key] * dr.select(inside, 1.0, 0.0) * dr.clip((facing - 0.1) * 5.0, 0.0, 1.0)
+            weight = self.dr_visible * dr.select(inside, 1.0, 0.0) * dr.clip((facing - 0.1) * 5.0, 0.0, 1.0)
             residual = dr.squared_norm(colour - observed)
-            wsum = dr.maximum(dr.sum(weight), 1.0)
-            total = total + dr.sum(weight * residual) / wsum / self.weights.image_sigma ** 2
-            stats[key] = (residual, weight)
-        return total / len(self.image_names), albedo_prior, stats
+            dr.scatter_add(acc, weight * residual, dr.full(mi.UInt32, self.slots[f"{key}.num"], width))
+            dr.scatter_add(acc, weight, dr.full(mi.UInt32, self.slots[f"{key}.den"], width))
 
     def _normals(self, pos):
         """Model-space unit normals of the samples from their one-rings (area weighted)."""
-        a = dr.gather(mi.Vector3f, pos, self.dr_corners[0])
-        b = dr.gather(mi.Vector3f, pos, self.dr_corners[1])
-        cc = dr.gather(mi.Vector3f, pos, self.dr_corners[2])
-        fn = dr.cross(b - a, cc - a) * self.dr_slot_valid
-        return dr.normalize(mi.Vector3f(dr.block_sum(fn.x, self.degree), dr.block_sum(fn.y, self.degree),
-                                        dr.block_sum(fn.z, self.degree)))
+        n = mi.Vector3f(0.0)
+        for j in range(self.degree):
+            a, b, c = (dr.gather(mi.Vector3f, pos, self.dr_corners[j][k]) for k in range(3))
+            n = n + dr.cross(b - a, c - a) * self.dr_slot_valid[j]
+        return dr.normalize(n)
 
-    def _albedo(self, theta):
+    def _albedo(self, acc, theta):
         """The samples' albedo: the colour model's (texture coefficients beta), or the fitted
-        per-vertex albedo with its prior, the squared deviation from its mean."""
+        per-vertex albedo, whose squared deviations from its mean go into slot ``albedo``."""
+        width = self.n_samples
         if self.model.has_texture:
-            alb = self.dr_color_mean
             s = self.layout["color"].start
+            alb = list(self.dr_color_mean)
             for k in range(self.model.color_dim):
-                alb = alb + self.dr_color_basis[k] * self._scalar(theta, s + k)
-            return dr.gather(mi.Vector3f, alb, dr.arange(mi.UInt32, self.n_samples)), None
+                beta = self._param(theta, s + k, width)
+                alb = [alb[c] + self.dr_color_basis[k][c] * beta for c in range(3)]
+            return mi.Vector3f(*alb)
         s = self.layout["albedo"].start
         albedo = mi.Vector3f(*[dr.gather(mi.Float, theta, 3 * self.dr_sample_vertex + (s + k)) for k in range(3)])
-        mean_albedo = mi.Vector3f(*[dr.sum(albedo[k]) / self.n_samples for k in range(3)])
-        return albedo, self.weights.albedo * dr.sum(dr.squared_norm(albedo - mean_albedo)) / self.n_samples
+        mean = dr.zeros(mi.Float, 3)
+        for k in range(3):
+            dr.scatter_add(mean, albedo[k], dr.full(mi.UInt32, k, width))
+        mean_albedo = dr.gather(mi.Vector3f, mean, dr.zeros(mi.UInt32, width)) * self.dr_inv_samples
+        dr.scatter_add(acc, dr.squared_norm(albedo - mean_albedo), dr.full(mi.UInt32, self.slots["albedo"], width))
+        return albedo
 
     def _shade(self, theta, key: str, albedo, nc, view, pcv, t):
         """Phong colour of the samples in photograph ``key`` (Blanz and Vetter 1999, sec. 4): ambient
         + directed light with cast shadow + specular lobe, then colour contrast, gain and offset."""
-        L = self.layout
-        el, az = self._block(theta, f"{key}.light_angles")
+        L, width = self.layout, self.n_samples
+
+        def block(name):
+            return self._block(theta, f"{key}.{name}", width)
+
+        el, az = block("light_angles")
         ld = mi.Vector3f(dr.cos(el) * dr.sin(az), -dr.sin(el), -dr.cos(el) * dr.cos(az))
-        lc = mi.Color3f(*self._block(theta, f"{key}.light_color"))
+        lc = mi.Color3f(*block("light_color"))
         if key == "point" and math.isfinite(self.light_distance):
             # the lamp at its calibrated distance in the fitted direction: per-point
             # direction and inverse-square falloff (relative to the face centre)
-            to_light = mi.Vector3f(*t) + self.light_distance * ld - pcv
+            to_light = mi.Vector3f(*t) + self.dr_light_distance * ld - pcv
             dist2 = dr.squared_norm(to_light)
             ld = to_light / dr.sqrt(dist2)
-            lc = lc * (self.light_distance ** 2 / dist2)
-        amb = mi.Color3f(*self._block(theta, f"{key}.ambient"))
-        ks = self._scalar(theta, L[f"{key}.specular"].start)
-        contrast = self._scalar(theta, L[f"{key}.contrast"].start)
-        gain = mi.Color3f(*self._block(theta, f"{key}.gain"))
-        offset = mi.Color3f(*self._block(theta, f"{key}.offset"))
+            lc = lc * (dr.square(self.dr_light_distance) / dist2)
+        amb = mi.Color3f(*block("ambient"))
+        ks = self._param(theta, L[f"{key}.specular"].start, width)
+        contrast = self._param(theta, L[f"{key}.contrast"].start, width)
+        gain = mi.Color3f(*block("gain"))
+        offset = mi.Color3f(*block("offset"))
         grey = getattr(self, "greyscale", False)  # issue 12: set by fit.fit_measurement for grey photographs
         if grey:  # one light colour, ambient, gain and offset: channel 0 of each block, so none can tint
             lc, amb, gain, offset = (mi.Color3f(c.x) for c in (lc, amb, gain, offset))

@@ -32,8 +32,10 @@ def distance_from_border(model) -> np.ndarray:
     border of the mesh (an edge used by one triangle); inf for a closed mesh."""
     t = np.asarray(model.triangles, np.int64)
     edges = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
-    unique, counts = np.unique(edges, axis=0, return_counts=True)
-    border = np.unique(unique[counts == 1])
+    n = model.vertex_count
+    keys, counts = np.unique(edges[:, 0] * n + edges[:, 1], return_counts=True)  # one int per edge: fast
+    single = keys[counts == 1]
+    border = np.unique(np.concatenate([single // n, single % n]))
     if len(border) == 0:
         return np.full(model.vertex_count, np.inf)
     return cKDTree(model.shape_mean[border]).query(model.shape_mean)[0]
@@ -150,15 +152,8 @@ class Fitter:
         d = -p / dist[:, None]  # towards the camera
         origin = p + eps * n
 
-        def occluded(o, direction, maxt):
-            ray = mi.Ray3f(mi.Point3f(*[mi.Float(o[:, k].astype(np.float32)) for k in range(3)]),
-                           mi.Vector3f(*[mi.Float(direction[:, k].astype(np.float32)) for k in range(3)]))
-            ray.maxt = mi.Float(np.asarray(maxt, np.float32))
-            return np.asarray(scene.ray_test(ray), bool)
-
-        seen = ~occluded(origin, d, np.maximum(dist - 2 * eps, eps))
-        seen &= np.sum(n * d, axis=1) > 0
-        lit = np.ones(len(p), bool)
+        # rays towards the camera, then (for a point image) towards the lamp: one ray_test
+        origins, directions, lengths = [origin], [d], [np.maximum(dist - 2 * eps, eps)]
         if "point" in self.image_names:
             el, az = theta[L["point.light_angles"]]
             ld = np.broadcast_to(light_direction(el, az), p.shape)
@@ -167,7 +162,14 @@ class Fitter:
                 to_light = theta[L["translation"]] + self.light_distance * ld - origin
                 maxt = np.linalg.norm(to_light, axis=1)
                 ld = to_light / maxt[:, None]
-            lit = ~occluded(origin, np.ascontiguousarray(ld), maxt)
+            origins.append(origin), directions.append(ld), lengths.append(maxt)
+        o, direction = np.concatenate(origins).astype(np.float32), np.concatenate(directions).astype(np.float32)
+        ray = mi.Ray3f(mi.Point3f(*[mi.Float(o[:, k]) for k in range(3)]),
+                       mi.Vector3f(*[mi.Float(direction[:, k]) for k in range(3)]))
+        ray.maxt = mi.Float(np.concatenate(lengths).astype(np.float32))
+        occluded = np.asarray(scene.ray_test(ray), bool)
+        seen = ~occluded[:len(p)] & (np.sum(n * d, axis=1) > 0)
+        lit = ~occluded[len(p):] if len(occluded) > len(p) else np.ones(len(p), bool)
         self.energy.set_visibility(seen, lit)
         dr.eval()
 

@@ -1,0 +1,108 @@
+"""The main job as a user meets it: ``mifaces measure`` cold and warm.
+
+Runs ``mifaces measure`` in fresh processes, first **cold** (an empty model
+cache, ``MIFACES_CACHE``, and an empty Dr.Jit kernel cache: ``HOME`` points
+at an empty folder, so ``~/.drjit`` is new), then **warm** (the same caches,
+filled by the cold run). Records the wall time of the command, the time of
+each stage from its ``report.json``, and the peak resident memory. Writes
+``validation/results/bench_pipeline.json`` and ``bench_pipeline.png``.
+
+    python validation/bench_pipeline.py [--runs warm=2] [--args "--geometry fitted"]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
+
+from mifaces.files import atomic_path, write_json
+
+RESULTS = Path(__file__).resolve().parent / "results"
+MIFACES = Path(sys.executable).parent / "mifaces"
+
+
+def run(out: Path, home: Path, cache: Path, extra: list[str]) -> dict:
+    """One ``mifaces measure`` in a fresh process; its wall time, stages and peak memory."""
+    env = {**os.environ, "HOME": str(home), "MIFACES_CACHE": str(cache), "PYTHONUNBUFFERED": "1"}
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    t0 = time.perf_counter()
+    done = subprocess.run([str(MIFACES), "measure", "--out", str(out), *extra], env=env, capture_output=True,
+                          text=True)
+    wall = time.perf_counter() - t0
+    if done.returncode != 0:
+        raise RuntimeError(f"mifaces measure failed:\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}")
+    report = json.loads((out / "report.json").read_text())
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    skin = report["models"].get("cooktorrance", {}).get("ground_truth", {}) or {}
+    return {"wall_s": round(wall, 1), "stages_s": {k: round(v, 1) for k, v in report["seconds"].items()},
+            "peak_rss_mib": round(max(peak, before) / 1024, 1),
+            "skin_cooktorrance_error": (skin.get("regions") or {}).get("skin"),
+            "shapes": report.get("shapes")}
+
+
+def figure(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = list(results)
+    stages = [s for s in results[runs[0]]["stages_s"] if s != "total"]
+    fig, ax = plt.subplots(figsize=(8, 1.2 + 0.6 * len(runs)))
+    for i, name in enumerate(runs):
+        left = 0.0
+        for j, stage in enumerate(stages):
+            width = results[name]["stages_s"].get(stage, 0.0)
+            ax.barh(i, width, left=left, color=f"C{j}", label=stage if i == 0 else None)
+            left += width
+        ax.text(results[name]["wall_s"], i, f" {results[name]['wall_s']:.0f} s", va="center", fontsize=8)
+    ax.set_yticks(range(len(runs)), runs)
+    ax.set_xlabel("seconds (stage times from report.json; the label is the command's wall time)")
+    ax.legend(fontsize=7, ncol=3, loc="lower right")
+    ax.set_title("mifaces measure on the built-in default (simulated capture)", fontsize=9)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--warm", type=int, default=1, help="warm runs after the cold one")
+    parser.add_argument("--args", default="", help="extra arguments of mifaces measure")
+    parser.add_argument("--results", type=Path, default=RESULTS)
+    args = parser.parse_args(argv)
+    extra = shlex.split(args.args)
+    results = {}
+    with tempfile.TemporaryDirectory(prefix="mifaces-bench-") as tmp:
+        tmp = Path(tmp)
+        home, cache = tmp / "home", tmp / "cache"
+        home.mkdir()
+        for i in range(args.warm + 1):
+            name = "cold" if i == 0 else f"warm{'' if args.warm == 1 else i}"
+            print(f"{name} run ...", flush=True)
+            results[name] = run(tmp / f"out{i}", home, cache, extra)
+            print(f"  {results[name]['wall_s']} s: {results[name]['stages_s']}", flush=True)
+    document = {"command": f"mifaces measure {' '.join(extra)}".strip(),
+                "machine": {"cores": os.cpu_count(), "platform": platform.platform(),
+                            "python": platform.python_version()},
+                "note": "cold: empty MIFACES_CACHE and empty Dr.Jit kernel cache (a new HOME); warm: both filled",
+                "runs": results}
+    write_json(args.results / "bench_pipeline.json", document)
+    figure(results, args.results / "bench_pipeline.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
