@@ -77,9 +77,9 @@ class Errors:
 
     def add(self, key: str, group: str, prediction, photo, valid) -> None:
         for g in ("all", group):
-            e, p = self.sums.setdefault(key, {}).setdefault(g, [0.0, 0.0, 0])
+            e, p, n = self.sums.setdefault(key, {}).setdefault(g, [0.0, 0.0, 0])
             self.sums[key][g] = [e + float(np.sum((prediction[valid] - photo[valid]) ** 2)),
-                                 p + float(np.sum(photo[valid] ** 2)), self.sums[key][g][2] + 1]
+                                 p + float(np.sum(photo[valid] ** 2)), n + 1]
 
     def relative_rmse(self) -> dict:
         return {key: {g: float(np.sqrt(e / p)) if p > 0 else None for g, (e, p, _) in groups.items()}
