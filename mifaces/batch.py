@@ -214,7 +214,7 @@ class WorkerSetup(WorkerPlugin):
 
 def _slots(client: Client) -> dict[str, int]:
     slots = {}
-    for address, info in client.scheduler_info(n_workers=-1)["workers"].items():
+    for address, info in client.scheduler_info()["workers"].items():
         host = get_address_host(address)
         slots[host] = slots.get(host, 0) + info["nthreads"]
     return slots
@@ -249,7 +249,7 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None, tas
 
 def dashboard(client: Client) -> str:
     """The line naming the Dask dashboard's address, or why there is none."""
-    if "dashboard" not in client.scheduler_info(n_workers=0).get("services", {}):
+    if "dashboard" not in client.scheduler_info().get("services", {}):
         return "Dask dashboard: none (the scheduler serves none)"
     if importlib.util.find_spec("bokeh") is None:
         return f"Dask dashboard: not available (bokeh is not installed; with it, {client.dashboard_link})"
