@@ -347,7 +347,10 @@ def _run(todo: dict, out: Path, importer, options: dict, variant: str, workers, 
             record["captures"][name].update(entry)
             write_json(out / RECORD, record)
             line = _line(name, record["captures"][name])
-            tqdm.write(line) if isinstance(bar, tqdm) else echo(line)
+            if isinstance(bar, tqdm):
+                bar.write(line)  # above the bar, on a terminal
+            else:
+                echo(line)
             bar.update()
         bar.close()
 

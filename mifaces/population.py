@@ -133,7 +133,8 @@ def population(reports: dict[str, dict], record: dict | None = None) -> dict:
         {"parameters": ..., "albedo": {error: summary}}, "status": {status:
         count}}}`` (summaries from :func:`robust_summary`); ``shape_status``;
         ``seconds`` (``measure``: :func:`mifaces.pipeline.measure`'s total;
-        ``task``: the batch task's wall time); ``outliers``, every flagged value.
+        ``task``: the batch task's wall time); ``outliers``, every flagged value
+        (``where``: ``model / section / region / parameter`` or ``seconds / kind``).
     """
     values, statuses, shapes = _gather(reports)
     models = _summarise(values) if values else {}
@@ -144,7 +145,7 @@ def population(reports: dict[str, dict], record: dict | None = None) -> dict:
         seconds["task"] = robust_summary({s: e["seconds"] for s, e in record["captures"].items()
                                           if s in reports and "seconds" in e and e.get("status") == "done"})
     return {"subjects": sorted(reports), "models": models, "shape_status": dict(shapes), "seconds": seconds,
-            "outliers": _outliers({"models": models})}
+            "outliers": _outliers({**models, "seconds": seconds})}
 
 
 def write_population(out, reports: dict, record: dict | None = None) -> dict:
