@@ -42,7 +42,7 @@ import mifaces  # noqa: F401  # first: it points Dr.Jit at libLLVM; workers impo
 import dask
 import drjit as dr
 import mitsuba as mi
-from distributed import Client, LocalCluster, WorkerPlugin, as_completed
+from distributed import Client, KilledWorker, LocalCluster, WorkerPlugin, as_completed
 from distributed.comm import get_address_host
 from tqdm import tqdm
 
@@ -342,7 +342,9 @@ def _run(todo: dict, out: Path, importer, options: dict, variant: str, workers, 
             name = futures[future]
             try:
                 entry = future.result()
-            except Exception as error:  # the worker died (KilledWorker), or the task could not run
+            except KilledWorker as error:
+                entry = {"status": FAILED, "error": f"the worker process measuring it died (KilledWorker): {error}"}
+            except Exception as error:  # the task could not run (unpicklable arguments, a cancelled future)
                 entry = {"status": FAILED, "error": f"{type(error).__name__}: {error}"}
             record["captures"][name].update(entry)
             write_json(out / RECORD, record)
