@@ -49,7 +49,7 @@ from tqdm import tqdm
 from .capture.types import MANIFEST
 from .files import write_json
 from .importers.yaleb import import_subject
-from .pipeline import MODELS, measure
+from .pipeline import GEOMETRIES, MODELS, measure
 from .population import write_population
 from .progress import progress as progress_bar
 
@@ -300,6 +300,10 @@ def measure_batch(inputs, out, workers: int | None = None, scheduler: str | None
     t0 = time.perf_counter()
     echo = echo or (lambda line: None)
     out = Path(out).resolve()
+    unknown = [m for m in models if m not in MODELS]
+    if unknown or not models or geometry not in GEOMETRIES:  # before any worker starts
+        raise ValueError(f"models must be among {list(MODELS)} (got {list(models)}), geometry one of "
+                         f"{GEOMETRIES} (got {geometry!r})")
     captures = find_captures(inputs, importer)
     options = {"models": list(models), "geometry": geometry, "resolution": resolution, **options}
     record = {"out": str(out), "importer": importer, "options": options,
