@@ -286,3 +286,39 @@ def yaleb(subject_dir: str, out: str, count: int | None, train_lights: str | Non
     except (FileExistsError, FileNotFoundError, ValueError) as error:
         raise click.ClickException(str(error)) from None
     click.echo(f"wrote the capture {path} and {path / SPLIT}")
+
+
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(exists=True, file_okay=False))
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
+              help="Batch folder: <name>/ per capture (as mifaces measure writes it), batch.json, population.md/json/png.")
+@click.option("--workers", type=click.IntRange(1), default=None,
+              help="Worker processes of the local Dask cluster (default: one per core, at most one per capture).")
+@click.option("--scheduler", default=None,
+              help="Address (tcp://host:port) or scheduler file of a running Dask scheduler, instead of a local cluster.")
+@click.option("--model", "models", multiple=True, type=click.Choice(BRDF_MODELS),
+              help="BRDF model(s) to fit (default: all four).")
+@click.option("--resume", is_flag=True, help="Skip captures whose results in --out are complete.")
+@click.option("--import", "importer", default=None,
+              help="'yaleb': INPUTS are raw data (Yale subject folders, or folders of them), imported into OUT/captures "
+                   "first (mifaces.batch.IMPORTERS).")
+@click.option("--geometry", default=default(measure_capture, "geometry"), show_default=True, type=click.Choice(GEOMETRIES),
+              help="Fit the face model to each photograph, or use a simulated capture's true shapes.")
+@click.option("--resolution", default=default(measure_capture, "resolution"), show_default=True, type=click.IntRange(8),
+              help="Texture resolution R.")
+@click.option("--spp", default=default(measure_capture, "spp"), show_default=True, type=click.IntRange(1),
+              help="Samples per pixel of the reports' renders.")
+def batch(inputs: tuple[str, ...], out_dir: str, workers: int | None, scheduler: str | None, models: tuple[str, ...],
+          resume: bool, importer: str | None, geometry: str, resolution: int, spp: int) -> None:
+    """Measure many captures (INPUTS: capture folders or folders of them) on Dask, and write a population report."""
+    from .batch import measure_batch  # Dask's import is slow: only for this command
+
+    record = measure_batch(inputs, out_dir, workers=workers, scheduler=scheduler, models=models or MODELS,
+                           resume=resume, importer=importer, geometry=geometry, resolution=resolution, spp=spp,
+                           echo=click.echo)
+    counts = {s: sum(e["status"] == s for e in record["captures"].values()) for s in ("done", "skipped", "failed")}
+    click.echo(f"{counts['done']} measured, {counts['skipped']} skipped (complete), {counts['failed']} failed in "
+               f"{record['seconds']:.0f} s; population report: {out_dir}/population.md")
+    if record["failed"]:
+        raise click.ClickException(f"{len(record['failed'])} capture(s) failed: {', '.join(record['failed'])} "
+                                   f"(errors in {out_dir}/batch.json)")
