@@ -26,7 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import cosine_lobe
-from .model import EXPONENT_GRID, BRDFModel, Parameter, dot, mean, power
+from .model import EXPONENT_GRID, MAX_LOBES, BRDFModel, Parameter, ParameterError, dot, mean, power
 
 #: Largest lobe albedo estimate used to weight sampling (keeps weights finite).
 _MAX_WEIGHT = 1e4
@@ -72,6 +72,9 @@ class Lafortune(BRDFModel):
         self.lobes = tuple(range(1, lobes + 1)) if isinstance(lobes, int) else tuple(lobes)
         if not self.lobes or min(self.lobes) < 1:
             raise ValueError(f"lafortune: lobes must be a count >= 1 or 1-based lobe numbers, got {lobes!r}")
+        if max(self.lobes) > MAX_LOBES:
+            raise ParameterError(f"lafortune: at most {MAX_LOBES} lobes (numbered 1 to {MAX_LOBES}), got lobe "
+                                 f"{max(self.lobes)}")
         self.options = {"lobes": self.lobes}
 
     @classmethod
