@@ -215,7 +215,7 @@ def _check_arguments(measurements: int, resolution, preset: str | None, companio
     if companion not in COMPANIONS:
         raise ValueError(f"companion must be 'diffuse', 'exposures' or 'both', got {companion!r}")
     try:
-        width, height = (_integer("resolution", r, 1, MAX_IMAGE_SIDE) for r in resolution)
+        width, height = (_integer("resolution", r, 1, 2 ** 31 - 1) for r in resolution)
     except TypeError:
         raise ValueError(f"resolution must be (width, height), got {resolution!r}") from None
     if width < 16 or height < 16:
