@@ -147,8 +147,8 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     out = check_result_target(out, KIND, force)  # before the work: writable, and nothing to lose
     face_model = load_model(model)
     truth = brdf_with_overrides(brdf, brdf_params)
-    info = {"model": getattr(face_model, "name", str(model)), "brdf": truth["model"], "measurements": measurements,
-            "resolution": [width, height], "seed": seed, "spp": spp, "companion": companion}
+    # what the photographs show stays in ground_truth/: the set manifest records only the set's shape
+    info = {"measurements": measurements, "resolution": [width, height], "companion": companion}
     with result_set(out, KIND, force=force, info=info) as folder:
         lights, render_seconds = _simulate_into(folder, face_model, truth, measurements, width, height, seed, spp, companion,
                                         albedo_resolution, progress)
