@@ -154,7 +154,7 @@ class Lafortune(BRDFModel):
     def _axis_and_weight(self, j, wi, params):
         cxy, cz, n = self._lobe(j, params)
         s = mi.Vector3f(mean(cxy) * wi.x, mean(cxy) * wi.y, mean(cz) * wi.z)
-        length = dr.sqrt(dot(s, s))
+        length = dr.sqrt(dr.maximum(dot(s, s), 1e-24))  # no infinite gradient at s = 0
         axis = dr.select(length > 1e-12, s / dr.maximum(length, 1e-12), mi.Vector3f(0, 0, 1))
         log_weight = n * dr.log(dr.maximum(length, 1e-30)) + dr.log(dr.two_pi / (n + 2.0))
         weight = dr.exp(dr.minimum(log_weight, dr.log(_MAX_WEIGHT)))
