@@ -6,8 +6,10 @@ Each command is one API call that a script could make.
 from __future__ import annotations
 
 import inspect
+import math
 import json
 import warnings
+from pathlib import Path
 
 import click
 
@@ -16,14 +18,20 @@ import mifaces
 from .brdf import NAMES as BRDF_MODELS
 from .capture import load_capture
 from .capture.ground_truth import ground_truth_folder
-from .files import write_json
+from .brdf import MAX_LOBES
+from .files import MAX_IMAGE_PIXELS, check_result_target, check_writable, write_json
 from .gallery import render_gallery
 from .landmarks import NoFaceError, detect_landmarks
 from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
 from .reflectance import fit_brdf as fit_brdf_model, render_fitted
+from .reflectance.io import KIND as BRDF_KIND
 from .shape import fit_shape as fit_shapes
+from .shape.io import INDEX as SHAPES_INDEX
 from .status import CONVERGED
 from .studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
+
+#: Largest texture resolution R the commands take (R x R texels).
+MAX_TEXTURE = math.isqrt(MAX_IMAGE_PIXELS)
 
 
 def default(function, name: str):
@@ -99,8 +107,10 @@ def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
 @click.option("--companion", default=default(simulate_capture, "companion"), show_default=True,
               type=click.Choice(COMPANIONS),
               help="Companion of each point-light photograph.")
+@click.option("--force", is_flag=True, help="Replace a simulated capture at OUT (never a real one).")
 def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None, measurements: int,
-             resolution: tuple[int, int], seed: int, preset: str | None, spp: int, companion: str) -> None:
+             resolution: tuple[int, int], seed: int, preset: str | None, spp: int, companion: str,
+             force: bool) -> None:
     """Simulate a capture session with ground truth into folder OUT (paper sec. 3)."""
     overrides = None
     if brdf_params is not None:
@@ -110,7 +120,8 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
         except (json.JSONDecodeError, UnicodeDecodeError) as e:
             raise click.BadParameter(f"{brdf_params} is not valid JSON: {e}", param_hint="--brdf-params") from None
     result = simulate_capture(out, model=face_model, brdf=brdf_model, brdf_params=overrides, measurements=measurements,
-                              resolution=resolution, seed=seed, preset=preset, spp=spp, companion=companion)
+                              resolution=resolution, seed=seed, preset=preset, spp=spp, companion=companion,
+                              force=force)
     click.echo(f"simulated {result.measurements} measurement{'s' * (result.measurements != 1)} under "
                f"{result.lights} light{'s' * (result.lights != 1)} in {result.seconds:.1f} s "
                f"({result.seconds_per_measurement:.1f} s per measurement)")
@@ -128,9 +139,14 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
               help="Scale of the default iteration schedule (e.g. 0.25 for a quick fit).")
 @click.option("--no-diffuse", is_flag=True, help="Ignore the companion diffuse-light pictures.")
 @click.option("--fixed-focal", is_flag=True, help="Keep the calibrated focal length.")
+@click.option("--force", is_flag=True, help="Write over the fits in --out (those not fitted again are kept).")
 def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[str, ...], iterations: float | None,
-              no_diffuse: bool, fixed_focal: bool) -> None:
+              no_diffuse: bool, fixed_focal: bool, force: bool) -> None:
     """Fit the face model to every photograph of CAPTURE (paper sec. 4.2)."""
+    check_writable(out_dir)
+    if (Path(out_dir) / SHAPES_INDEX).exists() and not force:
+        raise click.ClickException(f"{out_dir} holds fitted shapes already ({SHAPES_INDEX}); use --force to "
+                                   "write over them")
     fits = fit_shapes(capture, face_model, measurements=list(measurements) or None, out=out_dir, iterations=iterations,
                progress=True, use_diffuse=not no_diffuse, fit_focal=not fixed_focal)
     for f in fits:
@@ -150,16 +166,18 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
               help="Folder for brdf.json, albedo.exr and scene.xml.")
 @click.option("--geometry", default=default(fit_brdf_model, "geometry"), show_default=True,
               help="'ground-truth' (a simulated capture's) or the folder mifaces fit-shape wrote.")
-@click.option("--resolution", default=default(fit_brdf_model, "resolution"), show_default=True, type=click.IntRange(8),
-              help="Texture-space resolution R (R x R texels).")
-@click.option("--lobes", default=default(fit_brdf_model, "lobes"), show_default=True, type=click.IntRange(1),
+@click.option("--resolution", default=default(fit_brdf_model, "resolution"), show_default=True,
+              type=click.IntRange(8, MAX_TEXTURE), help="Texture-space resolution R (R x R texels).")
+@click.option("--lobes", default=default(fit_brdf_model, "lobes"), show_default=True, type=click.IntRange(1, MAX_LOBES),
               help="Lafortune lobes.")
 @click.option("--face-model", default=None, help="Face model of the geometry (default: the one it names).")
+@click.option("--force", is_flag=True, help="Replace the fitted BRDF in --out.")
 def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolution: int, lobes: int,
-             face_model: str | None) -> None:
+             face_model: str | None, force: bool) -> None:
     """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
+    check_result_target(out_dir, BRDF_KIND, force)
     estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, resolution=resolution, lobes=lobes,
-                   out=out_dir)
+                   out=out_dir, force=force)
     click.echo(f"fitted {estimate.model} to {estimate.samples} samples of {len(estimate.measurements)} "
                f"photographs in {estimate.seconds['total']:.1f} s")
     for name, fit_ in estimate.fits.items():
@@ -182,10 +200,11 @@ def _short(value) -> str:
               help="BRDF model(s) to fit (default: all four).")
 @click.option("--geometry", default=default(measure_capture, "geometry"), show_default=True, type=click.Choice(GEOMETRIES),
               help="Fit the face model to each photograph, or use a simulated capture's true shapes.")
-@click.option("--resolution", default=default(measure_capture, "resolution"), show_default=True, type=click.IntRange(8),
-              help="Texture resolution R.")
+@click.option("--resolution", default=default(measure_capture, "resolution"), show_default=True,
+              type=click.IntRange(8, MAX_TEXTURE), help="Texture resolution R.")
 def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
+    check_writable(out_dir)
     report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution)
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
@@ -228,6 +247,7 @@ def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, 
     point or directional lights, environment maps, or another person's face (BRDF transfer)."""
     if sum(x is not None for x in (light_position, light_direction, light_angles)) > 1:
         raise click.UsageError("give one of --light, --light-direction and --light-angles")
+    check_writable(Path(out_stem).parent)
     loaded = load_capture(capture)
     if light_angles is not None:
         light_direction = loaded.camera.direction(*light_angles)

@@ -161,7 +161,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
 def _capture(out: Path, capture, timings: dict, progress: bool) -> Capture:
     """The capture to measure: loaded, or simulated into ``out/capture`` when none is given."""
     if capture is None:
-        simulated = simulate(out / "capture", progress=progress)
+        simulated = simulate(out / "capture", progress=progress, force=True)  # measure's own folder
         timings["simulate"] = simulated.seconds
         capture = out / "capture"
     return capture if isinstance(capture, Capture) else load_capture(capture)
@@ -201,7 +201,7 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
                             progress=progress)
     lamp = capture.light(first.light)
     write_estimate(estimate, out / "brdf" / model, scene, capture.camera, lamp.position, lamp.intensity,
-                   light_direction=lamp.direction)
+                   light_direction=lamp.direction, force=True)  # measure's own folder
     timings[f"fit_brdf_{model}"] = time.perf_counter() - t
     entry = estimate.to_json()
     entry["warnings"] = [str(w.message) for w in caught]

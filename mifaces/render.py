@@ -24,7 +24,8 @@ import mitsuba as mi
 import numpy as np
 
 from . import brdf as brdf_models
-from .files import atomic_path, write_exr, write_png
+from .brdf.model import check_numbers
+from .files import atomic_path, check_render_size, write_exr, write_png
 from .progress import progress
 from .model.mesh import mitsuba_mesh
 from .model.regions import REGIONS, triangle_regions
@@ -215,6 +216,13 @@ class FaceScene:
             A directional (distant) light instead of the point light: unit
             vector in the world frame from the face towards the light.
         """
+        brdf = brdf_models.validate_brdf(brdf)
+        for name, value, minimum in (("light position", light_position, None),
+                                     ("light direction", light_direction, None), ("light intensity", intensity, 0.0)):
+            if value is not None:
+                check_numbers(name, value, 3, minimum, scalar_ok=True)
+        check_numbers("environment map scale", envmap_scale, minimum=0.0)
+        check_render_size(camera.width, camera.height, spp, "face scene")
         if light_position is None and light_direction is None and envmap is None:
             raise ValueError("a face scene needs a light: a point light position, a light direction or an "
                              "environment map")

@@ -93,11 +93,10 @@ class AnalyticBSDF:
             if isinstance(value, mi.Object):
                 raise ValueError(f"{type(self).__name__}: parameter {p.name!r} must be a "
                                  f"{'colour' if p.kind == 'rgb' else 'number'}, not a texture")
+            value = p.check(value, f"{self.MODEL.name} BSDF {props.id() or ''}".rstrip())
             if p.kind == "rgb":
                 self.values[p.name] = mi.Color3f(value)
             else:
-                if not isinstance(value, (int, float)):
-                    raise ValueError(f"{type(self).__name__}: parameter {p.name!r} must be a number, got {value!r}")
                 # Scalar variants box numbers so that mi.traverse can update them.
                 self.values[p.name] = mi.Float(value) if dr.is_jit_v(mi.Float) else dr.scalar.Array1f(value)
         self.parameters_changed()
@@ -109,6 +108,9 @@ class AnalyticBSDF:
             callback.put(name, value, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys=None):
+        # values set through mi.traverse are checked as the scene's were
+        self.full_model.validate({k: v for k, v in self.values.items() if keys is None or k in keys},
+                                 f"{self.MODEL.name} BSDF")
         for value in self.values.values():
             dr.make_opaque(value)
         self.has_diffuse = not _texture_is_zero(self.diffuse)

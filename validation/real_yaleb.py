@@ -59,7 +59,7 @@ def face_mask(scene: FaceScene, camera) -> np.ndarray:
     """Pixels the fitted face covers: a white diffuse face under a uniform environment."""
     white = {"model": "phong", "options": {}, "regions": {"skin": {"specular_reflectance": 0.0, "exponent": 1.0}}}
     image = scene.render(white, np.ones((8, 8, 3), np.float32), camera, envmap=np.ones((8, 16, 3), np.float32),
-                         spp=16, max_depth=1)
+                         spp=16, max_depth=2)
     return image.mean(axis=2) > 0.05
 
 

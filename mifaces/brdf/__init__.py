@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from .cooktorrance import CookTorrance
 from .lafortune import Lafortune
-from .model import BRDFModel, Parameter
+from .model import MAX_LOBES, BRDFModel, Parameter, ParameterError
 from .phong import Phong
 from .ward import Ward
 
@@ -46,10 +46,33 @@ def model(name: str, **options) -> BRDFModel:
     return cls(**options)
 
 
+def validate_brdf(document) -> dict:
+    """A BRDF in the ``brdf.json`` layout (``{"model", "options", "regions"}``)
+    with its regions checked by :meth:`~mifaces.brdf.model.BRDFModel.validate_regions`:
+    the one validation the renderers, the simulator and the readers of
+    ``brdf.json`` share. Raises :class:`~mifaces.brdf.model.ParameterError`
+    (or a ``ValueError`` for an unknown model or option)."""
+    if not isinstance(document, dict) or not isinstance(document.get("model"), str):
+        raise ParameterError(f"a BRDF must be an object with a 'model' name, got {document!r}"[:300])
+    options = document.get("options", {})
+    if not isinstance(options, dict):
+        raise ParameterError(f"'options' of the BRDF must be an object of plugin options, got {options!r}"[:300])
+    regions = document.get("regions")
+    if document["model"] in MODELS and MODELS[document["model"]].SEVERAL_LOBES and "lobes" not in options:
+        # the lobes the regions name, as a scene's properties would (Lafortune's cxy_2, ...)
+        keys = [key for params in (regions if isinstance(regions, dict) else {}).values()
+                if isinstance(params, dict) for key in params]
+        lobes = max(MODELS[document["model"]].from_properties(keys, options.get).lobe_scales())
+        options = dict(options, lobes=lobes) if lobes > 1 else options
+    instance = model(document["model"], **options)
+    return dict(document, options=dict(options), regions=instance.validate_regions(regions))
+
+
 def evaluate(name: str, wi, wo, params, **options):
     """f(wi, wo) of model ``name``, without the cosine term (RGB)."""
     return model(name, **options).eval(wi, wo, params)
 
 
-__all__ = ["BRDFModel", "Parameter", "MODELS", "NAMES", "model", "evaluate",
+__all__ = ["BRDFModel", "Parameter", "ParameterError", "MAX_LOBES", "MODELS", "NAMES", "model", "evaluate",
+           "validate_brdf",
            "Phong", "CookTorrance", "Ward", "Lafortune"]

@@ -26,7 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import cosine_lobe
-from .model import EXPONENT_GRID, BRDFModel, Parameter, dot, mean, power
+from .model import EXPONENT_GRID, MAX_LOBES, BRDFModel, Parameter, ParameterError, dot, mean, power
 
 #: Largest lobe albedo estimate used to weight sampling (keeps weights finite).
 _MAX_WEIGHT = 1e4
@@ -72,6 +72,9 @@ class Lafortune(BRDFModel):
         self.lobes = tuple(range(1, lobes + 1)) if isinstance(lobes, int) else tuple(lobes)
         if not self.lobes or min(self.lobes) < 1:
             raise ValueError(f"lafortune: lobes must be a count >= 1 or 1-based lobe numbers, got {lobes!r}")
+        if max(self.lobes) > MAX_LOBES:
+            raise ParameterError(f"lafortune: at most {MAX_LOBES} lobes (numbered 1 to {MAX_LOBES}), got lobe "
+                                 f"{max(self.lobes)}")
         self.options = {"lobes": self.lobes}
 
     @classmethod
@@ -151,7 +154,7 @@ class Lafortune(BRDFModel):
     def _axis_and_weight(self, j, wi, params):
         cxy, cz, n = self._lobe(j, params)
         s = mi.Vector3f(mean(cxy) * wi.x, mean(cxy) * wi.y, mean(cz) * wi.z)
-        length = dr.sqrt(dot(s, s))
+        length = dr.sqrt(dr.maximum(dot(s, s), 1e-24))  # no infinite gradient at s = 0
         axis = dr.select(length > 1e-12, s / dr.maximum(length, 1e-12), mi.Vector3f(0, 0, 1))
         log_weight = n * dr.log(dr.maximum(length, 1e-30)) + dr.log(dr.two_pi / (n + 2.0))
         weight = dr.exp(dr.minimum(log_weight, dr.log(_MAX_WEIGHT)))

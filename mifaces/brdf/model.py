@@ -29,6 +29,17 @@ import numpy as np
 
 #: Cosines below this are treated as this in divisions (θ > 89.99994°).
 COS_EPSILON = 1e-6
+#: Most glossy lobes a model may have (Lafortune): each lobe costs a power
+#: per sample, and beyond a few the fits are not determined by photographs.
+MAX_LOBES = 8
+#: Relative slack at a range's ends, so that a float32 round trip of a value
+#: at its bound (a fit's optimum at the bound) stays valid.
+_RANGE_SLACK = 1e-6
+
+
+class ParameterError(ValueError):
+    """A BRDF parameter that is not a finite number (or colour) within its
+    :class:`Parameter`'s physical range, or that the model does not have."""
 
 
 @dataclass(frozen=True)
@@ -60,6 +71,33 @@ class Parameter:
     doc: str
     start: float | None = None
 
+    def check(self, value, where: str = ""):
+        """``value`` as plain floats (three for an RGB parameter), or a
+        :class:`ParameterError` naming ``where``, the parameter and the value.
+
+        A value must be a finite number (an RGB parameter also a triple of
+        them; no booleans, strings or objects) within [:attr:`lower`,
+        :attr:`upper`]. Dr.Jit values (``mi.Float``, ``mi.Color3f``) are read
+        back, so check them where they are set, not in a kernel."""
+        prefix = f"{where}: " if where else ""
+        shape = "a colour (one number or three)" if self.kind == "rgb" else "a number"
+        try:
+            if isinstance(value, (bool, str, bytes, dict)) or (
+                    isinstance(value, (list, tuple)) and any(isinstance(v, (bool, str)) for v in value)):
+                raise TypeError
+            values = np.array(dr.detach(value) if dr.is_array_v(value) else value, dtype=np.float64).ravel()
+        except (TypeError, ValueError):
+            raise ParameterError(f"{prefix}{self.name} = {value!r} is not {shape}"[:300]) from None
+        if values.size not in ((1, 3) if self.kind == "rgb" else (1,)):
+            raise ParameterError(f"{prefix}{self.name} = {value!r} is not {shape}"[:300])
+        slack = _RANGE_SLACK * max(1.0, abs(self.lower), abs(self.upper))
+        if not np.all(np.isfinite(values)) or np.any(values < self.lower - slack) \
+                or np.any(values > self.upper + slack):
+            shown = values.tolist() if values.size > 1 else float(values[0])
+            raise ParameterError(f"{prefix}{self.name} = {shown} is outside [{self.lower}, {self.upper}] "
+                                 "or not finite")
+        return [float(v) for v in np.broadcast_to(values, 3)] if self.kind == "rgb" else float(values[0])
+
     def start_value(self):
         """:attr:`start` (or :attr:`default`): a float, or three for an RGB parameter."""
         value = float(self.default if self.start is None else self.start)
@@ -74,6 +112,35 @@ DIFFUSE = Parameter("diffuse_reflectance", "rgb", 0.5, 0.0, 1.0,
 #: exponents, each from a near-mirror to a near-diffuse lobe.
 SLOPE_GRID = np.geomspace(0.01, 1.0, 15)
 EXPONENT_GRID = np.geomspace(1.0, 1e5, 21)
+
+
+def check_numbers(name: str, value, length: int | None = None, minimum: float | None = None,
+                  scalar_ok: bool = False):
+    """``value`` (a number, or ``length`` numbers; one number repeated where
+    ``scalar_ok``) as floats, finite and at least ``minimum``; a
+    ``ValueError`` naming ``name`` and the value otherwise. For the numbers
+    around a BRDF: light positions, directions, intensities, angles."""
+    try:
+        if isinstance(value, (bool, str, dict)):
+            raise TypeError
+        values = np.asarray(value, np.float64)
+    except (TypeError, ValueError):
+        values = None
+    shape = () if length is None else (length,)
+    if scalar_ok and values is not None and values.shape == ():
+        values = np.full(shape, values)
+    if values is None or values.shape != shape or not np.all(np.isfinite(values)) \
+            or (minimum is not None and np.any(values < minimum)):
+        what = "a finite number" if length is None else f"{length} finite numbers"
+        bound = "" if minimum is None else f" >= {minimum:g}"
+        shown = value.tolist() if isinstance(value, np.ndarray) else value
+        raise ValueError(f"{name} must be {what}{bound}, got {shown!r}"[:300])
+    return float(values) if length is None else values
+
+
+def _numeric(value) -> bool:
+    """Whether ``value`` is a number, a sequence of them or a Dr.Jit array (not a texture)."""
+    return isinstance(value, (int, float, list, tuple, np.ndarray)) or dr.is_array_v(value)
 
 
 def dot(a, b):
@@ -194,6 +261,53 @@ class BRDFModel:
     def parameter(self, name: str) -> Parameter:
         """The parameter called ``name``."""
         return next(p for p in self.parameters() if p.name == name)
+
+    def validate(self, params: Mapping, where: str = "") -> dict:
+        """The parameters ``params`` (name -> value) checked by
+        :meth:`Parameter.check`, as plain floats (RGB as three).
+
+        This is the one validation of BRDF parameters: the plugins'
+        constructors and ``parameters_changed``, the face scenes, the
+        simulator's ground truth and :func:`mifaces.reflectance.io.load_estimate`
+        call it. A texture (a non-numeric ``diffuse_reflectance``) is passed
+        through unchecked.
+
+        Raises
+        ------
+        ParameterError
+            Naming ``where`` (e.g. the region), the parameter and its value:
+            a name the model does not have, a value that is not finite, not a
+            number (or three) or outside the parameter's range.
+        """
+        known = {p.name: p for p in self.parameters()}
+        out = {}
+        for name, value in params.items():
+            if name not in known:
+                prefix = f"{where}: " if where else ""
+                raise ParameterError(f"{prefix}{self.name} has no parameter {name!r}; its parameters: "
+                                     f"{sorted(known)}")
+            if name == DIFFUSE.name and not _numeric(value):
+                out[name] = value
+                continue
+            out[name] = known[name].check(value, where)
+        return out
+
+    def validate_regions(self, regions, fallback: str = "skin") -> dict:
+        """Per-region glossy parameters (the ``regions`` of ``brdf.json``),
+        each region's checked by :meth:`validate` (a parameter not given
+        takes its default); ``fallback``, the region the others default to,
+        must be present."""
+        if not isinstance(regions, dict) or not regions:
+            raise ParameterError(f"regions must map region names to parameter objects, got {regions!r}"[:300])
+        if fallback not in regions:
+            raise ParameterError(f"regions: no {fallback!r} region (the one every region without its own "
+                                 f"parameters takes); regions given: {sorted(regions)}")
+        out = {}
+        for region, params in regions.items():
+            if not isinstance(params, dict):
+                raise ParameterError(f"region {region!r}: parameters must be an object, got {params!r}"[:300])
+            out[region] = self.validate(params, f"region {region!r}")
+        return out
 
     def defaults(self) -> dict:
         """Default value of every parameter (floats)."""

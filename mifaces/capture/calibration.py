@@ -41,6 +41,16 @@ from .types import SpherePictures
 
 #: Smallest sphere image we try to locate (radius in pixels).
 MIN_SPHERE_RADIUS_PX = 4.0
+#: Largest part of a sphere's disc a highlight may cover: a point light's
+#: reflection is a small spot; a blob over more of the disc is a saturated
+#: picture, a uniform one, or no point light at all.
+MAX_HIGHLIGHT_FRACTION = 0.05
+#: Least ratio of a highlight's peak to the sphere's median brightness.
+MIN_HIGHLIGHT_CONTRAST = 4.0
+#: Largest RMS distance of the light from the spheres' reflected rays, as a
+#: fraction of its distance from the camera: beyond, the spheres disagree
+#: (measured on simulated captures: below 0.3 %).
+MAX_RAY_RESIDUAL = 0.02
 
 
 class CalibrationError(ValueError):
@@ -242,6 +252,10 @@ def find_highlight(image: np.ndarray, sphere: SphereDetection, inner: float = 0.
         raise CalibrationError(f"no highlight on the sphere at pixel ({cx:.1f}, {cy:.1f})")
     blobs, _ = ndi.label(window > 0.5 * peak)
     blob = blobs == blobs[np.unravel_index(np.argmax(window), window.shape)]
+    if blob.sum() > MAX_HIGHLIGHT_FRACTION * disc.sum() or peak < MIN_HIGHLIGHT_CONTRAST * np.median(window[disc]):
+        raise CalibrationError(f"no distinct highlight on the sphere at pixel ({cx:.1f}, {cy:.1f}): the brightest "
+                               f"blob covers {blob.sum() / disc.sum():.0%} of its disc at {peak:.3g}, its median "
+                               f"{np.median(window[disc]):.3g} (a saturated or uniform picture?)")
     blob = ndi.binary_dilation(blob, iterations=2) & disc
     dark = disc & ~ndi.binary_dilation(blob, iterations=2)
     background = np.median(window[dark]) if dark.sum() > 10 else 0.0
@@ -305,7 +319,10 @@ def calibrate_light(spheres: SpherePictures, camera: Camera, expected_count: int
     Raises
     ------
     CalibrationError
-        Fewer than two spheres found or with a highlight, or parallel rays.
+        Fewer than two spheres found or with a distinct highlight (a
+        saturated or uniform picture has none: :data:`MAX_HIGHLIGHT_FRACTION`,
+        :data:`MIN_HIGHLIGHT_CONTRAST`), parallel rays, or spheres that
+        disagree beyond :data:`MAX_RAY_RESIDUAL`.
     """
     found = locate_spheres(spheres.outline.pixels, camera, spheres.radius)
     if expected_count is not None and len(found) != expected_count:
@@ -339,5 +356,9 @@ def calibrate_light(spheres: SpherePictures, camera: Camera, expected_count: int
     if np.any(along <= 0):
         raise CalibrationError("the triangulated light lies behind a sphere's reflected ray")
     distances = np.linalg.norm(offsets - along[:, None] * directions, axis=1)
+    rms = float(np.sqrt(np.mean(distances ** 2)))
+    if rms > MAX_RAY_RESIDUAL * np.linalg.norm(x):
+        raise CalibrationError(f"the spheres disagree: the light lies {rms:.1f} mm (RMS) from their reflected rays, "
+                               f"more than {MAX_RAY_RESIDUAL:.0%} of its distance {np.linalg.norm(x):.0f} mm")
     return LightCalibration(camera.to_world(x), x, tuple(s for s, _ in used), np.array(highlights), origins,
                             directions, distances, rejected)

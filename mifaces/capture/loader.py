@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..files import check_image_size, check_name, resolve_inside
 from ..landmarks import NoFaceError
 from ..model.landmarks import FEATURE_POINTS
 from .calibration import CalibrationError, calibrate_light
@@ -24,7 +25,10 @@ from .types import (FEATURE_POINT_RANGE, FORMAT, IMAGE_SUFFIXES, MANIFEST, TRANS
 # Loading and validating
 # --------------------------------------------------------------------------------------------
 class _Problems(list):
-    """Collects validation messages; each names where in the manifest it is."""
+    """Collects validation messages; each names where in the manifest it is.
+    ``allow_outside``: whether image paths may leave the capture folder."""
+
+    allow_outside = False
 
     def objects(self, data, key: str, what: str):
         """Yield ``(index, entry, where)`` for the objects of the non-empty list
@@ -50,6 +54,9 @@ class _Problems(list):
             self.append(f"{where}: missing '{key}'")
             return None
         value = obj[key]
+        if kind is not None and isinstance(value, bool) and bool not in (kind if isinstance(kind, tuple) else (kind,)):
+            self.append(f"{where}.{key}: must be a number, not {value!r}")
+            return None
         if kind is not None and not isinstance(value, kind):
             names = kind.__name__ if isinstance(kind, type) else "/".join(k.__name__ for k in kind)
             self.append(f"{where}.{key}: must be {names}, got {type(value).__name__} {value!r}"[:300])
@@ -102,6 +109,11 @@ def _camera(entry, problems: _Problems) -> Camera | None:
     for name, v in (("width", width), ("height", height)):
         if v is not None and v <= 0:
             problems.append(f"camera.{name}: must be positive, got {v}")
+    if width is not None and height is not None and width > 0 and height > 0:
+        try:
+            check_image_size(width, height, "camera")
+        except ValueError as e:
+            problems.append(str(e))
     calibrated = entry.get("calibrated", True)
     if not isinstance(calibrated, bool):
         problems.append(f"camera.calibrated: must be true or false, got {calibrated!r}")
@@ -146,7 +158,8 @@ def _intrinsics(entry: dict, calibrated: bool, width, height, problems: _Problem
 
 
 def _image(entry, where: str, root: Path, camera: Camera | None, problems: _Problems) -> Image | None:
-    """Read and check one image entry ``{"path", "transfer", "gamma", "exposure", "saturation"}``."""
+    """Read and check one image entry ``{"path", "transfer", "gamma", "exposure", "saturation"}``:
+    a path inside the capture folder (:func:`mifaces.files.resolve_inside`), finite, non-negative pixels."""
     if isinstance(entry, str):
         entry = {"path": entry}
     if not isinstance(entry, dict):
@@ -162,7 +175,11 @@ def _image(entry, where: str, root: Path, camera: Camera | None, problems: _Prob
     gamma = problems.number(entry, "gamma", where, positive=True, default=2.2, required=False)
     exposure = problems.number(entry, "exposure", where, positive=True, default=1.0, required=False)
     saturation = problems.number(entry, "saturation", where, positive=True, default=None, required=False)
-    path = root / rel
+    try:
+        path = resolve_inside(root, rel, problems.allow_outside)
+    except (ValueError, OSError) as e:
+        problems.append(f"{where}.path: {e}")
+        return None
     if path.suffix.lower() not in IMAGE_SUFFIXES:
         problems.append(f"{where}.path: {rel!r} is not an image file we read ({', '.join(IMAGE_SUFFIXES)})")
     elif not path.is_file():
@@ -184,6 +201,12 @@ def _image(entry, where: str, root: Path, camera: Camera | None, problems: _Prob
         rows, cols = np.nonzero(bad.any(axis=2))
         problems.append(f"{where}: {rel} has {int(bad.any(axis=2).sum())} pixels with NaN or infinite values "
                         f"(first at x={cols[0]}, y={rows[0]})")
+        return None
+    negative = image.pixels < 0
+    if negative.any():
+        rows, cols = np.nonzero(negative.any(axis=2))
+        problems.append(f"{where}: {rel} has {len(rows)} pixels with negative values (first at x={cols[0]}, "
+                        f"y={rows[0]}: {image.pixels[rows[0], cols[0]].tolist()}); light is not negative")
         return None
     return image
 
@@ -226,7 +249,8 @@ def _face_box(obj: dict, where: str, problems: _Problems) -> tuple[float, ...] |
     return tuple(float(v) for v in box)
 
 
-def load_capture(path: str | os.PathLike, calibrate: bool = True, detect: bool = True) -> Capture:
+def load_capture(path: str | os.PathLike, calibrate: bool = True, detect: bool = True,
+                 allow_outside: bool = False) -> Capture:
     """Load and validate the capture in folder ``path`` (or its ``capture.json``).
 
     Parameters
@@ -242,6 +266,9 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True, detect: bool =
         with the landmark detector
         (:func:`mifaces.capture.feature_points.detect_feature_points`). Without
         it their ``feature_points`` stay empty.
+    allow_outside : bool
+        Accept image paths that leave the capture folder (absolute, ``../``,
+        symbolic links resolving outside); by default they are problems.
 
     Returns
     -------
@@ -259,6 +286,7 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True, detect: bool =
     """
     root, data = _read_manifest(Path(path))
     problems = _Problems()
+    problems.allow_outside = allow_outside
     if data.get("format") != FORMAT:
         problems.append(f"format: must be {FORMAT!r}, got {data.get('format')!r}")
     if data.get("version") != VERSION:
@@ -398,6 +426,11 @@ def _measurements(data: dict, root: Path, camera: Camera | None, lights: list[st
     for i, e, where in problems.objects(data, "measurements", ""):
         name = problems.need(e, "name", where, str) or f"#{i}"
         where = f"measurements[{i}] ({name})"
+        if not name.startswith("#"):
+            try:
+                check_name(name, "name")
+            except ValueError as error:
+                problems.append(f"{where}: {error}")
         light = problems.need(e, "light", where, str)
         if light is not None and light not in lights:
             problems.append(f"{where}.light: no light condition named {light!r} (lights: {lights})")

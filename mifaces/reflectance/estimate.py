@@ -100,7 +100,7 @@ class BRDFEstimate:
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
              resolution: int = 512, lobes: int = 1, options: dict | None = None, fixed: dict | None = None,
              schedule: SubsetSchedule | None = None, samples: ReflectanceSamples | None = None, measurements=None,
-             out=None, seed: int = 0, progress: bool = True) -> BRDFEstimate:
+             out=None, seed: int = 0, progress: bool = True, force: bool = False) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture.
 
     Parameters
@@ -129,6 +129,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         Fit to these measurements only (default: all with geometry).
     out : path, optional
         Write the result there (:func:`mifaces.reflectance.io.write_estimate`).
+    force : bool
+        Replace a fitted BRDF that ``out`` holds.
 
     Returns
     -------
@@ -173,7 +175,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         first = next(m for m in capture.measurements if m.name == estimate.measurements[0])
         lamp = capture.light(first.light)
         write_estimate(estimate, out, FaceScene(face, shapes[first.name]), capture.camera, lamp.position,
-                       lamp.intensity, light_direction=lamp.direction)
+                       lamp.intensity, light_direction=lamp.direction, force=force)
     return estimate
 
 

@@ -7,8 +7,11 @@ fit's loss, sample count, time and status under ``"fit"``; the albedo map
 ``albedo.exr`` (linear, row 0 at v = 0) and a PNG preview; and
 ``scene.xml``, the Mitsuba scene of :meth:`mifaces.render.FaceScene.description`
 that renders the fitted face with the plugins as the camera saw it in the
-first measurement (meshes in ``meshes/``). :func:`load_estimate` reads
-``brdf.json`` and the albedo map back.
+first measurement (meshes in ``meshes/``). The files are one result set
+(:func:`mifaces.files.result_set`): written together into a sibling folder
+and swapped in, so a killed run leaves the earlier set whole.
+:func:`load_estimate` reads ``brdf.json`` and the albedo map back and refuses
+a mixed set.
 """
 
 from __future__ import annotations
@@ -17,7 +20,9 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..files import atomic_write, read_exr, write_exr, write_json, write_png
+from .. import brdf as brdf_models
+from ..files import (ResultSetError, atomic_write, read_exr, result_set, verify_set, write_exr,
+                     write_json, write_png)
 from ..render import FaceScene, scene_xml
 
 if TYPE_CHECKING:
@@ -29,13 +34,15 @@ FILES = {"brdf": "brdf.json", "albedo": "albedo.exr", "preview": "albedo.png", "
 SCENE_SPP = 64
 #: The key path of the sample count in a scene dict.
 SPP_PATH = ("sensor", "sampler", "sample_count")
+#: The result-set kind of a fitted BRDF's folder.
+KIND = "brdf"
 
 
 def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_position, intensity, *,
-                   light_direction=None) -> dict[str, Path]:
+                   light_direction=None, force: bool = False) -> dict[str, Path]:
     """Write ``brdf.json``, ``albedo.exr`` (+ ``albedo.png``), ``meshes/*.ply``
-    and ``scene.xml`` into folder ``out``, each atomically; ``scene.xml``
-    last, so a scene never names a file not yet written.
+    and ``scene.xml`` into folder ``out`` as one result set
+    (:func:`mifaces.files.result_set`): all of them or none.
 
     Parameters
     ----------
@@ -49,38 +56,67 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
     light_direction : (3,) array, optional
         A directional light instead (world frame, towards the light;
         ``intensity`` is then its irradiance).
+    force : bool
+        Replace a fitted BRDF that ``out`` holds (else a ``FileExistsError``).
     """
     out = Path(out)
-    paths = {key: out / name for key, name in FILES.items()}
     document = estimate.to_json()
-    write_json(paths["brdf"], document)
-    write_exr(paths["albedo"], estimate.albedo.albedo)
-    write_png(paths["preview"], estimate.albedo.albedo)
-    face.write_meshes(out)
     scene = face.description(document, camera, light_position, intensity, spp=SCENE_SPP, albedo=FILES["albedo"],
-                             light_direction=light_direction)
+                             light_direction=light_direction)  # checks the BRDF and the light before writing
     comment = (f"The face as fitted by mifaces fit-brdf: per-region {estimate.model} BSDFs over the refined albedo "
                "map, seen by the capture's camera under the light of its first measurement. Render: "
                "mitsuba.load_file(path, spp=N) after `import mifaces` (which registers the plugins). Units: mm.")
-    with atomic_write(paths["scene"], "w") as f:
-        f.write(scene_xml(scene, {"spp": SPP_PATH}, comment))
-    return paths
+    info = {"model": estimate.model, "options": document["options"], "resolution": document["resolution"],
+            "measurements": document["measurements"]}
+    with result_set(out, KIND, force=force, info=info) as folder:
+        write_json(folder / FILES["brdf"], document)
+        write_exr(folder / FILES["albedo"], estimate.albedo.albedo)
+        write_png(folder / FILES["preview"], estimate.albedo.albedo)
+        face.write_meshes(folder)
+        with atomic_write(folder / FILES["scene"], "w") as f:
+            f.write(scene_xml(scene, {"spp": SPP_PATH}, comment))
+    return {key: out / name for key, name in FILES.items()}
 
 
 def load_estimate(path) -> dict:
     """Read a ``brdf.json`` (path to it or its folder) and the albedo map beside it:
-    the JSON document with ``"albedo"`` replaced by the (R, R, 3) array."""
+    the JSON document with ``"albedo"`` replaced by the (R, R, 3) array.
+
+    Raises
+    ------
+    mifaces.files.ResultSetError
+        Files that were not written together (a ``brdf.json`` and an albedo
+        map of different runs: changed checksums, or, in a folder without a
+        set manifest, an albedo map of another resolution).
+    mifaces.brdf.ParameterError
+        Parameters that are not finite or outside their range, a missing
+        ``skin`` region (the one other regions fall back to).
+    """
     path = Path(path)
     path = path / FILES["brdf"] if path.is_dir() else path
     if not path.is_file():
         raise FileNotFoundError(f"no brdf.json at {path}")
-    data = json.loads(path.read_text())
+    try:
+        data = json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError) as error:
+        raise ValueError(f"{path}: not valid JSON: {error}") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: not a brdf.json, not a JSON object")
     for key in ("model", "regions"):
         if key not in data:
             raise ValueError(f"{path}: not a brdf.json, no {key!r}")
-    albedo = path.parent / data.get("albedo", FILES["albedo"])
+    name = data.get("albedo", FILES["albedo"])
+    if not isinstance(name, str) or Path(name).name != name:
+        raise ValueError(f"{path}: 'albedo' must name a file beside brdf.json, got {name!r}")
+    albedo = path.parent / name
+    verify_set(path.parent, KIND, [path.name] + ([name] if albedo.is_file() else []))
+    data = brdf_models.validate_brdf(data)
     data["albedo"] = read_exr(albedo) if albedo.is_file() else None
+    resolution = data.get("resolution")
+    if data["albedo"] is not None and isinstance(resolution, int) and data["albedo"].shape[:2] != (resolution,) * 2:
+        raise ResultSetError(f"{path.parent}: brdf.json was fitted at resolution {resolution} but {name} is "
+                             f"{data['albedo'].shape[1]}x{data['albedo'].shape[0]}: files of different runs")
     return data
 
 
-__all__ = ["FILES", "write_estimate", "load_estimate"]
+__all__ = ["FILES", "KIND", "write_estimate", "load_estimate"]

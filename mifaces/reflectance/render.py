@@ -12,7 +12,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..brdf.model import check_numbers
 from ..capture import Capture, load_capture
+from ..files import check_writable
 from ..geometry import load_geometry
 from ..model import MorphableModel
 from ..render import FaceScene, save_image
@@ -60,6 +62,8 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     capture's camera and units, the image compares pixel for pixel with a
     photograph taken under that light.
     """
+    yaw = check_numbers("yaw", yaw)
+    check_writable(Path(out).parent)
     capture = capture if isinstance(capture, Capture) else load_capture(capture)
     data = load_estimate(brdf_dir)
     if data["albedo"] is None:

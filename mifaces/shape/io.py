@@ -1,7 +1,13 @@
 """Fitted shapes handed to the next stage (paper sec. 4.2 -> 4.3): in memory, or
 written to and read from a folder -- per measurement ``<name>.json`` and, for a
 converged fit, ``<name>.npy`` (camera-space vertices), and the index
-``shapes.json``."""
+``shapes.json``.
+
+The index is written last and holds each file's SHA-256: a reader
+(:func:`load_fitted_shapes`) refuses a file that is not the one the index
+was written with (a run killed between a measurement's files and the index),
+so fits of two runs are never mixed. Measurement names become file names
+only if they are safe (:func:`mifaces.files.check_name`)."""
 
 from __future__ import annotations
 
@@ -12,12 +18,25 @@ from pathlib import Path
 import numpy as np
 
 from ..capture import Camera, Capture, load_capture
-from ..files import atomic_write, write_json
+from ..files import ResultSetError, atomic_write, check_name, file_sha256, write_json
 from ..status import CONVERGED
 from .result import ShapeFit
 
 #: Name of the index file :func:`~mifaces.shape.fit.fit_shape` writes beside the per-measurement files.
 INDEX = "shapes.json"
+#: Suffix of a measurement's fitted albedo file.
+ALBEDO_SUFFIX = "_albedo"
+
+
+def file_stem(measurement: str) -> str:
+    """The file name stem of ``measurement``'s fit: its name, if safe
+    (:func:`mifaces.files.check_name`), not the index's and not one that
+    another measurement's albedo file takes (``<name>_albedo``)."""
+    check_name(measurement, "measurement name", reserved=(Path(INDEX).stem,))
+    if measurement.lower().endswith(ALBEDO_SUFFIX):
+        raise ValueError(f"measurement name {measurement!r} is reserved: it ends like a fitted albedo's file "
+                         f"(<name>{ALBEDO_SUFFIX}.npy)")
+    return measurement
 
 
 def as_capture(capture) -> Capture:
@@ -29,8 +48,9 @@ def write_fit(out, fit: ShapeFit, model) -> None:
     """Write ``<name>.json`` and, if converged, ``<name>.npy`` (camera-space vertices) atomically.
     A diverged fit's stale ``.npy`` from an earlier run is removed, so it is never read as a success."""
     out = Path(out)
+    stem = file_stem(fit.measurement)
     out.mkdir(parents=True, exist_ok=True)
-    npy = out / f"{fit.measurement}.npy"
+    npy = out / f"{stem}.npy"
     if fit.converged:
         with atomic_write(npy) as f:
             np.save(f, fit.vertices_camera.astype(np.float32))
@@ -40,16 +60,17 @@ def write_fit(out, fit: ShapeFit, model) -> None:
     data["model"] = model.name
     data["vertices"] = npy.name if fit.converged else None
     if fit.albedo is not None and fit.converged:
-        alb = out / f"{fit.measurement}_albedo.npy"
+        alb = out / f"{stem}{ALBEDO_SUFFIX}.npy"
         with atomic_write(alb) as f:
             np.save(f, fit.albedo)
         data["albedo"] = alb.name
-    write_json(out / f"{fit.measurement}.json", data)
+    write_json(out / f"{stem}.json", data)
 
 
 def write_index(out, capture, model, fits: list[ShapeFit], reference=None, model_source=None) -> None:
     """Write ``shapes.json``: the capture, the model (``model_source``: what
-    :func:`mifaces.load_model` loads it from), the camera and per measurement its status."""
+    :func:`mifaces.load_model` loads it from), the camera and per measurement
+    its status and its files' SHA-256 (measurements of earlier runs kept)."""
     out = Path(out)
     index = {"format": "mifaces-shapes", "version": 1, "capture": str(capture.path), "model": model.name,
              "model_source": str(model_source if model_source is not None else model.name),
@@ -62,11 +83,14 @@ def write_index(out, capture, model, fits: list[ShapeFit], reference=None, model
         except (ValueError, OSError):
             pass
     for fit in fits:
-        index["measurements"][fit.measurement] = {
-            "status": fit.status, "vertices": f"{fit.measurement}.npy" if fit.converged else None,
-            "parameters": f"{fit.measurement}.json", "seconds": round(fit.seconds, 3),
-            "feature_rms_px": fit.loss.get("feature_rms_px"), "message": fit.message,
-            "shared_with": fit.shared_with, "estimated": list(fit.estimated)}
+        stem = file_stem(fit.measurement)
+        entry = {"status": fit.status, "vertices": f"{stem}.npy" if fit.converged else None,
+                 "parameters": f"{stem}.json", "seconds": round(fit.seconds, 3),
+                 "feature_rms_px": fit.loss.get("feature_rms_px"), "message": fit.message,
+                 "shared_with": fit.shared_with, "estimated": list(fit.estimated)}
+        entry["sha256"] = {name: file_sha256(out / name) for name in (entry["vertices"], entry["parameters"])
+                           if name is not None and (out / name).is_file()}
+        index["measurements"][fit.measurement] = entry
     write_json(out / INDEX, index)
 
 
@@ -96,6 +120,22 @@ def shapes_in_world(fits: list[ShapeFit], capture) -> dict[str, np.ndarray]:
     _warn_left_out([f"{fit.measurement} ({fit.status})" for fit in fits if not fit.converged])
     return {fit.measurement: camera.to_world(fit.vertices_camera.astype(np.float32)).astype(np.float32)
             for fit in fits if fit.converged}
+
+
+def _load_vertices(path: Path, name: str, entry: dict) -> np.ndarray:
+    """The camera-space vertices of measurement ``name``'s index ``entry``,
+    checked against the SHA-256 the index holds (indices without one, from
+    older versions, are trusted)."""
+    stem = file_stem(name)
+    if entry["vertices"] != f"{stem}.npy":
+        raise ResultSetError(f"{path / INDEX}: measurement {name!r} names vertices {entry['vertices']!r}, "
+                             f"not {stem}.npy")
+    file = path / entry["vertices"]
+    expected = (entry.get("sha256") or {}).get(entry["vertices"])
+    if expected is not None and (not file.is_file() or file_sha256(file) != expected):
+        raise ResultSetError(f"{path}: {entry['vertices']} is not the file {INDEX} was written with (changed, "
+                             f"missing or from an interrupted run); fit {name} again")
+    return np.load(file, allow_pickle=False)
 
 
 def load_fitted_shapes(path, capture=None) -> dict[str, np.ndarray]:
@@ -133,7 +173,6 @@ def load_fitted_shapes(path, capture=None) -> dict[str, np.ndarray]:
         if entry.get("status") != CONVERGED or not entry.get("vertices"):
             skipped.append(f"{name} ({entry.get('status')})")
             continue
-        verts = np.load(path / entry["vertices"])
-        out[name] = camera.to_world(verts).astype(np.float32)
+        out[name] = camera.to_world(_load_vertices(path, name, entry)).astype(np.float32)
     _warn_left_out(skipped)
     return out

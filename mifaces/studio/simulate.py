@@ -57,6 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from ..capture import write_ground_truth
+from ..files import MAX_IMAGE_SIDE, check_image_size, check_render_size, check_result_target, result_set
 from ..model import load_model
 from ..progress import progress as progress_bar
 from ..render import face_shapes
@@ -67,6 +68,10 @@ from .truth import brdf_with_overrides
 from .write import ground_truth, true_measurement, write_manifest, write_photographs, write_sphere_photographs
 
 PRESETS = {"paper": {"measurements": 22}}
+#: Most measurements one simulated capture holds.
+MAX_MEASUREMENTS = 300
+#: The result-set kind of a simulated capture's folder.
+KIND = "capture"
 COMPANIONS = ("diffuse", "exposures", "both")
 
 
@@ -89,13 +94,15 @@ class SimulationResult:
 def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance", brdf_params: dict | None = None,
              measurements: int = 6, resolution: tuple[int, int] = (512, 512), seed: int = 0,
              preset: str | None = None, spp: int = 64, companion: str = "diffuse",
-             albedo_resolution: int = 1024, progress: bool = True) -> SimulationResult:
+             albedo_resolution: int = 1024, progress: bool = True, force: bool = False) -> SimulationResult:
     """Simulate a capture session and write it, with ground truth, to ``out``.
 
     Parameters
     ----------
     out : path
-        Capture folder to write (created; files in it are replaced atomically).
+        Capture folder to write, as one result set
+        (:func:`mifaces.files.result_set`): the photographs, the manifest and
+        the ground truth appear together, or not at all.
     model : str, path or MorphableModel
         ``'builtin'``, a model file for :func:`mifaces.load_model`, or a model.
     brdf : str
@@ -119,16 +126,39 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
         Size of the square albedo map.
     progress : bool
         Show a progress bar.
+    force : bool
+        Replace a simulated capture that ``out`` holds. A folder holding
+        anything else (a real capture) is never written over.
 
     Returns
     -------
     SimulationResult
+
+    Raises
+    ------
+    FileExistsError
+        ``out`` holds a simulated capture and ``force`` is False.
+    mifaces.files.ResultSetError
+        ``out`` holds files mifaces did not write (a real capture).
     """
     t_start = time.perf_counter()
-    measurements, (width, height) = _check_arguments(measurements, resolution, preset, companion)
-    out = Path(out)
+    measurements, (width, height) = _check_arguments(measurements, resolution, preset, companion, spp,
+                                                     albedo_resolution, seed)
+    out = check_result_target(out, KIND, force)  # before the work: writable, and nothing to lose
     face_model = load_model(model)
     truth = brdf_with_overrides(brdf, brdf_params)
+    # what the photographs show stays in ground_truth/: the set manifest records only the set's shape
+    info = {"measurements": measurements, "resolution": [width, height], "companion": companion}
+    with result_set(out, KIND, force=force, info=info) as folder:
+        lights, render_seconds = _simulate_into(folder, face_model, truth, measurements, width, height, seed, spp, companion,
+                                        albedo_resolution, progress)
+    return SimulationResult(out, measurements, lights, time.perf_counter() - t_start, render_seconds)
+
+
+def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width: int, height: int, seed: int,
+                   spp: int, companion: str, albedo_resolution: int, progress: bool) -> tuple[int, list[float]]:
+    """The simulation of :func:`simulate`, written into folder ``out``: the number of light
+    conditions and each measurement's render time."""
     rng = np.random.default_rng(seed)  # one generator, drawn from in a fixed order: subject, lights, frames
     subject = make_subject(face_model, rng, albedo_resolution)
     texture = albedo_texture(subject.albedo)
@@ -160,22 +190,38 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     bar.close()
 
     write_ground_truth(out, ground_truth(face_model, subject, studio, true_measurements, truth, seed, spp))
-    write_manifest(out, studio, face_model, subject.neutral, lights, entries)  # last: a capture is complete or absent
-    return SimulationResult(out, measurements, len(studio.per_light), time.perf_counter() - t_start, render_seconds)
+    write_manifest(out, studio, face_model, subject.neutral, lights, entries)
+    return len(studio.per_light), render_seconds
 
 
-def _check_arguments(measurements: int, resolution, preset: str | None, companion: str
-                     ) -> tuple[int, tuple[int, int]]:
-    """The number of measurements and the resolution; a ValueError naming a bad argument."""
+def _integer(name: str, value, lowest: int, highest: int) -> int:
+    """``value`` if it is an integer (not a bool) in [lowest, highest]; a ValueError naming ``name`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lowest <= value <= highest:
+        raise ValueError(f"{name} must be an integer from {lowest} to {highest}, got {value!r}")
+    return int(value)
+
+
+def _check_arguments(measurements: int, resolution, preset: str | None, companion: str, spp: int = 64,
+                     albedo_resolution: int = 1024, seed: int = 0) -> tuple[int, tuple[int, int]]:
+    """The number of measurements and the resolution; a ValueError naming a bad argument (sizes
+    within :func:`mifaces.files.check_render_size`'s limits, before anything is allocated)."""
     if preset is not None:
         if preset not in PRESETS:
             raise ValueError(f"unknown preset {preset!r}; presets: {sorted(PRESETS)}")
         measurements = PRESETS[preset]["measurements"]
-    if measurements < 1:
+    if isinstance(measurements, (int, np.integer)) and not isinstance(measurements, bool) and measurements < 1:
         raise ValueError(f"measurements must be >= 1, got {measurements}")
+    measurements = _integer("measurements", measurements, 1, MAX_MEASUREMENTS)
     if companion not in COMPANIONS:
         raise ValueError(f"companion must be 'diffuse', 'exposures' or 'both', got {companion!r}")
-    width, height = (int(r) for r in resolution)
+    try:
+        width, height = (_integer("resolution", r, 1, 2 ** 31 - 1) for r in resolution)
+    except TypeError:
+        raise ValueError(f"resolution must be (width, height), got {resolution!r}") from None
     if width < 16 or height < 16:
         raise ValueError(f"resolution must be at least 16x16, got {width}x{height}")
+    check_render_size(width, height, _integer("spp", spp, 1, 1 << 20), "simulate")
+    check_image_size(_integer("albedo_resolution", albedo_resolution, 16, MAX_IMAGE_SIDE),
+                     albedo_resolution, "albedo map")
+    _integer("seed", seed, 0, 2 ** 32 - 1)
     return measurements, (width, height)

@@ -95,43 +95,30 @@ def brdf_with_overrides(model: str, overrides: dict | None) -> dict:
     truth = default_brdf(model)
     if overrides is None:
         return truth
-    options = dict(truth["options"], **overrides.get("options", {}))
     regions = overrides.get("regions", {})
     if not isinstance(regions, dict):
         raise ValueError("'regions' must map region names to parameter objects")
-    # the lobes the overrides name, as a scene's properties would (Lafortune's cxy_2, ...)
-    keys = [key for params in regions.values() if isinstance(params, dict) for key in params]
-    lobes = max(brdf.MODELS[model].from_properties(keys, options.get).lobe_scales())
-    if lobes > 1:
-        options["lobes"] = lobes
-    instance = brdf.model(model, **options)
-    known = {p.name: p for p in instance.specular_parameters()}
-
     vocabulary = [r for r in REGIONS if r != "background"]
     for region, params in regions.items():
         if region not in vocabulary:
             raise ValueError(f"unknown region {region!r} in the BRDF parameters; regions: {vocabulary}")
         if not isinstance(params, dict):
             raise ValueError(f"region {region!r}: parameters must be an object")
-        merged = dict(truth["regions"].get(region, truth["regions"]["skin"]))
-        for key, value in params.items():
-            if key == "diffuse_reflectance":
-                raise ValueError(f"region {region!r}: the diffuse reflectance is the albedo map, not a parameter")
-            if key not in known:
-                raise ValueError(f"region {region!r}: {model} has no parameter {key!r}; "
-                                 f"its parameters: {sorted(known)}")
-            p = known[key]
-            values = np.atleast_1d(np.asarray(value, np.float64))
-            if values.size not in ((1, 3) if p.kind == "rgb" else (1,)) or not np.all(np.isfinite(values)) \
-                    or np.any(values < p.lower) or np.any(values > p.upper):
-                raise ValueError(f"region {region!r}: {key} = {value!r} is outside [{p.lower}, {p.upper}] "
-                                 f"or not a{' colour' if p.kind == 'rgb' else ' number'}")
-            merged[key] = ([float(v) for v in np.broadcast_to(values, 3)] if p.kind == "rgb" else float(values[0]))
-        missing = [name for name in known if name not in merged]
+        if "diffuse_reflectance" in params:
+            raise ValueError(f"region {region!r}: the diffuse reflectance is the albedo map, not a parameter")
+    # the models' own validation: names, finiteness, ranges, lobes (Lafortune's cxy_2, ...)
+    merged = {region: dict(truth["regions"].get(region, truth["regions"]["skin"]), **params)
+              for region, params in regions.items()}
+    checked = brdf.validate_brdf({"model": model, "options": dict(truth["options"], **overrides.get("options", {})),
+                                  "regions": {**merged, "skin": merged.get("skin", truth["regions"]["skin"])}})
+    instance = brdf.model(model, **checked["options"])
+    for region in regions:
+        missing = [p.name for p in instance.specular_parameters() if p.name not in merged[region]]
         if missing:
-            raise ValueError(f"region {region!r}: {model} with {lobes} lobes needs {', '.join(missing)}")
-        truth["regions"][region] = merged
-    truth["options"] = options
+            raise ValueError(f"region {region!r}: {model} with {len(instance.lobe_scales())} lobes needs "
+                             f"{', '.join(missing)}")
+        truth["regions"][region] = checked["regions"][region]
+    truth["options"] = checked["options"]
     return truth
 
 
