@@ -66,6 +66,10 @@ class BRDFEstimate:
     measurements : tuple of str
     seconds : dict
         Wall time of each step: ``samples``, ``fit``, ``refine``, ``total``.
+    refinement : dict or None
+        How the fit was refined by differentiable rendering
+        (:func:`mifaces.reflectance.refine.refine_estimate`), with its image
+        loss before and after; None if it was not.
     """
 
     model: str
@@ -76,6 +80,7 @@ class BRDFEstimate:
     samples: int
     measurements: tuple[str, ...]
     seconds: dict = field(default_factory=dict)
+    refinement: dict | None = None
 
     @property
     def resolution(self) -> int:
@@ -94,7 +99,7 @@ class BRDFEstimate:
                                for k in FIT_KEYS} for name, fit in self.fits.items()},
                 "samples": int(self.samples), "resolution": self.resolution,
                 "measurements": list(self.measurements), "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
-                "albedo": FILES["albedo"]}
+                "albedo": FILES["albedo"], "refinement": self.refinement}
 
 
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
