@@ -90,3 +90,60 @@ def test_loss_gradient_matches_finite_differences(index):
     print(index, gradient, difference)  # noqa: T201
     assert abs(gradient) > 1e-4  # the loss depends on the parameter here
     assert gradient == pytest.approx(difference, rel=FD_RTOL)
+
+
+def test_albedo_correction_interpolates_bilinearly():
+    mifaces.set_variant("llvm_ad_rgb")
+    rng = np.random.default_rng(0)
+    base = rng.uniform(0.2, 0.6, (16, 16, 3)).astype(np.float32)
+    correction = AlbedoCorrection(base, cell=4)
+    assert np.allclose(np.array(correction.albedo(mi.TensorXf(correction.start()))), base, atol=1e-6)
+    # a correction linear along the rows of the 4 x 4 grid is linear between cell centres
+    grid = np.repeat(np.linspace(-0.3, 0.3, 4)[:, None, None], 4, axis=1).repeat(3, axis=2).astype(np.float32)
+    albedo = np.array(correction.albedo(mi.TensorXf(grid)))
+    rows = (np.arange(16) + 0.5) / 4 - 0.5  # texel centres in cell coordinates
+    expected = np.interp(rows, np.arange(4), np.linspace(-0.3, 0.3, 4))
+    assert np.allclose(np.log(albedo / base)[:, 5, 1], expected, atol=1e-5)
+
+
+@pytest.fixture(scope="module")
+def fitted(small_capture):
+    from mifaces.capture import load_capture
+    from mifaces.geometry import load_geometry
+    from mifaces.reflectance import fit_brdf
+
+    capture = load_capture(small_capture("refine", measurements=2, resolution=(64, 64), spp=8,
+                                         albedo_resolution=64, seed=4))
+    face, shapes = load_geometry(capture, "ground-truth")
+    with pytest.warns(UserWarning):
+        estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, resolution=64, progress=False)
+    return capture, face, shapes, estimate
+
+
+def test_refinement_reuses_its_kernels_and_records_itself(fitted):
+    capture, face, shapes, estimate = fitted
+    schedule = RefineSchedule(iterations=6, spp=2, evaluation_spp=4)
+    refined = refine_estimate(estimate, capture, shapes, face, schedule, progress=False)
+    record = refined.refinement
+    assert record["photographs"] == ["m00", "m01"]
+    assert "skin" in record["regions"] and record["lamp_radius_mm"] is None
+    assert np.isfinite(record["loss_before"]) and np.isfinite(record["loss_after"])
+    # after two passes over the photographs the kernels come from the cache: nothing compiled per step
+    assert [h[4] for h in record["history"][4:]] == [0, 0]
+    assert refined.to_json()["refinement"]["schedule"]["spp"] == 2
+    assert estimate.refinement is None and estimate.to_json()["refinement"] is None
+    changed = [r for r in record["regions"] if refined.fits[r].params != estimate.fits[r].params]
+    assert changed == record["regions"]
+    assert refined.albedo.albedo.shape == estimate.albedo.albedo.shape
+    assert not np.array_equal(refined.albedo.albedo, estimate.albedo.albedo)
+
+
+def test_a_lamp_of_finite_size_lights_the_scene(fitted):
+    capture, face, shapes, estimate = fitted
+    schedule = RefineSchedule(iterations=1, spp=2, evaluation_spp=2)
+    capture = dataclasses.replace(capture, metadata={**capture.metadata, "lamp_radius_mm": 120.0})
+    refined = refine_estimate(estimate, capture, shapes, face, schedule, progress=False)
+    assert refined.refinement["lamp_radius_mm"] == 120.0
+    point = refine_estimate(estimate, fitted[0], shapes, face, schedule, progress=False)
+    # a sphere of 120 mm at 1.5 m lights the face almost as the point does
+    assert refined.refinement["loss_before"] == pytest.approx(point.refinement["loss_before"], rel=0.1)

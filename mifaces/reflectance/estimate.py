@@ -39,6 +39,7 @@ from ..render import FaceScene
 from .diffuse import DiffuseMap, refine_diffuse
 from .fitting import RegionFit, SubsetSchedule, fit_regions
 from .io import FILES, write_estimate
+from .refine import RefineSchedule, refine_estimate
 from .samples import ReflectanceSamples, capture_samples
 
 #: Fit statistics stored per region under ``brdf.json``'s ``"fit"``.
@@ -105,7 +106,7 @@ class BRDFEstimate:
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
              resolution: int = 512, lobes: int = 1, options: dict | None = None, fixed: dict | None = None,
              schedule: SubsetSchedule | None = None, samples: ReflectanceSamples | None = None, measurements=None,
-             out=None, seed: int = 0, progress: bool = True) -> BRDFEstimate:
+             out=None, seed: int = 0, progress: bool = True, refine: bool | RefineSchedule = False) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture.
 
     Parameters
@@ -134,6 +135,10 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         Fit to these measurements only (default: all with geometry).
     out : path, optional
         Write the result there (:func:`mifaces.reflectance.io.write_estimate`).
+    refine : bool or RefineSchedule
+        Refine the fit by differentiable rendering against the photographs
+        (:func:`mifaces.reflectance.refine.refine_estimate`, with this schedule
+        or the default one).
 
     Returns
     -------
@@ -174,6 +179,10 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
                             measurements=tuple(samples.measurement_names),
                             seconds={"samples": t_samples - t0, "fit": t_fit - t_samples, "refine": t_end - t_fit,
                                      "total": t_end - t0})
+    if refine:
+        estimate = refine_estimate(estimate, capture, shapes, face, None if refine is True else refine, seed=seed,
+                                   progress=progress)
+        estimate.seconds["total"] = time.perf_counter() - t0
     if out is not None:
         first = next(m for m in capture.measurements if m.name == estimate.measurements[0])
         lamp = capture.light(first.light)

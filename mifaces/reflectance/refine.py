@@ -103,13 +103,13 @@ class RefineSchedule:
     ``validation/refine.py`` (``validation/results/refine.json``).
     """
 
-    iterations: int = 48
+    iterations: int = 72
     spp: int = 4
     downsample: int = 1
     max_depth: int = 3
     learning_rate: float = 0.05
     albedo_learning_rate: float | None = 0.02
-    albedo_cell: int = 8
+    albedo_cell: int = 4
     decay: float = 0.1
     epsilon: float = 0.02
     evaluation_spp: int = 16
@@ -447,8 +447,8 @@ def _optimizer(problem: RefineProblem, schedule: RefineSchedule):
 
 
 def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedule: RefineSchedule | None = None, *,
-                    lamp_radius: float | None = None, measurements=None, seed: int = 0,
-                    progress: bool = True) -> BRDFEstimate:
+                    lamp_radius: float | None = None, measurements=None, seed: int = 0, progress: bool = True,
+                    callback=None) -> BRDFEstimate:
     """Refine a texture-space fit by differentiable rendering against the photographs.
 
     Parameters
@@ -469,6 +469,10 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
     seed : int
         Monte Carlo seeds derive from it.
     progress : bool
+    callback : callable, optional
+        Called after each step as ``callback(iteration, seconds, estimate)``,
+        ``seconds`` since the start, ``estimate()`` giving the estimate at
+        that step (for error-against-time curves).
 
     Returns
     -------
@@ -504,6 +508,8 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
             dr.eval()
             history.append([round(time.perf_counter() - t, 4), photo.name, float(loss[0]), *_kernels()])
             bar.set_postfix_str(f"loss {float(loss[0]):.4g}")
+            if callback is not None:
+                callback(it + 1, time.perf_counter() - t0, lambda: problem.estimate_of(opt, None))
     t_iterate = time.perf_counter()
     after = problem.total_loss(opt, schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
     t_end = time.perf_counter()
