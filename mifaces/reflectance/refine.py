@@ -16,7 +16,7 @@ where I_k is the path-traced render of measurement k (its face mesh, its
 camera, its light, the per-region plugins with parameters θ over the albedo
 texture ρ_d), J_k the photograph (s = s_white/π puts it in the renderer's
 units, eq. 4 with the white target's scale), M_k the pixels the face covers
-(eroded by one pixel at silhouettes and shadow-free of saturation), μ_k the
+(eroded by one pixel at silhouettes, saturated pixels left out), μ_k the
 photograph's mean over M_k and ψ_ε(r) = sqrt(r² + ε²) - ε the Charbonnier
 penalty (quadratic below ε, linear above: misregistered pixels cannot
 dominate). Gradients come from Dr.Jit's reverse mode through Mitsuba's path
