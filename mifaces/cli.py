@@ -172,12 +172,14 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
               help="Lafortune lobes.")
 @click.option("--face-model", default=None, help="Face model of the geometry (default: the one it names).")
 @click.option("--force", is_flag=True, help="Replace the fitted BRDF in --out.")
+@click.option("--refine/--no-refine", default=default(fit_brdf_model, "refine"), show_default=True,
+              help="Refine the fit by differentiable rendering against the photographs.")
 def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolution: int, lobes: int,
-             face_model: str | None, force: bool) -> None:
+             face_model: str | None, force: bool, refine: bool) -> None:
     """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
     check_result_target(out_dir, BRDF_KIND, force)
     estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, resolution=resolution, lobes=lobes,
-                   out=out_dir, force=force)
+                   out=out_dir, force=force, refine=refine)
     click.echo(f"fitted {estimate.model} to {estimate.samples} samples of {len(estimate.measurements)} "
                f"photographs in {estimate.seconds['total']:.1f} s")
     for name, fit_ in estimate.fits.items():
@@ -202,10 +204,14 @@ def _short(value) -> str:
               help="Fit the face model to each photograph, or use a simulated capture's true shapes.")
 @click.option("--resolution", default=default(measure_capture, "resolution"), show_default=True,
               type=click.IntRange(8, MAX_TEXTURE), help="Texture resolution R.")
-def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int) -> None:
+@click.option("--refine/--no-refine", default=default(measure_capture, "refine"), show_default=True,
+              help="Refine each fit by differentiable rendering against the photographs.")
+def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int,
+            refine: bool) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
     check_writable(out_dir)
-    report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution)
+    report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution,
+                             refine=refine)
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")

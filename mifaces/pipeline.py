@@ -84,7 +84,8 @@ def novel_point_light(capture, centre: np.ndarray) -> np.ndarray:
 
 
 def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resolution: int = 512,
-            shape_iterations: float | None = None, spp: int = 64, face_model="builtin", progress: bool = True) -> dict:
+            shape_iterations: float | None = None, spp: int = 64, face_model="builtin", progress: bool = True,
+            refine: bool = False) -> dict:
     """Measure the reflectance of the face in ``capture``, writing everything to ``out``.
 
     The stages hand their results to each other in memory: the face model is
@@ -114,6 +115,9 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         Samples per pixel of the report's renders.
     face_model : str, path or MorphableModel
         The face model fitted to the photographs (``geometry='fitted'``).
+    refine : bool
+        Refine each fit by differentiable rendering against the photographs
+        (``fit_brdf(..., refine=True)``).
 
     Returns
     -------
@@ -146,7 +150,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     panels = []
     for model in models:
         entry, panel = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, resolution, spp,
-                                  timings, progress)
+                                  timings, progress, refine)
         report["models"][model] = entry
         panels.append(panel)
     timings["total"] = time.perf_counter() - t0
@@ -191,14 +195,14 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
 
 
 def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, scene: FaceScene, first,
-               novel, resolution: int, spp: int, timings: dict, progress: bool):
+               novel, resolution: int, spp: int, timings: dict, progress: bool, refine: bool = False):
     """Fit one BRDF model, write it, render it in the first photograph's place
     and under the novel light; the report's entry and picture row."""
     t = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
-                            progress=progress)
+                            progress=progress, refine=refine)
     lamp = capture.light(first.light)
     write_estimate(estimate, out / "brdf" / model, scene, capture.camera, lamp.position, lamp.intensity,
                    light_direction=lamp.direction, force=True)  # measure's own folder

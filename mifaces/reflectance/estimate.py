@@ -39,6 +39,7 @@ from ..render import FaceScene
 from .diffuse import DiffuseMap, refine_diffuse
 from .fitting import RegionFit, SubsetSchedule, fit_regions
 from .io import FILES, write_estimate
+from .refine import RefineSchedule, refine_estimate
 from .samples import ReflectanceSamples, capture_samples
 
 #: Fit statistics stored per region under ``brdf.json``'s ``"fit"``.
@@ -66,6 +67,10 @@ class BRDFEstimate:
     measurements : tuple of str
     seconds : dict
         Wall time of each step: ``samples``, ``fit``, ``refine``, ``total``.
+    refinement : dict or None
+        How the fit was refined by differentiable rendering
+        (:func:`mifaces.reflectance.refine.refine_estimate`), with its image
+        loss before and after; None if it was not.
     """
 
     model: str
@@ -76,6 +81,7 @@ class BRDFEstimate:
     samples: int
     measurements: tuple[str, ...]
     seconds: dict = field(default_factory=dict)
+    refinement: dict | None = None
 
     @property
     def resolution(self) -> int:
@@ -94,13 +100,14 @@ class BRDFEstimate:
                                for k in FIT_KEYS} for name, fit in self.fits.items()},
                 "samples": int(self.samples), "resolution": self.resolution,
                 "measurements": list(self.measurements), "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
-                "albedo": FILES["albedo"]}
+                "albedo": FILES["albedo"], "refinement": self.refinement}
 
 
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
              resolution: int = 512, lobes: int = 1, options: dict | None = None, fixed: dict | None = None,
              schedule: SubsetSchedule | None = None, samples: ReflectanceSamples | None = None, measurements=None,
-             out=None, seed: int = 0, progress: bool = True, force: bool = False) -> BRDFEstimate:
+             out=None, seed: int = 0, progress: bool = True, force: bool = False,
+             refine: bool | RefineSchedule = False) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture.
 
     Parameters
@@ -131,6 +138,10 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         Write the result there (:func:`mifaces.reflectance.io.write_estimate`).
     force : bool
         Replace a fitted BRDF that ``out`` holds.
+    refine : bool or RefineSchedule
+        Refine the fit by differentiable rendering against the photographs
+        (:func:`mifaces.reflectance.refine.refine_estimate`, with this schedule
+        or the default one).
 
     Returns
     -------
@@ -171,6 +182,10 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
                             measurements=tuple(samples.measurement_names),
                             seconds={"samples": t_samples - t0, "fit": t_fit - t_samples, "refine": t_end - t_fit,
                                      "total": t_end - t0})
+    if refine:
+        estimate = refine_estimate(estimate, capture, shapes, face, None if refine is True else refine, seed=seed,
+                                   progress=progress)
+        estimate.seconds["total"] = time.perf_counter() - t0
     if out is not None:
         first = next(m for m in capture.measurements if m.name == estimate.measurements[0])
         lamp = capture.light(first.light)

@@ -1,0 +1,539 @@
+"""Analysis by synthesis through Mitsuba: the texture-space fit refined by
+differentiating renders of the fitted face against the photographs.
+
+The texture-space fit (:func:`mifaces.reflectance.estimate.fit_brdf`, the
+paper's method, sec. 4.3-5.3) reads each texel as if it were lit by the
+light alone and seen through an ideal pixel: interreflection (eye sockets,
+nostrils, under the lips), a lamp of finite size, and the resampling and
+pixel footprint that blur thin curved regions (lips, eyebrows, hair) are not
+modelled, so small regions' highlights read too weak. :func:`refine_estimate`
+starts from that fit and minimises the difference between Mitsuba renders of
+the fitted face and the photographs themselves:
+
+    E(θ, ρ_d) = Σ_k 1/|M_k| Σ_{p ∈ M_k} Σ_c ψ_ε((I_k(θ, ρ_d)[p, c] - s J_k[p, c]) / μ_k),
+
+where I_k is the path-traced render of measurement k (its face mesh, its
+camera, its light, the per-region plugins with parameters θ over the albedo
+texture ρ_d), J_k the photograph (s = s_white/π puts it in the renderer's
+units, eq. 4 with the white target's scale), M_k the pixels the face covers
+(eroded by one pixel at silhouettes, saturated pixels left out), μ_k the
+photograph's mean over M_k and ψ_ε(r) = sqrt(r² + ε²) - ε the Charbonnier
+penalty (quadratic below ε, linear above: misregistered pixels cannot
+dominate). Gradients come from Dr.Jit's reverse mode through Mitsuba's path
+replay backpropagation (``prb``; Vicini et al., "Path Replay
+Backpropagation", SIGGRAPH 2021); the steps are Adam's, one photograph per
+step in turn. Parameters stay inside their ranges (``Parameter.lower`` and
+``upper``) by the reparameterisation of the texture-space fit
+(:class:`~mifaces.reflectance.parameters.ParameterSpace`, a sigmoid or its
+logarithmic form); the albedo, optionally a variable too, by a smooth
+multiplicative correction (:class:`AlbedoCorrection`).
+
+Each photograph's scene is the one face-scene builder's
+(:meth:`mifaces.render.FaceScene.scene`) with the differentiable integrator,
+a film cropped to the face, and the light of the capture: a point light, a
+directional light, or, where the capture states ``lamp_radius_mm`` (in its
+``metadata``) or the caller gives ``lamp_radius``, a spherical area light of
+that radius and the same radiant intensity. No environment, no other
+geometry. The scenes are built once; each step writes the parameters
+(opaque, so the kernels compiled on the first pass over the photographs are
+reused) and renders.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+from scipy.ndimage import binary_erosion
+
+from .. import brdf as brdf_models
+from ..model.regions import REGIONS
+from ..progress import progress as progress_bar
+from ..render import FaceScene, mitsuba_sensor
+from .parameters import ParameterSpace
+
+if TYPE_CHECKING:
+    from .estimate import BRDFEstimate
+
+#: Key of a capture's ``metadata`` that gives the lamp's radius (mm).
+LAMP_RADIUS_KEY = "lamp_radius_mm"
+#: Fewest pixels (over all photographs, at the render resolution) for a region's parameters to be variables.
+MIN_PIXELS = 40
+
+
+@dataclass(frozen=True)
+class RefineSchedule:
+    """How the refinement runs.
+
+    Attributes
+    ----------
+    iterations : int
+        Adam steps; each renders one photograph (in turn) forward and backward.
+    spp : int
+        Samples per pixel of each render (the backward pass uses as many,
+        with a decorrelated seed).
+    downsample : int
+        Render at 1/``downsample`` of the camera's resolution against the
+        photograph averaged over ``downsample``² blocks.
+    max_depth : int
+        Path length: 2 direct light only, 3 one interreflection, ...
+    learning_rate : float
+        Adam's step in the unconstrained parameters (about the relative change
+        per step of a parameter in logarithmic form).
+    albedo_learning_rate : float or None
+        With a number, the albedo is a variable too (:class:`AlbedoCorrection`),
+        with this step (about the relative change per step); None keeps the
+        texture-space albedo.
+    albedo_cell : int
+        Texels per side of a cell of the albedo's correction grid.
+    decay : float
+        The learning rates fall from their value to ``decay`` times it over
+        the iterations (half a cosine).
+    epsilon : float
+        ε of the Charbonnier penalty, relative to the photograph's mean.
+    evaluation_spp : int
+        Samples per pixel of the loss reported before and after.
+
+    The defaults come from the error-against-time measurement of
+    ``validation/refine.py`` (``validation/results/refine.json``).
+    """
+
+    iterations: int = 72
+    spp: int = 4
+    downsample: int = 1
+    max_depth: int = 3
+    learning_rate: float = 0.05
+    albedo_learning_rate: float | None = 0.02
+    albedo_cell: int = 4
+    decay: float = 0.1
+    epsilon: float = 0.02
+    evaluation_spp: int = 16
+
+    def __post_init__(self):
+        for name in ("iterations", "spp", "downsample", "evaluation_spp", "albedo_cell"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"RefineSchedule.{name} must be >= 1, got {getattr(self, name)!r}")
+        if self.max_depth < 2:
+            raise ValueError(f"RefineSchedule.max_depth must be >= 2 (direct light), got {self.max_depth!r}")
+
+
+def _decayed(rate: float, iteration: int, schedule: RefineSchedule) -> float:
+    """``rate`` at ``iteration``: from ``rate`` down to ``decay`` times it by half a cosine."""
+    t = iteration / max(schedule.iterations - 1, 1)
+    return rate * (schedule.decay + (1 - schedule.decay) * 0.5 * (1 + np.cos(np.pi * t)))
+
+
+class AlbedoCorrection:
+    """The albedo as a variable: the texture-space albedo ``base`` (R, R, 3)
+    times exp(c), c a correction grid of (R/cell)² RGB cells interpolated
+    bilinearly (cell centres at their texels' centre), capped at 1.
+
+    Per-texel detail stays the texture-space fit's (which it has from every
+    sample of the texel); the correction takes out the smooth biases the
+    texture-space reading leaves (light interreflected in cavities, the blur of
+    thin regions, the albedo that absorbs a mis-fitted highlight), from many
+    pixels per cell rather than the few of a texel.
+    """
+
+    def __init__(self, base: np.ndarray, cell: int):
+        r = base.shape[0]
+        self.shape = base.shape
+        self.cells = max(1, -(-r // cell))
+        self.base = mi.Float(np.ascontiguousarray(base, np.float32).ravel())
+        x = (np.arange(r) + 0.5) * self.cells / r - 0.5  # texel centres in cell coordinates
+        lo = np.clip(np.floor(x).astype(np.int64), 0, self.cells - 1)
+        hi = np.clip(lo + 1, 0, self.cells - 1)
+        t = np.clip(x - lo, 0.0, 1.0)
+        self.taps = []
+        for rows, wr in ((lo, 1 - t), (hi, t)):
+            for cols, wc in ((lo, 1 - t), (hi, t)):
+                index = ((rows[:, None, None] * self.cells + cols[None, :, None]) * 3 + np.arange(3)).ravel()
+                weight = np.broadcast_to((wr[:, None] * wc[None, :])[..., None], (r, r, 3)).ravel()
+                self.taps.append((mi.UInt32(index.astype(np.uint32)), mi.Float(weight.astype(np.float32))))
+
+    def start(self) -> np.ndarray:
+        """The correction that leaves the albedo as it is: zeros (cells, cells, 3)."""
+        return np.zeros((self.cells, self.cells, 3), np.float32)
+
+    def albedo(self, correction) -> mi.TensorXf:
+        """The albedo texture (R, R, 3) of ``correction`` (a TensorXf of
+        :meth:`start`'s shape), differentiable."""
+        c = correction.array
+        log_scale = sum(w * dr.gather(mi.Float, c, i) for i, w in self.taps)
+        return mi.TensorXf(dr.minimum(self.base * dr.exp(log_scale), 1.0), self.shape)
+
+
+def image_loss(image, target, weight, epsilon: float):
+    """The robust image loss of one photograph (the module docstring's E_k).
+
+    Parameters
+    ----------
+    image, target : mi.TensorXf (H, W, 3)
+        Render and photograph, both divided by the photograph's mean μ_k over
+        the mask (the residual is relative).
+    weight : mi.TensorXf (H, W, 3)
+        1/|M_k| on the masked pixels, 0 elsewhere.
+    epsilon : float
+        ε of ψ_ε(r) = sqrt(r² + ε²) - ε.
+
+    Returns
+    -------
+    mi.Float
+        Σ weight · ψ_ε(image - target), differentiable in ``image``.
+    """
+    r = image - target
+    return dr.sum(weight * (dr.sqrt(r * r + epsilon * epsilon) - epsilon), axis=None).array
+
+
+@dataclass(eq=False)
+class _Photograph:
+    """One measurement's scene, photograph and mask, at the render resolution."""
+
+    name: str
+    scene: mi.Scene
+    params: mi.SceneParameters
+    target: mi.TensorXf
+    weight: mi.TensorXf
+    #: 1 / the photograph's mean over the mask (μ_k)
+    scale: float
+    #: scene parameter key -> (region, parameter name)
+    keys: dict
+    albedo_keys: list
+    #: region -> covered pixels
+    pixels: dict
+
+
+def _box_mean(a: np.ndarray, k: int) -> np.ndarray:
+    """``a`` (H, W, ...) averaged over k × k blocks (H, W cut to multiples of k)."""
+    h, w = a.shape[0] // k * k, a.shape[1] // k * k
+    a = a[:h, :w]
+    return a.reshape(h // k, k, w // k, k, *a.shape[2:]).mean(axis=(1, 3))
+
+
+def coverage(scene: mi.Scene, camera, region_map: np.ndarray) -> np.ndarray:
+    """Region label (``region_map`` at the texture coordinate the pixel centre's
+    ray hits) of each pixel of ``camera``'s image of ``scene``; 0 where the
+    ray hits nothing. (H, W) int."""
+    ys, xs = np.mgrid[0:camera.height, 0:camera.width]
+    directions = camera.pixel_rays(np.stack([xs, ys], -1).reshape(-1, 2)) @ camera.rotation  # to world: R^T d
+    origin = [mi.Float(np.full(len(directions), c, np.float32)) for c in camera.position]
+    ray = mi.Ray3f(mi.Point3f(*origin), mi.Vector3f(np.ascontiguousarray(directions.T, np.float32)))
+    si = scene.ray_intersect(ray)
+    hit = np.asarray(si.is_valid())
+    uv = np.asarray(si.uv).T
+    r = region_map.shape[0]
+    col = np.clip((uv[:, 0] * r).astype(int), 0, r - 1)
+    row = np.clip((uv[:, 1] * r).astype(int), 0, r - 1)
+    labels = np.where(hit, np.maximum(region_map[row, col], 1), 0)
+    return labels.reshape(camera.height, camera.width)
+
+
+def _light(capture, measurement, lamp_radius: float | None) -> tuple[dict, dict | None]:
+    """The keyword arguments of :meth:`FaceScene.scene` for the measurement's
+    light, and the sphere lamp that replaces its point light (or None)."""
+    light = capture.light(measurement.light)
+    if light.directional:
+        return {"light_direction": light.direction, "intensity": light.intensity}, None
+    if light.position is None:
+        raise ValueError(f"measurement {measurement.name!r}: light {light.name!r} has no position")
+    kwargs = {"light_position": light.position, "intensity": light.intensity}
+    if not lamp_radius:
+        return kwargs, None
+    radiance = np.asarray(light.intensity, np.float64) / (np.pi * lamp_radius ** 2)  # same intensity, I = L π r²
+    return kwargs, {"type": "sphere", "center": [float(x) for x in light.position], "radius": float(lamp_radius),
+                    "emitter": {"type": "area", "radiance": {"type": "rgb", "value": radiance.tolist()}}}
+
+
+class RefineProblem:
+    """The photographs of a capture as differentiable renders of a fitted face.
+
+    Parameters
+    ----------
+    estimate : BRDFEstimate
+        The texture-space fit to start from.
+    capture : Capture
+    shapes : mapping
+        Measurement name -> (V, 3) world vertices of ``face_model``.
+    face_model : MorphableModel
+    schedule : RefineSchedule
+    lamp_radius : float or None
+        Radius (mm) of a spherical lamp in place of each point light.
+    measurements : sequence of str, optional
+        The photographs to use (default: those of the estimate).
+
+    Attributes
+    ----------
+    photographs : list of _Photograph
+    spaces : dict
+        Region -> :class:`ParameterSpace` of its glossy parameters (diffuse and
+        per-region fixed parameters held).
+    variables : dict
+        Name (``<region>.<k>``, ``albedo``) -> start value of each unconstrained variable.
+    """
+
+    def __init__(self, estimate: BRDFEstimate, capture, shapes, face_model, schedule: RefineSchedule,
+                 lamp_radius: float | None = None, measurements=None):
+        self.estimate, self.schedule = estimate, schedule
+        self.model = brdf_models.model(estimate.model, **estimate.options)
+        brdf, albedo = estimate.to_json(), estimate.albedo.albedo
+        names = list(measurements or estimate.measurements)
+        scale = (capture.white_target.reflectance_scale() / np.pi if capture.white_target is not None
+                 else np.ones(3))
+        self.photographs = [self._photograph(capture, m, shapes[m.name], face_model, brdf, albedo, scale,
+                                             lamp_radius)
+                            for m in capture.measurements if m.name in names and m.name in shapes]
+        if not self.photographs:
+            raise ValueError(f"no photograph to refine on: none of {names} has a shape")
+        pixels = {}
+        for photo in self.photographs:
+            for region, n in photo.pixels.items():
+                pixels[region] = pixels.get(region, 0) + n
+        self.pixels = pixels
+        self.spaces, self.variables = {}, {}
+        for region, fit in estimate.fits.items():
+            if pixels.get(region, 0) < MIN_PIXELS:
+                continue
+            fixed = {k: v for k, v in fit.params.items()
+                     if k not in {p.name for p in self.model.specular_parameters()}
+                     or k in self.model.fixed_in_region(region)}
+            space = ParameterSpace(self.model, fixed=fixed)
+            if not len(space):
+                continue
+            self.spaces[region] = space
+            for i, x in enumerate(space.vector(fit.params)):
+                self.variables[f"{region}.{i}"] = float(x)
+        self.albedo = None
+        if schedule.albedo_learning_rate is not None:
+            self.albedo = AlbedoCorrection(albedo, schedule.albedo_cell)
+            self.variables["albedo"] = self.albedo.start()
+
+    def _photograph(self, capture, m, vertices, face_model, brdf, albedo, scale, lamp_radius) -> _Photograph:
+        k = self.schedule.downsample
+        camera = capture.camera
+        kwargs, lamp = _light(capture, m, lamp_radius)
+        description = FaceScene(face_model, vertices).scene(brdf, albedo, camera, **kwargs)
+        labels = coverage(mi.load_dict({"type": "scene", **{key: v for key, v in description.items()
+                                                          if key.startswith("face_")}}),
+                          camera, self.estimate.region_map)
+        covered = binary_erosion(labels > 0, iterations=1) & ~m.image.saturated
+        # the render's pixels: those whose every photograph pixel is covered
+        low_mask = _box_mean(covered.astype(np.float64), k) > 0.999
+        if not low_mask.any():
+            raise ValueError(f"measurement {m.name!r}: the face covers no unsaturated pixel")
+        rows, cols = np.nonzero(low_mask)
+        r0, r1, c0, c1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+        target = _box_mean(m.image.pixels * scale, k)[r0:r1, c0:c1]
+        mask = low_mask[r0:r1, c0:c1]
+        mean = float(target[mask].mean())
+        weight = np.repeat(mask[..., None], 3, axis=2) / (3.0 * mask.sum())
+        sensor = mitsuba_sensor(camera, self.schedule.spp)
+        sensor["film"] = dict(sensor["film"], width=camera.width // k, height=camera.height // k,
+                              crop_offset_x=int(c0), crop_offset_y=int(r0), crop_width=int(c1 - c0),
+                              crop_height=int(r1 - r0), rfilter={"type": "gaussian", "stddev": 0.5 / k}
+                              if k == 1 else {"type": "box"})
+        description["sensor"] = sensor
+        description["integrator"] = {"type": "prb", "max_depth": int(self.schedule.max_depth), "hide_emitters": True}
+        if lamp is not None:
+            description["light"] = lamp
+        scene = mi.load_dict(description)
+        params = mi.traverse(scene)
+        free = {p.name for p in self.model.specular_parameters()}
+        keys, albedo_keys = {}, []
+        for key in params.keys():
+            parts = key.split(".")
+            if parts[0].startswith("face_") and len(parts) > 2 and parts[1] == "bsdf":
+                region = parts[0][len("face_"):].rsplit("_", 1)[0]
+                if parts[2] in free:
+                    keys[key] = (region, parts[2])
+                elif parts[2:] == ["diffuse_reflectance", "data"]:
+                    albedo_keys.append(key)
+        low_labels = labels[: labels.shape[0] // k * k, : labels.shape[1] // k * k][::k, ::k][r0:r1, c0:c1]
+        names = {label: name for name, label in REGIONS.items()}
+        pixels = {}
+        for label, n in zip(*np.unique(low_labels[mask], return_counts=True)):
+            region = names.get(int(label), "skin")
+            pixels[region] = pixels.get(region, 0) + int(n)
+        return _Photograph(m.name, scene, params, mi.TensorXf(np.ascontiguousarray(target / mean, np.float32)),
+                           mi.TensorXf(np.ascontiguousarray(weight, np.float32)), 1.0 / mean, keys, albedo_keys,
+                           pixels)
+
+    # -- the parameters as Dr.Jit values of the unconstrained variables --------
+    def values(self, variables: dict) -> dict:
+        """Region -> {parameter: Dr.Jit value} (differentiable in ``variables``)."""
+        out = {}
+        for region, space in self.spaces.items():
+            u = [variables[f"{region}.{i}"] for i in range(len(space))]
+            out[region] = space.drjit_params(u)
+        return out
+
+    def set(self, photo: _Photograph, variables: dict) -> None:
+        """Write the parameters of ``variables`` into ``photo``'s scene."""
+        values = self.values(variables)
+        for key, (region, name) in photo.keys.items():
+            if region in values:
+                photo.params[key] = values[region][name]
+        if self.albedo is not None:
+            texture = self.albedo.albedo(variables["albedo"])
+            for key in photo.albedo_keys:
+                photo.params[key] = texture
+        photo.params.update()
+
+    def loss(self, photo: _Photograph, variables: dict, spp: int, seed: int):
+        """E_k of ``photo`` (:func:`image_loss`) rendered with ``spp`` samples:
+        a differentiable mi.Float."""
+        self.set(photo, variables)
+        image = mi.render(photo.scene, photo.params, spp=spp, seed=seed, seed_grad=seed + 1)
+        return image_loss(image * photo.scale, photo.target, photo.weight, self.schedule.epsilon)
+
+    def total_loss(self, variables: dict, spp: int, seed: int = 1 << 20) -> float:
+        """Mean E_k over the photographs (no gradients)."""
+        with dr.suspend_grad():
+            return float(np.mean([self.loss(p, variables, spp, seed + 2 * i)[0]
+                                  for i, p in enumerate(self.photographs)]))
+
+    def estimate_of(self, variables: dict, refinement: dict) -> BRDFEstimate:
+        """The estimate with each refined region's parameters (and the albedo)
+        from ``variables``, and the ``refinement`` record."""
+        fits = dict(self.estimate.fits)
+        for region, space in self.spaces.items():
+            x = np.array([float(np.asarray(variables[f"{region}.{i}"])[0]) for i in range(len(space))])
+            params = dict(fits[region].params)
+            params.update({k: v for k, v in space.values(x).items() if k in params})
+            fits[region] = dataclasses.replace(fits[region], params=params)
+        albedo = self.estimate.albedo
+        if self.albedo is not None:
+            with dr.suspend_grad():
+                texture = np.asarray(self.albedo.albedo(variables["albedo"]), np.float32)
+            albedo = dataclasses.replace(albedo, albedo=texture)
+        return dataclasses.replace(self.estimate, fits=fits, albedo=albedo, refinement=refinement)
+
+
+class _kernel_history:
+    """Record Dr.Jit's kernel launches inside the ``with`` block."""
+
+    def __enter__(self):
+        self.was = dr.flag(dr.JitFlag.KernelHistory)
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        dr.kernel_history()  # clears it
+        return self
+
+    def __exit__(self, *exc):
+        dr.set_flag(dr.JitFlag.KernelHistory, self.was)
+
+
+def _kernels() -> tuple[int, int, float]:
+    """Kernels launched since the last call: count, how many were compiled
+    (not found in the cache), and their compile time in seconds."""
+    kernels = [k for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT]
+    compiled = [k for k in kernels if not k.get("cache_hit", False) and not k.get("cache_disk", False)]
+    seconds = sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in compiled) / 1000.0
+    return len(kernels), len(compiled), round(seconds, 4)
+
+
+def _optimizer(problem: RefineProblem, schedule: RefineSchedule):
+    opt = mi.ad.Adam(lr=schedule.learning_rate)
+    for name, value in problem.variables.items():
+        if name == "albedo":
+            opt[name] = mi.TensorXf(np.ascontiguousarray(value, np.float32))
+            opt.set_learning_rate({name: schedule.albedo_learning_rate})
+        else:
+            opt[name] = mi.Float(value)
+    return opt
+
+
+def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedule: RefineSchedule | None = None, *,
+                    lamp_radius: float | None = None, measurements=None, seed: int = 0, progress: bool = True,
+                    callback=None) -> BRDFEstimate:
+    """Refine a texture-space fit by differentiable rendering against the photographs.
+
+    Parameters
+    ----------
+    estimate : BRDFEstimate
+        The fit of :func:`mifaces.reflectance.estimate.fit_brdf` to start from.
+    capture : Capture
+    shapes : mapping
+        Measurement name -> (V, 3) world vertices (mm) of ``face_model``.
+    face_model : MorphableModel
+    schedule : RefineSchedule, optional
+    lamp_radius : float, optional
+        Radius (mm) of the lamp, a sphere of that size in place of each point
+        light; default the capture's ``metadata["lamp_radius_mm"]``, else a
+        point light.
+    measurements : sequence of str, optional
+        Photographs to refine on (default: those the estimate was fitted to).
+    seed : int
+        Monte Carlo seeds derive from it.
+    progress : bool
+    callback : callable, optional
+        Called after each step as ``callback(iteration, seconds, estimate)``,
+        ``seconds`` since the start, ``estimate()`` giving the estimate at
+        that step (for error-against-time curves).
+
+    Returns
+    -------
+    BRDFEstimate
+        With the refined glossy parameters per region seen by enough pixels
+        (and the albedo with ``schedule.albedo_learning_rate``), and
+        ``refinement``: the schedule, the loss before and after, the loss per
+        iteration, the regions refined, times and kernel launches.
+    """
+    schedule = schedule or RefineSchedule()
+    if lamp_radius is None:
+        lamp_radius = capture.metadata.get(LAMP_RADIUS_KEY)
+    t0 = time.perf_counter()
+    problem = RefineProblem(estimate, capture, shapes, face_model, schedule, lamp_radius, measurements)
+    opt = _optimizer(problem, schedule)
+    t_build = time.perf_counter()
+    with dr.suspend_grad():
+        start = {k: mi.TensorXf(opt[k]) if k == "albedo" else mi.Float(opt[k]) for k in problem.variables}
+    before = problem.total_loss(start, schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
+    t_before = time.perf_counter()
+    history = []
+    bar = progress_bar(range(schedule.iterations), desc="refining", unit="it", enabled=progress)
+    with _kernel_history():
+        for it in bar:
+            t = time.perf_counter()
+            photo = problem.photographs[it % len(problem.photographs)]
+            loss = problem.loss(photo, opt, schedule.spp, seed=seed * 7919 + 2 * it)
+            dr.backward(loss)
+            opt.step()
+            opt.set_learning_rate({name: _decayed(schedule.albedo_learning_rate if name == "albedo"
+                                                  else schedule.learning_rate, it + 1, schedule)
+                                   for name in problem.variables})
+            dr.eval()
+            history.append([round(time.perf_counter() - t, 4), photo.name, float(loss[0]), *_kernels()])
+            bar.set_postfix_str(f"loss {float(loss[0]):.4g}")
+            if callback is not None:
+                callback(it + 1, time.perf_counter() - t0, lambda: problem.estimate_of(opt, None))
+    t_iterate = time.perf_counter()
+    after = problem.total_loss(opt, schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
+    t_end = time.perf_counter()
+    first = len(problem.photographs)  # the first pass over the photographs compiles the kernels
+    refinement = {
+        "method": "prb",
+        "schedule": dataclasses.asdict(schedule),
+        "lamp_radius_mm": float(lamp_radius) if lamp_radius else None,
+        "photographs": [p.name for p in problem.photographs],
+        "regions": sorted(problem.spaces), "region_pixels": problem.pixels,
+        "loss_before": before, "loss_after": after,
+        "history_keys": ["seconds", "photograph", "loss", "launches", "compiled", "compile_seconds"],
+        "history": history,
+        "launches_per_iteration": float(np.mean([h[3] for h in history])),
+        "kernels_compiled": {"first_pass": int(sum(h[4] for h in history[:first])),
+                             "later": int(sum(h[4] for h in history[first:]))},
+        "seconds": {"build": t_build - t0, "loss_before": t_before - t_build, "iterations": t_iterate - t_before,
+                    "compile": float(sum(h[5] for h in history)),
+                    "first_pass": float(sum(h[0] for h in history[:first])),
+                    "per_iteration_after_first_pass": float(np.mean([h[0] for h in history[first:]]))
+                    if len(history) > first else None,
+                    "loss_after": t_end - t_iterate, "total": t_end - t0},
+    }
+    return problem.estimate_of(opt, refinement)
+
+
+__all__ = ["LAMP_RADIUS_KEY", "RefineSchedule", "RefineProblem", "image_loss", "coverage", "refine_estimate"]

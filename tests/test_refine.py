@@ -1,0 +1,149 @@
+"""Tests of mifaces.reflectance.refine: the gradient of the render loss
+against finite differences, the albedo correction, and a refinement run on a
+small simulated capture (kernels reused, record written)."""
+
+from __future__ import annotations
+
+import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
+
+import dataclasses
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mifaces import brdf as brdf_models
+from mifaces.reflectance.parameters import ParameterSpace
+from mifaces.reflectance.refine import AlbedoCorrection, RefineSchedule, image_loss, refine_estimate
+
+#: Relative tolerance of the reverse-mode gradient against central differences.
+FD_RTOL = 0.02
+MEAN_INVERSE = 1.0
+#: Samples per pixel of the renders (the backward pass samples other pixel positions than the
+#: primal: the two agree to Monte Carlo noise only).
+SPP = 1024
+#: Step of the central differences in the unconstrained variable.
+FD_STEP = 1e-2
+
+
+def _sphere_scene(spp: int = 16) -> mi.Scene:
+    """A Cook-Torrance sphere under a point light, 32 x 32, direct light only
+    (``max_depth`` 2: with a point light, which BSDF sampling never hits, a
+    pixel's value is then a smooth function of the parameters for a fixed
+    seed, so finite differences are exact up to float32 rounding)."""
+    return mi.load_dict({
+        "type": "scene", "integrator": {"type": "prb", "max_depth": 2},
+        "sensor": {"type": "perspective", "fov": 30,
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"},
+                            "pixel_format": "rgb"},
+                   "sampler": {"type": "independent", "sample_count": spp}},
+        "sphere": {"type": "sphere", "bsdf": {"type": "cooktorrance", "diffuse_reflectance": {"type": "rgb", "value": 0.3},
+                                              "specular_reflectance": {"type": "rgb", "value": 0.8},
+                                              "roughness": 0.3, "eta": 1.4}},
+        "light": {"type": "point", "position": [2.0, 2.0, 5.0], "intensity": {"type": "rgb", "value": 30.0}}})
+
+
+def _loss(scene, params, space, u, target, weight, seed):
+    """The refinement's image loss of the sphere with parameters from the
+    unconstrained ``u``; ``target`` is the photograph divided by its mean
+    over the sphere, as :class:`~mifaces.reflectance.refine.RefineProblem` does."""
+    values = space.drjit_params(u)
+    for name in ("specular_reflectance", "roughness"):
+        params[f"sphere.bsdf.{name}"] = values[name]
+    params.update()
+    image = mi.render(scene, params, spp=SPP, seed=seed, seed_grad=seed + 1)
+    return image_loss(image * MEAN_INVERSE, target, weight, 0.02)
+
+
+@pytest.mark.parametrize("index", [0, 3], ids=["specular_reflectance_red", "roughness"])
+def test_loss_gradient_matches_finite_differences(index):
+    mifaces.set_variant("llvm_ad_rgb")
+    scene = _sphere_scene()
+    params = mi.traverse(scene)
+    model = brdf_models.model("cooktorrance")
+    space = ParameterSpace(model, fixed={"diffuse_reflectance": [0.3] * 3, "eta": 1.4})
+    with dr.suspend_grad():
+        target = mi.render(scene, spp=64, seed=7)  # the "photograph": ρs 0.8, m 0.3
+    photo = np.array(target)
+    mask = photo.sum(axis=2, keepdims=True) > 0  # the sphere's pixels
+    global MEAN_INVERSE
+    MEAN_INVERSE = 1.0 / float(photo[np.repeat(mask, 3, axis=2)].mean())
+    target = mi.TensorXf(photo * MEAN_INVERSE)
+    weight = mi.TensorXf(np.repeat(mask, 3, axis=2).astype(np.float32) / (3 * mask.sum()))
+    x0 = space.vector({"specular_reflectance": [0.5, 0.6, 0.7], "roughness": 0.2})
+    u = [mi.Float(float(x)) for x in x0]
+    dr.enable_grad(u[index])
+    loss = _loss(scene, params, space, u, target, weight, seed=3)
+    dr.backward(loss)
+    gradient = float(dr.grad(u[index])[0])
+
+    def at(x):
+        with dr.suspend_grad():
+            v = [mi.Float(float(t)) for t in x]
+            return float(_loss(scene, params, space, v, target, weight, seed=3)[0])
+
+    step = np.zeros_like(x0)
+    step[index] = FD_STEP
+    difference = (at(x0 + step) - at(x0 - step)) / (2 * FD_STEP)
+    print(index, gradient, difference)  # noqa: T201
+    assert abs(gradient) > 1e-4  # the loss depends on the parameter here
+    assert gradient == pytest.approx(difference, rel=FD_RTOL)
+
+
+def test_albedo_correction_interpolates_bilinearly():
+    mifaces.set_variant("llvm_ad_rgb")
+    rng = np.random.default_rng(0)
+    base = rng.uniform(0.2, 0.6, (16, 16, 3)).astype(np.float32)
+    correction = AlbedoCorrection(base, cell=4)
+    assert np.allclose(np.array(correction.albedo(mi.TensorXf(correction.start()))), base, atol=1e-6)
+    # a correction linear along the rows of the 4 x 4 grid is linear between cell centres
+    grid = np.repeat(np.linspace(-0.3, 0.3, 4)[:, None, None], 4, axis=1).repeat(3, axis=2).astype(np.float32)
+    albedo = np.array(correction.albedo(mi.TensorXf(grid)))
+    rows = (np.arange(16) + 0.5) / 4 - 0.5  # texel centres in cell coordinates
+    expected = np.interp(rows, np.arange(4), np.linspace(-0.3, 0.3, 4))
+    assert np.allclose(np.log(albedo / base)[:, 5, 1], expected, atol=1e-5)
+
+
+@pytest.fixture(scope="module")
+def fitted(small_capture):
+    from mifaces.capture import load_capture
+    from mifaces.geometry import load_geometry
+    from mifaces.reflectance import fit_brdf
+
+    capture = load_capture(small_capture("refine", measurements=2, resolution=(64, 64), spp=8,
+                                         albedo_resolution=64, seed=4))
+    face, shapes = load_geometry(capture, "ground-truth")
+    with pytest.warns(UserWarning):
+        estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, resolution=64, progress=False)
+    return capture, face, shapes, estimate
+
+
+def test_refinement_reuses_its_kernels_and_records_itself(fitted):
+    capture, face, shapes, estimate = fitted
+    schedule = RefineSchedule(iterations=6, spp=2, evaluation_spp=4)
+    refined = refine_estimate(estimate, capture, shapes, face, schedule, progress=False)
+    record = refined.refinement
+    assert record["photographs"] == ["m00", "m01"]
+    assert "skin" in record["regions"] and record["lamp_radius_mm"] is None
+    assert np.isfinite(record["loss_before"]) and np.isfinite(record["loss_after"])
+    # after two passes over the photographs the kernels come from the cache: nothing compiled per step
+    assert [h[4] for h in record["history"][4:]] == [0, 0]
+    assert refined.to_json()["refinement"]["schedule"]["spp"] == 2
+    assert estimate.refinement is None and estimate.to_json()["refinement"] is None
+    changed = [r for r in record["regions"] if refined.fits[r].params != estimate.fits[r].params]
+    assert changed == record["regions"]
+    assert refined.albedo.albedo.shape == estimate.albedo.albedo.shape
+    assert not np.array_equal(refined.albedo.albedo, estimate.albedo.albedo)
+
+
+def test_a_lamp_of_finite_size_lights_the_scene(fitted):
+    capture, face, shapes, estimate = fitted
+    schedule = RefineSchedule(iterations=1, spp=2, evaluation_spp=2)
+    capture = dataclasses.replace(capture, metadata={**capture.metadata, "lamp_radius_mm": 120.0})
+    refined = refine_estimate(estimate, capture, shapes, face, schedule, progress=False)
+    assert refined.refinement["lamp_radius_mm"] == 120.0
+    point = refine_estimate(estimate, fitted[0], shapes, face, schedule, progress=False)
+    # a sphere of 120 mm at 1.5 m lights the face almost as the point does
+    assert refined.refinement["loss_before"] == pytest.approx(point.refinement["loss_before"], rel=0.1)
