@@ -286,3 +286,19 @@ def yaleb(subject_dir: str, out: str, count: int | None, train_lights: str | Non
     except (FileExistsError, FileNotFoundError, ValueError) as error:
         raise click.ClickException(str(error)) from None
     click.echo(f"wrote the capture {path} and {path / SPLIT}")
+
+
+@import_.command("diligent")
+@click.argument("object_dir", type=click.Path(exists=True, file_okay=False))
+@click.argument("out", type=click.Path(file_okay=False))
+@click.option("--force", is_flag=True, help="Write over an existing import at OUT.")
+def diligent(object_dir: str, out: str, force: bool) -> None:
+    """Write the DiLiGenT object in OBJECT_DIR as OUT/diligent.npz (images per unit light intensity, lights, mask;
+    x right, y up, z towards the camera) and OUT/split.json (the fixed training and held-out halves of the lights)."""
+    from .importers.diligent import ARCHIVE, SPLIT, import_object
+
+    try:
+        path = import_object(object_dir, out, force=force)
+    except (FileExistsError, FileNotFoundError, ValueError) as error:
+        raise click.ClickException(str(error)) from None
+    click.echo(f"wrote {path / ARCHIVE} and {path / SPLIT}")
