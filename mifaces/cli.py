@@ -6,8 +6,8 @@ Each command is one API call that a script could make.
 from __future__ import annotations
 
 import inspect
-import math
 import json
+import math
 import warnings
 from pathlib import Path
 
@@ -15,12 +15,12 @@ import click
 
 import mifaces
 
-from .brdf import NAMES as BRDF_MODELS
+from .brdf import MAX_LOBES, NAMES as BRDF_MODELS
 from .capture import load_capture
 from .capture.ground_truth import ground_truth_folder
-from .brdf import MAX_LOBES
 from .files import MAX_IMAGE_PIXELS, check_result_target, check_writable, write_json
 from .gallery import render_gallery
+from .importers.diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
 from .landmarks import NoFaceError, detect_landmarks
 from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
 from .reflectance import fit_brdf as fit_brdf_model, render_fitted
@@ -312,6 +312,17 @@ def yaleb(subject_dir: str, out: str, count: int | None, train_lights: str | Non
     except (FileExistsError, FileNotFoundError, ValueError) as error:
         raise click.ClickException(str(error)) from None
     click.echo(f"wrote the capture {path} and {path / SPLIT}")
+
+
+@import_.command("diligent")
+@click.argument("object_dir", type=click.Path(exists=True, file_okay=False))
+@click.argument("out", type=click.Path(file_okay=False))
+@click.option("--force", is_flag=True, help="Write over an existing import at OUT.")
+def diligent(object_dir: str, out: str, force: bool) -> None:
+    """Write the DiLiGenT object in OBJECT_DIR as OUT/diligent.npz (images per unit light intensity, lights, mask;
+    x right, y up, z towards the camera) and OUT/split.json (the fixed training and held-out halves of the lights)."""
+    path = import_diligent(object_dir, out, force=force)
+    click.echo(f"wrote {path / DILIGENT_ARCHIVE} and {path / DILIGENT_SPLIT}")
 
 
 @main.command()
