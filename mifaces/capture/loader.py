@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 import os
 from dataclasses import replace
 from pathlib import Path
@@ -17,88 +16,12 @@ from .calibration import CalibrationError, calibrate_light
 from .camera import Camera
 from .feature_points import detect_feature_points
 from .images import read_image
+from .problems import Problems
 from .types import (FEATURE_POINT_RANGE, FORMAT, IMAGE_SUFFIXES, MANIFEST, TRANSFERS, VERSION,
                     Capture, CaptureError, Distance, Image, Light, Measurement, SpherePictures, WhiteTarget)
 
 
-# --------------------------------------------------------------------------------------------
-# Loading and validating
-# --------------------------------------------------------------------------------------------
-class _Problems(list):
-    """Collects validation messages; each names where in the manifest it is.
-    ``allow_outside``: whether image paths may leave the capture folder."""
-
-    allow_outside = False
-
-    def objects(self, data, key: str, what: str):
-        """Yield ``(index, entry, where)`` for the objects of the non-empty list
-        ``data[key]``, recording a problem for a missing list or a non-object."""
-        entries = data.get(key)
-        if not isinstance(entries, list) or not entries:
-            self.append(f"{key}: need a non-empty list{what}")
-            return
-        for i, entry in enumerate(entries):
-            where = f"{key}[{i}]"
-            if not isinstance(entry, dict):
-                self.append(f"{where}: must be an object")
-                continue
-            yield i, entry, where
-
-    def unique(self, key: str, names: list[str]) -> None:
-        """Record a problem for each name used more than once in ``data[key]``."""
-        for name in {n for n in names if names.count(n) > 1}:
-            self.append(f"{key}: name {name!r} used more than once")
-
-    def need(self, obj, key, where, kind=None):
-        if not isinstance(obj, dict) or key not in obj:
-            self.append(f"{where}: missing '{key}'")
-            return None
-        value = obj[key]
-        if kind is not None and isinstance(value, bool) and bool not in (kind if isinstance(kind, tuple) else (kind,)):
-            self.append(f"{where}.{key}: must be a number, not {value!r}")
-            return None
-        if kind is not None and not isinstance(value, kind):
-            names = kind.__name__ if isinstance(kind, type) else "/".join(k.__name__ for k in kind)
-            self.append(f"{where}.{key}: must be {names}, got {type(value).__name__} {value!r}"[:300])
-            return None
-        return value
-
-    def number(self, obj, key, where, positive=False, default=None, required=True):
-        if isinstance(obj, dict) and key not in obj and not required:
-            return default
-        value = self.need(obj, key, where, (int, float))
-        if value is None or isinstance(value, bool):
-            if isinstance(value, bool):
-                self.append(f"{where}.{key}: must be a number, got {value!r}")
-            return None
-        if not math.isfinite(value) or (positive and value <= 0):
-            self.append(f"{where}.{key}: must be a finite{' positive' if positive else ''} number, got {value!r}")
-            return None
-        return float(value)
-
-    def vector(self, obj, key, where, length, required=True, default=None, positive=False, scalar_ok=False):
-        if isinstance(obj, dict) and key not in obj and not required:
-            return default
-        value = self.need(obj, key, where)
-        if value is None:
-            return None
-        if scalar_ok and isinstance(value, (int, float)) and not isinstance(value, bool):
-            value = [value] * length
-        try:
-            a = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            self.append(f"{where}.{key}: must be a list of {length} numbers, got {value!r}"[:300])
-            return None
-        if a.shape != (length,) if isinstance(length, int) else a.shape != length:
-            self.append(f"{where}.{key}: must have shape {length}, got {a.shape}")
-            return None
-        if not np.all(np.isfinite(a)) or (positive and np.any(a <= 0)):
-            self.append(f"{where}.{key}: must be finite{' and positive' if positive else ''}, got {value!r}")
-            return None
-        return a
-
-
-def _camera(entry, problems: _Problems) -> Camera | None:
+def _camera(entry, problems: Problems) -> Camera | None:
     where = "camera"
     if not isinstance(entry, dict):
         problems.append("camera: missing or not an object")
@@ -137,7 +60,7 @@ def _camera(entry, problems: _Problems) -> Camera | None:
     return Camera(width, height, fx, fy, cx, cy, distortion, rotation, translation, calibrated)
 
 
-def _intrinsics(entry: dict, calibrated: bool, width, height, problems: _Problems):
+def _intrinsics(entry: dict, calibrated: bool, width, height, problems: Problems):
     """``fx, fy, cx, cy`` of a manifest's camera. An uncalibrated camera's are a guess: one
     ``focal_guess_px`` may stand for both focal lengths, and ``cx, cy`` default to the image centre."""
     where = "camera"
@@ -157,7 +80,7 @@ def _intrinsics(entry: dict, calibrated: bool, width, height, problems: _Problem
     return fx, fy, cx, cy
 
 
-def _image(entry, where: str, root: Path, camera: Camera | None, problems: _Problems) -> Image | None:
+def _image(entry, where: str, root: Path, camera: Camera | None, problems: Problems) -> Image | None:
     """Read and check one image entry ``{"path", "transfer", "gamma", "exposure", "saturation"}``:
     a path inside the capture folder (:func:`mifaces.files.resolve_inside`), finite, non-negative pixels."""
     if isinstance(entry, str):
@@ -211,7 +134,7 @@ def _image(entry, where: str, root: Path, camera: Camera | None, problems: _Prob
     return image
 
 
-def _feature_points(entry, where: str, camera: Camera | None, problems: _Problems) -> dict[str, np.ndarray]:
+def _feature_points(entry, where: str, camera: Camera | None, problems: Problems) -> dict[str, np.ndarray]:
     if not isinstance(entry, dict):
         problems.append(f"{where}: must be an object mapping feature point names to [x, y] pixels")
         return {}
@@ -233,7 +156,7 @@ def _feature_points(entry, where: str, camera: Camera | None, problems: _Problem
     return out
 
 
-def _face_box(obj: dict, where: str, problems: _Problems) -> tuple[float, ...] | None:
+def _face_box(obj: dict, where: str, problems: Problems) -> tuple[float, ...] | None:
     """The optional ``face_box`` of ``obj``, ``[x0, y0, x1, y1]`` in pixels (``x1, y1`` the last inside)."""
     value = obj.get("face_box")
     if value is None:
@@ -285,7 +208,7 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True, detect: bool =
         Where feature points are to be detected without the ``landmarks`` extra.
     """
     root, data = _read_manifest(Path(path))
-    problems = _Problems()
+    problems = Problems()
     problems.allow_outside = allow_outside
     if data.get("format") != FORMAT:
         problems.append(f"format: must be {FORMAT!r}, got {data.get('format')!r}")
@@ -324,7 +247,7 @@ def _read_manifest(path: Path) -> tuple[Path, dict]:
     return root, data
 
 
-def _white_target(wt, problems: _Problems) -> WhiteTarget | None:
+def _white_target(wt, problems: Problems) -> WhiteTarget | None:
     """The white target, or None where the manifest has none (reflectance then only relative)."""
     if wt is None:
         return None
@@ -342,7 +265,7 @@ def _white_target(wt, problems: _Problems) -> WhiteTarget | None:
     return WhiteTarget(value, refl, dist, inten, cos_i) if len(problems) == n else None
 
 
-def _distances(entries, problems: _Problems) -> list[Distance]:
+def _distances(entries, problems: Problems) -> list[Distance]:
     """The metric distances: none (absent or empty: no absolute scale), or at least three."""
     distances = []
     if entries is None or entries == []:
@@ -362,7 +285,7 @@ def _distances(entries, problems: _Problems) -> list[Distance]:
     return distances
 
 
-def _lights(data: dict, root: Path, camera: Camera | None, problems: _Problems) -> list[Light]:
+def _lights(data: dict, root: Path, camera: Camera | None, problems: Problems) -> list[Light]:
     lights = []
     for i, e, where in problems.objects(data, "lights", " of light conditions"):
         name = problems.need(e, "name", where, str)
@@ -380,7 +303,7 @@ def _lights(data: dict, root: Path, camera: Camera | None, problems: _Problems) 
     return lights
 
 
-def _directional_light(e: dict, name, where: str, relative, problems: _Problems) -> Light | None:
+def _directional_light(e: dict, name, where: str, relative, problems: Problems) -> Light | None:
     """A distant light: ``direction`` towards it (world frame), ``intensity`` optional (then 1, relative)."""
     for key in ("position_mm", "spheres"):
         if key in e:
@@ -398,7 +321,7 @@ def _directional_light(e: dict, name, where: str, relative, problems: _Problems)
 
 
 def _point_light(e: dict, name, where: str, relative, root: Path, camera: Camera | None,
-                 problems: _Problems) -> Light | None:
+                 problems: Problems) -> Light | None:
     """A point light: ``intensity`` and ``position_mm`` or the steel-sphere pictures to calibrate it from."""
     intensity = problems.vector(e, "intensity", where, 3, positive=True, scalar_ok=True)
     position = problems.vector(e, "position_mm", where, 3, required=False)
@@ -420,7 +343,7 @@ def _point_light(e: dict, name, where: str, relative, root: Path, camera: Camera
 
 
 def _measurements(data: dict, root: Path, camera: Camera | None, lights: list[str],
-                  problems: _Problems) -> list[Measurement]:
+                  problems: Problems) -> list[Measurement]:
     measurements = []
     capture_box = _face_box(data, "face_box", problems)
     for i, e, where in problems.objects(data, "measurements", ""):
@@ -457,7 +380,7 @@ def _measurements(data: dict, root: Path, camera: Camera | None, lights: list[st
     return measurements
 
 
-def _calibrate(lights: list[Light], camera: Camera, problems: _Problems) -> list[Light]:
+def _calibrate(lights: list[Light], camera: Camera, problems: Problems) -> list[Light]:
     """The lights with the positions their steel-sphere pictures give (paper sec. 3)."""
     calibrated = []
     for light in lights:
@@ -476,7 +399,7 @@ def _calibrate(lights: list[Light], camera: Camera, problems: _Problems) -> list
 # --------------------------------------------------------------------------------------------
 # Detecting feature points
 # --------------------------------------------------------------------------------------------
-def _detect(measurements: list[Measurement], root: Path, problems: _Problems) -> list[Measurement]:
+def _detect(measurements: list[Measurement], root: Path, problems: Problems) -> list[Measurement]:
     """The measurements, those without feature points given the detected ones (on the diffuse
     companion, evenly lit, where there is one, else the photograph); each picture detected once."""
     found: dict[tuple, dict | None] = {}

@@ -27,6 +27,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .layout import Layout, adjacency, device_array
 from .result import Weights
 from .targets import FRONTAL, blurred
 
@@ -36,81 +37,6 @@ PHONG_EXPONENT = 16.0
 ROWS = 1024
 #: Rec. 601 luminance weights of the colour-contrast operator (Blanz and Vetter 1999).
 LUMINANCE = (0.3, 0.59, 0.11)
-
-
-class Layout:
-    """Named blocks of the parameter vector and their natural units (Adam works on theta / unit)."""
-
-    IMAGE_BLOCK = (("light_angles", 2, 0.15), ("light_color", 3, 0.15), ("ambient", 3, 0.1),
-                   ("specular", 1, 0.05), ("contrast", 1, 0.1), ("gain", 3, 0.1), ("offset", 3, 0.03))
-
-    def __init__(self, model, images: list[str]):
-        self.slices, units = {}, []
-
-        def add(name, n, unit):
-            self.slices[name] = slice(len(units), len(units) + n)
-            units.extend([unit] * n)
-
-        add("rotation", 3, 0.05)
-        add("translation", 3, 5.0)
-        add("log_focal", 1, 0.02)
-        for image in images:
-            for name, n, unit in self.IMAGE_BLOCK:
-                add(f"{image}.{name}", n, unit)
-        add("shape", model.shape_dim, 1.0)
-        add("expression", model.expression_dim, 1.0)
-        if model.has_texture:
-            add("color", model.color_dim, 0.3)
-        else:
-            add("albedo", 3 * model.vertex_count, 0.03)
-        self.units = np.array(units, np.float64)
-        self.size = len(units)
-
-    def __getitem__(self, name):
-        return self.slices[name]
-
-
-#: An opaque zero per array type (see :func:`device_array`).
-_ZERO = {}
-
-
-def device_array(dtype, values):
-    """``values`` as a flat Dr.Jit array (``mi.Float`` for float32, ``mi.UInt32`` for uint32) in
-    memory Dr.Jit owns, evaluated.
-
-    Dr.Jit's LLVM backend maps a NumPy array's memory instead of copying it, and writes whether
-    it is aligned into the code of the kernels that load from it: by chance, so the same kernel
-    of a second photograph would differ and be compiled again; and releasing mapped memory
-    cannot happen while a frozen function records. So the values are copied into a 64-byte
-    aligned buffer, and from there by a kernel (always the same) into Dr.Jit's own memory.
-    """
-    values = np.ascontiguousarray(values, dtype).ravel()
-    buffer = np.empty(values.size + 64 // values.itemsize, dtype)
-    start = (-buffer.ctypes.data % 64) // values.itemsize
-    aligned = buffer[start:start + values.size]
-    aligned[:] = values
-    array_type = mi.Float if dtype == np.float32 else mi.UInt32
-    if array_type not in _ZERO:  # made once: an opaque value is a launch
-        _ZERO[array_type] = dr.opaque(array_type, 0)
-    owned = array_type(aligned) + _ZERO[array_type]
-    dr.eval(owned)
-    return owned
-
-
-def adjacency(triangles: np.ndarray, vertex_count: int) -> np.ndarray:
-    """(N, D) triangle indices adjacent to each vertex, padded with -1."""
-    t = np.asarray(triangles, np.int64)
-    corner_vertex = t.ravel()
-    corner_triangle = np.repeat(np.arange(len(t)), 3)
-    order = np.argsort(corner_vertex, kind="stable")
-    cv, ct = corner_vertex[order], corner_triangle[order]
-    counts = np.bincount(cv, minlength=vertex_count)
-    d = max(int(counts.max()), 1)
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    slot = np.arange(len(cv)) - starts[cv]
-    out = np.full((vertex_count, d), -1, np.int64)
-    out[cv, slot] = ct
-    return out
 
 
 class Energy:

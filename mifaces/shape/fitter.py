@@ -18,7 +18,8 @@ from scipy.spatial import cKDTree
 from ..model.geometry import rotation_matrix, vertex_normals
 from ..model.mesh import mitsuba_mesh
 from ..status import DIVERGED
-from .energy import Energy, Layout
+from .energy import Energy
+from .layout import Layout
 from .result import ShapeSchedule, Weights
 from .targets import (FRONTAL, light_direction, metric_distances, normalised, rotation_centre, start_light,
                       start_translation)
