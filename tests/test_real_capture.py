@@ -62,7 +62,7 @@ def test_directional_greyscale_capture(tmp_path):
         assert light.directional and light.position is None and light.spheres is None
     np.testing.assert_allclose(top.direction, [0, -1 / np.sqrt(2), -1 / np.sqrt(2)])  # normalised
     np.testing.assert_allclose(side.direction, [0.6, 0, -0.8])
-    assert top.relative and np.array_equal(top.intensity, [1, 1, 1])  # no intensity: 1, relative
+    assert top.relative and np.array_equal(top.intensity, [np.pi] * 3)  # no intensity: white reads 1, relative
     assert side.relative and np.array_equal(side.intensity, [2, 2, 2])
     assert not known.relative and np.array_equal(known.intensity, [1, 2, 3])
     directions, distances = side.towards([[0, 0, 500], [10, 20, 600]])

@@ -17,8 +17,8 @@ from .camera import Camera
 from .feature_points import detect_feature_points
 from .images import read_image
 from .problems import Problems
-from .types import (FEATURE_POINT_RANGE, FORMAT, IMAGE_SUFFIXES, MANIFEST, TRANSFERS, VERSION,
-                    Capture, CaptureError, Distance, Image, Light, Measurement, SpherePictures, WhiteTarget)
+from .types import (FEATURE_POINT_RANGE, FORMAT, IMAGE_SUFFIXES, MANIFEST, RELATIVE_IRRADIANCE, TRANSFERS,
+                    VERSION, Capture, CaptureError, Distance, Image, Light, Measurement, SpherePictures, WhiteTarget)
 
 
 def _camera(entry, problems: Problems) -> Camera | None:
@@ -304,7 +304,8 @@ def _lights(data: dict, root: Path, camera: Camera | None, problems: Problems) -
 
 
 def _directional_light(e: dict, name, where: str, relative, problems: Problems) -> Light | None:
-    """A distant light: ``direction`` towards it (world frame), ``intensity`` optional (then 1, relative)."""
+    """A distant light: ``direction`` towards it (world frame), ``intensity`` optional (then
+    :data:`~mifaces.capture.types.RELATIVE_IRRADIANCE`, relative)."""
     for key in ("position_mm", "spheres"):
         if key in e:
             problems.append(f"{where}: give 'direction' (a directional light) or '{key}' (a point light), not both")
@@ -314,7 +315,7 @@ def _directional_light(e: dict, name, where: str, relative, problems: Problems) 
         direction = None
     intensity = problems.vector(e, "intensity", where, 3, positive=True, scalar_ok=True, required=False)
     if "intensity" not in e:
-        intensity, relative = np.ones(3), True
+        intensity, relative = np.full(3, RELATIVE_IRRADIANCE), True
     if name is None or direction is None or intensity is None:
         return None
     return Light(name, None, intensity, direction=direction / np.linalg.norm(direction), relative=relative is True)

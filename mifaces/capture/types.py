@@ -19,6 +19,10 @@ VERSION = 1
 GROUND_TRUTH = "ground_truth"
 #: Number of named feature points a measurement must have (paper sec. 4.2).
 FEATURE_POINT_RANGE = (7, 20)
+#: Irradiance of a directional light whose absolute intensity is unknown: the one that brings a white
+#: Lambertian surface facing the light to pixel value 1 (radiance E/π), so reflectance reads as
+#: pixel value / cos θ and the fitted albedos fall in the range the BRDF models' parameters allow.
+RELATIVE_IRRADIANCE = float(np.pi)
 #: Transfer curves of integer images.
 TRANSFERS = ("linear", "srgb", "gamma")
 IMAGE_SUFFIXES = (".exr", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".pgm", ".ppm", ".pnm")

@@ -189,7 +189,8 @@ def import_subject(subject_dir: str | os.PathLike, out: str | os.PathLike, train
       trades against the face's position).
     * **Lights**: one directional light per training photograph, named by its
       tag (``A+035E-20``), ``direction`` from the file name
-      (:func:`light_direction`), intensity 1, ``relative`` (the database's
+      (:func:`light_direction`), no intensity, so ``relative`` at
+      :data:`~mifaces.capture.types.RELATIVE_IRRADIANCE` (the database's
       strobes are equal, their absolute power unknown).
     * **Measurements**: one per training photograph, named by its stem, the
       PGM file copied into ``images/`` as is (``transfer`` linear: the
@@ -242,7 +243,7 @@ def import_subject(subject_dir: str | os.PathLike, out: str | os.PathLike, train
         "format": FORMAT, "version": VERSION,
         "camera": {"width": width, "height": height, "calibrated": False, "focal_guess_px": FOCAL_GUESS * height},
         "face_box": [0, 0, width - 1, height - 1],
-        "lights": [{"name": i.light, "direction": (i.direction + 0.0).tolist(), "intensity": 1.0, "relative": True}
+        "lights": [{"name": i.light, "direction": (i.direction + 0.0).tolist(), "relative": True}
                    for i in training],
         "measurements": [{"name": i.stem, "light": i.light, "pose": POSE,
                           "image": {"path": f"images/{i.stem}.pgm", "transfer": "linear"},
