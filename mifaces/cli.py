@@ -21,6 +21,7 @@ from .capture.ground_truth import ground_truth_folder
 from .files import MAX_IMAGE_PIXELS, check_result_target, check_writable, write_json
 from .gallery import render_gallery
 from .importers.diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
+from .importers.yaleb import SPLIT, import_subject
 from .landmarks import NoFaceError, detect_landmarks
 from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
 from .reflectance import fit_brdf as fit_brdf_model, render_fitted
@@ -302,8 +303,6 @@ def import_() -> None:
 def yaleb(subject_dir: str, out: str, count: int | None, train_lights: str | None, force: bool) -> None:
     """Write the Extended Yale B subject in SUBJECT_DIR as a capture at OUT: the training photographs with
     their directional lights, the held-out ones named in OUT/split.json."""
-    from .importers.yaleb import SPLIT, import_subject
-
     if count is not None and train_lights is not None:
         raise click.UsageError("give --train or --train-lights, not both")
     train = [s.strip() for s in train_lights.split(",") if s.strip()] if train_lights is not None else count or 8

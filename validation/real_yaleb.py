@@ -107,6 +107,8 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     stack = np.stack([i.pixels for i in train_images])
     albedo_ps, normals_ps = photometric_stereo.fit(stack, np.stack([i.direction for i in train_images]), mask,
                                                    saturated=stack >= SATURATED)
+    # the lights are equal: render in the photographs' units with the capture's (relative) irradiance
+    irradiance = capture.light(capture.measurements[0].light).intensity
     errors = Errors()
     per_light = {}
     estimates = {m: load_estimate(out / "measure" / "brdf" / m) for m in models}
@@ -123,13 +125,13 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
         predictions = {"photometric_stereo": photometric_stereo.predict(albedo_ps, normals_ps, image.direction)}
         for model in models:
             data = estimates[model]
-            rendered = scene.render(data, data["albedo"], camera, None, [1.0] * 3, spp=spp,
+            rendered = scene.render(data, data["albedo"], camera, None, irradiance, spp=spp,
                                     light_direction=direction).mean(axis=2)
             rendered[~mask] = 0.0
             write_exr(out / "heldout" / model / f"{image.stem}.exr", rendered[:, :, None].repeat(3, axis=2))
             predictions[model] = rendered
             predictions[f"{model}_diffuse_only"] = scene.render(
-                diffuse_only(data), data["albedo"], camera, None, [1.0] * 3, spp=spp,
+                diffuse_only(data), data["albedo"], camera, None, irradiance, spp=spp,
                 light_direction=direction).mean(axis=2)
         for key, prediction in predictions.items():
             errors.add(key, group, prediction, photo, valid)
@@ -211,7 +213,7 @@ def main(argv=None) -> int:
     parser.add_argument("--subjects", default=None, help="comma-separated subject folders (default: all)")
     parser.add_argument("--train", type=int, default=8)
     parser.add_argument("--models", default=",".join(NAMES))
-    parser.add_argument("--spp", type=int, default=16)
+    parser.add_argument("--spp", type=int, default=8)
     parser.add_argument("--resolution", type=int, default=256, help="texture resolution of the fits")
     parser.add_argument("--shadow-angle", type=float, default=SHADOW_ANGLE)
     parser.add_argument("--results", type=Path, default=RESULTS)

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..files import read_exr
+from .hdr import decode_srgb
 from .types import TRANSFERS, Image
 
 #: Suffixes of the netpbm formats :func:`read_codes` reads itself (binary P5/P6).
@@ -107,8 +108,6 @@ def decode(data: np.ndarray, transfer: str = "linear", gamma: float = 2.2) -> np
         colour-science's ``cctf_decoding``; ``'gamma'`` is ``v ** gamma``.
     """
     if transfer == "srgb":
-        from .hdr import decode_srgb
-
         return decode_srgb(data)
     if np.issubdtype(data.dtype, np.integer):
         values = data.astype(np.float64) / np.iinfo(data.dtype).max

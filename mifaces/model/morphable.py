@@ -27,14 +27,18 @@ landmarks.
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..files import atomic_write
 from . import geometry
-from .regions import REGION_NAMES, regions_present
+from .export import export_mesh
+from .mesh import mitsuba_mesh
+from .regions import REGION_NAMES, lookup, regions_present
 
 
 def _as(array, dtype, name: str, shape: tuple) -> np.ndarray:
@@ -269,15 +273,11 @@ class MorphableModel:
 
     def vertex_regions(self) -> np.ndarray:
         """Region label (N,) of every vertex, looked up in the region map at its uv."""
-        from .regions import lookup
-
         return lookup(self.region_map, self.uv)
 
     # ---- Mitsuba and files ------------------------------------------------------------------
     def mitsuba_mesh(self, coefficients=None, expression=None, color=None, bsdf=None, name: str = "face"):
         """A Mitsuba mesh of one face, built in memory (see :func:`mifaces.model.mesh.mitsuba_mesh`)."""
-        from .mesh import mitsuba_mesh
-
         albedo = self.texture(color) if (self.has_texture and color is not False) else None
         return mitsuba_mesh(self.shape(coefficients, expression), self.triangles, self.uv,
                             albedo=albedo, bsdf=bsdf, name=name)
@@ -285,17 +285,11 @@ class MorphableModel:
     def export(self, path: str | os.PathLike, coefficients=None, expression=None, color=None) -> Path:
         """Write one face as PLY or OBJ with texture coordinates (and vertex colours); see
         :func:`mifaces.model.export.export_mesh`."""
-        from .export import export_mesh
-
         albedo = self.texture(color) if (self.has_texture and color is not False) else None
         return export_mesh(path, self.shape(coefficients, expression), self.triangles, self.uv, albedo)
 
     def save(self, path: str | os.PathLike) -> Path:
         """Save as a mifaces model ``.npz`` (uncompressed, written atomically)."""
-        import json
-
-        from ..files import atomic_write
-
         arrays = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
