@@ -278,3 +278,42 @@ def test_a_fit_at_the_bound_of_its_range_is_flagged_and_replaced(jit_variant):
             assert fits["lips"].params["diffuse_reflectance"] != fits["skin"].params["diffuse_reflectance"]
         else:
             assert fits["lips"].status == AT_BOUND
+
+
+@pytest.mark.parametrize("name, width, sharp, wide", [("ward", "alpha", 1e-3, 0.3), ("cooktorrance", "roughness", 1e-3, 0.3),
+                                                      ("phong", "exponent", 1e5, 30.0)])
+def test_a_lobe_at_the_sharp_end_of_its_width_is_a_spike(name, width, sharp, wide):
+    model = brdf.model(name)
+    space = ParameterSpace(model, model.fixed_defaults())
+    start = {**model.defaults(), **conservative_start(model, np.full((10, 3), 0.3))}
+    assert not space.at_spike(space.vector({**start, width: wide}))
+    assert space.at_spike(space.vector({**start, width: sharp}))
+
+
+def test_a_spike_takes_its_neighbours_glossy_part_whatever_the_region_size(monkeypatch):
+    """A large region whose lobe ended as a spike (no photograph resolves one) borrows skin's
+    glossy part, keeping its own albedo; a large region merely at a bound keeps its fit."""
+    import mifaces.reflectance.fitting as fitting
+
+    model = brdf.model("ward")
+
+    def fake(model_, light, view, reflectance, sigma, **options):
+        n = len(sigma)
+        params = {"diffuse_reflectance": [0.4, 0.3, 0.2], "specular_reflectance": [0.05] * 3, "alpha": 0.3}
+        if n == 3000:  # beard: a spike
+            return fitting.RegionFit("ward", {}, {**params, "specular_reflectance": [1.0] * 3, "alpha": 1e-3}, 1.0,
+                                     n, 0.0, fitting.AT_BOUND, f"converged; {fitting.SPIKE}", 3)
+        if n == 2000:  # eyebrows: at the upper bound of alpha, not a spike
+            return fitting.RegionFit("ward", {}, {**params, "alpha": 1.0}, 1.0, n, 0.0, fitting.AT_BOUND,
+                                     "converged; at the bound of its range: alpha", 3)
+        return fitting.RegionFit("ward", {}, params, 1.0, n, 0.0, "converged", "converged", 3)
+
+    monkeypatch.setattr(fitting, "fit_region", fake)
+    labels = np.repeat([1, 6, 4], [5000, 3000, 2000])
+    n = len(labels)
+    with pytest.warns(UserWarning, match="spike"):
+        fits = fitting.fit_regions(model, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.ones(n), labels,
+                                   {1: "skin", 6: "beard", 4: "eyebrows"})
+    assert fits["beard"].status == "prior" and fits["beard"].params["alpha"] == 0.3
+    assert fits["beard"].params["specular_reflectance"] == [0.05] * 3
+    assert fits["eyebrows"].status == fitting.AT_BOUND and fits["eyebrows"].params["alpha"] == 1.0

@@ -66,6 +66,7 @@ class Lafortune(BRDFModel):
     SEVERAL_LOBES = True
     EXAMPLE_OPTIONS = {"lobes": 2}
     WIDTH_GRID = ("exponent", EXPONENT_GRID)
+    SHARP_END = "upper"
 
     def __init__(self, lobes: int | Sequence[int] = 1):
         super().__init__()

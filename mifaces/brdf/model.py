@@ -221,6 +221,10 @@ class BRDFModel:
     #: values :func:`~mifaces.reflectance.fitting.linear_start` tries; None:
     #: the model has no such parameter and a fit starts from :meth:`start_values`.
     WIDTH_GRID: ClassVar[tuple[str, np.ndarray] | None] = None
+    #: The end of the width parameter's range where the lobe becomes a spike
+    #: (``'lower'`` for a slope, ``'upper'`` for an exponent): a fit that ends
+    #: there resolves a highlight no photograph can, and is not trusted.
+    SHARP_END: ClassVar[str] = "lower"
 
     def __init__(self, **options):
         unknown = set(options) - set(self.OPTIONS)

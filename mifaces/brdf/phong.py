@@ -26,6 +26,7 @@ class Phong(BRDFModel):
     name = "phong"
     title = "Modified Phong"
     WIDTH_GRID = ("exponent", EXPONENT_GRID)
+    SHARP_END = "upper"
 
     def specular_parameters(self):
         return (

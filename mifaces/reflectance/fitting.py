@@ -204,6 +204,10 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         params, loss, pruned = prune_lobes(model, space, problem, params, loss)
         if pruned:
             reason += f"; lobe(s) {pruned} explained no sample and were set to zero"
+    # the lobe whose width the model names (its first), if it still reflects anything, as a spike
+    first = model.lobe_scales().get(1, ())
+    if any(np.any(np.asarray(params.get(s, 0.0)) != 0) for s in first) and space.at_spike(x):
+        status, reason = AT_BOUND, f"{reason}; {SPIKE}"
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=loss,
                      samples=len(sigma), seconds=time.perf_counter() - t0, status=status,
                      reason=reason, iterations=iterations, history=history)
@@ -238,6 +242,9 @@ def prior_fit(model: BRDFModel, params: dict, samples: int, reason: str) -> Regi
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=float("nan"),
                      samples=samples, seconds=0.0, status=PRIOR, reason=reason, iterations=0)
 
+
+#: Why a fit whose lobe width ended at its sharp end is not trusted.
+SPIKE = "the lobe became a spike at the sharp end of its width range"
 
 #: Where a region without enough samples borrows its BRDF from, in order
 #: (``skin`` is always the last resort).
@@ -287,16 +294,18 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     # A small region (fewer than 10x the samples a fit needs) whose best fit lies at a
     # bound of the valid range is more likely fitting noise than showing a material
     # the model cannot represent: it takes its neighbour's glossy part, keeping its own
-    # albedo. A large one keeps its own fit, flagged at_bound.
+    # albedo. A large one keeps its own fit, flagged at_bound, unless its lobe became a
+    # spike (sharper than the grid resolves), which no photograph shows: any region does.
     for name in [n for n, fit in fits.items() if fit.status == AT_BOUND]:
         donor = donor_of(name)
-        if donor is None or counts[name] >= 10 * needed:
+        spike = SPIKE in fits[name].reason
+        if not spike and (donor is None or counts[name] >= 10 * needed):
             warnings.warn(f"region {name!r}: the fit ended {fits[name].reason.split('; ')[-1]}", stacklevel=2)
             continue
-        borrowed = {**fits[donor].params, **held[name],
-                    "diffuse_reflectance": fits[name].params["diffuse_reflectance"]}
+        glossy = fits[donor].params if donor else {**model.defaults(), **model.fixed_defaults()}
+        borrowed = {**glossy, **held[name], "diffuse_reflectance": fits[name].params["diffuse_reflectance"]}
         reason = (f"{counts[name]} samples, and its own fit ended {fits[name].reason.split('; ')[-1]}: "
-                  f"the glossy part of {donor!r}")
+                  f"the glossy part of {repr(donor) if donor else 'the model defaults'}")
         warnings.warn(f"region {name!r}: {reason}", stacklevel=2)
         fits[name] = prior_fit(model, borrowed, counts[name], reason)
     for label, name in region_names.items():

@@ -116,6 +116,19 @@ class ParameterSpace:
                 out.append(f.name if f.channel is None else f"{f.name}[{f.channel}]")
         return out
 
+    def at_spike(self, x: np.ndarray, margin: float = 1e-3) -> bool:
+        """Whether ``x`` puts the lobe-width parameter within ``margin`` (a
+        fraction of its range, reparameterised) of the end where the lobe is a
+        spike (the model's ``SHARP_END``)."""
+        if self.model.WIDTH_GRID is None:
+            return False
+        name = self.model.WIDTH_GRID[0]
+        t = 0.5 * (1.0 + np.tanh(0.5 * np.asarray(x, np.float64)))
+        for f, ti in zip(self.free, t):
+            if f.name == name and (ti < margin if self.model.SHARP_END == "lower" else ti > 1 - margin):
+                return True
+        return False
+
     def vector(self, values: dict) -> np.ndarray:
         """The unconstrained vector whose :meth:`values` are ``values``
         (clipped just inside the bounds)."""
