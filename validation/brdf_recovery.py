@@ -192,7 +192,7 @@ def plot(same: list[dict], cross: list[dict], path: Path) -> None:
         ax.bar(np.arange(len(same)) + k * width, 100 * np.array(values), width, label=region)
     ax.set_xticks(np.arange(len(same)) + 0.4 - width / 2, [r["model"] for r in same])
     ax.set_ylabel("largest relative parameter error (%)")
-    ax.set_title("same family: fitted vs ground truth")
+    ax.set_title("simulated captures, same family: fitted vs ground truth")
     ax.legend(fontsize=8)
     ax = axes[1]
     names = [r["model"] for r in cross]
@@ -204,7 +204,7 @@ def plot(same: list[dict], cross: list[dict], path: Path) -> None:
     ax.set_xticks(np.arange(len(cross)), names, rotation=20, fontsize=8)
     ax.set_ylabel("BRDF RMSE")
     ax2.set_ylabel("held-out image RMSE (%)")
-    ax.set_title("cross family: Cook-Torrance truth")
+    ax.set_title("simulated captures, cross family: Cook-Torrance truth")
     h1, l1 = ax.get_legend_handles_labels()
     h2, l2 = ax2.get_legend_handles_labels()
     ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.22), ncol=3)
