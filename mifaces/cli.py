@@ -48,7 +48,7 @@ class Commands(click.Group):
     def invoke(self, ctx):
         try:
             return super().invoke(ctx)
-        except (ValueError, KeyError, TypeError, OSError) as error:
+        except (ValueError, KeyError, OSError) as error:  # a programming error (TypeError, ...) keeps its traceback
             message = error.args[0] if isinstance(error, KeyError) and error.args else str(error)
             raise click.ClickException(str(message)) from None
 

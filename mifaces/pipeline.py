@@ -177,7 +177,7 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
     ``out/shapes`` for the user) or the simulator's ground truth."""
     if geometry == "ground-truth":
         return load_geometry(capture, "ground-truth")
-    face = face_model if not isinstance(face_model, (str, Path)) else load_model(face_model)
+    face = load_model(face_model)  # a loaded model is taken as it is
     t = time.perf_counter()
     fits = fit_shape(capture, face, out=out / "shapes", iterations=shape_iterations, progress=progress)
     timings["fit_shape"] = time.perf_counter() - t
