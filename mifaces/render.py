@@ -89,8 +89,11 @@ def rgb(value) -> dict:
     return {"type": "rgb", "value": [float(x) for x in v]}
 
 
-def _bsdf(truth: dict, region: str, texture) -> dict:
-    """The plugin dict of one region: its parameters over the albedo texture."""
+def region_bsdf(truth: dict, region: str, texture) -> dict:
+    """The Mitsuba BSDF dict of one region of a ``brdf.json`` document: its
+    parameters over ``texture`` (a texture dict, a loaded texture, a reference,
+    or None for the plugin's own diffuse default). The simulator, the scene
+    writer and the validation's BRDF comparison all build a region's BSDF here."""
     model = truth["model"]
     options = dict(truth["options"])
     instance = brdf_models.model(model, **options)
@@ -150,7 +153,7 @@ def face_shapes(model, vertices: np.ndarray, truth: dict, texture=None, normals:
     region's BSDF from ``truth`` (the ``brdf.json`` layout) over the albedo
     ``texture`` (the plugin's default diffuse if None). Keys are
     ``face_<region>_<label>``."""
-    return {key: part.mesh(_bsdf(truth, part.region, texture))
+    return {key: part.mesh(region_bsdf(truth, part.region, texture))
             for key, part in region_meshes(model, vertices, normals).items()}
 
 
@@ -233,7 +236,7 @@ class FaceScene:
                  ALBEDO: {"type": "bitmap", "filename": albedo, "raw": True, "filter_type": "bilinear",
                           "wrap_mode": "clamp"}}
         for key, part in self.meshes.items():
-            scene[key] = {"type": "ply", "filename": self.mesh_file(key), "bsdf": _bsdf(brdf, part.region, ALBEDO_REF)}
+            scene[key] = {"type": "ply", "filename": self.mesh_file(key), "bsdf": region_bsdf(brdf, part.region, ALBEDO_REF)}
         if light_position is not None:
             if intensity is None:
                 raise ValueError("a point light needs its intensity")
