@@ -152,40 +152,51 @@ class Lafortune(BRDFModel):
             value += power(cxy * xy + cz * zz, n)
         return value
 
-    def _axis_and_weight(self, j, wi, params):
+    def _axis_and_log_weight(self, j, wi, params):
+        """Lobe j's axis s_j/|s_j|, exponent and log albedo estimate n log|s_j| + log(2π/(n + 2)),
+        capped at log :data:`_MAX_WEIGHT`."""
         cxy, cz, n = self._lobe(j, params)
         s = mi.Vector3f(mean(cxy) * wi.x, mean(cxy) * wi.y, mean(cz) * wi.z)
         length = dr.sqrt(dr.maximum(dot(s, s), 1e-24))  # no infinite gradient at s = 0
         axis = dr.select(length > 1e-12, s / dr.maximum(length, 1e-12), mi.Vector3f(0, 0, 1))
         log_weight = n * dr.log(dr.maximum(length, 1e-30)) + dr.log(dr.two_pi / (n + 2.0))
-        weight = dr.exp(dr.minimum(log_weight, dr.log(_MAX_WEIGHT)))
-        return axis, n, weight
+        return axis, n, dr.minimum(log_weight, dr.log(_MAX_WEIGHT))
+
+    def _lobes_and_shares(self, wi, params):
+        """Each lobe's (axis, exponent, share of the sampling): the albedo estimates
+        normalised in log space, relative to the largest, so that lobes whose
+        estimates underflow float32 (n = 1e5 at grazing incidence) keep finite
+        shares and gradients."""
+        lobes = [self._axis_and_log_weight(j, wi, params) for j in self.lobes]
+        if len(lobes) == 1:
+            return [(lobes[0][0], lobes[0][1], 1.0)]
+        largest = lobes[0][2]
+        for _, _, lw in lobes[1:]:
+            largest = dr.maximum(largest, lw)
+        largest = dr.detach(largest)  # cancels in the ratio; no gradient through the max
+        weights = [dr.exp(lw - largest) for _, _, lw in lobes]  # the largest is 1: the total is >= 1
+        total = sum(weights)
+        return [(axis, n, w / total) for (axis, n, _), w in zip(lobes, weights)]
 
     def specular_weight(self, wi, params):
-        return sum(self._axis_and_weight(j, wi, params)[2] for j in self.lobes)
+        return sum(dr.exp(self._axis_and_log_weight(j, wi, params)[2]) for j in self.lobes)
 
     def sample_specular(self, wi, sample1, sample2, params):
-        lobes = [self._axis_and_weight(j, wi, params) for j in self.lobes]
+        lobes = self._lobes_and_shares(wi, params)
         if len(lobes) == 1:
             axis, n, _ = lobes[0]
             return cosine_lobe.sample(axis, n, sample2)
-        # Lobe j is chosen where cumulative weight up to j-1 <= u·total < up to j:
+        # Lobe j is chosen where cumulative share up to j-1 <= u < up to j:
         # going backwards, the last assignment is the first lobe whose
-        # cumulative weight exceeds the threshold.
-        threshold = sample1 * sum(w for _, _, w in lobes)
+        # cumulative share exceeds u.
         cumulative, bounds = 0.0, []
-        for _, _, w in lobes[:-1]:
-            cumulative = cumulative + w
+        for _, _, share in lobes[:-1]:
+            cumulative = cumulative + share
             bounds.append(cumulative)
         wo = cosine_lobe.sample(lobes[-1][0], lobes[-1][1], sample2)
         for (axis, n, _), bound in reversed(list(zip(lobes[:-1], bounds))):
-            wo = dr.select(threshold < bound, cosine_lobe.sample(axis, n, sample2), wo)
+            wo = dr.select(sample1 < bound, cosine_lobe.sample(axis, n, sample2), wo)
         return wo
 
     def pdf_specular(self, wi, wo, params):
-        lobes = [self._axis_and_weight(j, wi, params) for j in self.lobes]
-        if len(lobes) == 1:
-            axis, n, _ = lobes[0]
-            return cosine_lobe.pdf(axis, n, wo)
-        total = dr.maximum(sum(w for _, _, w in lobes), 1e-30)
-        return sum(w / total * cosine_lobe.pdf(axis, n, wo) for axis, n, w in lobes)
+        return sum(share * cosine_lobe.pdf(axis, n, wo) for axis, n, share in self._lobes_and_shares(wi, params))
