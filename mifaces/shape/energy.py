@@ -27,7 +27,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .layout import Layout, adjacency, device_array
+from .layout import Layout, device_array
+from .layout import adjacency as triangle_adjacency
 from .result import Weights
 from .targets import FRONTAL, blurred
 
@@ -58,6 +59,9 @@ class Energy:
         The rotation centre (model space, mm).
     light_distance : float
         Distance (mm) of the point image's lamp from the face centre; inf for a directional light.
+    adjacency : (N, D) int array, optional
+        The model's vertex-triangle adjacency (:func:`~mifaces.shape.layout.adjacency`), if
+        already at hand.
     freeze : bool
         Replay the kernels of an evaluation (``dr.freeze``) instead of tracing it again, while
         the arrays keep their sizes (recorded anew per sample set).
@@ -77,7 +81,8 @@ class Energy:
     """
 
     def __init__(self, model, camera, layout: Layout, weights: Weights, images: dict, feature_vertices,
-                 feature_pixels, distances, centre, light_distance: float = math.inf, freeze: bool = True):
+                 feature_pixels, distances, centre, light_distance: float = math.inf, freeze: bool = True,
+                 adjacency=None):
         self.model, self.camera, self.layout, self.weights = model, camera, layout, weights
         self.images = images
         self.image_names = list(images)
@@ -87,7 +92,7 @@ class Energy:
         self.centre = centre
         self.light_distance = light_distance
         self.scale_px = camera.height / 512.0  # px per "512-px pixel"
-        self.adjacency = adjacency(model.triangles, model.vertex_count)
+        self.adjacency = triangle_adjacency(model.triangles, model.vertex_count) if adjacency is None else adjacency
         # accumulator slots: per image (sum of w r, sum of w), then the other sums of E
         self.slots = {name: i for i, name in enumerate(
             [f"{k}.{s}" for k in self.image_names for s in ("num", "den")] +

@@ -9,17 +9,18 @@ shadow map every 1000 iterations)."""
 from __future__ import annotations
 
 import math
+import weakref
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..model.geometry import rotation_matrix, vertex_normals
+from ..model.geometry import rotation_matrix
 from ..model.mesh import mitsuba_mesh
 from ..status import DIVERGED
 from .energy import Energy
-from .layout import Layout
+from .layout import Layout, adjacency
 from .result import ShapeSchedule, Weights
 from .targets import (FRONTAL, light_direction, metric_distances, normalised, rotation_centre, start_light,
                       start_translation)
@@ -40,6 +41,44 @@ def distance_from_border(model) -> np.ndarray:
     if len(border) == 0:
         return np.full(model.vertex_count, np.inf)
     return cKDTree(model.shape_mean[border]).query(model.shape_mean)[0]
+
+
+def sample_normals(vertices: np.ndarray, triangles: np.ndarray, ring: np.ndarray) -> np.ndarray:
+    """Unit normals (float64) of the vertices whose adjacent triangles are the rows of ``ring``
+    (``(S, D)``, padded with -1): the area-weighted mean of the face normals, as
+    :func:`~mifaces.model.geometry.vertex_normals` gives them on the whole mesh."""
+    tri = triangles[np.where(ring >= 0, ring, 0)]  # (S, D, 3)
+    v = np.asarray(vertices, np.float64)
+    a, b, c = v[tri[..., 0]], v[tri[..., 1]], v[tri[..., 2]]
+    n = np.sum(np.cross(b - a, c - a) * (ring >= 0)[..., None], axis=1)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.where(length > 0, n / np.maximum(length, 1e-30), 0.0).astype(np.float32).astype(np.float64)
+
+
+class _ModelArrays:
+    """What every fit of one model needs and no fit changes, computed once per model: the
+    vertices' distance from the open border, the vertex-triangle adjacency, and the scaled
+    shape and expression bases in float32 (``(3N, K)``, columns ``basis * sqrt(variance)``) for
+    the full mesh's positions at every visibility update (a float32 matrix-vector product; the
+    model's own float64 one converts the whole basis each time)."""
+
+    _cache: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+    def __init__(self, model):
+        self.border = distance_from_border(model)
+        self.adjacency = adjacency(model.triangles, model.vertex_count)
+        columns = [model.shape_basis * np.sqrt(model.shape_variance).astype(np.float32)]
+        if model.has_expressions:
+            columns.append(model.expression_basis * np.sqrt(model.expression_variance).astype(np.float32))
+        self.basis = np.ascontiguousarray(np.concatenate(columns, axis=1), np.float32)
+        self.mean = model.shape_mean.astype(np.float64).ravel()
+
+    @classmethod
+    def of(cls, model) -> _ModelArrays:
+        arrays = cls._cache.get(model)
+        if arrays is None:
+            arrays = cls._cache[model] = cls(model)
+        return arrays
 
 
 class _Adam:
@@ -82,7 +121,8 @@ class Fitter:
         used = np.zeros(model.vertex_count, bool)
         used[model.triangles.ravel()] = True
         # samples keep away from the mesh's open border, whose pixels mix face and background
-        inner = distance_from_border(model) > BORDER_MARGIN
+        self.arrays = _ModelArrays.of(model)
+        inner = self.arrays.border > BORDER_MARGIN
         self.candidates = np.flatnonzero(used & (model.vertex_regions() != 0) & inner)
         if len(self.candidates) < 100:
             self.candidates = np.flatnonzero(used)
@@ -98,7 +138,8 @@ class Fitter:
             self.light_angles = (el, az)
         self.energy = Energy(model, camera, self.layout, weights, self.images, self.feature_vertices,
                              self.feature_pixels, metric_distances(distances, model), self.centre,
-                             self.light_distance)
+                             self.light_distance, adjacency=self.arrays.adjacency)
+        self._scene = None  # the Mitsuba scene of the full mesh, its positions updated per visibility update
 
     def initial(self) -> np.ndarray:
         """Frontal view of the mean face placed on the feature points (paper: 'default values
@@ -131,9 +172,9 @@ class Fitter:
     def vertices_camera(self, theta: np.ndarray) -> np.ndarray:
         """All model vertices in camera space (numpy float64, mm)."""
         m, L = self.model, self.layout
-        alpha = theta[L["shape"]]
-        delta = theta[L["expression"]] if m.has_expressions else None
-        local = m.shape(alpha, delta).astype(np.float64)
+        coefficients = [theta[L["shape"]]] + ([theta[L["expression"]]] if m.has_expressions else [])
+        local = self.arrays.basis @ np.concatenate(coefficients).astype(np.float32)
+        local = (self.arrays.mean + local).reshape(-1, 3).astype(np.float32).astype(np.float64)
         return (local - self.centre) @ self.rotation(theta).T + theta[L["translation"]]
 
     def rotation(self, theta: np.ndarray) -> np.ndarray:
@@ -145,9 +186,15 @@ class Fitter:
         against the current full mesh (``Scene.ray_test``)."""
         L = self.layout
         verts = self.vertices_camera(theta)
-        scene = mi.load_dict({"type": "scene", "face": mitsuba_mesh(verts, self.model.triangles)})
+        if self._scene is None:
+            self._scene = mi.load_dict({"type": "scene", "face": mitsuba_mesh(verts, self.model.triangles)})
+            self._scene_params = mi.traverse(self._scene)
+        else:  # the same triangles: new positions, the acceleration structure rebuilt
+            self._scene_params["face.vertex_positions"] = mi.Float(verts.astype(np.float32).ravel())
+            self._scene_params.update()
+        scene = self._scene
         p = verts[self.samples]
-        n = vertex_normals(verts, self.model.triangles)[self.samples].astype(np.float64)
+        n = sample_normals(verts, self.model.triangles, self.arrays.adjacency[self.samples])
         eps = 0.3
         dist = np.linalg.norm(p, axis=1)
         d = -p / dist[:, None]  # towards the camera
