@@ -286,11 +286,15 @@ class Energy:
         out = self._frozen(arrays, inputs, image_weight > 0, grad)
         values = np.asarray(out[0], np.float64)
         g = np.asarray(out[1], np.float64)[:size] if grad else None
-        terms = dict(zip(("E", "E_I", "E_F", "E_P", "E_D"), values[:5].tolist()))
+        return self.terms(values, image_weight > 0), g
+
+    def terms(self, values, use_image: bool) -> dict:
+        """The terms (see :meth:`evaluate`) of the packed values of :meth:`energy`."""
+        terms = dict(zip(("E", "E_I", "E_F", "E_P", "E_D"), (float(v) for v in values[:5])))
         terms["feature_rms_px"] = math.sqrt(max(values[5], 0.0) / len(self.feature_vertices)) * self.scale_px
-        if image_weight > 0:
+        if use_image:
             terms["image_rms"] = math.sqrt(values[6] / max(values[7], 1.0) / 3.0)
-        return terms, g
+        return terms
 
     def _evaluate(self, arrays: dict, inputs, use_image: bool, grad: bool):
         """The packed terms (see :meth:`energy`) and, with ``grad``, dE/d(inputs), evaluated, for

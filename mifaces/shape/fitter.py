@@ -19,12 +19,15 @@ from scipy.spatial import cKDTree
 from ..model.geometry import rotation_matrix
 from ..model.mesh import mitsuba_mesh
 from ..status import DIVERGED
+from .adam import COLUMNS, DeviceAdam
 from .energy import Energy
 from .layout import Layout, adjacency
 from .result import ShapeSchedule, Weights
 from .targets import (FRONTAL, light_direction, metric_distances, normalised, rotation_centre, start_light,
                       start_translation)
 
+#: Steps between the host's reads of the fit's terms (the history's spacing).
+CHUNK = 10
 #: Sample vertices are kept this far (mm) from the mesh's open border.
 BORDER_MARGIN = 6.0
 
@@ -79,23 +82,6 @@ class _ModelArrays:
         if arrays is None:
             arrays = cls._cache[model] = cls(model)
         return arrays
-
-
-class _Adam:
-    """Adam's moments over one stage (Kingma and Ba 2015, Algorithm 1), on ``theta / unit``."""
-
-    beta1, beta2, eps = 0.9, 0.999, 1e-8
-
-    def __init__(self, size: int):
-        self.m1, self.m2, self.k = np.zeros(size), np.zeros(size), 0
-
-    def step(self, gu: np.ndarray, rate: float) -> np.ndarray:
-        """The step (in units) for the scaled gradient ``gu``."""
-        b1, b2 = self.beta1, self.beta2
-        self.m1 = b1 * self.m1 + (1 - b1) * gu
-        self.m2 = b2 * self.m2 + (1 - b2) * gu * gu
-        self.k += 1
-        return rate * (self.m1 / (1 - b1 ** self.k)) / (np.sqrt(self.m2 / (1 - b2 ** self.k)) + self.eps)
 
 
 class Fitter:
@@ -236,10 +222,13 @@ class Fitter:
         return stages
 
     def run(self, progress_bar=None, lr=(0.1, 0.01), visibility_interval: int = 50):
-        """Adam on ``theta / unit`` over :meth:`stages`.
+        """Adam on ``theta / unit`` over :meth:`stages`, on the Dr.Jit side (:class:`DeviceAdam`):
+        the host reads the steps' terms every :data:`CHUNK` steps and theta at each visibility
+        update (every ``visibility_interval`` steps of an image level, a multiple of CHUNK).
 
         Returns ``(theta, terms, history, iterations, status, message)``; ``status`` is None unless
-        the energy or its gradient became non-finite (``'diverged'``).
+        the energy or its gradient became non-finite (``'diverged'``): then theta is the last
+        finite one and ``iterations`` the steps made before.
         """
         L, w = self.layout, self.weights
         theta = self.initial()
@@ -255,34 +244,39 @@ class Fitter:
         stages = self.stages()
         image_total = sum(s[1] for s in stages[1:])
         history, terms, it_total, image_done = [], {}, 0, 0
+        adam = DeviceAdam(self.energy)
         for name, iters, samples, blur, mask in stages:
-            adam = _Adam(L.size)
             self.set_samples(100 if samples is None else samples)
             if samples is not None:
                 self.energy.set_level(blur)
                 self.update_visibility(theta)
-            for it in range(iters):
-                if samples is None:
-                    fw, iw, rate = 1.0, 0.0, lr[0]
-                else:
-                    frac = image_done / max(image_total, 1)
-                    fade = min(frac / max(w.feature_fade, 1e-9), 1.0)
-                    fw = (1 - fade) * 1.0 + fade * (w.feature_final / max(w.feature, 1e-12))
-                    iw, rate = 1.0, lr[0] * (lr[1] / lr[0]) ** frac
-                    if it > 0 and it % visibility_interval == 0:
-                        self.update_visibility(theta)
-                terms, g = self.energy.evaluate(theta, fw, iw)
-                if not (np.isfinite(terms["E"]) and np.all(np.isfinite(g))):
-                    return theta, terms, history, it_total, DIVERGED, f"non-finite energy or gradient in {name}"
-                theta = theta - adam.step(g * units * mask, rate) * units * mask
-                theta[nonnegative] = np.maximum(theta[nonnegative], 0.0)
-                it_total += 1
+            table = self._step_table(iters, samples is not None, image_done, image_total, lr)
+            adam.start(theta, units * mask, nonnegative, table)
+            done = 0
+            while done < iters:
+                if samples is not None and done > 0 and done % visibility_interval == 0:
+                    self.update_visibility(adam.read()[0])
+                end = min(iters, (done // CHUNK + 1) * CHUNK)
+                if samples is not None:  # a visibility update falls on the start of a chunk
+                    end = min(end, (done // visibility_interval + 1) * visibility_interval)
+                for _ in range(done, end):
+                    adam.step(samples is not None)
+                theta, packed, failed = adam.read()
+                steps = end - done if not failed else max(failed - 1 - done, 0)
+                for it in range(done, done + steps):
+                    if it % 10 == 0 or it == iters - 1:
+                        history.append({"iteration": it_total + it + 1 - done, "stage": name,
+                                        **self.energy.terms(packed[it], samples is not None)})
+                it_total += steps
                 if samples is not None:
-                    image_done += 1
-                if it % 10 == 0 or it == iters - 1:
-                    history.append({"iteration": it_total, "stage": name, **{k: float(v) for k, v in terms.items()}})
+                    image_done += steps
+                if failed:
+                    terms = self.energy.terms(packed[failed - 1], samples is not None)
+                    return theta, terms, history, it_total, DIVERGED, f"non-finite energy or gradient in {name}"
+                terms = self.energy.terms(packed[end - 1], samples is not None)
+                done = end
                 if progress_bar is not None:
-                    progress_bar.update(1)
+                    progress_bar.update(steps)
                     progress_bar.set_postfix(stage=name, E=f"{terms['E']:.3g}", lm=f"{terms['feature_rms_px']:.2f}px")
         use_image = bool(self.image_names and self.schedule.levels)
         if use_image:
@@ -290,3 +284,22 @@ class Fitter:
         terms, _ = self.energy.evaluate(theta, w.feature_final / max(w.feature, 1e-12), 1.0 if use_image else 0.0,
                                         grad=False)
         return theta, terms, history, it_total, None, ""
+
+    def _step_table(self, iters: int, image: bool, image_done: int, image_total: int, lr) -> np.ndarray:
+        """Per step of a stage (:data:`~mifaces.shape.adam.COLUMNS`): the feature term's weight
+        (fading over the image levels' first ``Weights.feature_fade``), the image term's, Adam's
+        step size (decaying geometrically from ``lr[0]`` to ``lr[1]`` over the image levels) and its
+        bias corrections ``1 - beta^k``."""
+        w = self.weights
+        table = np.zeros((iters, COLUMNS))
+        for it in range(iters):
+            if not image:
+                fw, iw, rate = 1.0, 0.0, lr[0]
+            else:
+                frac = (image_done + it) / max(image_total, 1)
+                fade = min(frac / max(w.feature_fade, 1e-9), 1.0)
+                fw = (1 - fade) * 1.0 + fade * (w.feature_final / max(w.feature, 1e-12))
+                iw, rate = 1.0, lr[0] * (lr[1] / lr[0]) ** frac
+            k = it + 1
+            table[it] = (fw * w.feature, iw, rate, 1 - DeviceAdam.beta1 ** k, 1 - DeviceAdam.beta2 ** k)
+        return table
