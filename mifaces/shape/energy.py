@@ -150,14 +150,16 @@ class Energy:
         basis = np.pad(np.concatenate(columns, axis=1).astype(np.float32), ((0, 3 * pad), (0, 0)))
         self.n_modes = basis.shape[1]
         self.dr_mean = device_array(np.float32, np.pad(m.shape_mean[needed], ((0, pad), (0, 0))))
-        self.dr_basis = [device_array(np.float32, basis[:, k]) for k in range(self.n_modes)]
+        columns = np.ascontiguousarray(basis.T)  # one contiguous row per mode: no strided copies
+        self.dr_basis = [device_array(np.float32, columns[k]) for k in range(self.n_modes)]
         self.dr_sample_local = device_array(np.uint32, local[samples])
         self.dr_feature_local = device_array(np.uint32, local[self.feature_vertices])
         if len(self.distances):
             self.dr_distance_local = [device_array(np.uint32, local[self.distance_vertices[:, k]])
                                       for k in range(2)]
         corners = np.where(valid[..., None], local[ring_tris], 0).astype(np.uint32)  # (S, D, 3)
-        self.dr_corners = [[device_array(np.uint32, corners[:, j, c]) for c in range(3)]
+        corners = np.ascontiguousarray(corners.transpose(1, 2, 0))  # (D, 3, S): contiguous rows
+        self.dr_corners = [[device_array(np.uint32, corners[j, c]) for c in range(3)]
                            for j in range(self.degree)]
         self.dr_slot_valid = [device_array(np.float32, valid[:, j]) for j in range(self.degree)]
         if m.has_texture:
