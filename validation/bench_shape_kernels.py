@@ -18,8 +18,8 @@ the end. Reported per measurement:
   found in the cache; ``compiled``: how many; ``cache_hits``;
 * ``execution_s``: the kernels' own run time, and ``execution_share``, its share of the
   wall time (both of the timed fit);
-* ``seconds``: wall time of the timed fit (``seconds_counted``: of the counted one); ``feature_rms_px`` and ``E``: the fit's
-  final loss terms; ``vertex_rms_mm``, ``vertex_rms_aligned_mm``,
+* ``seconds``: wall time of the timed fit (``seconds_counted``: of the counted one);
+  ``feature_rms_px`` and ``E``: the fit's final loss terms; ``vertex_rms_mm``, ``vertex_rms_aligned_mm``,
   ``normal_deg``: against the ground truth (the vertices of the true face
   that face the camera; as in ``validation/shape_estimation.py``).
 
