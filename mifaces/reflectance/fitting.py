@@ -8,8 +8,9 @@ where r is the reflectance scaled so that a white Lambertian target has
 r = 1 (so the model predicts π f; f without cosine, see
 :mod:`mifaces.brdf.model`) and σ the confidence of eq. 9/10. The model is
 evaluated by the same Dr.Jit functions the plugins use; its Jacobian comes
-from Dr.Jit's forward mode, one pass per free parameter; the steps are
-Levenberg-Marquardt (:mod:`mifaces.reflectance.levenberg_marquardt`) on random subsets
+from Dr.Jit's forward mode (a tangent per free parameter), and the normal
+equations are summed in the same kernel, one pass over the samples per step
+(:class:`_Problem`); the steps are Levenberg-Marquardt (:mod:`mifaces.reflectance.levenberg_marquardt`) on random subsets
 of growing size, each stage starting from the previous result (the paper's
 hierarchy). Parameters are kept in their valid ranges by reparameterisation:
 p = lo + (hi - lo)·sigmoid(x), or its logarithmic form for parameters that
