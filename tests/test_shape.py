@@ -288,11 +288,11 @@ def test_kernel_launches_per_iteration(model, camera, posed):
     _, _, _, m = posed
     per_iteration, stages = [], []
 
-    class Hook:  # the fit's progress hook: called once per iteration
+    class Hook:  # the fit's progress hook: called every few iterations (n of them)
         stage = None
 
         def update(self, n=1):
-            per_iteration.append(len(dr.kernel_history()))
+            per_iteration.append(len(dr.kernel_history()) / n)
             stages.append(self.stage)
 
         def set_postfix(self, stage=None, **_):
@@ -306,10 +306,10 @@ def test_kernel_launches_per_iteration(model, camera, posed):
         fit_measurement(m, camera, model, schedule=schedule, progress=Hook())
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
-    counts = {s: sorted(c for c, t in zip(per_iteration, stages) if t == s) for s in dict.fromkeys(stages)}
+    counts = {s: [c for c, t in zip(per_iteration, stages) if t == s] for s in dict.fromkeys(stages)}
     assert set(counts) == {"pose", "level0", "level1"}
-    # the first iteration of a stage also sets it up (samples, blur, visibility): the median is the steady state
-    assert all(c[len(c) // 2] <= 40 for c in counts.values()), counts
+    # the first steps of a stage also set it up (samples, blur, visibility): the later ones are the steady state
+    assert all(len(c) >= 2 and max(c[1:]) <= 40 for c in counts.values()), counts
 
 
 def test_second_photograph_reuses_kernels(model, camera, posed):

@@ -11,6 +11,16 @@ scipy's default step is below their precision) and with the Dr.Jit Jacobian
 mifaces uses. Every run starts from the same start (mifaces' lobe-width grid
 search, which each run's time includes).
 
+How far each of mifaces' fits is from the physical limit, one pass over the
+samples per Jacobian: every pass the fit makes (:meth:`_Problem.system`, which
+computes the residuals, their Jacobian and the normal equations in one kernel)
+is counted with its number of samples, giving the equivalent number of
+full-data passes; the limit is that number times the wall time of one
+full-data pass (warm, median of 5), and ``kernel_limit_s`` the same with the
+pass's kernel execution time alone (Dr.Jit's kernel history). The machine
+may be shared: the times are taken side by side in one process, and the load
+average is recorded.
+
 Run:  python validation/bench_brdf_fit.py [--samples N] [--quick]
 Writes validation/results/bench_brdf_fit.{json,png} and prints a table.
 """
@@ -18,11 +28,13 @@ Writes validation/results/bench_brdf_fit.{json,png} and prints a table.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
 import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 import scipy.optimize
@@ -60,6 +72,47 @@ def samples(model, truth, n, seed=0, noise=0.03):
     return light, view, r, 1.0 / (light[:, 2] ** 2 * view[:, 2])
 
 
+class PassCounter:
+    """Counts the passes of :meth:`_Problem.system` (samples per call) while it is installed."""
+
+    def __init__(self):
+        self.sizes = []
+        self.original = _Problem.system
+
+    def __enter__(self):
+        counter = self
+
+        def system(problem, x):
+            counter.sizes.append(problem.n)
+            return counter.original(problem, x)
+
+        _Problem.system = system
+        return self
+
+    def __exit__(self, *exc):
+        _Problem.system = self.original
+
+    def full_passes(self, n: int) -> float:
+        return sum(self.sizes) / n
+
+
+def one_pass(problem, x, repeats: int = 5) -> tuple[float, float]:
+    """Wall time (median) and kernel execution time of one full-data pass (residuals, Jacobian,
+    normal equations) at ``x``, warm."""
+    problem.system(x)
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        problem.system(x)
+        times.append(time.perf_counter() - t)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()
+    problem.system(x)
+    execution = sum(e.get("execution_time", 0.0) for e in dr.kernel_history()) / 1e3
+    dr.set_flag(dr.JitFlag.KernelHistory, False)
+    return float(np.median(times)), execution
+
+
 def scipy_fit(model, light, view, r, sigma, jacobian: str):
     space = ParameterSpace(model, model.fixed_defaults())
     problem = _Problem(model, space, light, view, r, sigma)
@@ -94,6 +147,7 @@ def main():
     parser.add_argument("--quick", action="store_true")
     args = parser.parse_args()
     n = 20_000 if args.quick else args.samples
+    load = os.getloadavg()[0]  # the machine may be shared: its load before and after
     rows, curves = [], {}
     for name, truth in TRUTH.items():
         model = brdf.model(name)
@@ -105,25 +159,40 @@ def main():
         full = _Problem(model, space, light, view, r, sigma)
         for label, schedule in [("hierarchical LM", SubsetSchedule()), ("full-data LM", FULL_DATA)]:
             trace = []
-            fit = fit_region(model, light, view, r, sigma, schedule=schedule, trace=trace)
+            with PassCounter() as passes:
+                fit = fit_region(model, light, view, r, sigma, schedule=schedule, trace=trace)
             # the full-data loss along the way, evaluated after the timed run
             history = [(t, full.loss(space.vector(values))) for t, values in trace]
+            pass_s, kernel_s = one_pass(full, space.vector(fit.params))
+            equivalent = passes.full_passes(len(sigma))
             runs[label] = {"loss": fit.loss, "seconds": fit.seconds, "history": history,
-                           "evaluations": fit.iterations, "status": fit.status}
+                           "evaluations": fit.iterations, "status": fit.status,
+                           "passes": len(passes.sizes), "full_data_passes": equivalent, "pass_s": pass_s,
+                           "limit_s": equivalent * pass_s, "kernel_limit_s": equivalent * kernel_s}
         for label, jac in [("scipy LM, 2-point Jacobian", "2-point"), ("scipy LM, Dr.Jit Jacobian", "drjit")]:
             runs[label] = scipy_fit(model, light, view, r, sigma, jac)
         best = min(run["loss"] for run in runs.values())
         scipy_time = runs["scipy LM, 2-point Jacobian"]["seconds"]
         for label, run in runs.items():
-            rows.append({"model": name, "method": label, "samples": len(sigma), "loss": run["loss"],
-                         "loss_over_best": run["loss"] / best, "seconds": run["seconds"],
-                         "speedup_vs_scipy": scipy_time / run["seconds"], "status": str(run["status"])})
+            row = {"model": name, "method": label, "samples": len(sigma), "loss": run["loss"],
+                   "loss_over_best": run["loss"] / best, "seconds": run["seconds"],
+                   "speedup_vs_scipy": scipy_time / run["seconds"], "status": str(run["status"])}
+            limit = ""
+            if "limit_s" in run:
+                row.update({k: run[k] for k in ("passes", "full_data_passes", "pass_s", "limit_s", "kernel_limit_s")})
+                row["seconds_over_limit"] = run["seconds"] / run["limit_s"]
+                limit = (f"; {run['passes']} passes = {run['full_data_passes']:.1f} full-data passes x "
+                         f"{1e3 * run['pass_s']:.0f} ms = {run['limit_s']:.2f} s limit "
+                         f"({row['seconds_over_limit']:.1f}x it; kernels alone {run['kernel_limit_s']:.2f} s)")
+            rows.append(row)
             print(f"{name:<13} {label:<28} loss {run['loss']:12.6g} ({run['loss'] / best - 1:+.2e})"
-                  f"  {run['seconds']:7.2f} s  ({scipy_time / run['seconds']:5.1f}x faster than scipy)", flush=True)
+                  f"  {run['seconds']:7.2f} s  ({scipy_time / run['seconds']:5.1f}x faster than scipy){limit}",
+                  flush=True)
         curves[name] = {label: run["history"] for label, run in runs.items()}
     if args.quick:
         return
-    write_json(OUT / "bench_brdf_fit.json", {"samples": n, "rows": rows, "curves": curves})
+    write_json(OUT / "bench_brdf_fit.json", {"samples": n, "threads": os.cpu_count(), "rows": rows,
+                                             "load_average_1min": [load, os.getloadavg()[0]], "curves": curves})
     plot(curves, OUT / "bench_brdf_fit.png")
     print(f"wrote {OUT / 'bench_brdf_fit.json'} and {OUT / 'bench_brdf_fit.png'}")
 

@@ -3,19 +3,23 @@
 Each measurement of a simulated capture is fitted with
 :func:`mifaces.shape.fit.fit_measurement` (the arguments
 :func:`~mifaces.shape.fit.fit_shape` passes) under Dr.Jit's kernel history
-(``dr.JitFlag.KernelHistory``). The history is read after every iteration
-(through the progress hook the fit calls once per iteration), so the
-launches are counted per iteration and per stage (``pose``: feature points
-only; ``level<i>``: the image levels). Reported per measurement:
+(``dr.JitFlag.KernelHistory``). The history is read every time the fit calls
+its progress hook (every few steps, with their number), so the launches are
+counted per iteration and per stage (``pose``: feature points only;
+``level<i>``: the image levels). Reading the history costs time (it copies
+every kernel's IR), so the wall time and the execution share come from a
+second, timed fit of the same measurement (warm) whose history is read once at
+the end. Reported per measurement:
 
 * ``launches_per_iteration`` (all iterations, and per stage) and the launches
   by kind (``JIT``, ``BlockReduce``, ``Memcpy``, ``Memset``, ...), with those on
   at most 1,000 elements;
 * ``compile_s``: code generation and backend compilation of the kernels not
   found in the cache; ``compiled``: how many; ``cache_hits``;
-* ``execution_s``: the kernels' own run time, and its share of the wall time;
-* ``seconds``: wall time of the fit; ``feature_rms_px`` and ``E``: the fit's
-  final loss terms; ``vertex_rms_mm``, ``vertex_rms_aligned_mm``,
+* ``execution_s``: the kernels' own run time, and ``execution_share``, its share of the
+  wall time (both of the timed fit);
+* ``seconds``: wall time of the timed fit (``seconds_counted``: of the counted one);
+  ``feature_rms_px`` and ``E``: the fit's final loss terms; ``vertex_rms_mm``, ``vertex_rms_aligned_mm``,
   ``normal_deg``: against the ground truth (the vertices of the true face
   that face the camera; as in ``validation/shape_estimation.py``).
 
@@ -63,12 +67,13 @@ class KernelCounter:
     """A progress hook for :func:`fit_measurement`: the kernel history of every iteration."""
 
     def __init__(self):
-        self.iterations, self.stages = [], []
+        self.iterations, self.stages, self.steps = [], [], []
         self.stage = None
 
     def update(self, n=1):
         self.iterations.append(dr.kernel_history())
         self.stages.append(self.stage)
+        self.steps.append(n)
 
     def set_postfix(self, stage=None, **_):
         if self.stages:
@@ -103,32 +108,42 @@ def bench(capture_path: Path, factor: float, names=None) -> list[dict]:
         t0 = time.perf_counter()
         fit = fit_measurement(m, capture.camera, model, light_position=capture.light(m.light).position,
                               schedule=schedule, progress=counter, distances=capture.distances)
-        seconds = time.perf_counter() - t0
+        counted = time.perf_counter() - t0
         outside = dr.kernel_history()  # after the last iteration: final visibility and evaluation
         everything = [e for it in counter.iterations for e in it] + outside
-        row = {"measurement": m.name, "iterations": fit.iterations, "seconds": seconds, "status": fit.status,
-               **summary(everything, fit.iterations), "stages": {}}
+        row = {"measurement": m.name, "iterations": fit.iterations, "seconds_counted": counted,
+               "status": fit.status, **summary(everything, fit.iterations), "stages": {}}
         for stage in dict.fromkeys(counter.stages):
-            its = [h for h, s in zip(counter.iterations, counter.stages) if s == stage]
-            # the first iteration of a stage carries its setup (samples, blur, visibility): the median
-            # iteration is the steady state
-            per_it = sorted(len(h) for h in its)
-            row["stages"][stage] = {"iterations": len(its), "median_launches": per_it[len(per_it) // 2],
-                                    **summary([e for h in its for e in h], len(its))}
-        row["execution_share"] = row["execution_s"] / seconds
-        gt, _ = truth(capture_path, m.name)
+            chunks = [(h, n) for h, s, n in zip(counter.iterations, counter.stages, counter.steps) if s == stage]
+            # the first steps of a stage carry its setup (samples, blur, visibility): the later ones
+            # are the steady state
+            steady = [len(h) / n for h, n in chunks[1:]] or [len(h) / n for h, n in chunks]
+            its = sum(n for _, n in chunks)
+            row["stages"][stage] = {"iterations": its, "median_launches": sorted(steady)[len(steady) // 2],
+                                    **summary([e for h, _ in chunks for e in h], its)}
+        # the timed fit: the same measurement again (warm), its history read once at the end
+        dr.kernel_history()
+        t0 = time.perf_counter()
+        fit_measurement(m, capture.camera, model, light_position=capture.light(m.light).position,
+                        schedule=schedule, progress=False, distances=capture.distances)
+        seconds = time.perf_counter() - t0
+        timed = summary(dr.kernel_history(), fit.iterations)
+        row.update({"seconds": seconds, "execution_s": timed["execution_s"], "compile_s_timed": timed["compile_s"],
+                    "execution_share": timed["execution_s"] / seconds})
+        gt = truth(capture_path, m.name)[0]
         mask = evaluated(model, gt, capture.camera)
         row.update({"feature_rms_px": fit.loss["feature_rms_px"], "E": fit.loss["E"],
                     **same_topology_metrics(model, fit.vertices_world.astype(np.float64), gt, capture.camera,
                                             mask)})
-        print(f"{m.name}: {fit.iterations} it, {seconds:.1f} s, {row['launches_per_iteration']:.0f} launches/it "
+        print(f"{m.name}: {fit.iterations} it, {seconds:.1f} s timed ({counted:.1f} s counted), "
+              f"{row['launches_per_iteration']:.0f} launches/it "
               f"({', '.join(f'{k} {v:.0f}' for k, v in row['by_kind_per_iteration'].items())}; "
               f"{row['small_per_iteration']:.0f} small), compiled {row['compiled']} "
               f"({row['compile_s']:.1f} s), cache hits {row['cache_hits']}, execution {row['execution_s']:.1f} s "
               f"({100 * row['execution_share']:.0f} %); lm {row['feature_rms_px']:.3f} px, E {row['E']:.4g}, "
               f"vRMS {row['vertex_rms_mm']:.2f} mm, normals {row['normal_deg']:.2f} deg", flush=True)
         for stage, s in row["stages"].items():
-            print(f"    {stage}: {s['iterations']} it, median {s['median_launches']} launches/it, "
+            print(f"    {stage}: {s['iterations']} it, median {s['median_launches']:.1f} launches/it, "
                   f"mean {s['launches_per_iteration']:.1f}", flush=True)
         rows.append(row)
     dr.set_flag(dr.JitFlag.KernelHistory, False)
@@ -144,6 +159,7 @@ def main():
     ap.add_argument("--only", nargs="*", help="measurement names to fit (default: all)")
     ap.add_argument("--label", default="after", help="key of this run in the JSON (e.g. before, after)")
     args = ap.parse_args()
+    load = os.getloadavg()[0]  # the machine may be shared: its load before and after
     with tempfile.TemporaryDirectory() as tmp:
         path = args.capture or ensure_capture(Path(tmp) / "capture", measurements=args.measurements,
                                               resolution=(args.resolution, args.resolution))
@@ -151,7 +167,8 @@ def main():
     result = json.loads(OUT.read_text()) if OUT.is_file() else {}
     result[args.label] = {"capture": str(args.capture or f"simulated {args.measurements} x {args.resolution}^2"),
                           "iterations_factor": args.iterations, "threads": os.cpu_count(),
-                          "machine": platform.platform(), "measurements": rows}
+                          "machine": platform.platform(), "load_average_1min": [load, os.getloadavg()[0]],
+                          "measurements": rows}
     write_json(OUT, result)
     print(f"wrote {OUT}")
 

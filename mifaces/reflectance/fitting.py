@@ -8,8 +8,9 @@ where r is the reflectance scaled so that a white Lambertian target has
 r = 1 (so the model predicts π f; f without cosine, see
 :mod:`mifaces.brdf.model`) and σ the confidence of eq. 9/10. The model is
 evaluated by the same Dr.Jit functions the plugins use; its Jacobian comes
-from Dr.Jit's forward mode, one pass per free parameter; the steps are
-Levenberg-Marquardt (:mod:`mifaces.reflectance.levenberg_marquardt`) on random subsets
+from Dr.Jit's forward mode (a tangent per free parameter), and the normal
+equations are summed in the same kernel, one pass over the samples per step
+(:class:`_Problem`); the steps are Levenberg-Marquardt (:mod:`mifaces.reflectance.levenberg_marquardt`) on random subsets
 of growing size, each stage starting from the previous result (the paper's
 hierarchy). Parameters are kept in their valid ranges by reparameterisation:
 p = lo + (hi - lo)·sigmoid(x), or its logarithmic form for parameters that
@@ -29,6 +30,7 @@ import numpy as np
 from .. import brdf as brdf_models
 from ..brdf.model import BRDFModel
 from ..progress import progress as progress_bar
+from ..shape.layout import device_array
 from ..status import AT_BOUND, CONVERGED, PRIOR
 from .levenberg_marquardt import levenberg_marquardt
 from .parameters import ParameterSpace, conservative_start, linear_start
@@ -83,27 +85,57 @@ class RegionFit:
 
 
 class _Problem:
-    """Residuals (r - π f)/σ of one set of samples, evaluated with Dr.Jit."""
+    """Residuals (r - π f)/σ of one set of samples, evaluated with Dr.Jit.
+
+    :meth:`system` and :meth:`loss` are one kernel each over the samples: the
+    model, its derivatives by forward mode (one tangent per free parameter, all
+    in the same kernel) and the sums of the normal equations, accumulated in
+    float64 (:func:`_sums`), frozen per model, parameter space and sample count
+    (``dr.freeze``), so a step replays the kernel instead of tracing the model again.
+    """
 
     def __init__(self, model, space, light, view, reflectance, sigma):
         self.model, self.space = model, space
-        self.wi = mi.Vector3f(np.ascontiguousarray(light.T, dtype=np.float32))
-        self.wo = mi.Vector3f(np.ascontiguousarray(view.T, dtype=np.float32))
-        self.r = mi.Color3f(np.ascontiguousarray(reflectance.T, dtype=np.float32))
-        self.w = mi.Float(np.ascontiguousarray(1.0 / sigma, dtype=np.float32))
+        # in Dr.Jit's own memory (device_array): a mapped NumPy array's alignment would enter the kernels
+        self.wi = mi.Vector3f(*(device_array(np.float32, light[:, k]) for k in range(3)))
+        self.wo = mi.Vector3f(*(device_array(np.float32, view[:, k]) for k in range(3)))
+        self.r = mi.Color3f(*(device_array(np.float32, reflectance[:, k]) for k in range(3)))
+        self.w = device_array(np.float32, 1.0 / np.asarray(sigma, np.float32))
         self.n = len(sigma)
+        key = _signature(space)
+        if key not in _FROZEN:
+            def sums(arrays, u, jacobian):
+                return _sums(space, arrays, u, jacobian)
+
+            _FROZEN[key] = dr.freeze(sums, warn_after=1000,  # one recording per sample count
+                                     state_fn=lambda arrays, u, jacobian: (dr.width(arrays["w"]), jacobian))
+        self._sums = _FROZEN[key]
 
     def _residuals(self, u):
         params = self.space.drjit_params(u)
         return (self.r - dr.pi * self.model.eval(self.wi, self.wo, params)) * self.w
 
+    def _run(self, x, jacobian: bool) -> np.ndarray:
+        arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w}
+        # opaque scalars: the kernel does not depend on the parameters' values
+        return np.asarray(self._sums(arrays, [dr.opaque(mi.Float, float(v)) for v in x], jacobian), np.float64)
+
     def loss(self, x) -> float:
-        # opaque scalars: the kernel is compiled once and reused every iteration
-        res = self._residuals([dr.opaque(mi.Float, float(v)) for v in x])
-        value = 0.5 * dr.sum(dr.square(res.x) + dr.square(res.y) + dr.square(res.z))
-        return float(value[0] if dr.is_array_v(value) else value)
+        """½ Σ r², accumulated in float64."""
+        return float(self._run(x, False)[0])
+
+    def system(self, x):
+        """``(JᵀJ, Jᵀr, ½ Σ r²)`` (float64) at ``x``, in one pass over the samples."""
+        values, p = self._run(x, True), len(x)
+        jtj = np.zeros((p, p))
+        rows, cols = np.triu_indices(p)
+        jtj[rows, cols] = values[1:1 + len(rows)]
+        jtj[cols, rows] = values[1:1 + len(rows)]
+        return jtj, values[1 + len(rows):], float(values[0])
 
     def residuals_and_jacobian(self, x):
+        """The residuals (M,) and their Jacobian (M, P), float32, on the host (for solvers that
+        want them; :meth:`system` is what the fits use)."""
         u = [dr.opaque(mi.Float, float(v)) for v in x]
         dr.enable_grad(u)
         res = self._residuals(u)
@@ -115,6 +147,46 @@ class _Problem:
             jac[:, k] = np.array(dr.grad(res)).ravel()
             dr.clear_grad(res)
         return r, jac
+
+
+#: The frozen :func:`_sums` per parameter space (:func:`_signature`).
+_FROZEN: dict = {}
+
+
+def _signature(space: ParameterSpace) -> tuple:
+    """What the kernel of a parameter space depends on: the model and its options, the fixed
+    values (literals of the code) and the free parameters with their ranges."""
+    return (mi.variant(), space.model.name, repr(sorted(dict(space.model.options).items())),
+            repr(sorted(space.fixed.items())),
+            tuple((f.name, f.channel, f.lower, f.upper, f.log) for f in space.free))
+
+
+def _sums(space: ParameterSpace, arrays: dict, u: list, jacobian: bool):
+    """``[½ Σ r², (JᵀJ)_ab for a <= b (row-major upper triangle), (Jᵀr)_a]`` as one float64
+    array, summed over the samples and colour channels of the residuals
+    ``(r - π f)/σ`` of ``arrays`` (``wi``, ``wo``, ``r``, ``w``) at the free variables ``u``;
+    without ``jacobian`` only the first entry. One kernel: the derivatives are forward-mode
+    tangents of the same expression, the sums scatter-adds into a small array (per-thread
+    copies on the LLVM backend, ``dr.ReduceMode.Expand``)."""
+    if jacobian:
+        dr.enable_grad(u)
+    res = (arrays["r"] - dr.pi * space.model.eval(arrays["wi"], arrays["wo"], space.drjit_params(u))) * arrays["w"]
+    n, p = dr.width(arrays["w"]), len(u)
+    r = [mi.Float64(c) for c in dr.detach(res)]
+    sums = [r[0] * r[0] + r[1] * r[1] + r[2] * r[2]]
+    if jacobian:
+        d = []
+        for uk in u:
+            dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
+            d.append([mi.Float64(c) for c in dr.grad(res)])
+            dr.clear_grad(res)
+        sums += [d[a][0] * d[b][0] + d[a][1] * d[b][1] + d[a][2] * d[b][2] for a in range(p) for b in range(a, p)]
+        sums += [d[a][0] * r[0] + d[a][1] * r[1] + d[a][2] * r[2] for a in range(p)]
+    acc = dr.zeros(mi.Float64, len(sums))
+    for k, value in enumerate(sums):
+        dr.scatter_add(acc, value * (0.5 if k == 0 else 1.0), dr.full(mi.UInt32, k, n))
+    dr.eval(acc)
+    return acc
 
 
 def validate_samples(light, view, reflectance, sigma) -> None:
@@ -187,7 +259,7 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         idx = np.sort(order[:size])
         problem = _Problem(model, space, light[idx], view[idx], reflectance[idx], sigma[idx])
         last = stage == len(sizes) - 1
-        result = levenberg_marquardt(problem.residuals_and_jacobian, problem.loss, x,
+        result = levenberg_marquardt(None, None, x, system=problem.system,
                                      max_iterations=schedule.final_iterations if last else schedule.iterations,
                                      ftol=ftol if last else max(ftol, schedule.stage_ftol), clock_start=t0)
         x = result.x

@@ -8,7 +8,9 @@ caller (mifaces computes them with Dr.Jit). The step solves
 
 (Marquardt's scaling, Press et al., *Numerical Recipes*, sec. 15.5, the
 method the paper uses), in float64 on the normal equations. λ shrinks by 3
-after an accepted step and grows by 4 after a rejected one.
+after an accepted step and grows by 4 after a rejected one. The caller gives
+either the residuals and their Jacobian, or (``system``) the normal equations
+and the loss formed where the residuals are, in one pass per step.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ class LMResult:
     reason : str
         Which test ended the run, in words.
     iterations : int
-        Jacobian evaluations.
+        Accepted steps plus one: the Jacobians the steps were solved with.
     history : list of (seconds, loss, x)
         Loss and parameters after each accepted step, with the wall time
         since the start.
@@ -74,8 +76,8 @@ def normal_equations(residuals: np.ndarray, jacobian: np.ndarray):
 
 
 def levenberg_marquardt(
-    residuals_and_jacobian: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
-    loss: Callable[[np.ndarray], float],
+    residuals_and_jacobian: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None,
+    loss: Callable[[np.ndarray], float] | None,
     x0: np.ndarray,
     max_iterations: int = 100,
     ftol: float = 1e-10,
@@ -83,17 +85,19 @@ def levenberg_marquardt(
     gtol: float = 1e-12,
     lambda0: float = 1e-3,
     clock_start: float | None = None,
+    system: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, float]] | None = None,
 ) -> LMResult:
     """Minimise ½ Σ r(x)².
 
     Parameters
     ----------
-    residuals_and_jacobian : callable
-        x -> (r of shape (M,), J of shape (M, P)).
-    loss : callable
+    residuals_and_jacobian : callable or None
+        x -> (r of shape (M,), J of shape (M, P)); the normal equations are
+        formed from them (:func:`normal_equations`). None when ``system`` is given.
+    loss : callable or None
         x -> ½ Σ r(x)², cheaper than the above (no Jacobian); used to test
         trial steps. May return inf/nan for an invalid x (the step is then
-        rejected).
+        rejected). None when ``system`` is given.
     x0 : ndarray of shape (P,)
     max_iterations : int
         Jacobian evaluations allowed.
@@ -108,12 +112,21 @@ def levenberg_marquardt(
         scales with each parameter's own curvature.
     clock_start : float, optional
         ``time.perf_counter()`` value the history's times count from.
+    system : callable, optional
+        x -> (JᵀJ (P, P), Jᵀr (P,), ½ Σ r²), all float64, in one pass over the
+        residuals (the caller forms the sums where the residuals are); then
+        every trial step is evaluated with it, and an accepted step's system is
+        the trial's, so each step costs one pass.
     """
     start = time.perf_counter() if clock_start is None else clock_start
     x = np.asarray(x0, dtype=np.float64).copy()
-    r, jac = residuals_and_jacobian(x)
-    current = 0.5 * float(np.dot(r.astype(np.float64), r.astype(np.float64)))
-    jtj, jtr = normal_equations(r, jac)
+    if system is None:
+        def system_of(x):
+            r, jac = residuals_and_jacobian(x)
+            return (*normal_equations(r, jac), 0.5 * float(np.dot(r.astype(np.float64), r.astype(np.float64))))
+    else:
+        system_of = system
+    jtj, jtr, current = system_of(x)
     history = [(time.perf_counter() - start, current, x.copy())]
     lam = lambda0
     iterations, evaluations = 1, 1
@@ -138,7 +151,13 @@ def levenberg_marquardt(
             if predicted <= ftol * current and lam <= lambda0:
                 status, reason = CONVERGED, "predicted loss decrease below ftol"
                 break
-        trial = float("inf") if delta is None or not np.all(np.isfinite(delta)) else loss(x + delta)
+        trial, trial_system = float("inf"), None
+        if delta is not None and np.all(np.isfinite(delta)):
+            if system is None:
+                trial = loss(x + delta)
+            else:
+                trial_system = system(x + delta)
+                trial = trial_system[2]
         evaluations += 1
         if np.isfinite(trial) and trial < current:
             rejections = 0
@@ -146,8 +165,7 @@ def levenberg_marquardt(
             decrease = current - trial
             current = trial
             lam = max(lam / 3.0, 1e-30)
-            r, jac = residuals_and_jacobian(x)
-            jtj, jtr = normal_equations(r, jac)
+            jtj, jtr, _ = system_of(x) if trial_system is None else trial_system
             iterations += 1
             history.append((time.perf_counter() - start, current, x.copy()))
             if decrease <= ftol * current:

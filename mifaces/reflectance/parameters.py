@@ -15,6 +15,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..brdf.model import BRDFModel, Parameter
+from ..shape.layout import device_array
 
 
 @dataclass(frozen=True)
@@ -199,15 +200,16 @@ def linear_start(model: BRDFModel, light, view, reflectance, sigma, fixed: dict 
     width_name, grid = model.WIDTH_GRID
     n = len(sigma)
     idx = np.sort(np.random.default_rng(seed).permutation(n)[:max_samples]) if n > max_samples else np.arange(n)
-    wi = mi.Vector3f(np.ascontiguousarray(np.asarray(light, np.float32)[idx].T))
-    wo = mi.Vector3f(np.ascontiguousarray(np.asarray(view, np.float32)[idx].T))
+    # in Dr.Jit's own memory (device_array): a mapped NumPy array's alignment would enter the kernels
+    wi = mi.Vector3f(*(device_array(np.float32, np.asarray(light, np.float32)[idx, k]) for k in range(3)))
+    wo = mi.Vector3f(*(device_array(np.float32, np.asarray(view, np.float32)[idx, k]) for k in range(3)))
     r = np.asarray(reflectance, np.float64)[idx]
     w = 1.0 / np.square(np.asarray(sigma, np.float64)[idx])
     unit = {**model.defaults(), **(fixed or {}), **model.unit_lobe()}
     best = None
     sw = w.sum()
     for width in grid:
-        params = {**unit, width_name: float(width)}
+        params = {**unit, width_name: dr.opaque(mi.Float, float(width))}  # one kernel for every width
         g = np.pi * np.array(model.eval(wi, wo, params, diffuse=False))[0].astype(np.float64)
         # weighted normal equations of [1, g] per channel
         sg, sgg = (w * g).sum(), (w * g * g).sum()

@@ -27,7 +27,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .layout import Layout, adjacency, device_array
+from .layout import Layout, device_array
+from .layout import adjacency as triangle_adjacency
 from .result import Weights
 from .targets import FRONTAL, blurred
 
@@ -58,6 +59,9 @@ class Energy:
         The rotation centre (model space, mm).
     light_distance : float
         Distance (mm) of the point image's lamp from the face centre; inf for a directional light.
+    adjacency : (N, D) int array, optional
+        The model's vertex-triangle adjacency (:func:`~mifaces.shape.layout.adjacency`), if
+        already at hand.
     freeze : bool
         Replay the kernels of an evaluation (``dr.freeze``) instead of tracing it again, while
         the arrays keep their sizes (recorded anew per sample set).
@@ -77,7 +81,8 @@ class Energy:
     """
 
     def __init__(self, model, camera, layout: Layout, weights: Weights, images: dict, feature_vertices,
-                 feature_pixels, distances, centre, light_distance: float = math.inf, freeze: bool = True):
+                 feature_pixels, distances, centre, light_distance: float = math.inf, freeze: bool = True,
+                 adjacency=None):
         self.model, self.camera, self.layout, self.weights = model, camera, layout, weights
         self.images = images
         self.image_names = list(images)
@@ -87,7 +92,7 @@ class Energy:
         self.centre = centre
         self.light_distance = light_distance
         self.scale_px = camera.height / 512.0  # px per "512-px pixel"
-        self.adjacency = adjacency(model.triangles, model.vertex_count)
+        self.adjacency = triangle_adjacency(model.triangles, model.vertex_count) if adjacency is None else adjacency
         # accumulator slots: per image (sum of w r, sum of w), then the other sums of E
         self.slots = {name: i for i, name in enumerate(
             [f"{k}.{s}" for k in self.image_names for s in ("num", "den")] +
@@ -145,14 +150,16 @@ class Energy:
         basis = np.pad(np.concatenate(columns, axis=1).astype(np.float32), ((0, 3 * pad), (0, 0)))
         self.n_modes = basis.shape[1]
         self.dr_mean = device_array(np.float32, np.pad(m.shape_mean[needed], ((0, pad), (0, 0))))
-        self.dr_basis = [device_array(np.float32, basis[:, k]) for k in range(self.n_modes)]
+        columns = np.ascontiguousarray(basis.T)  # one contiguous row per mode: no strided copies
+        self.dr_basis = [device_array(np.float32, columns[k]) for k in range(self.n_modes)]
         self.dr_sample_local = device_array(np.uint32, local[samples])
         self.dr_feature_local = device_array(np.uint32, local[self.feature_vertices])
         if len(self.distances):
             self.dr_distance_local = [device_array(np.uint32, local[self.distance_vertices[:, k]])
                                       for k in range(2)]
         corners = np.where(valid[..., None], local[ring_tris], 0).astype(np.uint32)  # (S, D, 3)
-        self.dr_corners = [[device_array(np.uint32, corners[:, j, c]) for c in range(3)]
+        corners = np.ascontiguousarray(corners.transpose(1, 2, 0))  # (D, 3, S): contiguous rows
+        self.dr_corners = [[device_array(np.uint32, corners[j, c]) for c in range(3)]
                            for j in range(self.degree)]
         self.dr_slot_valid = [device_array(np.float32, valid[:, j]) for j in range(self.degree)]
         if m.has_texture:
@@ -281,11 +288,15 @@ class Energy:
         out = self._frozen(arrays, inputs, image_weight > 0, grad)
         values = np.asarray(out[0], np.float64)
         g = np.asarray(out[1], np.float64)[:size] if grad else None
-        terms = dict(zip(("E", "E_I", "E_F", "E_P", "E_D"), values[:5].tolist()))
+        return self.terms(values, image_weight > 0), g
+
+    def terms(self, values, use_image: bool) -> dict:
+        """The terms (see :meth:`evaluate`) of the packed values of :meth:`energy`."""
+        terms = dict(zip(("E", "E_I", "E_F", "E_P", "E_D"), (float(v) for v in values[:5])))
         terms["feature_rms_px"] = math.sqrt(max(values[5], 0.0) / len(self.feature_vertices)) * self.scale_px
-        if image_weight > 0:
+        if use_image:
             terms["image_rms"] = math.sqrt(values[6] / max(values[7], 1.0) / 3.0)
-        return terms, g
+        return terms
 
     def _evaluate(self, arrays: dict, inputs, use_image: bool, grad: bool):
         """The packed terms (see :meth:`energy`) and, with ``grad``, dE/d(inputs), evaluated, for

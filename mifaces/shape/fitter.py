@@ -9,21 +9,25 @@ shadow map every 1000 iterations)."""
 from __future__ import annotations
 
 import math
+import weakref
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..model.geometry import rotation_matrix, vertex_normals
+from ..model.geometry import rotation_matrix
 from ..model.mesh import mitsuba_mesh
 from ..status import DIVERGED
+from .adam import COLUMNS, DeviceAdam
 from .energy import Energy
-from .layout import Layout
+from .layout import Layout, adjacency
 from .result import ShapeSchedule, Weights
 from .targets import (FRONTAL, light_direction, metric_distances, normalised, rotation_centre, start_light,
                       start_translation)
 
+#: Steps between the host's reads of the fit's terms (the history's spacing).
+CHUNK = 10
 #: Sample vertices are kept this far (mm) from the mesh's open border.
 BORDER_MARGIN = 6.0
 
@@ -42,21 +46,42 @@ def distance_from_border(model) -> np.ndarray:
     return cKDTree(model.shape_mean[border]).query(model.shape_mean)[0]
 
 
-class _Adam:
-    """Adam's moments over one stage (Kingma and Ba 2015, Algorithm 1), on ``theta / unit``."""
+def sample_normals(vertices: np.ndarray, triangles: np.ndarray, ring: np.ndarray) -> np.ndarray:
+    """Unit normals (float64) of the vertices whose adjacent triangles are the rows of ``ring``
+    (``(S, D)``, padded with -1): the area-weighted mean of the face normals, as
+    :func:`~mifaces.model.geometry.vertex_normals` gives them on the whole mesh."""
+    tri = triangles[np.where(ring >= 0, ring, 0)]  # (S, D, 3)
+    v = np.asarray(vertices, np.float64)
+    a, b, c = v[tri[..., 0]], v[tri[..., 1]], v[tri[..., 2]]
+    n = np.sum(np.cross(b - a, c - a) * (ring >= 0)[..., None], axis=1)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.where(length > 0, n / np.maximum(length, 1e-30), 0.0).astype(np.float32).astype(np.float64)
 
-    beta1, beta2, eps = 0.9, 0.999, 1e-8
 
-    def __init__(self, size: int):
-        self.m1, self.m2, self.k = np.zeros(size), np.zeros(size), 0
+class _ModelArrays:
+    """What every fit of one model needs and no fit changes, computed once per model: the
+    vertices' distance from the open border, the vertex-triangle adjacency, and the scaled
+    shape and expression bases in float32 (``(3N, K)``, columns ``basis * sqrt(variance)``) for
+    the full mesh's positions at every visibility update (a float32 matrix-vector product; the
+    model's own float64 one converts the whole basis each time)."""
 
-    def step(self, gu: np.ndarray, rate: float) -> np.ndarray:
-        """The step (in units) for the scaled gradient ``gu``."""
-        b1, b2 = self.beta1, self.beta2
-        self.m1 = b1 * self.m1 + (1 - b1) * gu
-        self.m2 = b2 * self.m2 + (1 - b2) * gu * gu
-        self.k += 1
-        return rate * (self.m1 / (1 - b1 ** self.k)) / (np.sqrt(self.m2 / (1 - b2 ** self.k)) + self.eps)
+    _cache: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+    def __init__(self, model):
+        self.border = distance_from_border(model)
+        self.adjacency = adjacency(model.triangles, model.vertex_count)
+        columns = [model.shape_basis * np.sqrt(model.shape_variance).astype(np.float32)]
+        if model.has_expressions:
+            columns.append(model.expression_basis * np.sqrt(model.expression_variance).astype(np.float32))
+        self.basis = np.ascontiguousarray(np.concatenate(columns, axis=1), np.float32)
+        self.mean = model.shape_mean.astype(np.float64).ravel()
+
+    @classmethod
+    def of(cls, model) -> _ModelArrays:
+        arrays = cls._cache.get(model)
+        if arrays is None:
+            arrays = cls._cache[model] = cls(model)
+        return arrays
 
 
 class Fitter:
@@ -82,7 +107,8 @@ class Fitter:
         used = np.zeros(model.vertex_count, bool)
         used[model.triangles.ravel()] = True
         # samples keep away from the mesh's open border, whose pixels mix face and background
-        inner = distance_from_border(model) > BORDER_MARGIN
+        self.arrays = _ModelArrays.of(model)
+        inner = self.arrays.border > BORDER_MARGIN
         self.candidates = np.flatnonzero(used & (model.vertex_regions() != 0) & inner)
         if len(self.candidates) < 100:
             self.candidates = np.flatnonzero(used)
@@ -98,7 +124,8 @@ class Fitter:
             self.light_angles = (el, az)
         self.energy = Energy(model, camera, self.layout, weights, self.images, self.feature_vertices,
                              self.feature_pixels, metric_distances(distances, model), self.centre,
-                             self.light_distance)
+                             self.light_distance, adjacency=self.arrays.adjacency)
+        self._scene = None  # the Mitsuba scene of the full mesh, its positions updated per visibility update
 
     def initial(self) -> np.ndarray:
         """Frontal view of the mean face placed on the feature points (paper: 'default values
@@ -131,9 +158,9 @@ class Fitter:
     def vertices_camera(self, theta: np.ndarray) -> np.ndarray:
         """All model vertices in camera space (numpy float64, mm)."""
         m, L = self.model, self.layout
-        alpha = theta[L["shape"]]
-        delta = theta[L["expression"]] if m.has_expressions else None
-        local = m.shape(alpha, delta).astype(np.float64)
+        coefficients = [theta[L["shape"]]] + ([theta[L["expression"]]] if m.has_expressions else [])
+        local = self.arrays.basis @ np.concatenate(coefficients).astype(np.float32)
+        local = (self.arrays.mean + local).reshape(-1, 3).astype(np.float32).astype(np.float64)
         return (local - self.centre) @ self.rotation(theta).T + theta[L["translation"]]
 
     def rotation(self, theta: np.ndarray) -> np.ndarray:
@@ -145,9 +172,15 @@ class Fitter:
         against the current full mesh (``Scene.ray_test``)."""
         L = self.layout
         verts = self.vertices_camera(theta)
-        scene = mi.load_dict({"type": "scene", "face": mitsuba_mesh(verts, self.model.triangles)})
+        if self._scene is None:
+            self._scene = mi.load_dict({"type": "scene", "face": mitsuba_mesh(verts, self.model.triangles)})
+            self._scene_params = mi.traverse(self._scene)
+        else:  # the same triangles: new positions, the acceleration structure rebuilt
+            self._scene_params["face.vertex_positions"] = mi.Float(verts.astype(np.float32).ravel())
+            self._scene_params.update()
+        scene = self._scene
         p = verts[self.samples]
-        n = vertex_normals(verts, self.model.triangles)[self.samples].astype(np.float64)
+        n = sample_normals(verts, self.model.triangles, self.arrays.adjacency[self.samples])
         eps = 0.3
         dist = np.linalg.norm(p, axis=1)
         d = -p / dist[:, None]  # towards the camera
@@ -189,10 +222,13 @@ class Fitter:
         return stages
 
     def run(self, progress_bar=None, lr=(0.1, 0.01), visibility_interval: int = 50):
-        """Adam on ``theta / unit`` over :meth:`stages`.
+        """Adam on ``theta / unit`` over :meth:`stages`, on the Dr.Jit side (:class:`DeviceAdam`):
+        the host reads the steps' terms every :data:`CHUNK` steps and theta at each visibility
+        update (every ``visibility_interval`` steps of an image level, a multiple of CHUNK).
 
         Returns ``(theta, terms, history, iterations, status, message)``; ``status`` is None unless
-        the energy or its gradient became non-finite (``'diverged'``).
+        the energy or its gradient became non-finite (``'diverged'``): then theta is the last
+        finite one and ``iterations`` the steps made before.
         """
         L, w = self.layout, self.weights
         theta = self.initial()
@@ -208,34 +244,39 @@ class Fitter:
         stages = self.stages()
         image_total = sum(s[1] for s in stages[1:])
         history, terms, it_total, image_done = [], {}, 0, 0
+        adam = DeviceAdam(self.energy)
         for name, iters, samples, blur, mask in stages:
-            adam = _Adam(L.size)
             self.set_samples(100 if samples is None else samples)
             if samples is not None:
                 self.energy.set_level(blur)
                 self.update_visibility(theta)
-            for it in range(iters):
-                if samples is None:
-                    fw, iw, rate = 1.0, 0.0, lr[0]
-                else:
-                    frac = image_done / max(image_total, 1)
-                    fade = min(frac / max(w.feature_fade, 1e-9), 1.0)
-                    fw = (1 - fade) * 1.0 + fade * (w.feature_final / max(w.feature, 1e-12))
-                    iw, rate = 1.0, lr[0] * (lr[1] / lr[0]) ** frac
-                    if it > 0 and it % visibility_interval == 0:
-                        self.update_visibility(theta)
-                terms, g = self.energy.evaluate(theta, fw, iw)
-                if not (np.isfinite(terms["E"]) and np.all(np.isfinite(g))):
-                    return theta, terms, history, it_total, DIVERGED, f"non-finite energy or gradient in {name}"
-                theta = theta - adam.step(g * units * mask, rate) * units * mask
-                theta[nonnegative] = np.maximum(theta[nonnegative], 0.0)
-                it_total += 1
+            table = self._step_table(iters, samples is not None, image_done, image_total, lr)
+            adam.start(theta, units * mask, nonnegative, table)
+            done = 0
+            while done < iters:
+                if samples is not None and done > 0 and done % visibility_interval == 0:
+                    self.update_visibility(adam.read()[0])
+                end = min(iters, (done // CHUNK + 1) * CHUNK)
+                if samples is not None:  # a visibility update falls on the start of a chunk
+                    end = min(end, (done // visibility_interval + 1) * visibility_interval)
+                for _ in range(done, end):
+                    adam.step(samples is not None)
+                theta, packed, failed = adam.read()
+                steps = end - done if not failed else max(failed - 1 - done, 0)
+                for it in range(done, done + steps):
+                    if it % 10 == 0 or it == iters - 1:
+                        history.append({"iteration": it_total + it + 1 - done, "stage": name,
+                                        **self.energy.terms(packed[it], samples is not None)})
+                it_total += steps
                 if samples is not None:
-                    image_done += 1
-                if it % 10 == 0 or it == iters - 1:
-                    history.append({"iteration": it_total, "stage": name, **{k: float(v) for k, v in terms.items()}})
+                    image_done += steps
+                if failed:
+                    terms = self.energy.terms(packed[failed - 1], samples is not None)
+                    return theta, terms, history, it_total, DIVERGED, f"non-finite energy or gradient in {name}"
+                terms = self.energy.terms(packed[end - 1], samples is not None)
+                done = end
                 if progress_bar is not None:
-                    progress_bar.update(1)
+                    progress_bar.update(steps)
                     progress_bar.set_postfix(stage=name, E=f"{terms['E']:.3g}", lm=f"{terms['feature_rms_px']:.2f}px")
         use_image = bool(self.image_names and self.schedule.levels)
         if use_image:
@@ -243,3 +284,22 @@ class Fitter:
         terms, _ = self.energy.evaluate(theta, w.feature_final / max(w.feature, 1e-12), 1.0 if use_image else 0.0,
                                         grad=False)
         return theta, terms, history, it_total, None, ""
+
+    def _step_table(self, iters: int, image: bool, image_done: int, image_total: int, lr) -> np.ndarray:
+        """Per step of a stage (:data:`~mifaces.shape.adam.COLUMNS`): the feature term's weight
+        (fading over the image levels' first ``Weights.feature_fade``), the image term's, Adam's
+        step size (decaying geometrically from ``lr[0]`` to ``lr[1]`` over the image levels) and its
+        bias corrections ``1 - beta^k``."""
+        w = self.weights
+        table = np.zeros((iters, COLUMNS))
+        for it in range(iters):
+            if not image:
+                fw, iw, rate = 1.0, 0.0, lr[0]
+            else:
+                frac = (image_done + it) / max(image_total, 1)
+                fade = min(frac / max(w.feature_fade, 1e-9), 1.0)
+                fw = (1 - fade) * 1.0 + fade * (w.feature_final / max(w.feature, 1e-12))
+                iw, rate = 1.0, lr[0] * (lr[1] / lr[0]) ** frac
+            k = it + 1
+            table[it] = (fw * w.feature, iw, rate, 1 - DeviceAdam.beta1 ** k, 1 - DeviceAdam.beta2 ** k)
+        return table

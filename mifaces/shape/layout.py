@@ -46,8 +46,8 @@ _ZERO = {}
 
 
 def device_array(dtype, values):
-    """``values`` as a flat Dr.Jit array (``mi.Float`` for float32, ``mi.UInt32`` for uint32) in
-    memory Dr.Jit owns, evaluated.
+    """``values`` as a flat Dr.Jit array (``mi.Float`` for float32, ``mi.Float64`` for float64,
+    ``mi.UInt32`` for uint32) in memory Dr.Jit owns, evaluated.
 
     Dr.Jit's LLVM backend maps a NumPy array's memory instead of copying it, and writes whether
     it is aligned into the code of the kernels that load from it: by chance, so the same kernel
@@ -60,7 +60,7 @@ def device_array(dtype, values):
     start = (-buffer.ctypes.data % 64) // values.itemsize
     aligned = buffer[start:start + values.size]
     aligned[:] = values
-    array_type = mi.Float if dtype == np.float32 else mi.UInt32
+    array_type = {np.dtype(np.float32): mi.Float, np.dtype(np.float64): mi.Float64}.get(np.dtype(dtype), mi.UInt32)
     if array_type not in _ZERO:  # made once: an opaque value is a launch
         _ZERO[array_type] = dr.opaque(array_type, 0)
     owned = array_type(aligned) + _ZERO[array_type]
