@@ -250,8 +250,10 @@ def test_bad_options_are_named(variant):
         mi.load_dict({"type": "cooktorrance", "fresnel": "conductor"})
     with pytest.raises(Exception, match="normalization"):
         mi.load_dict({"type": "ward", "normalization": "ashikhmin"})
-    with pytest.raises(Exception, match="roughness"):
-        mi.load_dict({"type": "cooktorrance", "roughness": {"type": "checkerboard"}})
+    with pytest.raises(Exception, match="roughness = 4.0 is outside"):
+        mi.load_dict({"type": "cooktorrance", "roughness": {"type": "checkerboard", "color0": 4.0}})
+    with pytest.raises(Exception, match="must be a number or a texture"):
+        mi.load_dict({"type": "cooktorrance", "roughness": {"type": "diffuse"}})
 
 
 def test_bitmap_diffuse_reflectance(jit_variant, tmp_path):
@@ -268,6 +270,35 @@ def test_bitmap_diffuse_reflectance(jit_variant, tmp_path):
     si.uv = mi.Point2f([0.1, 0.9], [0.5, 0.5])
     value = np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(0, 0, 1))).T
     np.testing.assert_allclose(value, np.array([[0.8, 0.1, 0.1], [0.1, 0.1, 0.8]]) / np.pi, rtol=1e-5)
+
+
+def test_parameter_textures_vary_per_texel(jit_variant):
+    """specular_reflectance and roughness as bitmaps: each texel evaluates as
+    the plugin with that texel's values; the textures are traversed and a
+    value set out of range through them is refused."""
+    def bitmap(values):
+        return {"type": "bitmap", "bitmap": mi.Bitmap(np.array([[[v] for v in values]], np.float32)), "raw": True,
+                "filter_type": "nearest"}
+
+    scales, widths = [0.5, 1.6], [0.15, 0.4]
+    textured = mi.load_dict({"type": "cooktorrance", "diffuse_reflectance": 0.2,
+                             "specular_reflectance": bitmap(scales), "roughness": bitmap(widths)})
+    si = dr.zeros(mi.SurfaceInteraction3f, 2)
+    si.wi = mi.Vector3f(direction(30))
+    si.uv = mi.Point2f([0.25, 0.75], [0.5, 0.5])
+    wo = mi.Vector3f(direction(35, 200))
+    value = np.array(textured.eval(mi.BSDFContext(), si, wo))
+    for texel, (scale, width) in enumerate(zip(scales, widths)):
+        plain = mi.load_dict({"type": "cooktorrance", "diffuse_reflectance": 0.2, "specular_reflectance": scale,
+                              "roughness": width})
+        expected = np.array(plain.eval(mi.BSDFContext(), si, wo))[:, 0]  # the same directions everywhere
+        np.testing.assert_allclose(value[:, texel], expected, rtol=1e-5)
+    assert not np.allclose(value[:, 0], value[:, 1])
+    params = mi.traverse(textured)
+    assert "roughness.data" in params and "specular_reflectance.data" in params
+    params["roughness.data"] = mi.TensorXf(np.full((1, 2, 1), 3.0, np.float32))
+    with pytest.raises(Exception, match="roughness"):
+        params.update()
 
 
 def test_xml_documentation_is_present(variant):
