@@ -124,7 +124,8 @@ def from_cook_torrance(name: str, region: dict) -> dict:
     scale = float(np.mean(region["specular_reflectance"]))
     m, eta = float(region["roughness"]), float(region["eta"])
     if name == "roughplastic":
-        return {"alpha": m, "int_ior": eta, "ext_ior": 1.0, "specular_reflectance": [scale] * 3}
+        return {"alpha": m, "int_ior": eta, "ext_ior": 1.0,
+                "specular_reflectance": [float(x) for x in np.broadcast_to(region["specular_reflectance"], 3)]}
     if name == "principled":
         return {"roughness": round(float(np.sqrt(m)), 5), "specular": round(min(1.0, scale * fresnel_normal(eta) / 0.08), 5),
                 "metallic": 0.0, "spec_tint": 0.0, "sheen": 0.0, "clearcoat": 0.0}
