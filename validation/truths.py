@@ -1,0 +1,124 @@
+"""``mifaces measure`` on ground truths the fit cannot copy (SIMULATED).
+
+For each truth, simulate a capture at the simulator's defaults (6
+measurements, 512x512, 64 spp, seed 0: the same face, lights and noise for
+every truth) and run the main job on it with its defaults (shapes fitted
+with the default built-in model, all four BRDF models, texture 512²):
+
+``cooktorrance``
+    the default truth, one of the fitted families (the inverse crime: the
+    reference the others are compared with);
+``roughplastic``, ``principled``
+    Mitsuba's built-ins (:mod:`mifaces.brdf.builtin`), outside every fitted family;
+``varying``
+    Cook–Torrance with per-texel scale and roughness maps (oily T-zone, drier
+    cheeks; :mod:`mifaces.studio.varying`), compared per region with the maps' means;
+``detail``
+    the Cook–Torrance face with wrinkles, pores and asymmetry outside the
+    model's span (:mod:`mifaces.studio.detail`).
+
+Records per truth and model the report's numbers (``report.json``): the
+relative RMSE of the fitted render against the first photograph (a
+training image), the albedo errors against the truth's map, the relative
+parameter errors where the truth is the fitted model, the skin parameters,
+and the fit times. Writes ``validation/results/truths.json`` and
+``truths.png`` (entries of earlier runs of other truths are kept).
+
+    python validation/truths.py [--truths roughplastic detail] [--work DIR]
+
+Machine: 2 CPU cores shared with other jobs; times are indicative only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
+
+import numpy as np
+
+from mifaces.capture import read_ground_truth
+from mifaces.files import atomic_path, write_json
+from mifaces.pipeline import measure
+from mifaces.studio.simulate import simulate
+
+RESULTS = Path(__file__).resolve().parent / "results"
+#: Truth name -> simulate() options.
+TRUTHS = {"cooktorrance": {}, "roughplastic": {"brdf": "roughplastic"}, "principled": {"brdf": "principled"},
+          "varying": {"varying": True}, "detail": {"detail": True}}
+
+
+def run_truth(name: str, work: Path) -> dict:
+    """Simulate truth ``name`` and measure it; the report's numbers per model."""
+    folder = work / name
+    t0 = time.perf_counter()
+    simulate(folder / "capture", force=True, progress=False, **TRUTHS[name])
+    simulated = time.perf_counter() - t0
+    report = measure(folder / "measure", folder / "capture", progress=False)
+    truth = read_ground_truth(folder / "capture")
+    models = {}
+    for model, entry in report["models"].items():
+        gt = entry.get("ground_truth") or {}
+        models[model] = {"image_relative_rmse_first_photo_training": entry["image_relative_rmse"],
+                         "albedo": gt.get("albedo"), "parameter_relative_errors": gt.get("regions"),
+                         "skin": entry["regions"].get("skin"), "fit_seconds": report["seconds"][f"fit_brdf_{model}"]}
+    return {"truth": truth.description, "truth_brdf_skin": truth.brdf["regions"]["skin"], "options": TRUTHS[name],
+            "simulate_seconds": simulated, "measure_seconds": report["seconds"], "models": models,
+            "shapes": report.get("shapes")}
+
+
+def figure(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    truths = list(results["truths"])
+    models = list(next(iter(results["truths"].values()))["models"])
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
+    width = 0.8 / len(models)
+    for k, model in enumerate(models):
+        x = np.arange(len(truths)) + (k - (len(models) - 1) / 2) * width
+        image = [100 * results["truths"][t]["models"][model]["image_relative_rmse_first_photo_training"]
+                 for t in truths]
+        albedo = [results["truths"][t]["models"][model]["albedo"]["rmse_sampled"] for t in truths]
+        axes[0].bar(x, image, width, label=model)
+        axes[1].bar(x, albedo, width, label=model)
+    for ax, title in zip(axes, ("image RMSE, first (training) photograph, %", "albedo RMSE vs truth (sampled texels)")):
+        ax.set_xticks(range(len(truths)), truths)
+        ax.set_title(f"SIMULATED: {title}", fontsize=9)
+    axes[0].legend(fontsize=8)
+    fig.suptitle("mifaces measure on truths outside the fit (simulated captures, defaults; truth on the x axis)",
+                 fontsize=10)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--truths", nargs="+", default=list(TRUTHS), choices=list(TRUTHS))
+    parser.add_argument("--work", type=Path, default=Path("out/validation_truths"))
+    args = parser.parse_args()
+    path = RESULTS / "truths.json"
+    results = json.loads(path.read_text()) if path.is_file() else {}
+    results.update({"label": "SIMULATED", "command": "python validation/truths.py",
+                    "machine": "2 CPU cores (LLVM), shared with other jobs: times indicative only"})
+    results.setdefault("truths", {})
+    for name in args.truths:
+        print(f"truth {name} ...", flush=True)
+        results["truths"][name] = run_truth(name, args.work)
+        for model, entry in results["truths"][name]["models"].items():
+            print(f"  {model:13s} image {100 * entry['image_relative_rmse_first_photo_training']:.2f}%  "
+                  f"albedo RMSE {entry['albedo']['rmse_sampled']:.4f} bias {entry['albedo']['bias_sampled']:+.4f}  "
+                  f"skin {entry['skin']}", flush=True)
+        write_json(path, results)
+    figure(results, RESULTS / "truths.png")
+
+
+if __name__ == "__main__":
+    main()
