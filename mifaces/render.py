@@ -139,10 +139,11 @@ class RegionMesh:
     uv: np.ndarray
     normals: np.ndarray
 
-    def mesh(self, bsdf) -> mi.Mesh:
-        """A ``mi.Mesh`` of this region with BSDF ``bsdf`` (a dict or a loaded BSDF)."""
+    def mesh(self, bsdf, interior=None) -> mi.Mesh:
+        """A ``mi.Mesh`` of this region with BSDF ``bsdf`` (a dict or a loaded BSDF)
+        and, optionally, a medium inside (``interior``)."""
         return mitsuba_mesh(self.vertices, self.triangles, self.uv, normals=self.normals, bsdf=bsdf,
-                            name=f"face_{self.region}")
+                            name=f"face_{self.region}", interior=interior)
 
 
 def region_meshes(model, vertices: np.ndarray, normals: np.ndarray | None = None) -> dict[str, RegionMesh]:

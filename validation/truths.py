@@ -15,7 +15,14 @@ with the default built-in model, all four BRDF models, texture 512²):
     cheeks; :mod:`mifaces.studio.varying`), compared per region with the maps' means;
 ``detail``
     the Cook–Torrance face with wrinkles, pores and asymmetry outside the
-    model's span (:mod:`mifaces.studio.detail`).
+    model's span (:mod:`mifaces.studio.detail`);
+``subsurface``
+    translucent skin (:mod:`mifaces.studio.subsurface`: a rough dielectric
+    boundary over a medium with Jensen et al. 2001's Skin1 coefficients),
+    rendered with the volumetric path tracer at 256x256 and 32 spp to fit
+    this machine, with ``cooktorrance_256``, the default truth at the same
+    size and samples, as its reference: the difference between the two is
+    the bias translucency causes.
 
 Records per truth and model the report's numbers (``report.json``): the
 relative RMSE of the fitted render against the first photograph (a
@@ -42,13 +49,18 @@ import numpy as np
 
 from mifaces.capture import read_ground_truth
 from mifaces.files import atomic_path, write_json
+from mifaces.model import load_model
+from mifaces.model.regions import REGIONS
 from mifaces.pipeline import measure
 from mifaces.studio.simulate import simulate
+from mifaces.studio.varying import texel_regions
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Truth name -> simulate() options.
 TRUTHS = {"cooktorrance": {}, "roughplastic": {"brdf": "roughplastic"}, "principled": {"brdf": "principled"},
-          "varying": {"varying": True}, "detail": {"detail": True}}
+          "varying": {"varying": True}, "detail": {"detail": True},
+          "subsurface": {"subsurface": True, "resolution": (256, 256), "spp": 32},
+          "cooktorrance_256": {"resolution": (256, 256), "spp": 32}}
 
 
 def run_truth(name: str, work: Path) -> dict:
@@ -65,9 +77,16 @@ def run_truth(name: str, work: Path) -> dict:
         models[model] = {"image_relative_rmse_first_photo_training": entry["image_relative_rmse"],
                          "albedo": gt.get("albedo"), "parameter_relative_errors": gt.get("regions"),
                          "skin": entry["regions"].get("skin"), "fit_seconds": report["seconds"][f"fit_brdf_{model}"]}
-    return {"truth": truth.description, "truth_brdf_skin": truth.brdf["regions"]["skin"], "options": TRUTHS[name],
+    return {"truth": truth.description, "truth_brdf_skin": truth.brdf["regions"]["skin"],
+            "truth_albedo_skin_mean": _skin_albedo(truth), "options": TRUTHS[name],
             "simulate_seconds": simulated, "measure_seconds": report["seconds"], "models": models,
             "shapes": report.get("shapes")}
+
+
+def _skin_albedo(truth) -> list[float]:
+    """Mean of the truth's albedo map over the skin texels (RGB)."""
+    labels = texel_regions(load_model(truth.model), truth.albedo.shape[0])
+    return [round(float(x), 5) for x in truth.albedo[labels == REGIONS["skin"]].mean(axis=0)]
 
 
 def figure(results: dict, path: Path) -> None:

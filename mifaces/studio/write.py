@@ -12,7 +12,7 @@ from ..capture import FORMAT, MANIFEST, VERSION, GroundTruth, TrueLight, TrueMea
 from ..files import write_exr, write_json, write_png
 from ..model.landmarks import FEATURE_POINTS
 from .photograph import FULL_WELL, READ_NOISE, Photographs, SpherePhotographs
-from .scene import INTEGRATOR, LAMP_RADIUS, LIGHT_DISTANCE, STEEL_SPHERE_RADIUS, Studio, white_value
+from .scene import LAMP_RADIUS, LIGHT_DISTANCE, STEEL_SPHERE_RADIUS, Studio, white_value
 from .subject import HeadPose, Subject
 
 #: Folder of the photographs inside the capture.
@@ -101,5 +101,5 @@ def ground_truth(face_model, subject: Subject, studio: Studio, measurements: lis
         model=face_model.name, seed=seed, spp=spp, resolution=(studio.camera.width, studio.camera.height),
         coefficients=subject.coefficients, head_center=subject.head, camera=studio.camera, lights=lights,
         sphere_radius=STEEL_SPHERE_RADIUS, neutral=subject.neutral, measurements=tuple(measurements), brdf=brdf,
-        albedo=subject.albedo, integrator=INTEGRATOR, noise={"full_well": FULL_WELL, "read_noise": READ_NOISE},
+        albedo=subject.albedo, integrator=studio.integrator, noise={"full_well": FULL_WELL, "read_noise": READ_NOISE},
         maps=dict(maps or {}), description=dict(description or {}))
