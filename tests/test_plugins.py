@@ -377,3 +377,28 @@ def test_sphere_scene_matches_array_api(render_variant, name):
     assert np.median(err) < 2e-3 * scale, np.median(err) / scale
     assert np.percentile(err, 95) < 3e-2 * scale, np.percentile(err, 95) / scale
     assert np.all(image[~inner.astype(bool) & (expected.sum(-1) == 0)][:, :] >= 0)
+
+
+def test_skin_boundary_reflects_cook_torrance_and_transmits_the_rest(jit_variant):
+    """skinboundary: outside, the Cook–Torrance glossy lobe; straight through with
+    weight 1 - F (what a volumetric path tracer's shadow rays see); sampling picks
+    the null transmission with probability 1 - F, outside and inside."""
+    params = {"specular_reflectance": 0.8, "roughness": 0.3, "eta": 1.38}
+    boundary = mi.load_dict({"type": "skinboundary", **params})
+    lobe = mi.load_dict({"type": "cooktorrance", "diffuse_reflectance": 0.0, **params})
+    n = 4096
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = mi.Vector3f(direction(60))
+    ctx = mi.BSDFContext()
+    wo = mi.Vector3f(direction(40, 200))
+    np.testing.assert_allclose(np.array(boundary.eval(ctx, si, wo)), np.array(lobe.eval(ctx, si, wo)), rtol=1e-5)
+    fresnel = float(np.asarray(mi.fresnel(mi.Float(np.cos(np.radians(60))), mi.Float(1.38))[0])[0])
+    np.testing.assert_allclose(np.array(boundary.eval_null_transmission(si))[:, 0], 1 - fresnel, rtol=1e-5)
+    u = (np.arange(n) + 0.5) / n
+    for wi in (direction(60), [-x for x in direction(60)]):  # from outside, from inside the medium
+        si.wi = mi.Vector3f(wi)
+        bs, weight = boundary.sample(ctx, si, mi.Float(u), mi.Point2f(mi.Float(u[::-1]), mi.Float(u)))
+        null = np.array(bs.sampled_type) == int(mi.BSDFFlags.Null)
+        assert abs(null.mean() - (1 - fresnel)) < 0.01
+        np.testing.assert_allclose(np.array(weight)[:, null], 1.0)
+        np.testing.assert_allclose(np.array(bs.wo)[:, null], -np.array(wi)[:, None] * np.ones(null.sum()), atol=1e-6)
