@@ -1,9 +1,11 @@
 """``mifaces measure`` on ground truths the fit cannot copy (SIMULATED).
 
-For each truth, simulate a capture at the simulator's defaults (6
-measurements, 512x512, 64 spp, seed 0: the same face, lights and noise for
-every truth) and run the main job on it with its defaults (shapes fitted
-with the default built-in model, all four BRDF models, texture 512²):
+For each truth, simulate a capture (6 measurements, seed 0: the same face,
+lights and noise draws for every truth; ``--resolution`` and ``--spp``,
+the simulator's defaults 512 and 64, or 256 and 32 to fit this machine, as
+the subsurface truth needs) and run the main job on it with its defaults
+(shapes fitted with the default built-in model, all four BRDF models,
+texture 512²):
 
 ``cooktorrance``
     the default truth, one of the fitted families (the inverse crime: the
@@ -19,10 +21,8 @@ with the default built-in model, all four BRDF models, texture 512²):
 ``subsurface``
     translucent skin (:mod:`mifaces.studio.subsurface`: a rough dielectric
     boundary over a medium with Jensen et al. 2001's Skin1 coefficients),
-    rendered with the volumetric path tracer at 256x256 and 32 spp to fit
-    this machine, with ``cooktorrance_256``, the default truth at the same
-    size and samples, as its reference: the difference between the two is
-    the bias translucency causes.
+    rendered with the volumetric path tracer; its difference from
+    ``cooktorrance`` at the same size and samples is the bias translucency causes.
 
 Records per truth and model the report's numbers (``report.json``): the
 relative RMSE of the fitted render against the first photograph (a
@@ -31,7 +31,7 @@ parameter errors where the truth is the fitted model, the skin parameters,
 and the fit times. Writes ``validation/results/truths.json`` and
 ``truths.png`` (entries of earlier runs of other truths are kept).
 
-    python validation/truths.py [--truths roughplastic detail] [--work DIR]
+    python validation/truths.py [--truths roughplastic detail] [--resolution 256 --spp 32] [--work DIR]
 
 Machine: 2 CPU cores shared with other jobs; times are indicative only.
 """
@@ -58,16 +58,15 @@ from mifaces.studio.varying import texel_regions
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Truth name -> simulate() options.
 TRUTHS = {"cooktorrance": {}, "roughplastic": {"brdf": "roughplastic"}, "principled": {"brdf": "principled"},
-          "varying": {"varying": True}, "detail": {"detail": True},
-          "subsurface": {"subsurface": True, "resolution": (256, 256), "spp": 32},
-          "cooktorrance_256": {"resolution": (256, 256), "spp": 32}}
+          "varying": {"varying": True}, "detail": {"detail": True}, "subsurface": {"subsurface": True}}
 
 
-def run_truth(name: str, work: Path) -> dict:
-    """Simulate truth ``name`` and measure it; the report's numbers per model."""
-    folder = work / name
+def run_truth(name: str, work: Path, size: int, spp: int) -> dict:
+    """Simulate truth ``name`` (``size``² pixels, ``spp`` samples) and measure it; the report's numbers per model."""
+    folder = work / f"{name}_{size}"
+    options = dict(TRUTHS[name], resolution=(size, size), spp=spp)
     t0 = time.perf_counter()
-    simulate(folder / "capture", force=True, progress=False, **TRUTHS[name])
+    simulate(folder / "capture", force=True, progress=False, **options)
     simulated = time.perf_counter() - t0
     report = measure(folder / "measure", folder / "capture", progress=False)
     truth = read_ground_truth(folder / "capture")
@@ -78,7 +77,7 @@ def run_truth(name: str, work: Path) -> dict:
                          "albedo": gt.get("albedo"), "parameter_relative_errors": gt.get("regions"),
                          "skin": entry["regions"].get("skin"), "fit_seconds": report["seconds"][f"fit_brdf_{model}"]}
     return {"truth": truth.description, "truth_brdf_skin": truth.brdf["regions"]["skin"],
-            "truth_albedo_skin_mean": _skin_albedo(truth), "options": TRUTHS[name],
+            "truth_albedo_skin_mean": _skin_albedo(truth), "simulate_options": options,
             "simulate_seconds": simulated, "measure_seconds": report["seconds"], "models": models,
             "shapes": report.get("shapes")}
 
@@ -122,6 +121,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--truths", nargs="+", default=list(TRUTHS), choices=list(TRUTHS))
     parser.add_argument("--work", type=Path, default=Path("out/validation_truths"))
+    parser.add_argument("--resolution", type=int, default=512, help="photograph size (square)")
+    parser.add_argument("--spp", type=int, default=64, help="samples per pixel of the photographs")
     args = parser.parse_args()
     path = RESULTS / "truths.json"
     results = json.loads(path.read_text()) if path.is_file() else {}
@@ -129,9 +130,10 @@ def main() -> None:
                     "machine": "2 CPU cores (LLVM), shared with other jobs: times indicative only"})
     results.setdefault("truths", {})
     for name in args.truths:
-        print(f"truth {name} ...", flush=True)
-        results["truths"][name] = run_truth(name, args.work)
-        for model, entry in results["truths"][name]["models"].items():
+        key = f"{name}_{args.resolution}"
+        print(f"truth {key} ...", flush=True)
+        results["truths"][key] = run_truth(name, args.work, args.resolution, args.spp)
+        for model, entry in results["truths"][key]["models"].items():
             print(f"  {model:13s} image {100 * entry['image_relative_rmse_first_photo_training']:.2f}%  "
                   f"albedo RMSE {entry['albedo']['rmse_sampled']:.4f} bias {entry['albedo']['bias_sampled']:+.4f}  "
                   f"skin {entry['skin']}", flush=True)
