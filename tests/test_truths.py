@@ -242,3 +242,17 @@ def test_subsurface_truth_renders_translucent_skin(tmp_path):
     assert len(pixels) > 50 and np.all(ratio > 0.9) and np.all(ratio < 2.0), ratio
     with pytest.raises(ValueError, match="subsurface truth"):
         simulate(tmp_path / "d", subsurface=True, brdf="roughplastic", **tiny)
+
+
+def test_cli_simulate_offers_the_truths_and_names_bad_combinations(tmp_path):
+    from click.testing import CliRunner
+
+    from mifaces.cli import main
+
+    help_text = CliRunner().invoke(main, ["simulate", "--help"]).output
+    for option in ("roughplastic", "principled", "--varying", "--detail", "--subsurface"):
+        assert option in help_text
+    for args, message in ((["--brdf", "roughplastic", "--varying"], "lobe scale and width maps"),
+                          (["--brdf", "principled", "--subsurface"], "subsurface truth")):
+        result = CliRunner().invoke(main, ["--variant", "llvm_ad_rgb", "simulate", str(tmp_path / "c"), *args])
+        assert result.exit_code == 1 and message in result.output, result.output
