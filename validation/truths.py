@@ -117,6 +117,19 @@ def figure(results: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def table(results: dict) -> str:
+    """The results as a Markdown table: per truth and model the training-photo RMSE,
+    the albedo RMSE and bias against the truth's map, and the skin's lobe width."""
+    lines = ["| truth | model | image RMSE, first photo (training) | albedo RMSE | albedo bias | skin parameters |",
+             "|---|---|---|---|---|---|"]
+    for name, entry in results["truths"].items():
+        for model, m in entry["models"].items():
+            skin = ", ".join(f"{k} {np.mean(v):.3g}" for k, v in (m["skin"] or {}).items() if k != "eta")
+            lines.append(f"| {name} | {model} | {100 * m['image_relative_rmse_first_photo_training']:.2f}% | "
+                         f"{m['albedo']['rmse_sampled']:.4f} | {m['albedo']['bias_sampled']:+.4f} | {skin} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--truths", nargs="+", default=list(TRUTHS), choices=list(TRUTHS))
@@ -139,6 +152,7 @@ def main() -> None:
                   f"skin {entry['skin']}", flush=True)
         write_json(path, results)
     figure(results, RESULTS / "truths.png")
+    print(table(results))
 
 
 if __name__ == "__main__":
