@@ -48,7 +48,7 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 import numpy as np
 
 from mifaces.capture import read_ground_truth
-from mifaces.files import atomic_path, write_json
+from mifaces.files import atomic_path, read_exr, write_json
 from mifaces.model import load_model
 from mifaces.model.regions import REGIONS
 from mifaces.pipeline import measure
@@ -76,10 +76,21 @@ def run_truth(name: str, work: Path, size: int, spp: int) -> dict:
         models[model] = {"image_relative_rmse_first_photo_training": entry["image_relative_rmse"],
                          "albedo": gt.get("albedo"), "parameter_relative_errors": gt.get("regions"),
                          "skin": entry["regions"].get("skin"), "fit_seconds": report["seconds"][f"fit_brdf_{model}"]}
+    fitted_skin_albedo(folder, models)
     return {"truth": truth.description, "truth_brdf_skin": truth.brdf["regions"]["skin"],
             "truth_albedo_skin_mean": _skin_albedo(truth), "simulate_options": options,
             "simulate_seconds": simulated, "measure_seconds": report["seconds"], "models": models,
             "shapes": report.get("shapes")}
+
+
+def fitted_skin_albedo(folder: Path, models: dict) -> None:
+    """Add to each model's entry the mean of its fitted albedo map over the skin texels (RGB), from
+    ``folder/measure/brdf/<model>/albedo.exr``: against the truth's, the bias per channel."""
+    model = load_model("builtin")
+    for name, entry in models.items():
+        albedo = read_exr(folder / "measure" / "brdf" / name / "albedo.exr")
+        labels = texel_regions(model, albedo.shape[0])
+        entry["albedo_skin_mean"] = [round(float(x), 5) for x in albedo[labels == REGIONS["skin"]].mean(axis=0)]
 
 
 def _skin_albedo(truth) -> list[float]:
@@ -117,16 +128,21 @@ def figure(results: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def _rgb(values) -> str:
+    return "" if values is None else "(" + ", ".join(f"{v:.3f}" for v in values) + ")"
+
+
 def table(results: dict) -> str:
     """The results as a Markdown table: per truth and model the training-photo RMSE,
     the albedo RMSE and bias against the truth's map, and the skin's lobe width."""
-    lines = ["| truth | model | image RMSE, first photo (training) | albedo RMSE | albedo bias | skin parameters |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| truth | model | image RMSE, first photo (training) | albedo RMSE | albedo bias | skin albedo (truth) "
+             "| skin parameters |", "|---|---|---|---|---|---|---|"]
     for name, entry in results["truths"].items():
         for model, m in entry["models"].items():
             skin = ", ".join(f"{k} {np.mean(v):.3g}" for k, v in (m["skin"] or {}).items() if k != "eta")
             lines.append(f"| {name} | {model} | {100 * m['image_relative_rmse_first_photo_training']:.2f}% | "
-                         f"{m['albedo']['rmse_sampled']:.4f} | {m['albedo']['bias_sampled']:+.4f} | {skin} |")
+                         f"{m['albedo']['rmse_sampled']:.4f} | {m['albedo']['bias_sampled']:+.4f} | "
+                         f"{_rgb(m.get('albedo_skin_mean'))} ({_rgb(entry.get('truth_albedo_skin_mean'))}) | {skin} |")
     return "\n".join(lines)
 
 
@@ -136,9 +152,19 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=Path("out/validation_truths"))
     parser.add_argument("--resolution", type=int, default=512, help="photograph size (square)")
     parser.add_argument("--spp", type=int, default=64, help="samples per pixel of the photographs")
+    parser.add_argument("--summarize", action="store_true",
+                        help="only recompute the skin albedo means of the recorded truths from --work, and the figure")
     args = parser.parse_args()
     path = RESULTS / "truths.json"
     results = json.loads(path.read_text()) if path.is_file() else {}
+    if args.summarize:
+        for key, entry in results["truths"].items():
+            fitted_skin_albedo(args.work / key, entry["models"])
+            entry["truth_albedo_skin_mean"] = _skin_albedo(read_ground_truth(args.work / key / "capture"))
+        write_json(path, results)
+        figure(results, RESULTS / "truths.png")
+        print(table(results))
+        return
     results.update({"label": "SIMULATED", "command": "python validation/truths.py",
                     "machine": "2 CPU cores (LLVM), shared with other jobs: times indicative only"})
     results.setdefault("truths", {})
