@@ -117,11 +117,13 @@ def figure(results: dict, path: Path) -> None:
         axes[0].bar(x, image, width, label=model)
         axes[1].bar(x, albedo, width, label=model)
     for ax, title in zip(axes, ("image RMSE, first (training) photograph, %", "albedo RMSE vs truth (sampled texels)")):
-        ax.set_xticks(range(len(truths)), truths)
+        ax.set_xticks(range(len(truths)), [t.rsplit("_", 1)[0] for t in truths], rotation=20, fontsize=8)
         ax.set_title(f"SIMULATED: {title}", fontsize=9)
     axes[0].legend(fontsize=8)
-    fig.suptitle("mifaces measure on truths outside the fit (simulated captures, defaults; truth on the x axis)",
-                 fontsize=10)
+    sizes = sorted({"{}² {} spp".format(e["simulate_options"]["resolution"][0], e["simulate_options"]["spp"])
+                    for e in results["truths"].values()})
+    fig.suptitle(f"SIMULATED: mifaces measure on truths outside the fit (6 measurements, {', '.join(sizes)}; "
+                 "truth on the x axis)", fontsize=10)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=90, format="png")
