@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import mifaces  # noqa: F401  # isort: skip
-from mifaces.brdf import ParameterError, validate_brdf
+from mifaces.brdf import validate_brdf
 from mifaces.brdf.builtin import fresnel_normal
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.model import load_model
