@@ -15,7 +15,7 @@ import click
 
 import mifaces
 
-from .brdf import MAX_LOBES, NAMES as BRDF_MODELS
+from .brdf import BUILTIN_NAMES, MAX_LOBES, NAMES as BRDF_MODELS
 from .capture import load_capture
 from .capture.ground_truth import ground_truth_folder
 from .files import MAX_IMAGE_PIXELS, check_result_target, check_writable, write_json
@@ -92,9 +92,17 @@ def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
 @click.option("--model", "face_model", default=default(simulate_capture, "model"), show_default=True,
               help="Face model: 'builtin' or a model file (see mifaces.load_model).")
 @click.option("--brdf", "brdf_model", default=default(simulate_capture, "brdf"), show_default=True,
-              type=click.Choice(BRDF_MODELS), help="Ground-truth BRDF plugin.")
+              type=click.Choice(BRDF_MODELS + BUILTIN_NAMES),
+              help="Ground-truth BRDF: a fitted family's plugin, or a Mitsuba built-in outside them.")
 @click.option("--brdf-params", type=click.Path(exists=True, dir_okay=False), default=None,
               help='JSON overrides: {"model": ..., "regions": {region: {parameter: value}}} (docs/capture.md).')
+@click.option("--varying", is_flag=True,
+              help="Spatially varying truth: per-texel specular scale and roughness maps (oily T-zone, drier cheeks).")
+@click.option("--detail", is_flag=True,
+              help="Add wrinkles, pores and asymmetry the face model cannot express to the simulated face.")
+@click.option("--subsurface", is_flag=True,
+              help="Translucent skin: a rough dielectric boundary over a scattering medium (volumetric path "
+                   "tracer: slow, use a small --resolution and --spp).")
 @click.option("--measurements", default=default(simulate_capture, "measurements"), show_default=True, type=click.IntRange(1),
               help="Number of measurements (three poses per light).")
 @click.option("--resolution", default="{}x{}".format(*default(simulate_capture, "resolution")), show_default=True,
@@ -109,8 +117,8 @@ def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
               type=click.Choice(COMPANIONS),
               help="Companion of each point-light photograph.")
 @click.option("--force", is_flag=True, help="Replace a simulated capture at OUT (never a real one).")
-def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None, measurements: int,
-             resolution: tuple[int, int], seed: int, preset: str | None, spp: int, companion: str,
+def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None, varying: bool, detail: bool,
+             subsurface: bool, measurements: int, resolution: tuple[int, int], seed: int, preset: str | None, spp: int, companion: str,
              force: bool) -> None:
     """Simulate a capture session with ground truth into folder OUT (paper sec. 3)."""
     overrides = None
@@ -122,7 +130,8 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
             raise click.BadParameter(f"{brdf_params} is not valid JSON: {e}", param_hint="--brdf-params") from None
     result = simulate_capture(out, model=face_model, brdf=brdf_model, brdf_params=overrides, measurements=measurements,
                               resolution=resolution, seed=seed, preset=preset, spp=spp, companion=companion,
-                              force=force)
+                              force=force, varying=varying, detail=detail,
+                              subsurface=subsurface)
     click.echo(f"simulated {result.measurements} measurement{'s' * (result.measurements != 1)} under "
                f"{result.lights} light{'s' * (result.lights != 1)} in {result.seconds:.1f} s "
                f"({result.seconds_per_measurement:.1f} s per measurement)")

@@ -24,6 +24,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import brdf as brdf_models
+from .brdf.builtin import region_bsdf as builtin_region_bsdf
 from .brdf.model import check_numbers
 from .files import atomic_path, check_render_size, write_exr, write_png
 from .progress import progress
@@ -89,22 +90,38 @@ def rgb(value) -> dict:
     return {"type": "rgb", "value": [float(x) for x in v]}
 
 
-def region_bsdf(truth: dict, region: str, texture) -> dict:
+def region_bsdf(truth: dict, region: str, texture, *, maps: Mapping | None = None) -> dict:
     """The Mitsuba BSDF dict of one region of a ``brdf.json`` document: its
     parameters over ``texture`` (a texture dict, a loaded texture, a reference,
-    or None for the plugin's own diffuse default). The simulator, the scene
-    writer and the validation's BRDF comparison all build a region's BSDF here."""
+    an ``rgb`` dict, or None for the plugin's own diffuse default). The
+    simulator, the scene writer and the validation's BRDF comparison all build
+    a region's BSDF here.
+
+    ``truth["model"]`` is one of the analytic plugins
+    (:data:`mifaces.brdf.MODELS`) or a Mitsuba built-in
+    (:data:`mifaces.brdf.BUILTINS`: ``roughplastic``, ``principled``), whose
+    albedo property (``diffuse_reflectance``, ``base_color``) takes
+    ``texture``. ``maps`` (parameter name -> texture) puts spatially varying
+    parameters in place of the region's values (a spatially varying ground
+    truth, :mod:`mifaces.studio.varying`)."""
     model = truth["model"]
-    options = dict(truth["options"])
-    instance = brdf_models.model(model, **options)
-    params = truth["regions"].get(region, truth["regions"]["skin"])
-    d = {"type": model} if texture is None else {"type": model, "diffuse_reflectance": texture}
-    for k, v in options.items():
-        if k != "lobes":
-            d[k] = v
-    kinds = {p.name: p.kind for p in instance.specular_parameters()}
-    for k, v in params.items():
-        d[k] = rgb(v) if kinds.get(k) == "rgb" else float(v)
+    if model in brdf_models.BUILTINS:
+        d = builtin_region_bsdf(truth, region, texture)
+    else:
+        options = dict(truth["options"])
+        instance = brdf_models.model(model, **options)
+        params = truth["regions"].get(region, truth["regions"]["skin"])
+        d = {"type": model} if texture is None else {"type": model, "diffuse_reflectance": texture}
+        for k, v in options.items():
+            if k != "lobes":
+                d[k] = v
+        kinds = {p.name: p.kind for p in instance.specular_parameters()}
+        for k, v in params.items():
+            d[k] = rgb(v) if kinds.get(k) == "rgb" else float(v)
+    for k, value in (maps or {}).items():
+        if k not in d:
+            raise ValueError(f"a {model} BSDF has no parameter {k!r} to take a map")
+        d[k] = value
     return d
 
 
@@ -122,10 +139,11 @@ class RegionMesh:
     uv: np.ndarray
     normals: np.ndarray
 
-    def mesh(self, bsdf) -> mi.Mesh:
-        """A ``mi.Mesh`` of this region with BSDF ``bsdf`` (a dict or a loaded BSDF)."""
+    def mesh(self, bsdf, interior=None) -> mi.Mesh:
+        """A ``mi.Mesh`` of this region with BSDF ``bsdf`` (a dict or a loaded BSDF)
+        and, optionally, a medium inside (``interior``)."""
         return mitsuba_mesh(self.vertices, self.triangles, self.uv, normals=self.normals, bsdf=bsdf,
-                            name=f"face_{self.region}")
+                            name=f"face_{self.region}", interior=interior)
 
 
 def region_meshes(model, vertices: np.ndarray, normals: np.ndarray | None = None) -> dict[str, RegionMesh]:
@@ -148,12 +166,13 @@ def region_meshes(model, vertices: np.ndarray, normals: np.ndarray | None = None
     return meshes
 
 
-def face_shapes(model, vertices: np.ndarray, truth: dict, texture=None, normals: np.ndarray | None = None) -> dict:
+def face_shapes(model, vertices: np.ndarray, truth: dict, texture=None, normals: np.ndarray | None = None, *,
+                maps: Mapping | None = None) -> dict:
     """One Mitsuba mesh per region (:func:`region_meshes`), each with its
     region's BSDF from ``truth`` (the ``brdf.json`` layout) over the albedo
-    ``texture`` (the plugin's default diffuse if None). Keys are
-    ``face_<region>_<label>``."""
-    return {key: part.mesh(region_bsdf(truth, part.region, texture))
+    ``texture`` (the plugin's default diffuse if None), and parameter
+    ``maps`` (see :func:`region_bsdf`). Keys are ``face_<region>_<label>``."""
+    return {key: part.mesh(region_bsdf(truth, part.region, texture, maps=maps))
             for key, part in region_meshes(model, vertices, normals).items()}
 
 
@@ -411,5 +430,5 @@ def scene_xml(scene: dict, parameters: Mapping[str, tuple[str, ...]] | None = No
     return header + ET.tostring(root, encoding="unicode") + "\n"
 
 
-__all__ = ["ALBEDO", "ALBEDO_REF", "MESH_FOLDER", "render_passes", "save_image", "mitsuba_sensor", "rgb",
+__all__ = ["ALBEDO", "ALBEDO_REF", "MESH_FOLDER", "render_passes", "save_image", "mitsuba_sensor", "rgb", "region_bsdf",
            "RegionMesh", "region_meshes", "face_shapes", "FaceScene", "face_scene", "render_face", "scene_xml"]

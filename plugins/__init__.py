@@ -2,7 +2,8 @@
 
 One plugin per model of :data:`mifaces.brdf.MODELS`, each the generic
 :class:`~mifaces.plugins.analytic.AnalyticBSDF` built from the model's
-description. ``register()`` makes them known to Mitsuba's scene loader under
+description, and ``skinboundary`` (:mod:`mifaces.plugins.boundary`), the
+boundary of the subsurface ground truth. ``register()`` makes them known to Mitsuba's scene loader under
 their XML names in the current variant; :func:`mifaces.set_variant` calls it.
 """
 
@@ -13,6 +14,10 @@ import mitsuba as mi
 from mifaces.brdf import MODELS
 
 from .analytic import behaviour
+from .boundary import SkinBoundary
+
+#: Plugins that are not BRDF models: XML name -> behaviour class.
+OTHERS = {"skinboundary": SkinBoundary}
 
 _classes: dict[tuple[str, str], type] = {}
 
@@ -24,7 +29,7 @@ def plugin_class(name: str) -> type:
     C++ side, e.g. by a shape in ``scalar_rgb``)."""
     key = (name, mi.variant())
     if key not in _classes:
-        klass = behaviour(MODELS[name])
+        klass = OTHERS[name] if name in OTHERS else behaviour(MODELS[name])
         # nanobind types take a single base: copy the behaviour's methods in.
         namespace = {}
         for base in reversed(klass.__mro__[:-1]):
@@ -35,7 +40,7 @@ def plugin_class(name: str) -> type:
 
 def register() -> None:
     """Register every mifaces BSDF in the current Mitsuba variant."""
-    for name in MODELS:
+    for name in [*MODELS, *OTHERS]:
         cls = plugin_class(name)
         mi.register_bsdf(name, lambda props, cls=cls: cls(props))
 

@@ -13,6 +13,12 @@ diffuse lobe. It is one-sided: zero unless both directions are above the
 surface (wrap it in ``twosided`` for both sides). ``eval`` returns
 f(wi, wo) · cos θo, Mitsuba's convention.
 
+Every parameter may be a texture instead of a value (a spatially varying
+BRDF: ``specular_reflectance``, ``roughness``, ... per texel, e.g. a
+``bitmap``): an RGB parameter reads the texture's colour, a scalar one its
+``eval_1``. A bitmap texture's values are checked against the parameter's
+range like a value's.
+
 A part whose weight is zero and not being differentiated (a black
 ``diffuse_reflectance``, a zero ``specular_reflectance``, a Lafortune lobe
 with zero coefficients) is left out: it is not evaluated, not sampled and its
@@ -27,6 +33,7 @@ from typing import ClassVar
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from mifaces.brdf.model import DIFFUSE, BRDFModel, mean
 
@@ -37,6 +44,16 @@ def _texture_is_zero(texture) -> bool:
     if any(dr.grad_enabled(v) for _, v in mi.traverse(texture).items()):
         return False
     return bool(dr.all(texture.mean() == 0, axis=None))
+
+
+def _texture_range(texture) -> list[float] | None:
+    """Smallest and largest value of a texture's data (a bitmap's ``data``,
+    a constant's ``value``, a checkerboard's colours), or None where it has no such parameter."""
+    values = [dr.detach(v) for k, v in mi.traverse(texture).items() if k.split(".")[-1] in ("data", "value")]
+    if not values:
+        return None
+    data = np.concatenate([np.asarray(v, np.float64).ravel() for v in values])
+    return [float(data.min()), float(data.max())]
 
 
 def _value_is_zero(value) -> bool:
@@ -87,13 +104,18 @@ class AnalyticBSDF:
         self.full_model = self.MODEL.from_properties(props.keys(), props.get)
         self.model = self.full_model
         self.diffuse = props.get_texture(DIFFUSE.name, DIFFUSE.default)
-        self.values = {}
+        self.values, self.textures = {}, {}
         for p in self.model.specular_parameters():
             value = props.get(p.name, p.default)
+            where = f"{self.MODEL.name} BSDF {props.id() or ''}".rstrip()
+            if isinstance(value, mi.Texture):
+                self.textures[p.name] = value
+                self._check_texture(p.name)
+                continue
             if isinstance(value, mi.Object):
                 raise ValueError(f"{type(self).__name__}: parameter {p.name!r} must be a "
-                                 f"{'colour' if p.kind == 'rgb' else 'number'}, not a texture")
-            value = p.check(value, f"{self.MODEL.name} BSDF {props.id() or ''}".rstrip())
+                                 f"{'colour' if p.kind == 'rgb' else 'number'} or a texture, not a {type(value).__name__}")
+            value = p.check(value, where)
             if p.kind == "rgb":
                 self.values[p.name] = mi.Color3f(value)
             else:
@@ -102,15 +124,28 @@ class AnalyticBSDF:
         self.parameters_changed()
 
     # -- parameters -------------------------------------------------------
+    def _check_texture(self, name: str) -> None:
+        """Check a parameter texture's values (where it exposes them) against the parameter's range."""
+        span = _texture_range(self.textures[name])
+        if span is not None:
+            parameter = {p.name: p for p in self.full_model.specular_parameters()}[name]
+            for value in span:
+                parameter.check(value, f"{self.MODEL.name} BSDF texture {name}")
+
     def traverse(self, callback):
         callback.put(DIFFUSE.name, self.diffuse, mi.ParamFlags.Differentiable)
         for name, value in self.values.items():
             callback.put(name, value, mi.ParamFlags.Differentiable)
+        for name, texture in self.textures.items():
+            callback.put(name, texture, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys=None):
         # values set through mi.traverse are checked as the scene's were
         self.full_model.validate({k: v for k, v in self.values.items() if keys is None or k in keys},
                                  f"{self.MODEL.name} BSDF")
+        for name in self.textures:
+            if keys is not None and any(k == name or k.startswith(name + ".") for k in keys):
+                self._check_texture(name)
         for value in self.values.values():
             dr.make_opaque(value)
         self.has_diffuse = not _texture_is_zero(self.diffuse)
@@ -130,8 +165,12 @@ class AnalyticBSDF:
         """Whether the glossy part has non-zero weight; only the lobes with
         a non-zero scale (:meth:`~mifaces.brdf.model.BRDFModel.lobe_scales`)
         are evaluated."""
-        active = [j for j, scales in self.full_model.lobe_scales().items()
-                  if not all(name in self.values and _value_is_zero(self.values[name]) for name in scales)]
+        def zero(name):
+            if name in self.textures:
+                return _texture_is_zero(self.textures[name])
+            return name in self.values and _value_is_zero(self.values[name])
+
+        active = [j for j, scales in self.full_model.lobe_scales().items() if not all(zero(n) for n in scales)]
         if active:
             self.model = self.full_model.only_lobes(active)
         return bool(active)
@@ -149,6 +188,9 @@ class AnalyticBSDF:
 
     def _params(self, si, active):
         params = {k: v[0] if isinstance(v, dr.scalar.Array1f) else v for k, v in self.values.items()}
+        kinds = {p.name: p.kind for p in self.full_model.specular_parameters()}
+        for k, texture in self.textures.items():
+            params[k] = texture.eval(si, active) if kinds[k] == "rgb" else texture.eval_1(si, active)
         if self.has_diffuse:
             params[DIFFUSE.name] = self.diffuse.eval(si, active)
         return params
@@ -228,7 +270,7 @@ class AnalyticBSDF:
 
     def to_string(self):
         lines = [f"  {DIFFUSE.name} = {self.diffuse}"]
-        lines += [f"  {k} = {v}" for k, v in self.values.items()]
+        lines += [f"  {k} = {v}" for k, v in {**self.values, **self.textures}.items()]
         return f"{type(self).__name__}[\n  model = {self.model!r},\n" + ",\n".join(lines) + "\n]"
 
 

@@ -250,8 +250,10 @@ def test_bad_options_are_named(variant):
         mi.load_dict({"type": "cooktorrance", "fresnel": "conductor"})
     with pytest.raises(Exception, match="normalization"):
         mi.load_dict({"type": "ward", "normalization": "ashikhmin"})
-    with pytest.raises(Exception, match="roughness"):
-        mi.load_dict({"type": "cooktorrance", "roughness": {"type": "checkerboard"}})
+    with pytest.raises(Exception, match="roughness = 4.0 is outside"):
+        mi.load_dict({"type": "cooktorrance", "roughness": {"type": "checkerboard", "color0": 4.0}})
+    with pytest.raises(Exception, match="must be a number or a texture"):
+        mi.load_dict({"type": "cooktorrance", "roughness": {"type": "diffuse"}})
 
 
 def test_bitmap_diffuse_reflectance(jit_variant, tmp_path):
@@ -268,6 +270,35 @@ def test_bitmap_diffuse_reflectance(jit_variant, tmp_path):
     si.uv = mi.Point2f([0.1, 0.9], [0.5, 0.5])
     value = np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(0, 0, 1))).T
     np.testing.assert_allclose(value, np.array([[0.8, 0.1, 0.1], [0.1, 0.1, 0.8]]) / np.pi, rtol=1e-5)
+
+
+def test_parameter_textures_vary_per_texel(jit_variant):
+    """specular_reflectance and roughness as bitmaps: each texel evaluates as
+    the plugin with that texel's values; the textures are traversed and a
+    value set out of range through them is refused."""
+    def bitmap(values):
+        return {"type": "bitmap", "bitmap": mi.Bitmap(np.array([[[v] for v in values]], np.float32)), "raw": True,
+                "filter_type": "nearest"}
+
+    scales, widths = [0.5, 1.6], [0.15, 0.4]
+    textured = mi.load_dict({"type": "cooktorrance", "diffuse_reflectance": 0.2,
+                             "specular_reflectance": bitmap(scales), "roughness": bitmap(widths)})
+    si = dr.zeros(mi.SurfaceInteraction3f, 2)
+    si.wi = mi.Vector3f(direction(30))
+    si.uv = mi.Point2f([0.25, 0.75], [0.5, 0.5])
+    wo = mi.Vector3f(direction(35, 200))
+    value = np.array(textured.eval(mi.BSDFContext(), si, wo))
+    for texel, (scale, width) in enumerate(zip(scales, widths)):
+        plain = mi.load_dict({"type": "cooktorrance", "diffuse_reflectance": 0.2, "specular_reflectance": scale,
+                              "roughness": width})
+        expected = np.array(plain.eval(mi.BSDFContext(), si, wo))[:, 0]  # the same directions everywhere
+        np.testing.assert_allclose(value[:, texel], expected, rtol=1e-5)
+    assert not np.allclose(value[:, 0], value[:, 1])
+    params = mi.traverse(textured)
+    assert "roughness.data" in params and "specular_reflectance.data" in params
+    params["roughness.data"] = mi.TensorXf(np.full((1, 2, 1), 3.0, np.float32))
+    with pytest.raises(Exception, match="roughness"):
+        params.update()
 
 
 def test_xml_documentation_is_present(variant):
@@ -346,3 +377,28 @@ def test_sphere_scene_matches_array_api(render_variant, name):
     assert np.median(err) < 2e-3 * scale, np.median(err) / scale
     assert np.percentile(err, 95) < 3e-2 * scale, np.percentile(err, 95) / scale
     assert np.all(image[~inner.astype(bool) & (expected.sum(-1) == 0)][:, :] >= 0)
+
+
+def test_skin_boundary_reflects_cook_torrance_and_transmits_the_rest(jit_variant):
+    """skinboundary: outside, the Cook–Torrance glossy lobe; straight through with
+    weight 1 - F (what a volumetric path tracer's shadow rays see); sampling picks
+    the null transmission with probability 1 - F, outside and inside."""
+    params = {"specular_reflectance": 0.8, "roughness": 0.3, "eta": 1.38}
+    boundary = mi.load_dict({"type": "skinboundary", **params})
+    lobe = mi.load_dict({"type": "cooktorrance", "diffuse_reflectance": 0.0, **params})
+    n = 4096
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = mi.Vector3f(direction(60))
+    ctx = mi.BSDFContext()
+    wo = mi.Vector3f(direction(40, 200))
+    np.testing.assert_allclose(np.array(boundary.eval(ctx, si, wo)), np.array(lobe.eval(ctx, si, wo)), rtol=1e-5)
+    fresnel = float(np.asarray(mi.fresnel(mi.Float(np.cos(np.radians(60))), mi.Float(1.38))[0])[0])
+    np.testing.assert_allclose(np.array(boundary.eval_null_transmission(si))[:, 0], 1 - fresnel, rtol=1e-5)
+    u = (np.arange(n) + 0.5) / n
+    for wi in (direction(60), [-x for x in direction(60)]):  # from outside, from inside the medium
+        si.wi = mi.Vector3f(wi)
+        bs, weight = boundary.sample(ctx, si, mi.Float(u), mi.Point2f(mi.Float(u[::-1]), mi.Float(u)))
+        null = np.array(bs.sampled_type) == int(mi.BSDFFlags.Null)
+        assert abs(null.mean() - (1 - fresnel)) < 0.01
+        np.testing.assert_allclose(np.array(weight)[:, null], 1.0)
+        np.testing.assert_allclose(np.array(bs.wo)[:, null], -np.array(wi)[:, None] * np.ones(null.sum()), atol=1e-6)

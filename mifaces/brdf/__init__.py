@@ -17,6 +17,7 @@ reverse modes.
 
 from __future__ import annotations
 
+from .builtin import BUILTIN_NAMES, BUILTINS, validate_builtin
 from .cooktorrance import CookTorrance
 from .lafortune import Lafortune
 from .model import MAX_LOBES, BRDFModel, Parameter, ParameterError
@@ -50,13 +51,18 @@ def validate_brdf(document) -> dict:
     """A BRDF in the ``brdf.json`` layout (``{"model", "options", "regions"}``)
     with its regions checked by :meth:`~mifaces.brdf.model.BRDFModel.validate_regions`:
     the one validation the renderers, the simulator and the readers of
-    ``brdf.json`` share. Raises :class:`~mifaces.brdf.model.ParameterError`
-    (or a ``ValueError`` for an unknown model or option)."""
+    ``brdf.json`` share. A ground truth may also be one of Mitsuba's
+    built-ins (:data:`mifaces.brdf.builtin.BUILTINS`), checked by
+    :func:`~mifaces.brdf.builtin.validate_builtin`. Raises
+    :class:`~mifaces.brdf.model.ParameterError` (or a ``ValueError`` for an
+    unknown model or option)."""
     if not isinstance(document, dict) or not isinstance(document.get("model"), str):
         raise ParameterError(f"a BRDF must be an object with a 'model' name, got {document!r}"[:300])
     options = document.get("options", {})
     if not isinstance(options, dict):
         raise ParameterError(f"'options' of the BRDF must be an object of plugin options, got {options!r}"[:300])
+    if document["model"] in BUILTINS:
+        return validate_builtin(document)
     regions = document.get("regions")
     if document["model"] in MODELS and MODELS[document["model"]].SEVERAL_LOBES and "lobes" not in options:
         # the lobes the regions name, as a scene's properties would (Lafortune's cxy_2, ...)
@@ -73,6 +79,6 @@ def evaluate(name: str, wi, wo, params, **options):
     return model(name, **options).eval(wi, wo, params)
 
 
-__all__ = ["BRDFModel", "Parameter", "ParameterError", "MAX_LOBES", "MODELS", "NAMES", "model", "evaluate",
+__all__ = ["BUILTINS", "BUILTIN_NAMES", "BRDFModel", "Parameter", "ParameterError", "MAX_LOBES", "MODELS", "NAMES", "model", "evaluate",
            "validate_brdf",
            "Phong", "CookTorrance", "Ward", "Lafortune"]

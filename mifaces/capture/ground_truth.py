@@ -14,14 +14,21 @@ Layout (lengths in mm, in the capture's world frame)::
         shapes/neutral.npy     the subject's neutral face (V, 3)
         shapes/<name>.npy      the face of measurement <name> in world space (V, 3) float32
         brdf.json         the BRDF per region, in the layout of :mod:`mifaces.studio.truth`
+                          (of a spatially varying truth: each region's mean of the maps)
         albedo.exr        the albedo map (linear RGB, texture space of the model)
+        maps/<parameter>.exr   a spatially varying truth's per-texel parameter maps
+                          (one channel, texture space of the model, as the albedo map)
+
+``scene.json``'s ``truth`` says what the truth was (``brdf``: the model or
+built-in; ``varying``: parameter maps; ``detail``: geometry outside the
+model's span, with its ``span_residual_mm``).
 """
 
 from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +43,7 @@ BRDF = "brdf.json"
 ALBEDO = "albedo.exr"
 SHAPES = "shapes"
 NEUTRAL = "neutral"
+MAPS = "maps"
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,6 +136,12 @@ class GroundTruth:
         The sensor model: ``full_well`` (electrons at full scale) and ``read_noise``.
     path : Path or None
         The folder it was read from.
+    maps : dict
+        Parameter name -> (N, N) float32 per-texel map of a spatially varying
+        truth (empty otherwise); ``brdf`` holds each region's mean.
+    description : dict
+        What the truth was: ``brdf`` (the model or built-in), ``varying``,
+        ``detail`` (and its ``span_residual_mm``), as the simulator set them.
     """
 
     model: str
@@ -146,6 +160,8 @@ class GroundTruth:
     integrator: dict
     noise: dict[str, float]
     path: Path | None = None
+    maps: dict[str, np.ndarray] = field(default_factory=dict)
+    description: dict = field(default_factory=dict)
 
     @property
     def shapes(self) -> dict[str, np.ndarray]:
@@ -174,6 +190,8 @@ def write_ground_truth(capture_dir: str | os.PathLike, truth: GroundTruth) -> Pa
     for m in truth.measurements:
         _write_npy(folder / SHAPES / f"{m.name}.npy", np.asarray(m.vertices, np.float32))
     write_exr(folder / ALBEDO, truth.albedo)
+    for name, image in truth.maps.items():
+        write_exr(folder / MAPS / f"{name}.exr", np.asarray(image, np.float32))
     write_json(folder / BRDF, truth.brdf)
     write_json(folder / SCENE, _scene_json(truth))
     return folder
@@ -208,7 +226,9 @@ def read_ground_truth(capture: Capture | str | os.PathLike) -> GroundTruth | Non
         sphere_radius=float(scene["steel_sphere_radius_mm"]), neutral=np.load(folder / SHAPES / f"{NEUTRAL}.npy"),
         measurements=measurements, brdf=json.loads((folder / scene.get("brdf", BRDF)).read_text()),
         albedo=read_exr(folder / scene.get("albedo", ALBEDO)), integrator=scene["integrator"],
-        noise=scene["noise"], path=folder)
+        noise=scene["noise"], path=folder,
+        maps={name: read_exr(folder / path) for name, path in scene.get("maps", {}).items()},
+        description=scene.get("truth", {}))
 
 
 def _scene_json(truth: GroundTruth) -> dict:
@@ -228,7 +248,8 @@ def _scene_json(truth: GroundTruth) -> dict:
             "coefficients": {k: np.asarray(v).tolist() for k, v in truth.coefficients.items()},
             "head_center_mm": head, "camera": truth.camera.to_json(), "lights": lights,
             "steel_sphere_radius_mm": float(truth.sphere_radius), "measurements": measurements,
-            "albedo": ALBEDO, "brdf": BRDF, "integrator": truth.integrator, "noise": truth.noise}
+            "albedo": ALBEDO, "brdf": BRDF, "integrator": truth.integrator, "noise": truth.noise,
+            "maps": {name: f"{MAPS}/{name}.exr" for name in truth.maps}, "truth": truth.description}
 
 
 def _write_npy(path: Path, array: np.ndarray) -> None:

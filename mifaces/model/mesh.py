@@ -18,7 +18,7 @@ import numpy as np
 
 def mitsuba_mesh(vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray | None = None,
                  normals: np.ndarray | None = None, albedo: np.ndarray | None = None, bsdf=None,
-                 name: str = "face") -> mi.Mesh:
+                 name: str = "face", interior=None) -> mi.Mesh:
     """Build a ``mi.Mesh`` from arrays, in the current variant.
 
     Parameters
@@ -37,6 +37,9 @@ def mitsuba_mesh(vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray | N
         mesh gets a ``diffuse`` BSDF with that reflectance).
     bsdf : mi.BSDF or dict, optional
         The mesh's BSDF; default ``diffuse``.
+    interior : mi.Medium or dict, optional
+        The medium on the mesh's inner side (opposite its normals), for
+        Mitsuba's volumetric path tracer.
 
     Returns
     -------
@@ -54,6 +57,8 @@ def mitsuba_mesh(vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray | N
         if albedo is not None:
             bsdf["reflectance"] = {"type": "mesh_attribute", "name": "vertex_color"}
     props["bsdf"] = mi.load_dict(bsdf) if isinstance(bsdf, dict) else bsdf
+    if interior is not None:
+        props["interior"] = mi.load_dict(interior) if isinstance(interior, dict) else interior
     mesh = mi.Mesh(name, len(vertices), len(triangles), props,
                    has_vertex_normals=True, has_vertex_texcoords=uv is not None)
     params = mi.traverse(mesh)

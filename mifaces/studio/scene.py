@@ -10,7 +10,7 @@ spheres: the walls return no light). Lengths in mm, world frame.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -60,6 +60,9 @@ class Studio:
         Steel-sphere centres, mm.
     sensor : dict
         The Mitsuba sensor of ``camera``.
+    integrator : dict
+        The Mitsuba integrator of its pictures (:data:`INTEGRATOR`; the
+        volumetric path tracer for a translucent subject).
     """
 
     camera: Camera
@@ -70,6 +73,7 @@ class Studio:
     per_light: list[int]
     sphere_centers: np.ndarray
     sensor: dict
+    integrator: dict = field(default_factory=lambda: dict(INTEGRATOR))
 
     @property
     def schedule(self) -> list[tuple[int, int]]:
@@ -134,7 +138,7 @@ def white_value(studio: Studio) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 def scene(studio: Studio, shapes: dict, emitters: dict, spp: int) -> dict:
     """The scene dict of ``shapes`` lit by ``emitters`` as the studio camera sees it with ``spp`` samples."""
-    d = {"type": "scene", "integrator": INTEGRATOR,
+    d = {"type": "scene", "integrator": studio.integrator,
          "sensor": dict(studio.sensor, sampler={"type": "independent", "sample_count": spp})}
     d.update(shapes)
     d.update(emitters)

@@ -16,8 +16,16 @@ The steps: :mod:`mifaces.studio.subject` (the face, its albedo, its poses),
 
 The face is a morphable model face (built-in by default) with a
 ground-truth spatially varying BRDF: per region the specular parameters of
-one of the plugins ``phong``, ``cooktorrance``, ``ward``, ``lafortune``,
-over a per-texel albedo map with fine detail. The capture folder it writes
+one of the plugins ``phong``, ``cooktorrance``, ``ward``, ``lafortune``, or
+of one of Mitsuba's built-ins ``roughplastic`` and ``principled``
+(:mod:`mifaces.brdf.builtin`: truths outside the fitted families), over a
+per-texel albedo map with fine detail. Two options take the truth further
+from what the fit can represent: ``varying`` gives the lobe's scale and
+width per texel (an oily T-zone, drier cheeks; :mod:`mifaces.studio.varying`),
+``detail`` adds wrinkles, pores and asymmetry the model's PCA cannot
+express (:mod:`mifaces.studio.detail`), and ``subsurface`` makes the skin
+translucent: a rough dielectric boundary over a scattering medium with
+measured skin coefficients (:mod:`mifaces.studio.subsurface`). The capture folder it writes
 loads with :func:`mifaces.capture.load_capture` and holds only what a real
 capture would; ``ground_truth/`` holds the rest.
 
@@ -51,7 +59,7 @@ from __future__ import annotations
 import itertools
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -60,11 +68,14 @@ from ..capture import write_ground_truth
 from ..files import MAX_IMAGE_SIDE, check_image_size, check_render_size, check_result_target, result_set
 from ..model import load_model
 from ..progress import progress as progress_bar
-from ..render import face_shapes
+from ..render import face_shapes, region_bsdf, region_meshes
 from .photograph import albedo_texture, annotate, photograph_face, photograph_spheres, visible_feature_points
+from . import subsurface as translucent
+from .detail import fine_detail, span_residual
 from .scene import set_up_studio
-from .subject import head_pose, make_subject
-from .truth import brdf_with_overrides
+from .subject import head_pose, make_subject, with_detail
+from .truth import DIGITS, brdf_with_overrides
+from .varying import VARYING, map_textures, region_means, varying_maps
 from .write import ground_truth, true_measurement, write_manifest, write_photographs, write_sphere_photographs
 
 PRESETS = {"paper": {"measurements": 22}}
@@ -94,7 +105,8 @@ class SimulationResult:
 def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance", brdf_params: dict | None = None,
              measurements: int = 6, resolution: tuple[int, int] = (512, 512), seed: int = 0,
              preset: str | None = None, spp: int = 64, companion: str = "diffuse",
-             albedo_resolution: int = 1024, progress: bool = True, force: bool = False) -> SimulationResult:
+             albedo_resolution: int = 1024, progress: bool = True, force: bool = False, varying: bool = False,
+             detail: bool = False, subsurface: bool = False) -> SimulationResult:
     """Simulate a capture session and write it, with ground truth, to ``out``.
 
     Parameters
@@ -106,9 +118,12 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     model : str, path or MorphableModel
         ``'builtin'``, a model file for :func:`mifaces.load_model`, or a model.
     brdf : str
-        Ground-truth plugin: ``'cooktorrance'`` (default), ``'phong'``, ``'ward'``, ``'lafortune'``.
+        Ground-truth plugin: ``'cooktorrance'`` (default), ``'phong'``, ``'ward'``, ``'lafortune'``,
+        or a Mitsuba built-in outside the fitted families: ``'roughplastic'``, ``'principled'``
+        (:mod:`mifaces.brdf.builtin`, defaults mapped from the same published skin values).
     brdf_params : dict, optional
-        Overrides in the ``brdf.json`` layout (``{"model", "regions": {region: {param: value}}}``).
+        Overrides in the ``brdf.json`` layout (``{"model", "regions": {region: {param: value}}}``),
+        with the plugin's (or built-in's) parameter names.
     measurements : int
         Number of measurements K: ceil(K / 3) light conditions with up to three poses each.
     resolution : (width, height)
@@ -129,6 +144,19 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     force : bool
         Replace a simulated capture that ``out`` holds. A folder holding
         anything else (a real capture) is never written over.
+    varying : bool
+        A spatially varying truth: per-texel lobe scale and width maps
+        (oily T-zone, drier cheeks), for ``brdf`` in
+        :data:`mifaces.studio.varying.VARYING`; ``ground_truth/maps/``.
+    detail : bool
+        Add fine geometry the face model cannot express (wrinkles, pores,
+        asymmetry) to the face; the ground truth's vertices are the detailed ones.
+    subsurface : bool
+        Translucent skin: the skin regions as a rough dielectric boundary
+        over a scattering medium with measured skin coefficients
+        (:mod:`mifaces.studio.subsurface`), rendered with Mitsuba's
+        volumetric path tracer: much slower, use few pixels and samples.
+        Needs the Cook–Torrance truth (the boundary's reflection).
 
     Returns
     -------
@@ -147,22 +175,53 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     out = check_result_target(out, KIND, force)  # before the work: writable, and nothing to lose
     face_model = load_model(model)
     truth = brdf_with_overrides(brdf, brdf_params)
+    if subsurface and (truth["model"] != "cooktorrance" or varying):
+        raise ValueError("a subsurface truth (subsurface=True) takes the Cook–Torrance truth's reflection for its "
+                         f"boundary: brdf='cooktorrance' without varying maps; got {truth['model']!r}"
+                         + (" with varying=True" if varying else ""))
+    if varying and truth["model"] not in VARYING:
+        raise ValueError(f"a spatially varying truth (varying=True) needs a BRDF with lobe scale and width maps: "
+                         f"{sorted(VARYING)}; got {truth['model']!r}")
     # what the photographs show stays in ground_truth/: the set manifest records only the set's shape
     info = {"measurements": measurements, "resolution": [width, height], "companion": companion}
     with result_set(out, KIND, force=force, info=info) as folder:
         lights, render_seconds = _simulate_into(folder, face_model, truth, measurements, width, height, seed, spp, companion,
-                                        albedo_resolution, progress)
+                                                albedo_resolution, progress, {"varying": varying, "detail": detail,
+                                                                           "subsurface": subsurface})
     return SimulationResult(out, measurements, lights, time.perf_counter() - t_start, render_seconds)
 
 
+def _truth_subject(face_model, truth: dict, rng: np.random.Generator, seed: int, albedo_resolution: int,
+                   variation: dict):
+    """The subject, its parameter maps (empty unless ``variation['varying']``), the ``brdf.json``
+    the ground truth records, and the truth's description. Detail and maps draw from their own
+    generators, so that a capture with them shows the same face, lights and noise as one without."""
+    subject = make_subject(face_model, rng, albedo_resolution)
+    description = {"brdf": truth["model"], "varying": bool(variation["varying"]), "detail": bool(variation["detail"])}
+    if variation["detail"]:
+        subject = with_detail(subject, fine_detail(face_model, subject.neutral, np.random.default_rng([seed, 1])))
+        description["span_residual_mm"] = round(span_residual(face_model, subject.neutral), 4)
+    maps, recorded = {}, truth
+    if variation["varying"]:
+        maps = varying_maps(face_model, subject.neutral, truth, np.random.default_rng([seed, 2]), albedo_resolution)
+        recorded = region_means(face_model, maps, truth, DIGITS)
+    if variation["subsurface"]:
+        subject = replace(subject, albedo=translucent.subsurface_albedo(face_model, subject.albedo, truth))
+        description["subsurface"] = translucent.description(truth)
+    return subject, maps, recorded, description
+
+
 def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width: int, height: int, seed: int,
-                   spp: int, companion: str, albedo_resolution: int, progress: bool) -> tuple[int, list[float]]:
+                   spp: int, companion: str, albedo_resolution: int, progress: bool,
+                   variation: dict) -> tuple[int, list[float]]:
     """The simulation of :func:`simulate`, written into folder ``out``: the number of light
     conditions and each measurement's render time."""
     rng = np.random.default_rng(seed)  # one generator, drawn from in a fixed order: subject, lights, frames
-    subject = make_subject(face_model, rng, albedo_resolution)
-    texture = albedo_texture(subject.albedo)
+    subject, maps, recorded, description = _truth_subject(face_model, truth, rng, seed, albedo_resolution, variation)
+    texture, textures = albedo_texture(subject.albedo), map_textures(maps)
     studio = set_up_studio(width, height, subject.head, measurements, rng, spp)
+    if variation["subsurface"]:
+        studio = replace(studio, integrator=translucent.INTEGRATOR)
     seeds = itertools.count(seed * 1000 + 1)  # Monte Carlo seed of each render, in order
     frames = measurements * (1 + (companion in ("diffuse", "both")) + (companion in ("exposures", "both")))
     bar = progress_bar(total=frames + 2 * len(studio.per_light), desc="simulating", unit="frame", enabled=progress)
@@ -178,7 +237,7 @@ def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width:
         name = f"m{index:02d}"
         pose = head_pose(face_model, subject, pi, rng)
         vertices = pose.vertices.astype(np.float32)
-        shapes = face_shapes(face_model, vertices, truth, texture, face_model.vertex_normals(vertices))
+        shapes = _face(face_model, vertices, truth, texture, textures, variation["subsurface"])
         photographs = photograph_face(studio, shapes, li, companion, spp, seeds, rng)
         bar.update(1 + (photographs.diffuse is not None) + bool(photographs.exposures))
         entry = write_photographs(out, name, li, pi, photographs)
@@ -189,9 +248,19 @@ def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width:
         render_seconds.append(time.perf_counter() - t0)
     bar.close()
 
-    write_ground_truth(out, ground_truth(face_model, subject, studio, true_measurements, truth, seed, spp))
+    write_ground_truth(out, ground_truth(face_model, subject, studio, true_measurements, recorded, seed, spp, maps,
+                                         description))
     write_manifest(out, studio, face_model, subject.neutral, lights, entries)
     return len(studio.per_light), render_seconds
+
+
+def _face(face_model, vertices: np.ndarray, truth: dict, texture, maps: dict, subsurface: bool) -> dict:
+    """The face's Mitsuba meshes with their truth: surfaces (with parameter ``maps``), or translucent skin."""
+    normals = face_model.vertex_normals(vertices)
+    if subsurface:
+        return translucent.subsurface_shapes(region_meshes(face_model, vertices, normals), truth,
+                                             lambda region: region_bsdf(truth, region, texture))
+    return face_shapes(face_model, vertices, truth, texture, normals, maps=maps)
 
 
 def _integer(name: str, value, lowest: int, highest: int) -> int:

@@ -3,7 +3,7 @@ pose and expression in each measurement (lengths in mm, world frame)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.ndimage as ndi
@@ -27,12 +27,17 @@ class Subject:
         Centre of the neutral face's bounding box: the centre of head rotations.
     albedo : (N, N, 3) float32
         Linear RGB albedo map in the model's texture space.
+    detail : (V, 3) float64, optional
+        Offsets (mm, model frame) the model cannot express, added to the face
+        in every pose and expression (:mod:`mifaces.studio.detail`);
+        ``neutral`` includes them.
     """
 
     coefficients: dict[str, np.ndarray]
     neutral: np.ndarray
     head: np.ndarray
     albedo: np.ndarray
+    detail: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,6 +69,11 @@ def make_subject(face_model, rng: np.random.Generator, albedo_resolution: int) -
     return Subject(coefficients, neutral, head, albedo)
 
 
+def with_detail(subject: Subject, detail: np.ndarray) -> Subject:
+    """``subject`` with fine ``detail`` (V, 3) added to its face (the head centre stays)."""
+    return replace(subject, neutral=(subject.neutral + detail).astype(np.float32), detail=np.asarray(detail, np.float64))
+
+
 def head_pose(face_model, subject: Subject, pose: int, rng: np.random.Generator) -> HeadPose:
     """The subject at pose ``pose`` of :data:`mifaces.studio.scene.POSES`, as a sitter holds it:
     jittered by up to 3° yaw, 4° pitch, 2° roll, moved by 3 mm (standard deviation) and with a
@@ -78,6 +88,8 @@ def head_pose(face_model, subject: Subject, pose: int, rng: np.random.Generator)
     if face_model.has_expressions:
         expression = np.abs(rng.normal(0.0, 0.12, face_model.expression_dim))
     local = face_model.shape(subject.coefficients["shape"], expression).astype(np.float64)
+    if subject.detail is not None:
+        local = local + subject.detail
     vertices = (local - subject.head) @ rotation.T + subject.head + translation
     return HeadPose((yaw, pitch, roll), rotation, translation, expression, vertices)
 

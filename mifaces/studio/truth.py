@@ -8,7 +8,10 @@ and the region's index of refraction
 (:data:`mifaces.brdf.materials.REFRACTIVE_INDEX`). Every other model is
 derived from the same lobe by its
 :meth:`~mifaces.brdf.model.BRDFModel.from_lobe`: the Cook–Torrance lobe's
-directional albedo at normal incidence and its roughness.
+directional albedo at normal incidence and its roughness. Mitsuba's
+built-ins (``roughplastic``, ``principled``: ground truths outside the
+fitted families) take the same values by
+:func:`mifaces.brdf.builtin.from_cook_torrance`.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import mitsuba as mi
 import numpy as np
 
 from .. import brdf
+from ..brdf.builtin import BUILTINS, builtin, from_cook_torrance, validate_builtin
 from ..brdf.cooktorrance import CookTorrance
 from ..brdf.materials import REFRACTIVE_INDEX
 from ..model.regions import REGIONS
@@ -61,8 +65,12 @@ def default_brdf(model: str = TRUTH_MODEL) -> dict:
 
     Cook–Torrance is :data:`COOK_TORRANCE_REGIONS`; the other models are
     derived from it as the module docstring explains, their parameters
-    rounded to :data:`DIGITS` decimals.
+    rounded to :data:`DIGITS` decimals; a built-in (``roughplastic``,
+    ``principled``) by :func:`mifaces.brdf.builtin.from_cook_torrance`.
     """
+    if model in BUILTINS:
+        return {"model": model, "options": builtin(model).default_options(),
+                "regions": {name: from_cook_torrance(model, ct) for name, ct in COOK_TORRANCE_REGIONS.items()}}
     instance = brdf.model(model)  # a ValueError names an unknown model
     kinds = {p.name: p.kind for p in instance.specular_parameters()}
     regions = {}
@@ -106,6 +114,8 @@ def brdf_with_overrides(model: str, overrides: dict | None) -> dict:
             raise ValueError(f"region {region!r}: parameters must be an object")
         if "diffuse_reflectance" in params:
             raise ValueError(f"region {region!r}: the diffuse reflectance is the albedo map, not a parameter")
+    if model in BUILTINS:
+        return _builtin_with_overrides(truth, regions, overrides.get("options", {}))
     # the models' own validation: names, finiteness, ranges, lobes (Lafortune's cxy_2, ...)
     merged = {region: dict(truth["regions"].get(region, truth["regions"]["skin"]), **params)
               for region, params in regions.items()}
@@ -123,3 +133,20 @@ def brdf_with_overrides(model: str, overrides: dict | None) -> dict:
 
 
 # --------------------------------------------------------------------------------------------
+def _builtin_with_overrides(truth: dict, regions: dict, options: dict) -> dict:
+    """The built-in ground truth ``truth`` with the region ``regions`` and
+    ``options`` overrides, checked (:func:`mifaces.brdf.builtin.validate_builtin`).
+    Principled's ``eta`` and ``specular`` exclude each other: giving one drops
+    the other's default."""
+    merged = {}
+    for region, params in regions.items():
+        base = dict(truth["regions"].get(region, truth["regions"]["skin"]))
+        for a, b in (("eta", "specular"), ("specular", "eta")):
+            if a in params and b not in params:
+                base.pop(b, None)
+        merged[region] = dict(base, **params)
+    checked = validate_builtin({"model": truth["model"], "options": dict(truth["options"], **options),
+                                "regions": merged or {"skin": truth["regions"]["skin"]}})
+    truth["regions"].update(checked["regions"] if merged else {})
+    truth["options"] = checked["options"]
+    return truth

@@ -12,7 +12,7 @@ from ..capture import FORMAT, MANIFEST, VERSION, GroundTruth, TrueLight, TrueMea
 from ..files import write_exr, write_json, write_png
 from ..model.landmarks import FEATURE_POINTS
 from .photograph import FULL_WELL, READ_NOISE, Photographs, SpherePhotographs
-from .scene import INTEGRATOR, LAMP_RADIUS, LIGHT_DISTANCE, STEEL_SPHERE_RADIUS, Studio, white_value
+from .scene import LAMP_RADIUS, LIGHT_DISTANCE, STEEL_SPHERE_RADIUS, Studio, white_value
 from .subject import HeadPose, Subject
 
 #: Folder of the photographs inside the capture.
@@ -92,12 +92,14 @@ def true_measurement(name: str, light: int, pose: HeadPose, feature_points: dict
 
 
 def ground_truth(face_model, subject: Subject, studio: Studio, measurements: list[TrueMeasurement], brdf: dict,
-                 seed: int, spp: int) -> GroundTruth:
-    """What the simulation knew, as :func:`mifaces.capture.write_ground_truth` writes it."""
+                 seed: int, spp: int, maps: dict | None = None, description: dict | None = None) -> GroundTruth:
+    """What the simulation knew, as :func:`mifaces.capture.write_ground_truth` writes it (``maps``:
+    a spatially varying truth's parameter maps; ``description``: what the truth was)."""
     lights = tuple(TrueLight(light_name(i), position, studio.intensity, LAMP_RADIUS, studio.sphere_centers)
                    for i, position in enumerate(studio.light_positions))
     return GroundTruth(
         model=face_model.name, seed=seed, spp=spp, resolution=(studio.camera.width, studio.camera.height),
         coefficients=subject.coefficients, head_center=subject.head, camera=studio.camera, lights=lights,
         sphere_radius=STEEL_SPHERE_RADIUS, neutral=subject.neutral, measurements=tuple(measurements), brdf=brdf,
-        albedo=subject.albedo, integrator=INTEGRATOR, noise={"full_well": FULL_WELL, "read_noise": READ_NOISE})
+        albedo=subject.albedo, integrator=studio.integrator, noise={"full_well": FULL_WELL, "read_noise": READ_NOISE},
+        maps=dict(maps or {}), description=dict(description or {}))

@@ -1,0 +1,187 @@
+"""``mifaces measure`` on ground truths the fit cannot copy (SIMULATED).
+
+For each truth, simulate a capture (6 measurements, seed 0: the same face,
+lights and noise draws for every truth; ``--resolution`` and ``--spp``,
+the simulator's defaults 512 and 64, or 256 and 32 to fit this machine, as
+the subsurface truth needs) and run the main job on it with its defaults
+(shapes fitted with the default built-in model, all four BRDF models,
+texture 512²):
+
+``cooktorrance``
+    the default truth, one of the fitted families (the inverse crime: the
+    reference the others are compared with);
+``roughplastic``, ``principled``
+    Mitsuba's built-ins (:mod:`mifaces.brdf.builtin`), outside every fitted family;
+``varying``
+    Cook–Torrance with per-texel scale and roughness maps (oily T-zone, drier
+    cheeks; :mod:`mifaces.studio.varying`), compared per region with the maps' means;
+``detail``
+    the Cook–Torrance face with wrinkles, pores and asymmetry outside the
+    model's span (:mod:`mifaces.studio.detail`);
+``subsurface``
+    translucent skin (:mod:`mifaces.studio.subsurface`: a rough dielectric
+    boundary over a medium with Jensen et al. 2001's Skin1 coefficients),
+    rendered with the volumetric path tracer; its difference from
+    ``cooktorrance`` at the same size and samples is the bias translucency causes.
+
+Records per truth and model the report's numbers (``report.json``): the
+relative RMSE of the fitted render against the first photograph (a
+training image), the albedo errors against the truth's map, the relative
+parameter errors where the truth is the fitted model, the skin parameters,
+and the fit times. Writes ``validation/results/truths.json`` and
+``truths.png`` (entries of earlier runs of other truths are kept).
+
+    python validation/truths.py [--truths roughplastic detail] [--resolution 256 --spp 32] [--work DIR]
+
+Machine: 2 CPU cores shared with other jobs; times are indicative only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
+
+import numpy as np
+
+from mifaces.capture import read_ground_truth
+from mifaces.files import atomic_path, read_exr, write_json
+from mifaces.model import load_model
+from mifaces.model.regions import REGIONS
+from mifaces.pipeline import measure
+from mifaces.studio.simulate import simulate
+from mifaces.studio.varying import texel_regions
+
+RESULTS = Path(__file__).resolve().parent / "results"
+#: Truth name -> simulate() options.
+TRUTHS = {"cooktorrance": {}, "roughplastic": {"brdf": "roughplastic"}, "principled": {"brdf": "principled"},
+          "varying": {"varying": True}, "detail": {"detail": True}, "subsurface": {"subsurface": True}}
+
+
+def run_truth(name: str, work: Path, size: int, spp: int) -> dict:
+    """Simulate truth ``name`` (``size``² pixels, ``spp`` samples) and measure it; the report's numbers per model."""
+    folder = work / f"{name}_{size}"
+    options = dict(TRUTHS[name], resolution=(size, size), spp=spp)
+    t0 = time.perf_counter()
+    simulate(folder / "capture", force=True, progress=False, **options)
+    simulated = time.perf_counter() - t0
+    report = measure(folder / "measure", folder / "capture", progress=False)
+    truth = read_ground_truth(folder / "capture")
+    models = {}
+    for model, entry in report["models"].items():
+        gt = entry.get("ground_truth") or {}
+        models[model] = {"image_relative_rmse_first_photo_training": entry["image_relative_rmse"],
+                         "albedo": gt.get("albedo"), "parameter_relative_errors": gt.get("regions"),
+                         "skin": entry["regions"].get("skin"), "fit_seconds": report["seconds"][f"fit_brdf_{model}"]}
+    fitted_skin_albedo(folder, models)
+    return {"truth": truth.description, "truth_brdf_skin": truth.brdf["regions"]["skin"],
+            "truth_albedo_skin_mean": _skin_albedo(truth), "simulate_options": options,
+            "simulate_seconds": simulated, "measure_seconds": report["seconds"], "models": models,
+            "shapes": report.get("shapes")}
+
+
+def fitted_skin_albedo(folder: Path, models: dict) -> None:
+    """Add to each model's entry the mean of its fitted albedo map over the skin texels (RGB), from
+    ``folder/measure/brdf/<model>/albedo.exr``: against the truth's, the bias per channel."""
+    model = load_model("builtin")
+    for name, entry in models.items():
+        albedo = read_exr(folder / "measure" / "brdf" / name / "albedo.exr")
+        labels = texel_regions(model, albedo.shape[0])
+        entry["albedo_skin_mean"] = [round(float(x), 5) for x in albedo[labels == REGIONS["skin"]].mean(axis=0)]
+
+
+def _skin_albedo(truth) -> list[float]:
+    """Mean of the truth's albedo map over the skin texels (RGB)."""
+    labels = texel_regions(load_model(truth.model), truth.albedo.shape[0])
+    return [round(float(x), 5) for x in truth.albedo[labels == REGIONS["skin"]].mean(axis=0)]
+
+
+def figure(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    truths = list(results["truths"])
+    models = list(next(iter(results["truths"].values()))["models"])
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
+    width = 0.8 / len(models)
+    for k, model in enumerate(models):
+        x = np.arange(len(truths)) + (k - (len(models) - 1) / 2) * width
+        image = [100 * results["truths"][t]["models"][model]["image_relative_rmse_first_photo_training"]
+                 for t in truths]
+        albedo = [results["truths"][t]["models"][model]["albedo"]["rmse_sampled"] for t in truths]
+        axes[0].bar(x, image, width, label=model)
+        axes[1].bar(x, albedo, width, label=model)
+    for ax, title in zip(axes, ("image RMSE, first (training) photograph, %", "albedo RMSE vs truth (sampled texels)")):
+        ax.set_xticks(range(len(truths)), [t.rsplit("_", 1)[0] for t in truths], rotation=20, fontsize=8)
+        ax.set_title(f"SIMULATED: {title}", fontsize=9)
+    axes[0].legend(fontsize=8)
+    sizes = sorted({"{}² {} spp".format(e["simulate_options"]["resolution"][0], e["simulate_options"]["spp"])
+                    for e in results["truths"].values()})
+    fig.suptitle(f"SIMULATED: mifaces measure on truths outside the fit (6 measurements, {', '.join(sizes)}; "
+                 "truth on the x axis)", fontsize=10)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
+    plt.close(fig)
+
+
+def _rgb(values) -> str:
+    return "" if values is None else "(" + ", ".join(f"{v:.3f}" for v in values) + ")"
+
+
+def table(results: dict) -> str:
+    """The results as a Markdown table: per truth and model the training-photo RMSE,
+    the albedo RMSE and bias against the truth's map, and the skin's lobe width."""
+    lines = ["| truth | model | image RMSE, first photo (training) | albedo RMSE | albedo bias | skin albedo (truth) "
+             "| skin parameters |", "|---|---|---|---|---|---|---|"]
+    for name, entry in results["truths"].items():
+        for model, m in entry["models"].items():
+            skin = ", ".join(f"{k} {np.mean(v):.3g}" for k, v in (m["skin"] or {}).items() if k != "eta")
+            lines.append(f"| {name} | {model} | {100 * m['image_relative_rmse_first_photo_training']:.2f}% | "
+                         f"{m['albedo']['rmse_sampled']:.4f} | {m['albedo']['bias_sampled']:+.4f} | "
+                         f"{_rgb(m.get('albedo_skin_mean'))} ({_rgb(entry.get('truth_albedo_skin_mean'))}) | {skin} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--truths", nargs="+", default=list(TRUTHS), choices=list(TRUTHS))
+    parser.add_argument("--work", type=Path, default=Path("out/validation_truths"))
+    parser.add_argument("--resolution", type=int, default=512, help="photograph size (square)")
+    parser.add_argument("--spp", type=int, default=64, help="samples per pixel of the photographs")
+    parser.add_argument("--summarize", action="store_true",
+                        help="only recompute the skin albedo means of the recorded truths from --work, and the figure")
+    args = parser.parse_args()
+    path = RESULTS / "truths.json"
+    results = json.loads(path.read_text()) if path.is_file() else {}
+    if args.summarize:
+        for key, entry in results["truths"].items():
+            fitted_skin_albedo(args.work / key, entry["models"])
+            entry["truth_albedo_skin_mean"] = _skin_albedo(read_ground_truth(args.work / key / "capture"))
+        write_json(path, results)
+        figure(results, RESULTS / "truths.png")
+        print(table(results))
+        return
+    results.update({"label": "SIMULATED", "command": "python validation/truths.py",
+                    "machine": "2 CPU cores (LLVM), shared with other jobs: times indicative only"})
+    results.setdefault("truths", {})
+    for name in args.truths:
+        key = f"{name}_{args.resolution}"
+        print(f"truth {key} ...", flush=True)
+        results["truths"][key] = run_truth(name, args.work, args.resolution, args.spp)
+        for model, entry in results["truths"][key]["models"].items():
+            print(f"  {model:13s} image {100 * entry['image_relative_rmse_first_photo_training']:.2f}%  "
+                  f"albedo RMSE {entry['albedo']['rmse_sampled']:.4f} bias {entry['albedo']['bias_sampled']:+.4f}  "
+                  f"skin {entry['skin']}", flush=True)
+        write_json(path, results)
+    figure(results, RESULTS / "truths.png")
+    print(table(results))
+
+
+if __name__ == "__main__":
+    main()
