@@ -178,7 +178,7 @@ class _Region:
 
 
 def refine_texel_normals(model, fit, fits: dict, light, view, reflectance, sigma, texel, measurement, label,
-                         names: dict, resolution: int, *, prior_weight: float = PRIOR_WEIGHT, rounds: int = 4,
+                         names: dict, resolution: int, *, prior_weight: float = PRIOR_WEIGHT, rounds: int = 8,
                          tol: float = 1e-3, search=SEARCH, smooth: float = 0.0, progress=None) -> TexelNormals:
     """Alternate the per-texel normal step with the region BRDF fit (module docstring).
 
@@ -240,8 +240,9 @@ def refine_texel_normals(model, fit, fits: dict, light, view, reflectance, sigma
         loss, albedo = _evaluate(model, regions, fits, names, normals, prior_weight)
         rotated = rotate_samples(light, view, reflectance, sigma, normals[texel])
         kept_texel, kept_label = texel[rotated[4]], label[rotated[4]]
-        fits = fit(*rotated[:2], rotated[2] - _albedo_offsets(albedo, refined, kept_texel, kept_label),
-                   rotated[3], kept_label)
+        use = _fitted_samples(refined, kept_texel, kept_label)
+        offsets = _albedo_offsets(albedo, refined, kept_texel, kept_label)
+        fits = fit(rotated[0][use], rotated[1][use], (rotated[2] - offsets)[use], rotated[3][use], kept_label[use])
         tilt = np.degrees(np.arccos(np.clip(normals[refined, 2], -1.0, 1.0)))
         history.append({"round": round_, "loss": loss, "seconds": time.perf_counter() - t0,
                         "texels": int(refined.sum()), "mean_tilt_deg": float(tilt.mean()) if tilt.size else 0.0})
@@ -267,6 +268,14 @@ def _evaluate(model, regions, fits, names, normals, prior_weight):
             loss += state.loss
             albedo[region.texels] = state.albedo
     return loss, albedo
+
+
+def _fitted_samples(refined, texel, label) -> np.ndarray:
+    """The samples of the region fit: in a region with refined texels, theirs (a texel's normal and
+    albedo are known only there); in the others, all."""
+    on = refined[texel]
+    with_normals = np.unique(label[on])
+    return on | ~np.isin(label, with_normals)
 
 
 def _albedo_offsets(albedo, refined, texel, label) -> np.ndarray:
