@@ -114,6 +114,19 @@ def test_texel_normals_recover_tilted_normals_and_the_gloss():
     assert not sparse.refined.any() and np.all(sparse.normals[..., 2] == 1.0)
 
 
+def test_smooth_normals_average_inside_the_mask_only():
+    rng = np.random.default_rng(3)
+    normals = _unit(np.concatenate([rng.normal(scale=0.05, size=(16, 16, 2)), np.ones((16, 16, 1))], axis=2))
+    mask = np.zeros((16, 16), bool)
+    mask[4:12, 4:12] = True
+    smooth = tn.smooth_normals(normals, mask, 2.0)
+    np.testing.assert_array_equal(smooth[~mask], normals[~mask])
+    np.testing.assert_allclose(np.linalg.norm(smooth, axis=2), 1.0, atol=1e-12)
+    assert smooth[mask][:, :2].std() < 0.5 * normals[mask][:, :2].std()
+    np.testing.assert_allclose(tn.smooth_normals(np.tile([0.0, 0.6, 0.8], (16, 16, 1)), mask, 2.0)[mask],
+                               np.tile([0.0, 0.6, 0.8], (mask.sum(), 1)), atol=1e-12)  # a constant field stays
+
+
 def _patch(rotation=0.5):
     """A curved 9 x 9 patch (normal about +z) whose uv axes are turned by ``rotation`` radians."""
     g = np.linspace(-1, 1, 9)
