@@ -177,18 +177,22 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
               help="Refine the fit by differentiable rendering against the photographs.")
 @click.option("--normals/--no-normals", default=default(fit_brdf_model, "normals"), show_default=True,
               help="Estimate a normal per texel alternating with the fit (writes normals.exr, used by scene.xml).")
+@click.option("--specular-maps/--no-specular-maps", default=default(fit_brdf_model, "specular_maps"),
+              show_default=True, help="Estimate the specular reflectance per texel (writes specular.exr).")
 def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolution: int, lobes: int,
-             face_model: str | None, force: bool, refine: bool, normals: bool) -> None:
+             face_model: str | None, force: bool, refine: bool, normals: bool, specular_maps: bool) -> None:
     """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
     check_result_target(out_dir, BRDF_KIND, force)
     estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, resolution=resolution, lobes=lobes,
-                   out=out_dir, force=force, refine=refine, normals=normals)
+                   out=out_dir, force=force, refine=refine, normals=normals, specular_maps=specular_maps)
     click.echo(f"fitted {estimate.model} to {estimate.samples} samples of {len(estimate.measurements)} "
                f"photographs in {estimate.seconds['total']:.1f} s")
     for name, fit_ in estimate.fits.items():
         params = ", ".join(f"{k}={_short(v)}" for k, v in fit_.params.items() if k != "diffuse_reflectance")
         click.echo(f"  {name:9s} {fit_.samples:8d} samples  {fit_.status:10s} {params}")
-    click.echo(f"wrote {out_dir}/brdf.json, albedo.exr, {'normals.exr, ' * (estimate.normals is not None)}scene.xml")
+    maps = "".join(f"{name}.exr, " for name, value in (("normals", estimate.normals), ("specular", estimate.specular))
+                   if value is not None)
+    click.echo(f"wrote {out_dir}/brdf.json, albedo.exr, {maps}scene.xml")
 
 
 def _short(value) -> str:

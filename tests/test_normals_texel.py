@@ -22,6 +22,7 @@ from mifaces.reflectance import fit_brdf, load_estimate
 from mifaces.reflectance import texel_normals as tn
 from mifaces.reflectance.fitting import FULL_DATA, fit_regions
 from mifaces.reflectance.samples import texel_geometry
+from mifaces.reflectance.specular_maps import refine_specular
 from mifaces.render import FaceScene, scene_xml
 
 GLOSSY = {"specular_reflectance": [0.6] * 3, "roughness": 0.3, "eta": 1.4}
@@ -127,6 +128,39 @@ def test_smooth_normals_average_inside_the_mask_only():
                                np.tile([0.0, 0.6, 0.8], (mask.sum(), 1)), atol=1e-12)  # a constant field stays
 
 
+def test_specular_maps_move_only_as_far_as_the_samples_justify():
+    """Texels with many samples of a varied highlight find their ρ_s scale; texels with few stay
+    near the region's; a region with one gloss stays one gloss."""
+    mifaces.set_variant("llvm_ad_rgb")
+    rng = np.random.default_rng(5)
+    model = brdf.model("cooktorrance")
+    params = {1: {**GLOSSY, "diffuse_reflectance": [0.4] * 3}}
+    texels, side = 200, 16
+    true_k = np.where(np.arange(texels) % 2 == 0, 1.5, 0.6)
+    counts = np.where(np.arange(texels) < 150, 12, 2)  # the last 50 texels: two samples each
+    texel = np.repeat(np.arange(texels), counts)
+    light = _unit(rng.normal(size=(len(texel), 3)) * [0.5, 0.5, 0] + [0, 0, 1])
+    view = _unit(rng.normal(size=(len(texel), 3)) * [0.5, 0.5, 0] + [0, 0, 1])
+    from mifaces.reflectance.diffuse import specular_reflectance_factor
+
+    g = specular_reflectance_factor(model, params, light, view, np.ones(len(texel), int))
+    albedo = rng.uniform(0.3, 0.5, (texels, 3))
+    r = albedo[texel] + true_k[texel, None] * g + rng.normal(scale=0.01, size=g.shape)
+    sigma = np.ones(len(texel))
+    region_map = np.ones((side, side), np.uint8)
+    result = refine_specular(model, params, light, view, r, sigma, texel, np.ones(len(texel), np.uint8), region_map)
+    k = result.scale.ravel()[:texels]
+    many, few = np.arange(texels) < 150, np.arange(texels) >= 150
+    assert np.median(np.abs(k[many] - true_k[many])) < 0.1
+    assert np.mean(np.abs(k[few] - 1.0)) < np.mean(np.abs(true_k[few] - 1.0))  # shrunk towards the region
+    np.testing.assert_allclose(result.specular.reshape(-1, 3)[:texels], np.repeat(k[:, None] * 0.6, 3, axis=1), rtol=1e-5)
+    assert np.all(result.scale.ravel()[texels:] == 1.0)  # texels without samples: the region's
+    # one gloss: the texels stay at the region's (k near 1 everywhere)
+    uniform = refine_specular(model, params, light, view, albedo[texel] + g + rng.normal(scale=0.01, size=g.shape),
+                              sigma, texel, np.ones(len(texel), np.uint8), region_map)
+    assert np.abs(uniform.scale.ravel()[:texels] - 1.0).max() < 0.1
+
+
 def _patch(rotation=0.5):
     """A curved 9 x 9 patch (normal about +z) whose uv axes are turned by ``rotation`` radians."""
     g = np.linspace(-1, 1, 9)
@@ -210,11 +244,13 @@ def test_fit_brdf_with_normals_writes_the_normal_map(capture_dir, tmp_path):
     out = tmp_path / "fit"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # thin regions borrow skin's fit
-        estimate = fit_brdf(capture_dir, resolution=48, out=out, normals=True, normal_options={"rounds": 2},
-                            progress=False)
+        estimate = fit_brdf(capture_dir, resolution=32, out=out, normals=True, normal_options={"rounds": 1},
+                            specular_maps=True, progress=False)
     data = load_estimate(out)
-    assert data["normals"].shape == (48, 48, 3) and data["normal_refinement"]["texels"] > 200
+    assert data["normals"].shape == (32, 32, 3) and data["normal_refinement"]["texels"] > 100
     np.testing.assert_allclose(tn.decode(data["normals"]), estimate.normals, atol=1e-5)
+    np.testing.assert_allclose(data["specular"], estimate.specular.specular)
+    assert set(data["specular_shrinkage"]) == set(estimate.fits)
     assert data["normal_refinement"]["median_tilt_deg"] < 3.0
     text = (out / "scene.xml").read_text()
     assert 'type="normalmap"' in text and 'value="normals.exr"' in text
@@ -240,11 +276,15 @@ def test_cli_normals_flags_reach_the_api(monkeypatch, tmp_path):
     monkeypatch.setattr(cli, "measure_capture", fake)
     capture = tmp_path / "capture"
     capture.mkdir()
-    for command in (["fit-brdf", str(capture), "--out", str(tmp_path / "o"), "--normals"],
+    for command in (["fit-brdf", str(capture), "--out", str(tmp_path / "o"), "--normals", "--specular-maps"],
                     ["measure", str(capture), "--out", str(tmp_path / "m"), "--normals"]):
         calls.clear()
         CliRunner().invoke(main, command)
         assert calls.get("normals") is True, command
+    assert calls.get("specular_maps") is None  # measure: not a flag of its own
     calls.clear()
     CliRunner().invoke(main, ["fit-brdf", str(capture), "--out", str(tmp_path / "p")])
-    assert calls.get("normals") is False
+    assert calls.get("normals") is False and calls.get("specular_maps") is False
+    calls.clear()
+    CliRunner().invoke(main, ["fit-brdf", str(capture), "--out", str(tmp_path / "q"), "--specular-maps"])
+    assert calls.get("specular_maps") is True

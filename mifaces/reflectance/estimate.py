@@ -44,6 +44,7 @@ from .fitting import RegionFit, SubsetSchedule, fit_regions
 from .io import FILES, write_estimate
 from .refine import RefineSchedule, refine_estimate
 from .samples import ReflectanceSamples, capture_samples
+from .specular_maps import SpecularMap, refine_specular
 from .texel_normals import MIN_OBSERVATIONS, encode, mitsuba_tangent_normals, refine_texel_normals
 
 #: Fit statistics stored per region under ``brdf.json``'s ``"fit"``.
@@ -81,6 +82,9 @@ class BRDFEstimate:
         if they were estimated (``fit_brdf(..., normals=True)``).
     normal_refinement : dict or None
         How they were (:meth:`~mifaces.reflectance.texel_normals.TexelNormals.summary`).
+    specular : SpecularMap or None
+        Per-texel specular reflectance shrunk towards each region's
+        (:func:`mifaces.reflectance.specular_maps.refine_specular`), if estimated.
     """
 
     model: str
@@ -94,6 +98,7 @@ class BRDFEstimate:
     refinement: dict | None = None
     normals: np.ndarray | None = None
     normal_refinement: dict | None = None
+    specular: SpecularMap | None = None
 
     def normal_texture(self) -> np.ndarray | None:
         """The normals as a ``normalmap`` texture ((n + 1) / 2), or None."""
@@ -118,7 +123,9 @@ class BRDFEstimate:
                 "measurements": list(self.measurements), "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
                 "albedo": FILES["albedo"], "refinement": self.refinement,
                 **({} if self.normals is None else {"normals": FILES["normals"],
-                                                    "normal_refinement": self.normal_refinement})}
+                                                    "normal_refinement": self.normal_refinement}),
+                **({} if self.specular is None else {"specular": FILES["specular"], "specular_shrinkage": {
+                    name: self.specular.shrinkage.get(REGIONS[name]) for name in self.fits}})}
 
 
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
@@ -126,7 +133,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
              schedule: SubsetSchedule | None = None, samples: ReflectanceSamples | None = None, measurements=None,
              out=None, seed: int = 0, progress: bool = True, force: bool = False,
              refine: bool | RefineSchedule = False, normals: bool = False,
-             normal_options: dict | None = None) -> BRDFEstimate:
+             normal_options: dict | None = None, specular_maps: bool = False) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture.
 
     Parameters
@@ -168,6 +175,10 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         a warning, when no texel has the samples it needs.
     normal_options : dict, optional
         Keyword arguments of ``refine_texel_normals`` (``prior_weight``, ``rounds``, ``tol``).
+    specular_maps : bool
+        Estimate the specular reflectance per texel, shrunk towards each
+        region's (:func:`mifaces.reflectance.specular_maps.refine_specular`;
+        models with a ``specular_reflectance``). The region fits stay the summary.
 
     Returns
     -------
@@ -216,9 +227,15 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     t_fit = time.perf_counter()
     by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
     albedo = refine_diffuse(brdf, by_label, light, view, r, sigma, texel, label, region_map)
+    specular = None
+    if specular_maps:
+        if any(p.name == "specular_reflectance" for p in brdf.specular_parameters()):
+            specular = refine_specular(brdf, by_label, light, view, r, sigma, texel, label, region_map)
+        else:
+            warnings.warn(f"specular maps left out: {brdf.name} has no specular_reflectance", stacklevel=2)
     t_end = time.perf_counter()
     estimate = BRDFEstimate(model=brdf.name, options=dict(options), fits=fits, albedo=albedo,
-                            region_map=region_map, samples=int(len(texel)),
+                            region_map=region_map, samples=int(len(texel)), specular=specular,
                             measurements=tuple(samples.measurement_names),
                             seconds={"samples": t_samples - t0, "fit": t_fit - t_samples, "refine": t_end - t_fit,
                                      "total": t_end - t0})

@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 
 #: The fitted BRDF's files in an output folder.
 FILES = {"brdf": "brdf.json", "albedo": "albedo.exr", "preview": "albedo.png", "scene": "scene.xml",
-         "normals": "normals.exr"}
+         "normals": "normals.exr", "specular": "specular.exr"}
 #: Samples per pixel of ``scene.xml`` (``mi.load_file(path, spp=N)`` overrides it).
 SCENE_SPP = 64
 #: The key path of the sample count in a scene dict.
@@ -80,16 +80,20 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
         write_png(folder / FILES["preview"], estimate.albedo.albedo)
         if normals is not None:
             write_exr(folder / FILES["normals"], normals)
+        if estimate.specular is not None:
+            write_exr(folder / FILES["specular"], estimate.specular.specular)
         face.write_meshes(folder)
         with atomic_write(folder / FILES["scene"], "w") as f:
             f.write(scene_xml(scene, {"spp": SPP_PATH}, comment))
-    return {key: out / name for key, name in FILES.items() if key != "normals" or normals is not None}
+    optional = {"normals": normals is not None, "specular": estimate.specular is not None}
+    return {key: out / name for key, name in FILES.items() if optional.get(key, True)}
 
 
 def load_estimate(path) -> dict:
     """Read a ``brdf.json`` (path to it or its folder) and the albedo map beside it:
     the JSON document with ``"albedo"`` replaced by the (R, R, 3) array, and
-    ``"normals"`` by the normal map's texture ((n + 1) / 2, (R, R, 3); None without one).
+    ``"normals"`` by the normal map's texture ((n + 1) / 2, (R, R, 3); None without one) and
+    ``"specular"`` by the per-texel specular reflectance map (None without one).
 
     Raises
     ------
@@ -118,14 +122,18 @@ def load_estimate(path) -> dict:
     if not isinstance(name, str) or Path(name).name != name:
         raise ValueError(f"{path}: 'albedo' must name a file beside brdf.json, got {name!r}")
     albedo = path.parent / name
-    normals = data.get("normals")
-    if normals is not None and (not isinstance(normals, str) or Path(normals).name != normals
-                                or not (path.parent / normals).is_file()):
-        raise ValueError(f"{path}: 'normals' must name a normal map beside brdf.json, got {normals!r}")
-    verify_set(path.parent, KIND, [path.name] + ([name] if albedo.is_file() else []) + ([normals] if normals else []))
+    maps = {}
+    for key in ("normals", "specular"):
+        value = data.get(key)
+        if value is not None and (not isinstance(value, str) or Path(value).name != value
+                                  or not (path.parent / value).is_file()):
+            raise ValueError(f"{path}: {key!r} must name a map beside brdf.json, got {value!r}")
+        maps[key] = value
+    verify_set(path.parent, KIND, [path.name] + ([name] if albedo.is_file() else []) + [v for v in maps.values() if v])
     data = brdf_models.validate_brdf(data)
     data["albedo"] = read_exr(albedo) if albedo.is_file() else None
-    data["normals"] = read_exr(path.parent / normals) if normals else None
+    for key, value in maps.items():
+        data[key] = read_exr(path.parent / value) if value else None
     resolution = data.get("resolution")
     if data["albedo"] is not None and isinstance(resolution, int) and data["albedo"].shape[:2] != (resolution,) * 2:
         raise ResultSetError(f"{path.parent}: brdf.json was fitted at resolution {resolution} but {name} is "
