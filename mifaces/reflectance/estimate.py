@@ -172,7 +172,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         Estimate a normal per texel from its samples, alternating with the
         region fit (:func:`mifaces.reflectance.texel_normals.refine_texel_normals`):
         for fitted shapes, whose normals are a few degrees off. Left out, with
-        a warning, when no texel has the samples it needs.
+        a warning, when no texel has the samples it needs. (``refine`` renders
+        without the normal map.)
     normal_options : dict, optional
         Keyword arguments of ``refine_texel_normals`` (``prior_weight``, ``rounds``, ``tol``).
     specular_maps : bool
