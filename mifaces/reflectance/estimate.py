@@ -214,14 +214,9 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
                        fixed_by_region=per_region, schedule=schedule, seed=seed)
     texel_normals = None
     if normals:
-        def fit(*arrays):
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # the fit at the model's normals has warned already
-                return fit_regions(brdf, *arrays, names, fixed=fixed, fixed_by_region=per_region, schedule=schedule,
-                                   seed=seed)
-
-        texel_normals = _refine_normals(brdf, fit, fits, (light, view, r, sigma, texel, measurement, label), names,
-                                        resolution, normal_options, progress)
+        texel_normals = _refine_normals(brdf, fits, (light, view, r, sigma, texel, measurement, label), names,
+                                        resolution, normal_options, progress,
+                                        dict(fixed=fixed, fixed_by_region=per_region, schedule=schedule, seed=seed))
         if texel_normals is not None:
             light, view, r, sigma, keep = texel_normals.samples
             texel, label, fits = texel[keep], label[keep], texel_normals.fits
@@ -256,9 +251,15 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     return estimate
 
 
-def _refine_normals(brdf, fit, fits, arrays, names, resolution, options, progress):
-    """:func:`refine_texel_normals` on the face's samples, or None (with a warning) where no texel
-    has :data:`MIN_OBSERVATIONS` samples (one light per texel: nothing to tell a normal from)."""
+def _refine_normals(brdf, fits, arrays, names, resolution, options, progress, fit_options):
+    """:func:`refine_texel_normals` on the face's samples, the region fit as :func:`fit_brdf`'s
+    (``fit_options`` of :func:`fit_regions`), or None (with a warning) where no texel has
+    :data:`MIN_OBSERVATIONS` samples (one light per texel: nothing to tell a normal from)."""
+    def fit(*samples):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the fit at the model's normals has warned already
+            return fit_regions(brdf, *samples, names, **fit_options)
+
     texel = arrays[4]
     if not np.any(np.bincount(texel) >= MIN_OBSERVATIONS):
         warnings.warn(f"per-texel normals left out: no texel has the {MIN_OBSERVATIONS} samples (lights and "

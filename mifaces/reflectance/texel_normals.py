@@ -56,6 +56,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.ndimage
 
 from ..model.texture_space import rasterize
 from .normals import NormalFit, refine_normals
@@ -303,8 +304,6 @@ def _albedo_offsets(albedo, refined, texel, label) -> np.ndarray:
 def smooth_normals(normals, mask, sigma: float) -> np.ndarray:
     """Normals (R, R, 3) averaged over ``mask`` with a Gaussian of ``sigma`` texels (normalised
     convolution: texels outside ``mask`` neither give nor take), renormalised; outside unchanged."""
-    import scipy.ndimage
-
     mask = np.asarray(mask, np.float64)
     weight = scipy.ndimage.gaussian_filter(mask, sigma)
     out = np.array(normals, np.float64)
