@@ -14,7 +14,9 @@ then fitted per region at a 256 x 256 texture (``fit_brdf``):
 * ``true_shapes_normals``: the true shapes with normals (should change little).
 
 Reported: skin ρ_s (mean over RGB) and roughness relative errors against the
-truth, the albedo RMSE where sampled, and for the refined skin texels the
+truth; the per-texel ρ_s map (``specular_maps=True``) on skin texels with 3 or
+more samples: its spread about the region's fit (the truth has one ρ_s per
+region, so it should stay near it) and its error against the truth; the albedo RMSE where sampled, and for the refined skin texels the
 mean angle between the normal used and the true one, expressed in the fitted
 shape's tangent frame and averaged over the measurements (the part of the
 shape fit's normal error that a tangent-space normal map can correct).
@@ -88,7 +90,7 @@ def run(capture, model, geometry, options, resolution, truth):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         estimate = fit_brdf(capture, "cooktorrance", geometry=geometry, face_model=model, resolution=resolution,
-                            progress=False, normals=options is not None, normal_options=options)
+                            progress=False, normals=options is not None, normal_options=options, specular_maps=True)
     fit, true = estimate.fits["skin"].params, truth["regions"]["skin"]
     return estimate, {
         "seconds": time.perf_counter() - t0, "samples": estimate.samples,
@@ -97,7 +99,20 @@ def run(capture, model, geometry, options, resolution, truth):
                                                         np.asarray(true["specular_reflectance"]) - 1))),
         "roughness_rel": float(abs(fit["roughness"] / true["roughness"] - 1)),
         "normal_refinement": {k: v for k, v in (estimate.normal_refinement or {}).items() if k != "history"} or None,
-        "rounds": len((estimate.normal_refinement or {}).get("history", [])) - 1}
+        "rounds": len((estimate.normal_refinement or {}).get("history", [])) - 1,
+        "specular_map": specular_map_errors(estimate, true)}
+
+
+def specular_map_errors(estimate, true) -> dict:
+    """The per-texel ρ_s map on skin texels with 3 or more samples: its scale k about the region's
+    fit (the truth has one ρ_s per region, so k should stay near 1) and its error against the truth."""
+    skin = (estimate.region_map == REGIONS["skin"]) & (estimate.albedo.samples >= 3)
+    k = estimate.specular.scale[skin]
+    texel = estimate.specular.specular[skin].mean(axis=1) / np.mean(true["specular_reflectance"])
+    return {"texels": int(skin.sum()), "scale_median_abs_deviation": float(np.median(np.abs(k - 1))),
+            "scale_p5_p95": [float(np.percentile(k, 5)), float(np.percentile(k, 95))],
+            "texel_rho_s_rel_error_mean": float(np.mean(np.abs(texel - 1))),
+            "texel_rho_s_rel_error_median": float(np.median(np.abs(texel - 1)))}
 
 
 def main(argv=None) -> int:
@@ -129,7 +144,8 @@ def main(argv=None) -> int:
         result["runs"][label] = row
         print(f"{label:22s} rho_s {100 * row['specular_reflectance_rel']:5.1f} %  roughness "
               f"{100 * row['roughness_rel']:5.1f} %  normals {row.get('skin_normal_error_deg', float('nan')):.2f} deg"
-              f"  {row['seconds']:.0f} s", flush=True)
+              f"  {row['seconds']:.0f} s; texel rho_s map median error "
+              f"{100 * row['specular_map']['texel_rho_s_rel_error_median']:.1f} %", flush=True)
     write_json(args.results / "normals_faces.json", result)
     figure(result, maps, args.results / "normals_faces.png")
     return 0
