@@ -153,7 +153,8 @@ def test_specular_maps_move_only_as_far_as_the_samples_justify():
     many, few = np.arange(texels) < 150, np.arange(texels) >= 150
     assert np.median(np.abs(k[many] - true_k[many])) < 0.1
     assert np.mean(np.abs(k[few] - 1.0)) < np.mean(np.abs(true_k[few] - 1.0))  # shrunk towards the region
-    np.testing.assert_allclose(result.specular.reshape(-1, 3)[:texels], np.repeat(k[:, None] * 0.6, 3, axis=1), rtol=1e-5)
+    np.testing.assert_allclose(result.specular.reshape(-1, 3)[:texels], np.repeat(k[:, None] * 0.6, 3, axis=1),
+                               rtol=1e-5)
     assert np.all(result.scale.ravel()[texels:] == 1.0)  # texels without samples: the region's
     # one gloss: the texels stay at the region's (k near 1 everywhere)
     uniform = refine_specular(model, params, light, view, albedo[texel] + g + rng.normal(scale=0.01, size=g.shape),

@@ -16,10 +16,11 @@ then fitted per region at a 256 x 256 texture (``fit_brdf``):
 Reported: skin ρ_s (mean over RGB) and roughness relative errors against the
 truth; the per-texel ρ_s map (``specular_maps=True``) on skin texels with 3 or
 more samples: its spread about the region's fit (the truth has one ρ_s per
-region, so it should stay near it) and its error against the truth; the albedo RMSE where sampled, and for the refined skin texels the
-mean angle between the normal used and the true one, expressed in the fitted
-shape's tangent frame and averaged over the measurements (the part of the
-shape fit's normal error that a tangent-space normal map can correct).
+region, so it should stay near it) and its error against the truth; and for
+the refined skin texels the mean angle between the normal used and the true
+one, expressed in the fitted shape's tangent frame and averaged over the
+measurements (the part of the shape fit's normal error that a tangent-space
+normal map can correct).
 
 Run:  python validation/normals_faces.py [--work DIR] [--resolution 256]
 Writes validation/results/normals_faces.{json,png}. SIMULATED data.
@@ -28,6 +29,7 @@ Writes validation/results/normals_faces.{json,png}. SIMULATED data.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -130,7 +132,8 @@ def main(argv=None) -> int:
     true_ts = true_tangent_normals(capture, model, fitted, true, r).reshape(r, r, 3)
     first = next(m.name for m in capture.measurements if m.name in fitted)
     true_mitsuba = mitsuba_tangent_normals(true_ts, model, fitted[first]).reshape(-1, 3)
-    result = {"data": "SIMULATED", "capture": str(capture_dir), "resolution": r, "runs": {}}
+    result = {"data": "SIMULATED", "capture": str(capture_dir), "resolution": r, "runs": {},
+              "command": "python validation/normals_faces.py " + " ".join(argv if argv is not None else sys.argv[1:])}
     maps = {}
     for label, (geometry, options) in RUNS.items():
         estimate, row = run(capture, model, str(shapes_dir) if geometry == "fitted" else geometry, options, r,
