@@ -184,18 +184,24 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
 @click.option("--force", is_flag=True, help="Replace the fitted BRDF in --out.")
 @click.option("--refine/--no-refine", default=default(fit_brdf_model, "refine"), show_default=True,
               help="Refine the fit by differentiable rendering against the photographs.")
+@click.option("--normals/--no-normals", default=default(fit_brdf_model, "normals"), show_default=True,
+              help="Estimate a normal per texel alternating with the fit (writes normals.exr, used by scene.xml).")
+@click.option("--specular-maps/--no-specular-maps", default=default(fit_brdf_model, "specular_maps"),
+              show_default=True, help="Estimate the specular reflectance per texel (writes specular.exr).")
 def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolution: int, lobes: int,
-             face_model: str | None, force: bool, refine: bool) -> None:
+             face_model: str | None, force: bool, refine: bool, normals: bool, specular_maps: bool) -> None:
     """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
     check_result_target(out_dir, BRDF_KIND, force)
     estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, resolution=resolution, lobes=lobes,
-                   out=out_dir, force=force, refine=refine)
+                   out=out_dir, force=force, refine=refine, normals=normals, specular_maps=specular_maps)
     click.echo(f"fitted {estimate.model} to {estimate.samples} samples of {len(estimate.measurements)} "
                f"photographs in {estimate.seconds['total']:.1f} s")
     for name, fit_ in estimate.fits.items():
         params = ", ".join(f"{k}={_short(v)}" for k, v in fit_.params.items() if k != "diffuse_reflectance")
         click.echo(f"  {name:9s} {fit_.samples:8d} samples  {fit_.status:10s} {params}")
-    click.echo(f"wrote {out_dir}/brdf.json, albedo.exr, scene.xml")
+    maps = "".join(f"{name}.exr, " for name, value in (("normals", estimate.normals), ("specular", estimate.specular))
+                   if value is not None)
+    click.echo(f"wrote {out_dir}/brdf.json, albedo.exr, {maps}scene.xml")
 
 
 def _short(value) -> str:
@@ -216,12 +222,14 @@ def _short(value) -> str:
               type=click.IntRange(8, MAX_TEXTURE), help="Texture resolution R.")
 @click.option("--refine/--no-refine", default=default(measure_capture, "refine"), show_default=True,
               help="Refine each fit by differentiable rendering against the photographs.")
+@click.option("--normals/--no-normals", default=default(measure_capture, "normals"), show_default=True,
+              help="Estimate a normal per texel alternating with each fit.")
 def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int,
-            refine: bool) -> None:
+            refine: bool, normals: bool) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
     check_writable(out_dir)
     report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution,
-                             refine=refine)
+                             refine=refine, normals=normals)
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")

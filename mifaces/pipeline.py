@@ -85,7 +85,7 @@ def novel_point_light(capture, centre: np.ndarray) -> np.ndarray:
 
 def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resolution: int = 512,
             shape_iterations: float | None = None, spp: int = 64, face_model="builtin", progress: bool = True,
-            refine: bool = False) -> dict:
+            refine: bool = False, normals: bool = False) -> dict:
     """Measure the reflectance of the face in ``capture``, writing everything to ``out``.
 
     The stages hand their results to each other in memory: the face model is
@@ -118,6 +118,9 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     refine : bool
         Refine each fit by differentiable rendering against the photographs
         (``fit_brdf(..., refine=True)``).
+    normals : bool
+        Estimate a normal per texel alternating with each fit
+        (``fit_brdf(..., normals=True)``); the renders show it.
 
     Returns
     -------
@@ -150,7 +153,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     panels = []
     for model in models:
         entry, panel = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, resolution, spp,
-                                  timings, progress, refine)
+                                  timings, progress, refine, normals)
         report["models"][model] = entry
         panels.append(panel)
     timings["total"] = time.perf_counter() - t0
@@ -195,14 +198,15 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
 
 
 def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, scene: FaceScene, first,
-               novel, resolution: int, spp: int, timings: dict, progress: bool, refine: bool = False):
+               novel, resolution: int, spp: int, timings: dict, progress: bool, refine: bool = False,
+               normals: bool = False):
     """Fit one BRDF model, write it, render it in the first photograph's place
     and under the novel light; the report's entry and picture row."""
     t = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
-                            progress=progress, refine=refine)
+                            progress=progress, refine=refine, normals=normals)
     lamp = capture.light(first.light)
     write_estimate(estimate, out / "brdf" / model, scene, capture.camera, lamp.position, lamp.intensity,
                    light_direction=lamp.direction, force=True)  # measure's own folder
@@ -211,9 +215,10 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
     entry["warnings"] = [str(w.message) for w in caught]
     entry["ground_truth"] = ground_truth_errors(estimate, capture)
     brdf, albedo = estimate.to_json(), estimate.albedo.albedo
+    normals = estimate.normal_texture()
     rendered = scene.render(brdf, albedo, capture.camera, lamp.position, lamp.intensity, spp=spp,
-                            light_direction=lamp.direction)
-    relit = scene.render(brdf, albedo, capture.camera, spp=spp, **novel)
+                            light_direction=lamp.direction, normals=normals)
+    relit = scene.render(brdf, albedo, capture.camera, spp=spp, normals=normals, **novel)
     photo = first.image.pixels
     face_pixels = photo.mean(axis=2) > 0.02 * photo.max()
     entry["image_relative_rmse"] = float(np.sqrt(np.mean((rendered[face_pixels] - photo[face_pixels]) ** 2))

@@ -35,6 +35,8 @@ from .model.regions import REGIONS, triangle_regions
 ALBEDO = "albedo"
 #: The reference to the albedo texture a region's BSDF holds as its diffuse reflectance.
 ALBEDO_REF = {"type": "ref", "id": ALBEDO}
+#: Id of the tangent-space normal map in a face scene with per-texel normals.
+NORMALS = "normals"
 #: Folder of a face scene's meshes, beside its ``scene.xml``.
 MESH_FOLDER = "meshes"
 
@@ -209,7 +211,7 @@ class FaceScene:
 
     def description(self, brdf: dict, camera, light_position=None, intensity=None, envmap=None,
                     envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, albedo: str = "albedo.exr", *,
-                    light_direction=None) -> dict:
+                    light_direction=None, normals: str | None = None) -> dict:
         """The Mitsuba scene dict of the face with a per-region BRDF over an
         albedo map, as ``camera`` sees it; meshes and albedo map named by
         file (:meth:`mesh_file`, ``albedo``), relative to the scene's folder.
@@ -237,6 +239,11 @@ class FaceScene:
         light_direction : (3,) array, optional
             A directional (distant) light instead of the point light: unit
             vector in the world frame from the face towards the light.
+        normals : str, optional
+            A tangent-space normal map's file (texture space as ``albedo``,
+            Mitsuba's ``normalmap`` encoding (n + 1) / 2 relative to the
+            mesh's shading frame: :mod:`mifaces.reflectance.texel_normals`):
+            each region's BSDF is then wrapped in a ``normalmap`` BSDF.
         """
         brdf = brdf_models.validate_brdf(brdf)
         for name, value, minimum in (("light position", light_position, None),
@@ -254,8 +261,14 @@ class FaceScene:
                  "sensor": mitsuba_sensor(camera, spp),
                  ALBEDO: {"type": "bitmap", "filename": albedo, "raw": True, "filter_type": "bilinear",
                           "wrap_mode": "clamp"}}
+        if normals is not None:
+            scene[NORMALS] = {"type": "bitmap", "filename": normals, "raw": True, "filter_type": "bilinear",
+                              "wrap_mode": "clamp"}
         for key, part in self.meshes.items():
-            scene[key] = {"type": "ply", "filename": self.mesh_file(key), "bsdf": region_bsdf(brdf, part.region, ALBEDO_REF)}
+            bsdf = region_bsdf(brdf, part.region, ALBEDO_REF)
+            if normals is not None:
+                bsdf = {"type": "normalmap", "normalmap": {"type": "ref", "id": NORMALS}, "bsdf": bsdf}
+            scene[key] = {"type": "ply", "filename": self.mesh_file(key), "bsdf": bsdf}
         if light_position is not None:
             if intensity is None:
                 raise ValueError("a point light needs its intensity")
@@ -283,24 +296,28 @@ class FaceScene:
         return scene
 
     def scene(self, brdf: dict, albedo: np.ndarray, camera, light_position=None, intensity=None, envmap=None,
-              envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, *, light_direction=None) -> dict:
-        """:meth:`description` with the meshes and the ``albedo`` array (R, R, 3)
-        in memory in place of their files: a dict for ``mi.load_dict``."""
+              envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, *, light_direction=None,
+              normals: np.ndarray | None = None) -> dict:
+        """:meth:`description` with the meshes, the ``albedo`` array (R, R, 3) and the
+        tangent-space ``normals`` texture (R', R', 3, encoded, or None) in memory in place of
+        their files: a dict for ``mi.load_dict``."""
         scene = self.description(brdf, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth,
-                                 light_direction=light_direction)
-        texture = {k: v for k, v in scene.pop(ALBEDO).items() if k != "filename"}
-        texture = mi.load_dict({**texture, "bitmap": mi.Bitmap(np.ascontiguousarray(albedo, np.float32))})
+                                 light_direction=light_direction, normals=None if normals is None else NORMALS)
+        textures = {}
+        for name, data in ((ALBEDO, albedo), (NORMALS, normals)):
+            if data is not None:
+                texture = {k: v for k, v in scene.pop(name).items() if k != "filename"}
+                textures[name] = mi.load_dict({**texture, "bitmap": mi.Bitmap(np.ascontiguousarray(data, np.float32))})
         for key, part in self.meshes.items():
-            bsdf = {k: texture if v == ALBEDO_REF else v for k, v in scene[key]["bsdf"].items()}
-            scene[key] = part.mesh(bsdf)
+            scene[key] = part.mesh(_with_textures(scene[key]["bsdf"], textures))
         return scene
 
     def render(self, brdf: dict, albedo: np.ndarray, camera, light_position=None, intensity=None, envmap=None,
                envmap_scale: float = 1.0, spp: int = 64, seed: int = 0, max_depth: int = 4, *,
-               light_direction=None) -> np.ndarray:
+               light_direction=None, normals: np.ndarray | None = None) -> np.ndarray:
         """Render :meth:`scene`: (H, W, 3) float32 linear radiance."""
         scene = self.scene(brdf, albedo, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth,
-                           light_direction=light_direction)
+                           light_direction=light_direction, normals=normals)
         return np.array(mi.render(mi.load_dict(scene), spp=spp, seed=seed), dtype=np.float32)[..., :3]
 
     def write_meshes(self, folder: str | os.PathLike) -> dict[str, Path]:
@@ -311,6 +328,20 @@ class FaceScene:
             with atomic_path(paths[key]) as tmp:
                 part.mesh({"type": "diffuse"}).write_ply(str(tmp))
         return paths
+
+
+def _with_textures(bsdf: dict, textures: dict) -> dict:
+    """``bsdf`` (a dict, nested BSDFs included) with each reference to a texture of ``textures`` (id ->
+    loaded texture) replaced by the texture."""
+    out = {}
+    for k, v in bsdf.items():
+        if isinstance(v, dict) and v.get("type") == "ref" and v.get("id") in textures:
+            out[k] = textures[v["id"]]
+        elif isinstance(v, dict):
+            out[k] = _with_textures(v, textures)
+        else:
+            out[k] = v
+    return out
 
 
 def face_scene(brdf: dict, albedo: np.ndarray, face_model, vertices: np.ndarray, camera, light_position=None,
@@ -430,5 +461,6 @@ def scene_xml(scene: dict, parameters: Mapping[str, tuple[str, ...]] | None = No
     return header + ET.tostring(root, encoding="unicode") + "\n"
 
 
-__all__ = ["ALBEDO", "ALBEDO_REF", "MESH_FOLDER", "render_passes", "save_image", "mitsuba_sensor", "rgb", "region_bsdf",
+__all__ = ["ALBEDO", "ALBEDO_REF", "NORMALS", "MESH_FOLDER", "render_passes", "save_image", "mitsuba_sensor", "rgb",
+           "region_bsdf",
            "RegionMesh", "region_meshes", "face_shapes", "FaceScene", "face_scene", "render_face", "scene_xml"]

@@ -25,6 +25,11 @@ Writes ``DIR/<subject>/capture`` (with ``split.json``), ``DIR/<subject>/measure`
 Real photographs: these figures are not simulated.
 
     python validation/real_yaleb.py --data ../shared/data/yaleb --out out/real_yaleb [--subjects yaleB01] [--train 8]
+
+With ``--normals``, each subject is measured twice, without and with per-texel
+normals (``mifaces measure --normals``), and the held-out errors of both are
+written to ``validation/results/real_yaleb_normals.{json,png}``
+(:func:`normals_comparison`).
 """
 
 from __future__ import annotations
@@ -87,7 +92,7 @@ class Errors:
 
 
 def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shadow_angle: float,
-                resolution: int) -> dict:
+                resolution: int, normals: bool = False) -> dict:
     """Import, measure and relight one subject; its errors and timings."""
     t0 = time.perf_counter()
     name = subject_dir.name
@@ -95,7 +100,8 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     images = {image.stem: image for image in read_subject(subject_dir)}
     train_images, heldout = default_split(list(images.values()), train)
     t_measure = time.perf_counter()
-    report = measure(out / "measure", capture_dir, models=models, resolution=resolution, progress=True)
+    report = measure(out / "measure", capture_dir, models=models, resolution=resolution, progress=True,
+                     normals=normals)
     seconds = {"import": t_measure - t0, "measure": time.perf_counter() - t_measure}
     capture = load_capture(capture_dir, detect=False)
     face, shapes = load_geometry(capture, out / "measure" / "shapes")
@@ -126,13 +132,13 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
         for model in models:
             data = estimates[model]
             rendered = scene.render(data, data["albedo"], camera, None, irradiance, spp=spp,
-                                    light_direction=direction).mean(axis=2)
+                                    light_direction=direction, normals=data.get("normals")).mean(axis=2)
             rendered[~mask] = 0.0
             write_exr(out / "heldout" / model / f"{image.stem}.exr", rendered[:, :, None].repeat(3, axis=2))
             predictions[model] = rendered
             predictions[f"{model}_diffuse_only"] = scene.render(
                 diffuse_only(data), data["albedo"], camera, None, irradiance, spp=spp,
-                light_direction=direction).mean(axis=2)
+                light_direction=direction, normals=data.get("normals")).mean(axis=2)
         for key, prediction in predictions.items():
             errors.add(key, group, prediction, photo, valid)
         per_light[image.stem] = {"azimuth": image.azimuth, "elevation": image.elevation, "group": group,
@@ -206,6 +212,56 @@ def figure(results: list[dict], out: Path, data_dir: Path, run_dir: Path, best: 
     plt.close(fig)
 
 
+def normals_comparison(args, subjects, models, argv) -> int:
+    """Each subject measured without and with per-texel normals (``measure(..., normals=True)``, into
+    ``DIR/<subject>`` and ``DIR/<subject>_normals``): held-out relative RMSE of both, pooled and per
+    subject, in ``real_yaleb_normals.{json,png}``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = {}
+    for label, normals in (("without", False), ("with", True)):
+        results = []
+        for subject in subjects:
+            print(f"== {subject} ({label} normals)", flush=True)
+            folder = args.out / (subject + ("_normals" if normals else ""))
+            results.append(subject_run(args.data / subject, folder, args.train, models, args.spp, args.shadow_angle,
+                                       args.resolution, normals=normals))
+        runs[label] = {"overall": summary(results, models),
+                       "subjects": {r["subject"]: r["relative_rmse"] for r in results},
+                       "seconds": {r["subject"]: r["seconds"] for r in results}}
+    best = runs["without"]["overall"]["best_model"]
+    document = {"data": "Extended Yale Face Database B (cropped), real photographs", "train_lights": args.train,
+                "models": list(models), "spp": args.spp, "texture_resolution": args.resolution,
+                "command": "python validation/real_yaleb.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+                "best_model_without": best, "runs": runs,
+                "best_model_error": {k: runs[k]["overall"]["relative_rmse"][best]["all"] for k in runs}}
+    write_json(args.results / "real_yaleb_normals.json", document)
+    fig, ax = plt.subplots(figsize=(8, 4))
+    names = subjects + ["pooled"]
+    x = np.arange(len(names))
+    bars = {"photometric stereo": [runs["without"]["subjects"][s]["photometric_stereo"]["all"] for s in subjects]
+            + [runs["without"]["overall"]["relative_rmse"]["photometric_stereo"]["all"]]}
+    for k in runs:
+        bars[f"{best}, {k} normals"] = ([runs[k]["subjects"][s][best]["all"] for s in subjects]
+                                        + [runs[k]["overall"]["relative_rmse"][best]["all"]])
+    for i, (label, values) in enumerate(bars.items()):
+        ax.bar(x + (i - 1) * 0.27, values, 0.27, label=label)
+    ax.set_xticks(x, names)
+    ax.set_ylabel("held-out relative RMSE")
+    ax.set_title(f"Yale B, real photographs: held-out relighting ({args.train} training lights)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_path(args.results / "real_yaleb_normals.png") as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    print(f"{best}: {document['best_model_error']['without']:.4f} without, {document['best_model_error']['with']:.4f} "
+          "with per-texel normals")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[2] / "shared/data/yaleb")
@@ -217,12 +273,16 @@ def main(argv=None) -> int:
     parser.add_argument("--resolution", type=int, default=256, help="texture resolution of the fits")
     parser.add_argument("--shadow-angle", type=float, default=SHADOW_ANGLE)
     parser.add_argument("--results", type=Path, default=RESULTS)
+    parser.add_argument("--normals", action="store_true",
+                        help="measure without and with per-texel normals; write real_yaleb_normals.{json,png}")
     args = parser.parse_args(argv)
     if not args.data.is_dir():
         print(f"no Yale data at {args.data}: nothing to validate", file=sys.stderr)
         return 1
     subjects = args.subjects.split(",") if args.subjects else sorted(p.name for p in args.data.iterdir() if p.is_dir())
     models = tuple(args.models.split(","))
+    if args.normals:
+        return normals_comparison(args, subjects, models, argv)
     results = []
     for subject in subjects:
         print(f"== {subject}", flush=True)

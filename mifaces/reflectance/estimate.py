@@ -13,7 +13,9 @@ geometry to fitted BRDFs (paper sec. 4.3-5.3).
 3. one BRDF model fitted per region by hierarchical Levenberg-Marquardt
    (:func:`mifaces.reflectance.fitting.fit_regions`; a region with too few samples
    borrows a neighbour's fit, a region with none is not evaluated);
-4. the diffuse albedo refitted per texel with the glossy part fixed
+4. optionally (``normals=True``, beyond the paper), a normal per texel
+   alternated with step 3 (:func:`mifaces.reflectance.texel_normals.refine_texel_normals`);
+5. the diffuse albedo refitted per texel with the glossy part fixed
    (:func:`mifaces.reflectance.diffuse.refine_diffuse`).
 
 With ``out``, :func:`mifaces.reflectance.io.write_estimate` writes the
@@ -27,6 +29,7 @@ or any mapping from measurement name to world-space vertices.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,6 +44,8 @@ from .fitting import RegionFit, SubsetSchedule, fit_regions
 from .io import FILES, write_estimate
 from .refine import RefineSchedule, refine_estimate
 from .samples import ReflectanceSamples, capture_samples
+from .specular_maps import SpecularMap, refine_specular
+from .texel_normals import MIN_OBSERVATIONS, encode, mitsuba_tangent_normals, refine_texel_normals
 
 #: Fit statistics stored per region under ``brdf.json``'s ``"fit"``.
 FIT_KEYS = ("diffuse_reflectance", "loss", "samples", "seconds", "status", "reason", "iterations")
@@ -71,6 +76,15 @@ class BRDFEstimate:
         How the fit was refined by differentiable rendering
         (:func:`mifaces.reflectance.refine.refine_estimate`), with its image
         loss before and after; None if it was not.
+    normals : ndarray (R, R, 3) or None
+        Per-texel unit normals relative to Mitsuba's shading frame of the
+        face mesh (:func:`mifaces.reflectance.texel_normals.mitsuba_tangent_normals`),
+        if they were estimated (``fit_brdf(..., normals=True)``).
+    normal_refinement : dict or None
+        How they were (:meth:`~mifaces.reflectance.texel_normals.TexelNormals.summary`).
+    specular : SpecularMap or None
+        Per-texel specular reflectance shrunk towards each region's
+        (:func:`mifaces.reflectance.specular_maps.refine_specular`), if estimated.
     """
 
     model: str
@@ -82,6 +96,13 @@ class BRDFEstimate:
     measurements: tuple[str, ...]
     seconds: dict = field(default_factory=dict)
     refinement: dict | None = None
+    normals: np.ndarray | None = None
+    normal_refinement: dict | None = None
+    specular: SpecularMap | None = None
+
+    def normal_texture(self) -> np.ndarray | None:
+        """The normals as a ``normalmap`` texture ((n + 1) / 2), or None."""
+        return None if self.normals is None else encode(self.normals)
 
     @property
     def resolution(self) -> int:
@@ -100,14 +121,19 @@ class BRDFEstimate:
                                for k in FIT_KEYS} for name, fit in self.fits.items()},
                 "samples": int(self.samples), "resolution": self.resolution,
                 "measurements": list(self.measurements), "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
-                "albedo": FILES["albedo"], "refinement": self.refinement}
+                "albedo": FILES["albedo"], "refinement": self.refinement,
+                **({} if self.normals is None else {"normals": FILES["normals"],
+                                                    "normal_refinement": self.normal_refinement}),
+                **({} if self.specular is None else {"specular": FILES["specular"], "specular_shrinkage": {
+                    name: self.specular.shrinkage.get(REGIONS[name]) for name in self.fits}})}
 
 
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
              resolution: int = 512, lobes: int = 1, options: dict | None = None, fixed: dict | None = None,
              schedule: SubsetSchedule | None = None, samples: ReflectanceSamples | None = None, measurements=None,
              out=None, seed: int = 0, progress: bool = True, force: bool = False,
-             refine: bool | RefineSchedule = False) -> BRDFEstimate:
+             refine: bool | RefineSchedule = False, normals: bool = False,
+             normal_options: dict | None = None, specular_maps: bool = False) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture.
 
     Parameters
@@ -142,6 +168,18 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         Refine the fit by differentiable rendering against the photographs
         (:func:`mifaces.reflectance.refine.refine_estimate`, with this schedule
         or the default one).
+    normals : bool
+        Estimate a normal per texel from its samples, alternating with the
+        region fit (:func:`mifaces.reflectance.texel_normals.refine_texel_normals`):
+        for fitted shapes, whose normals are a few degrees off. Left out, with
+        a warning, when no texel has the samples it needs. (``refine`` renders
+        without the normal map.)
+    normal_options : dict, optional
+        Keyword arguments of ``refine_texel_normals`` (``prior_weight``, ``rounds``, ``tol``).
+    specular_maps : bool
+        Estimate the specular reflectance per texel, shrunk towards each
+        region's (:func:`mifaces.reflectance.specular_maps.refine_specular`;
+        models with a ``specular_reflectance``). The region fits stay the summary.
 
     Returns
     -------
@@ -166,22 +204,41 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     label = samples.label if samples.label is not None else samples.region(region_map)
     names = {REGIONS[n]: n for n in regions_present(face.region_map)}
     on_face = np.isin(label, list(names))
-    light, view, r, sigma, texel, label = (a[on_face] for a in (samples.light, samples.view, samples.reflectance,
-                                                                samples.sigma, samples.texel, label))
+    light, view, r, sigma, texel, label, measurement = (
+        a[on_face] for a in (samples.light, samples.view, samples.reflectance, samples.sigma, samples.texel, label,
+                             samples.measurement))
     # parameters with a published value per region (Cook-Torrance's η) are fixed at it unless given
     per_region = {name: {k: v for k, v in brdf.fixed_in_region(name).items() if fixed is None or k not in fixed}
                   for name in names.values()}
     fits = fit_regions(brdf, light, view, r, sigma, label, names, progress=progress, fixed=fixed,
                        fixed_by_region=per_region, schedule=schedule, seed=seed)
+    texel_normals = None
+    if normals:
+        texel_normals = _refine_normals(brdf, fits, (light, view, r, sigma, texel, measurement, label), names,
+                                        resolution, normal_options, progress,
+                                        dict(fixed=fixed, fixed_by_region=per_region, schedule=schedule, seed=seed))
+        if texel_normals is not None:
+            light, view, r, sigma, keep = texel_normals.samples
+            texel, label, fits = texel[keep], label[keep], texel_normals.fits
     t_fit = time.perf_counter()
     by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
     albedo = refine_diffuse(brdf, by_label, light, view, r, sigma, texel, label, region_map)
+    specular = None
+    if specular_maps:
+        if any(p.name == "specular_reflectance" for p in brdf.specular_parameters()):
+            specular = refine_specular(brdf, by_label, light, view, r, sigma, texel, label, region_map)
+        else:
+            warnings.warn(f"specular maps left out: {brdf.name} has no specular_reflectance", stacklevel=2)
     t_end = time.perf_counter()
     estimate = BRDFEstimate(model=brdf.name, options=dict(options), fits=fits, albedo=albedo,
-                            region_map=region_map, samples=int(on_face.sum()),
+                            region_map=region_map, samples=int(len(texel)), specular=specular,
                             measurements=tuple(samples.measurement_names),
                             seconds={"samples": t_samples - t0, "fit": t_fit - t_samples, "refine": t_end - t_fit,
                                      "total": t_end - t0})
+    if texel_normals is not None:
+        first = next(name for name in estimate.measurements if name in shapes)
+        estimate.normals = mitsuba_tangent_normals(texel_normals.normals, face, shapes[first]).astype(np.float32)
+        estimate.normal_refinement = texel_normals.summary()
     if refine:
         estimate = refine_estimate(estimate, capture, shapes, face, None if refine is True else refine, seed=seed,
                                    progress=progress)
@@ -192,6 +249,25 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         write_estimate(estimate, out, FaceScene(face, shapes[first.name]), capture.camera, lamp.position,
                        lamp.intensity, light_direction=lamp.direction, force=force)
     return estimate
+
+
+def _refine_normals(brdf, fits, arrays, names, resolution, options, progress, fit_options):
+    """:func:`refine_texel_normals` on the face's samples, the region fit as :func:`fit_brdf`'s
+    (``fit_options`` of :func:`fit_regions`), or None (with a warning) where no texel has
+    :data:`MIN_OBSERVATIONS` samples (one light per texel: nothing to tell a normal from)."""
+    def fit(*samples):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the fit at the model's normals has warned already
+            return fit_regions(brdf, *samples, names, **fit_options)
+
+    texel = arrays[4]
+    if not np.any(np.bincount(texel) >= MIN_OBSERVATIONS):
+        warnings.warn(f"per-texel normals left out: no texel has the {MIN_OBSERVATIONS} samples (lights and "
+                      "poses) a normal needs", stacklevel=3)
+        return None
+    report = (lambda e: print(f"normals round {e['round']}: E {e['loss']:.6g}, {e['texels']} texels, "
+                              f"mean tilt {e['mean_tilt_deg']:.2f} deg", flush=True)) if progress else None
+    return refine_texel_normals(brdf, fit, fits, *arrays, names, resolution, progress=report, **(options or {}))
 
 
 __all__ = ["FIT_KEYS", "BRDFEstimate", "fit_brdf"]

@@ -7,7 +7,10 @@ fit's loss, sample count, time and status under ``"fit"``; the albedo map
 ``albedo.exr`` (linear, row 0 at v = 0) and a PNG preview; and
 ``scene.xml``, the Mitsuba scene of :meth:`mifaces.render.FaceScene.description`
 that renders the fitted face with the plugins as the camera saw it in the
-first measurement (meshes in ``meshes/``). The files are one result set
+first measurement (meshes in ``meshes/``); with per-texel normals, the
+normal map ``normals.exr`` (Mitsuba's ``normalmap`` encoding, see
+:mod:`mifaces.reflectance.texel_normals`), which ``scene.xml`` wraps every
+region's BSDF in. The files are one result set
 (:func:`mifaces.files.result_set`): written together into a sibling folder
 and swapped in, so a killed run leaves the earlier set whole.
 :func:`load_estimate` reads ``brdf.json`` and the albedo map back and refuses
@@ -29,7 +32,8 @@ if TYPE_CHECKING:
     from .estimate import BRDFEstimate
 
 #: The fitted BRDF's files in an output folder.
-FILES = {"brdf": "brdf.json", "albedo": "albedo.exr", "preview": "albedo.png", "scene": "scene.xml"}
+FILES = {"brdf": "brdf.json", "albedo": "albedo.exr", "preview": "albedo.png", "scene": "scene.xml",
+         "normals": "normals.exr", "specular": "specular.exr"}
 #: Samples per pixel of ``scene.xml`` (``mi.load_file(path, spp=N)`` overrides it).
 SCENE_SPP = 64
 #: The key path of the sample count in a scene dict.
@@ -61,8 +65,10 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
     """
     out = Path(out)
     document = estimate.to_json()
+    normals = estimate.normal_texture()
     scene = face.description(document, camera, light_position, intensity, spp=SCENE_SPP, albedo=FILES["albedo"],
-                             light_direction=light_direction)  # checks the BRDF and the light before writing
+                             light_direction=light_direction, normals=None if normals is None else FILES["normals"])
+    # (description checks the BRDF and the light before anything is written)
     comment = (f"The face as fitted by mifaces fit-brdf: per-region {estimate.model} BSDFs over the refined albedo "
                "map, seen by the capture's camera under the light of its first measurement. Render: "
                "mitsuba.load_file(path, spp=N) after `import mifaces` (which registers the plugins). Units: mm.")
@@ -72,15 +78,22 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
         write_json(folder / FILES["brdf"], document)
         write_exr(folder / FILES["albedo"], estimate.albedo.albedo)
         write_png(folder / FILES["preview"], estimate.albedo.albedo)
+        if normals is not None:
+            write_exr(folder / FILES["normals"], normals)
+        if estimate.specular is not None:
+            write_exr(folder / FILES["specular"], estimate.specular.specular)
         face.write_meshes(folder)
         with atomic_write(folder / FILES["scene"], "w") as f:
             f.write(scene_xml(scene, {"spp": SPP_PATH}, comment))
-    return {key: out / name for key, name in FILES.items()}
+    optional = {"normals": normals is not None, "specular": estimate.specular is not None}
+    return {key: out / name for key, name in FILES.items() if optional.get(key, True)}
 
 
 def load_estimate(path) -> dict:
     """Read a ``brdf.json`` (path to it or its folder) and the albedo map beside it:
-    the JSON document with ``"albedo"`` replaced by the (R, R, 3) array.
+    the JSON document with ``"albedo"`` replaced by the (R, R, 3) array, and
+    ``"normals"`` by the normal map's texture ((n + 1) / 2, (R, R, 3); None without one) and
+    ``"specular"`` by the per-texel specular reflectance map (None without one).
 
     Raises
     ------
@@ -109,9 +122,18 @@ def load_estimate(path) -> dict:
     if not isinstance(name, str) or Path(name).name != name:
         raise ValueError(f"{path}: 'albedo' must name a file beside brdf.json, got {name!r}")
     albedo = path.parent / name
-    verify_set(path.parent, KIND, [path.name] + ([name] if albedo.is_file() else []))
+    maps = {}
+    for key in ("normals", "specular"):
+        value = data.get(key)
+        if value is not None and (not isinstance(value, str) or Path(value).name != value
+                                  or not (path.parent / value).is_file()):
+            raise ValueError(f"{path}: {key!r} must name a map beside brdf.json, got {value!r}")
+        maps[key] = value
+    verify_set(path.parent, KIND, [path.name] + ([name] if albedo.is_file() else []) + [v for v in maps.values() if v])
     data = brdf_models.validate_brdf(data)
     data["albedo"] = read_exr(albedo) if albedo.is_file() else None
+    for key, value in maps.items():
+        data[key] = read_exr(path.parent / value) if value else None
     resolution = data.get("resolution")
     if data["albedo"] is not None and isinstance(resolution, int) and data["albedo"].shape[:2] != (resolution,) * 2:
         raise ResultSetError(f"{path.parent}: brdf.json was fitted at resolution {resolution} but {name} is "

@@ -216,7 +216,9 @@ def _unit(normals, view) -> np.ndarray:
     """Unit normals; zero rows (unsolved pixels) become the view direction."""
     normals = np.array(normals, np.float64)
     length = np.linalg.norm(normals, axis=1)
-    fallback = np.broadcast_to(np.asarray(view, np.float64).reshape(-1, 3), normals.shape)
+    view = np.asarray(view, np.float64)
+    view = view.mean(axis=0) if view.ndim == 3 else view  # one per observation: their mean per pixel
+    fallback = np.broadcast_to(view.reshape(-1, 3), normals.shape)
     normals[length <= 0] = fallback[length <= 0]
     return normals / np.linalg.norm(normals, axis=1, keepdims=True)
 
@@ -242,8 +244,9 @@ def refine_normals(model: BRDFModel | str, params: dict, values, directions, wei
         Start normals (Lambertian photometric stereo); zero rows start at ``view``.
     albedo : ndarray (P, 3), optional
         Start albedo; default the closed form at the start normals.
-    view : ndarray (3,) or (P, 3)
-        Unit direction towards the viewer (orthographic camera: one for all).
+    view : ndarray (3,), (P, 3) or (K, P, 3)
+        Unit direction towards the viewer (orthographic camera: one for all; texels of a face seen in
+        several poses: one per observation).
     prior : ndarray (P, 3), optional
         Prior normals n̄ (default: the start normals).
     prior_weight : float

@@ -44,16 +44,19 @@ class Observations:
     Evaluates s = max(0, n·l) and g = π f_s(l̂, v̂) s for the glossy parameters
     θ, and reduces per pixel with block sums, so only per-pixel arrays cross
     to numpy. ``values`` (K, P, 3) and ``weights`` (K, P) may be None for
-    :meth:`shading` alone.
+    :meth:`shading` alone. ``view`` is (3,), (P, 3) or, one per observation, (K, P, 3).
     """
 
     def __init__(self, model: BRDFModel, params: dict, directions, view, pixels: int, values=None, weights=None):
         k = len(directions)
         directions = np.broadcast_to(np.asarray(directions, np.float64).reshape(k, -1, 3), (k, pixels, 3))
-        view = np.broadcast_to(np.asarray(view, np.float64).reshape(-1, 3), (pixels, 3))
         self.model, self.params, self.k, self.p = model, glossy_params(model, params), k, pixels
         self.light = vectors(np.transpose(directions, (1, 0, 2)).reshape(-1, 3))
-        self.view = vectors(np.repeat(view, k, axis=0))
+        view = np.asarray(view, np.float64)
+        if view.ndim == 3:  # one view direction per observation (texels seen in several poses)
+            self.view = vectors(np.transpose(np.broadcast_to(view, (k, pixels, 3)), (1, 0, 2)).reshape(-1, 3))
+        else:
+            self.view = vectors(np.repeat(np.broadcast_to(view.reshape(-1, 3), (pixels, 3)), k, axis=0))
         self.pixel = dr.arange(mi.UInt32, pixels * k) // k
         if values is not None:
             self.value = mi.Color3f(np.ascontiguousarray(
