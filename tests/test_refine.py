@@ -123,11 +123,11 @@ def fitted(small_capture):
 
 def test_refinement_reuses_its_kernels_and_records_itself(fitted):
     capture, face, shapes, estimate = fitted
-    schedule = RefineSchedule(iterations=6, spp=2, evaluation_spp=4)
+    schedule = RefineSchedule(iterations=6, spp=2, evaluation_spp=4, held_regions=())
     refined = refine_estimate(estimate, capture, shapes, face, schedule, progress=False)
     record = refined.refinement
     assert record["photographs"] == ["m00", "m01"]
-    assert "skin" in record["regions"] and record["lamp_radius_mm"] is None
+    assert "skin" in record["regions"] and record["lamp_radius_mm"] is None and record["lights"] == ["point"]
     assert np.isfinite(record["loss_before"]) and np.isfinite(record["loss_after"])
     # after two passes over the photographs the kernels come from the cache: nothing compiled per step
     assert [h[4] for h in record["history"][4:]] == [0, 0]
@@ -154,7 +154,7 @@ def test_a_lamp_of_finite_size_lights_the_scene(fitted):
     schedule = RefineSchedule(iterations=1, spp=2, evaluation_spp=2)
     capture = dataclasses.replace(capture, metadata={**capture.metadata, "lamp_radius_mm": 120.0})
     refined = refine_estimate(estimate, capture, shapes, face, schedule, progress=False)
-    assert refined.refinement["lamp_radius_mm"] == 120.0
+    assert refined.refinement["lamp_radius_mm"] == 120.0 and refined.refinement["lights"] == ["sphere"]
     point = refine_estimate(estimate, fitted[0], shapes, face, schedule, progress=False)
     # a sphere of 120 mm at 1.5 m lights the face almost as the point does
     assert refined.refinement["loss_before"] == pytest.approx(point.refinement["loss_before"], rel=0.1)
@@ -168,7 +168,7 @@ def test_schedule_scales_each_region_rate_by_its_pixels():
     assert schedule.rate("eyes.3", 0, pixels=100) == pytest.approx(0.05 * MAX_RATE_SCALE)  # capped
     assert schedule.rate("albedo", 0, pixels=40_000) == pytest.approx(0.02)  # the albedo's own rate
     assert schedule.rate("skin.0", 10, pixels=40_000) == pytest.approx(0.0025)  # decayed to 0.1
-    assert RefineSchedule().rate("skin.0", 0, pixels=40_000) == pytest.approx(RefineSchedule.learning_rate)
+    assert RefineSchedule(pixel_reference=None).rate("skin.0", 0, pixels=40_000) == pytest.approx(0.05)
     with pytest.raises(ValueError, match="average"):
         RefineSchedule(average=1.0)
     with pytest.raises(ValueError, match="pixel_reference"):

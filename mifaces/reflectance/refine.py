@@ -186,6 +186,7 @@ class RefineProblem:
         names = list(measurements or estimate.measurements)
         scale = (capture.white_target.reflectance_scale() / np.pi if capture.white_target is not None
                  else np.ones(3))
+        self.light_kinds = set()
         self.photographs = [self._photograph(capture, m, shapes[m.name], face_model, brdf, albedo, scale,
                                              lamp_radius)
                             for m in capture.measurements if m.name in names and m.name in shapes]
@@ -218,6 +219,8 @@ class RefineProblem:
         k = self.schedule.downsample
         camera = capture.camera
         kwargs, lamp = _light(capture, m, lamp_radius)
+        self.light_kinds.add("sphere" if lamp is not None else
+                             "directional" if "light_direction" in kwargs else "point")
         description = FaceScene(face_model, vertices).scene(brdf, albedo, camera, **kwargs)
         labels = coverage(mi.load_dict({"type": "scene", **{key: v for key, v in description.items()
                                                           if key.startswith("face_")}}),
@@ -427,7 +430,7 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
     refinement = {
         "method": "prb",
         "schedule": dataclasses.asdict(schedule),
-        "lamp_radius_mm": float(lamp_radius) if lamp_radius else None,
+        "lamp_radius_mm": float(lamp_radius) if lamp_radius else None, "lights": sorted(problem.light_kinds),
         "photographs": [p.name for p in problem.photographs],
         "regions": sorted(problem.spaces), "region_pixels": problem.pixels,
         "loss_before": before, "loss_after": after, "iterates_averaged": average.count,
