@@ -123,7 +123,7 @@ def fitted(small_capture):
 
 def test_refinement_reuses_its_kernels_and_records_itself(fitted):
     capture, face, shapes, estimate = fitted
-    schedule = RefineSchedule(iterations=6, spp=2, evaluation_spp=4, held_regions=())
+    schedule = RefineSchedule(iterations=6, spp=2, evaluation_spp=4, held_regions=(), average=0.0)
     refined = refine_estimate(estimate, capture, shapes, face, schedule, progress=False)
     record = refined.refinement
     assert record["photographs"] == ["m00", "m01"]
