@@ -16,7 +16,7 @@ analysis by synthesis through Mitsuba fix what the texture-space fit misses?
    (:func:`mifaces.pipeline.novel_light`) against the ground truth rendered
    the same way, cost.
 
-Run:  python validation/refine.py [--image 512] [--spp 4] [--iterations 72]
+Run:  python validation/refine.py [--image 512] [--spp 2 4] [--iterations 96] [--capture DIR]
 Writes validation/results/refine.json and refine.png. The capture goes to a
 temporary folder.
 """
