@@ -16,6 +16,7 @@ import pytest
 from mifaces import brdf as brdf_models
 from mifaces.reflectance.parameters import ParameterSpace
 from mifaces.reflectance.refine import AlbedoCorrection, RefineSchedule, image_loss, refine_estimate
+from mifaces.reflectance.refine_schedule import MAX_RATE_SCALE, IterateAverage
 
 #: Relative tolerance of the reverse-mode gradient against central differences.
 FD_RTOL = 0.02
@@ -122,11 +123,11 @@ def fitted(small_capture):
 
 def test_refinement_reuses_its_kernels_and_records_itself(fitted):
     capture, face, shapes, estimate = fitted
-    schedule = RefineSchedule(iterations=6, spp=2, evaluation_spp=4)
+    schedule = RefineSchedule(iterations=6, spp=2, evaluation_spp=4, held_regions=(), average=0.0)
     refined = refine_estimate(estimate, capture, shapes, face, schedule, progress=False)
     record = refined.refinement
     assert record["photographs"] == ["m00", "m01"]
-    assert "skin" in record["regions"] and record["lamp_radius_mm"] is None
+    assert "skin" in record["regions"] and record["lamp_radius_mm"] is None and record["lights"] == ["point"]
     assert np.isfinite(record["loss_before"]) and np.isfinite(record["loss_after"])
     # after two passes over the photographs the kernels come from the cache: nothing compiled per step
     assert [h[4] for h in record["history"][4:]] == [0, 0]
@@ -138,12 +139,52 @@ def test_refinement_reuses_its_kernels_and_records_itself(fitted):
     assert not np.array_equal(refined.albedo.albedo, estimate.albedo.albedo)
 
 
+def test_held_regions_keep_their_texture_space_fit(fitted):
+    capture, face, shapes, estimate = fitted
+    schedule = RefineSchedule(iterations=2, spp=2, evaluation_spp=2, held_regions=("skin",), average=0.5)
+    refined = refine_estimate(estimate, capture, shapes, face, schedule, progress=False)
+    record = refined.refinement
+    assert "skin" not in record["regions"]
+    assert refined.fits["skin"].params == estimate.fits["skin"].params
+    assert record["iterates_averaged"] == 1 and list(record["schedule"]["held_regions"]) == ["skin"]
+
+
 def test_a_lamp_of_finite_size_lights_the_scene(fitted):
     capture, face, shapes, estimate = fitted
     schedule = RefineSchedule(iterations=1, spp=2, evaluation_spp=2)
     capture = dataclasses.replace(capture, metadata={**capture.metadata, "lamp_radius_mm": 120.0})
     refined = refine_estimate(estimate, capture, shapes, face, schedule, progress=False)
-    assert refined.refinement["lamp_radius_mm"] == 120.0
+    assert refined.refinement["lamp_radius_mm"] == 120.0 and refined.refinement["lights"] == ["sphere"]
     point = refine_estimate(estimate, fitted[0], shapes, face, schedule, progress=False)
     # a sphere of 120 mm at 1.5 m lights the face almost as the point does
     assert refined.refinement["loss_before"] == pytest.approx(point.refinement["loss_before"], rel=0.1)
+
+
+def test_schedule_scales_each_region_rate_by_its_pixels():
+    schedule = RefineSchedule(iterations=11, learning_rate=0.05, albedo_learning_rate=0.02, decay=0.1,
+                              pixel_reference=10_000)
+    assert schedule.rate("lips.0", 0, pixels=10_000) == pytest.approx(0.05)
+    assert schedule.rate("skin.0", 0, pixels=40_000) == pytest.approx(0.025)  # sqrt(1/4)
+    assert schedule.rate("eyes.3", 0, pixels=100) == pytest.approx(0.05 * MAX_RATE_SCALE)  # capped
+    assert schedule.rate("albedo", 0, pixels=40_000) == pytest.approx(0.02)  # the albedo's own rate
+    assert schedule.rate("skin.0", 10, pixels=40_000) == pytest.approx(0.0025)  # decayed to 0.1
+    assert RefineSchedule(pixel_reference=None).rate("skin.0", 0, pixels=40_000) == pytest.approx(0.05)
+    with pytest.raises(ValueError, match="average"):
+        RefineSchedule(average=1.0)
+    with pytest.raises(ValueError, match="pixel_reference"):
+        RefineSchedule(pixel_reference=0)
+
+
+def test_iterate_average_is_the_mean_of_the_last_iterates():
+    mifaces.set_variant("llvm_ad_rgb")
+    schedule = RefineSchedule(iterations=8, average=0.25)  # the last 2 iterates
+    assert schedule.averaged_from == 6
+    average = IterateAverage(["a", "albedo"], schedule)
+    current = {"a": mi.Float(0.0), "albedo": mi.TensorXf(np.zeros((2, 2, 3), np.float32))}
+    assert average.mean(current)["a"] is current["a"]  # nothing averaged yet: the iterate itself
+    for it in range(8):
+        current = {"a": mi.Float(float(it)), "albedo": mi.TensorXf(np.full((2, 2, 3), it, np.float32))}
+        average.add(it, current)
+    mean = average.mean(current)
+    assert average.count == 2 and float(mean["a"][0]) == pytest.approx(6.5)
+    assert isinstance(mean["albedo"], mi.TensorXf) and np.allclose(np.array(mean["albedo"]), 6.5)

@@ -13,18 +13,28 @@ photographs:
 * each model's own diffuse-only prediction: its fitted albedo map on its
   fitted shape, without the glossy part.
 
+With ``--refine``, each model is also fitted again on the same shapes and
+samples and refined by differentiable rendering against the same training
+photographs (``fit_brdf(..., refine=True)``, directional lights as the
+capture gives them; :mod:`mifaces.reflectance.refine`), and its held-out
+renders are scored beside the unrefined ones (``<model>_refined``): same
+split, same pixels. Results then go to ``real_yaleb[_trainN]_refine.json``
+and ``.png``.
+
 The error is the pooled relative RMSE over the face (the pixels the fitted
 face covers), sqrt(sum err^2 / sum photo^2) over all held-out images,
 saturated pixels (code 255) excluded; separately for the lights more than
 ``--shadow-angle`` degrees from the camera axis, which cast large shadows.
 
 Writes ``DIR/<subject>/capture`` (with ``split.json``), ``DIR/<subject>/measure``,
-``DIR/<subject>/heldout/<model>/<stem>.exr`` (linear, 0 outside the face) and
+``DIR/<subject>/heldout/<model>/<stem>.exr`` (linear, 0 outside the face; with
+``--refine`` also ``DIR/<subject>/refined/<model>`` and ``heldout/<model>_refined``) and
 ``mask.png``, ``validation/results/real_yaleb.json`` and ``real_yaleb.png``.
 
 Real photographs: these figures are not simulated.
 
     python validation/real_yaleb.py --data ../shared/data/yaleb --out out/real_yaleb [--subjects yaleB01] [--train 8]
+        [--refine] [--normals]
 
 With ``--normals``, each subject is measured twice, without and with per-texel
 normals (``mifaces measure --normals``), and the held-out errors of both are
@@ -50,7 +60,7 @@ from mifaces.files import atomic_path, write_exr, write_json, write_png
 from mifaces.geometry import load_geometry
 from mifaces.importers.yaleb import default_split, import_subject, read_subject
 from mifaces.pipeline import measure
-from mifaces.reflectance import load_estimate
+from mifaces.reflectance import fit_brdf, load_estimate
 from mifaces.render import FaceScene
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -91,8 +101,24 @@ class Errors:
                 for key, groups in self.sums.items()}
 
 
+def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> dict:
+    """Each model fitted on ``shapes`` and refined against the training
+    photographs, written to ``out/<model>``; model -> the refinement record
+    (image loss before and after, seconds)."""
+    records = {}
+    for model in models:
+        estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, refine=True,
+                            out=out / model, force=True, progress=True)
+        record = estimate.refinement
+        records[model] = {"loss_before": record["loss_before"], "loss_after": record["loss_after"],
+                          "regions": record["regions"], "seconds": round(record["seconds"]["total"], 1)}
+        print(f"  {model} refined: image loss {record['loss_before']:.4f} -> {record['loss_after']:.4f} "
+              f"({record['seconds']['total']:.0f} s)", flush=True)
+    return records
+
+
 def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shadow_angle: float,
-                resolution: int, normals: bool = False) -> dict:
+                resolution: int, normals: bool = False, refine: bool = False) -> dict:
     """Import, measure and relight one subject; its errors and timings."""
     t0 = time.perf_counter()
     name = subject_dir.name
@@ -109,6 +135,11 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     scene = FaceScene(face, shapes[first])
     mask = face_mask(scene, capture.camera)
     camera = capture.camera
+    refined = {}
+    if refine:
+        t_refine = time.perf_counter()
+        refined = refine_models(capture, face, shapes, models, out / "refined", resolution)
+        seconds["refine"] = time.perf_counter() - t_refine
     # photometric stereo on the same training photographs, over the face
     stack = np.stack([i.pixels for i in train_images])
     albedo_ps, normals_ps = photometric_stereo.fit(stack, np.stack([i.direction for i in train_images]), mask,
@@ -118,8 +149,9 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     errors = Errors()
     per_light = {}
     estimates = {m: load_estimate(out / "measure" / "brdf" / m) for m in models}
+    estimates.update({f"{m}_refined": load_estimate(out / "refined" / m) for m in refined})
     t_render = time.perf_counter()
-    for model in models:
+    for model in estimates:
         write_png(out / "heldout" / model / "mask.png", np.repeat(mask[:, :, None], 3, axis=2).astype(np.float32),
                   srgb=False)
     for image in heldout:
@@ -129,13 +161,14 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
         group = "large_shadows" if angle > shadow_angle else "small_shadows"
         direction = camera.rotation.T @ image.direction
         predictions = {"photometric_stereo": photometric_stereo.predict(albedo_ps, normals_ps, image.direction)}
-        for model in models:
-            data = estimates[model]
+        for model, data in estimates.items():
             rendered = scene.render(data, data["albedo"], camera, None, irradiance, spp=spp,
                                     light_direction=direction, normals=data.get("normals")).mean(axis=2)
             rendered[~mask] = 0.0
             write_exr(out / "heldout" / model / f"{image.stem}.exr", rendered[:, :, None].repeat(3, axis=2))
             predictions[model] = rendered
+            if model.endswith("_refined"):
+                continue
             predictions[f"{model}_diffuse_only"] = scene.render(
                 diffuse_only(data), data["albedo"], camera, None, irradiance, spp=spp,
                 light_direction=direction, normals=data.get("normals")).mean(axis=2)
@@ -149,7 +182,7 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     seconds["total"] = time.perf_counter() - t0
     return {"subject": name, "train": [i.stem for i in train_images], "heldout": len(heldout),
             "face_pixels": int(mask.sum()), "relative_rmse": errors.relative_rmse(), "per_light": per_light,
-            "shapes": report.get("shapes"), "seconds": seconds, "errors": errors}
+            "shapes": report.get("shapes"), "refinement": refined or None, "seconds": seconds, "errors": errors}
 
 
 def summary(results: list[dict], models) -> dict:
@@ -162,8 +195,14 @@ def summary(results: list[dict], models) -> dict:
                 total.sums[key][g] = [s[0] + e, s[1] + p, s[2] + n]
     overall = total.relative_rmse()
     best = min(models, key=lambda m: overall[m]["all"])
-    return {"relative_rmse": overall, "best_model": best,
-            "best_vs_photometric_stereo": overall[best]["all"] / overall["photometric_stereo"]["all"]}
+    out = {"relative_rmse": overall, "best_model": best,
+           "best_vs_photometric_stereo": overall[best]["all"] / overall["photometric_stereo"]["all"]}
+    if f"{best}_refined" in overall:
+        out["refined_vs_unrefined"] = {m: {g: overall[f"{m}_refined"][g] / overall[m][g] for g in overall[m]}
+                                       for m in models}
+        out["best_refined_vs_photometric_stereo"] = (overall[f"{best}_refined"]["all"]
+                                                     / overall["photometric_stereo"]["all"])
+    return out
 
 
 def figure(results: list[dict], out: Path, data_dir: Path, run_dir: Path, best: str) -> None:
@@ -184,10 +223,13 @@ def figure(results: list[dict], out: Path, data_dir: Path, run_dir: Path, best: 
         photo = images[stem].pixels
         predicted = read_exr(run_dir / r["subject"] / "heldout" / best / f"{stem}.exr")[:, :, 0]
         info = r["per_light"][stem]
+        last = (None, "")
+        if f"{best}_refined" in info:  # --refine: the refined model's render beside it
+            refined = read_exr(run_dir / r["subject"] / "heldout" / f"{best}_refined" / f"{stem}.exr")[:, :, 0]
+            last = (refined, f"{best} refined (rel. RMSE {info[f'{best}_refined']:.2f})")
         for col, (img, title) in enumerate([(photo, f"photograph {stem[-9:]}"),
                                             (predicted, f"{best} (rel. RMSE {info[best]:.2f})"),
-                                            (np.abs(predicted - photo), "|difference|"),
-                                            (None, "")]):
+                                            (np.abs(predicted - photo), "|difference|"), last]):
             if img is None:
                 continue
             ax = fig.add_subplot(grid[row, col])
@@ -275,6 +317,8 @@ def main(argv=None) -> int:
     parser.add_argument("--results", type=Path, default=RESULTS)
     parser.add_argument("--normals", action="store_true",
                         help="measure without and with per-texel normals; write real_yaleb_normals.{json,png}")
+    parser.add_argument("--refine", action="store_true",
+                        help="also refine each fit by differentiable rendering and score it beside the unrefined")
     args = parser.parse_args(argv)
     if not args.data.is_dir():
         print(f"no Yale data at {args.data}: nothing to validate", file=sys.stderr)
@@ -287,20 +331,23 @@ def main(argv=None) -> int:
     for subject in subjects:
         print(f"== {subject}", flush=True)
         results.append(subject_run(args.data / subject, args.out / subject, args.train, models, args.spp,
-                                   args.shadow_angle, args.resolution))
+                                   args.shadow_angle, args.resolution, refine=args.refine))
         print({k: round(v["all"], 4) for k, v in results[-1]["relative_rmse"].items()}, flush=True)
     overall = summary(results, models)
     document = {"data": "Extended Yale Face Database B (cropped), real photographs", "train_lights": args.train,
                 "models": list(models), "spp": args.spp, "texture_resolution": args.resolution,
-                "shadow_angle_deg": args.shadow_angle,
+                "shadow_angle_deg": args.shadow_angle, "refine": args.refine,
                 "command": "python validation/real_yaleb.py " + " ".join(argv if argv is not None else sys.argv[1:]),
                 "overall": overall,
                 "subjects": [{k: v for k, v in r.items() if k != "errors"} for r in results]}
-    suffix = "" if args.train == 8 else f"_train{args.train}"
+    suffix = ("" if args.train == 8 else f"_train{args.train}") + ("_refine" if args.refine else "")
     write_json(args.results / f"real_yaleb{suffix}.json", document)
     figure(results, args.results / f"real_yaleb{suffix}.png", args.data, args.out, overall["best_model"])
     print(f"best model {overall['best_model']}: {overall['relative_rmse'][overall['best_model']]['all']:.4f} "
           f"against photometric stereo {overall['relative_rmse']['photometric_stereo']['all']:.4f}")
+    if args.refine:
+        print("refined / unrefined held-out relative RMSE: "
+              + ", ".join(f"{m} {v['all']:.4f}" for m, v in overall["refined_vs_unrefined"].items()))
     return 0
 
 

@@ -16,7 +16,7 @@ analysis by synthesis through Mitsuba fix what the texture-space fit misses?
    (:func:`mifaces.pipeline.novel_light`) against the ground truth rendered
    the same way, cost.
 
-Run:  python validation/refine.py [--image 512] [--spp 4] [--iterations 72]
+Run:  python validation/refine.py [--image 512] [--spp 2 4] [--iterations 96] [--capture DIR]
 Writes validation/results/refine.json and refine.png. The capture goes to a
 temporary folder.
 """
@@ -98,18 +98,26 @@ def figure(path: Path, curves: dict, images: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 4, figsize=(17, 4))
+    panels = [("lips", "specular_reflectance"), ("hair", "specular_reflectance"),
+              ("eyebrows", "specular_reflectance"), ("eyebrows", "roughness"), ("eyes", "roughness"),
+              ("skin", "specular_reflectance")]
+    fig, axes = plt.subplots(2, 4, figsize=(17, 8))
+    axes = axes.ravel()
     for spp, curve in curves.items():
         t = [c["seconds"] for c in curve]
-        for ax, (region, param) in zip(axes[:2], [("lips", "specular_reflectance"), ("eyes", "roughness")]):
+        for ax, (region, param) in zip(axes, panels):
             ax.plot(t, [100 * c["errors"]["regions"][region][param] for c in curve], "o-", label=f"{spp} spp")
-            ax.set_title(f"{region} {param} error (%) [simulated]", fontsize=9)
-            ax.set_xlabel("refinement wall time (s)")
+    for ax, (region, param) in zip(axes, panels):
+        limit = TARGETS.get(region, {}).get(param)
+        if limit is not None:
+            ax.axhline(100 * limit, color="k", ls=":", lw=1)
+        ax.set_title(f"{region} {param} error (%) [simulated]", fontsize=9)
+        ax.set_xlabel("refinement wall time (s), 2 shared cores")
     axes[0].legend()
     scale = 0.8 / max(np.percentile(images["truth"], 99.5), 1e-12)
-    for ax, name in zip(axes[2:], ["texture-space", "refined"]):
+    for ax, name in zip(axes[6:], ["texture-space", "refined"]):
         ax.imshow(np.clip(4 * np.abs(images[name] - images["truth"]) * scale, 0, 1) ** (1 / 2.2))
-        ax.set_title(f"novel light: |{name} - truth| x 4", fontsize=9)
+        ax.set_title(f"novel light: |{name} - truth| x 4 [simulated]", fontsize=9)
         ax.axis("off")
     fig.tight_layout()
     fig.savefig(path, dpi=80)

@@ -22,7 +22,9 @@ penalty (quadratic below ε, linear above: misregistered pixels cannot
 dominate). Gradients come from Dr.Jit's reverse mode through Mitsuba's path
 replay backpropagation (``prb``; Vicini et al., "Path Replay
 Backpropagation", SIGGRAPH 2021); the steps are Adam's, one photograph per
-step in turn. Parameters stay inside their ranges (``Parameter.lower`` and
+step in turn, and the result is the mean of the last iterates
+(Polyak-Ruppert averaging, :class:`~mifaces.reflectance.refine_schedule.IterateAverage`).
+Parameters stay inside their ranges (``Parameter.lower`` and
 ``upper``) by the reparameterisation of the texture-space fit
 (:class:`~mifaces.reflectance.parameters.ParameterSpace`, a sigmoid or its
 logarithmic form); the albedo, optionally a variable too, by a smooth
@@ -57,6 +59,7 @@ from ..progress import progress as progress_bar
 from ..render import FaceScene, mitsuba_sensor
 from .albedo_correction import AlbedoCorrection
 from .parameters import ParameterSpace
+from .refine_schedule import IterateAverage, RefineSchedule
 
 if TYPE_CHECKING:
     from .estimate import BRDFEstimate
@@ -65,68 +68,6 @@ if TYPE_CHECKING:
 LAMP_RADIUS_KEY = "lamp_radius_mm"
 #: Fewest pixels (over all photographs, at the render resolution) for a region's parameters to be variables.
 MIN_PIXELS = 40
-
-
-@dataclass(frozen=True)
-class RefineSchedule:
-    """How the refinement runs.
-
-    Attributes
-    ----------
-    iterations : int
-        Adam steps; each renders one photograph (in turn) forward and backward.
-    spp : int
-        Samples per pixel of each render (the backward pass uses as many,
-        with a decorrelated seed).
-    downsample : int
-        Render at 1/``downsample`` of the camera's resolution against the
-        photograph averaged over ``downsample``² blocks.
-    max_depth : int
-        Path length: 2 direct light only, 3 one interreflection, ...
-    learning_rate : float
-        Adam's step in the unconstrained parameters (about the relative change
-        per step of a parameter in logarithmic form).
-    albedo_learning_rate : float or None
-        With a number, the albedo is a variable too (:class:`AlbedoCorrection`),
-        with this step (about the relative change per step); None keeps the
-        texture-space albedo.
-    albedo_cell : int
-        Texels per side of a cell of the albedo's correction grid.
-    decay : float
-        The learning rates fall from their value to ``decay`` times it over
-        the iterations (half a cosine).
-    epsilon : float
-        ε of the Charbonnier penalty, relative to the photograph's mean.
-    evaluation_spp : int
-        Samples per pixel of the loss reported before and after.
-
-    The defaults come from the error-against-time measurement of
-    ``validation/refine.py`` (``validation/results/refine.json``).
-    """
-
-    iterations: int = 72
-    spp: int = 4
-    downsample: int = 1
-    max_depth: int = 3
-    learning_rate: float = 0.05
-    albedo_learning_rate: float | None = 0.02
-    albedo_cell: int = 4
-    decay: float = 0.1
-    epsilon: float = 0.02
-    evaluation_spp: int = 16
-
-    def __post_init__(self):
-        for name in ("iterations", "spp", "downsample", "evaluation_spp", "albedo_cell"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"RefineSchedule.{name} must be >= 1, got {getattr(self, name)!r}")
-        if self.max_depth < 2:
-            raise ValueError(f"RefineSchedule.max_depth must be >= 2 (direct light), got {self.max_depth!r}")
-
-
-def _decayed(rate: float, iteration: int, schedule: RefineSchedule) -> float:
-    """``rate`` at ``iteration``: from ``rate`` down to ``decay`` times it by half a cosine."""
-    t = iteration / max(schedule.iterations - 1, 1)
-    return rate * (schedule.decay + (1 - schedule.decay) * 0.5 * (1 + np.cos(np.pi * t)))
 
 
 def image_loss(image, target, weight, epsilon: float):
@@ -245,6 +186,7 @@ class RefineProblem:
         names = list(measurements or estimate.measurements)
         scale = (capture.white_target.reflectance_scale() / np.pi if capture.white_target is not None
                  else np.ones(3))
+        self.light_kinds = set()
         self.photographs = [self._photograph(capture, m, shapes[m.name], face_model, brdf, albedo, scale,
                                              lamp_radius)
                             for m in capture.measurements if m.name in names and m.name in shapes]
@@ -257,7 +199,7 @@ class RefineProblem:
         self.pixels = pixels
         self.spaces, self.variables = {}, {}
         for region, fit in estimate.fits.items():
-            if pixels.get(region, 0) < MIN_PIXELS:
+            if pixels.get(region, 0) < MIN_PIXELS or region in schedule.held_regions:
                 continue
             fixed = {k: v for k, v in fit.params.items()
                      if k not in {p.name for p in self.model.specular_parameters()}
@@ -277,6 +219,8 @@ class RefineProblem:
         k = self.schedule.downsample
         camera = capture.camera
         kwargs, lamp = _light(capture, m, lamp_radius)
+        self.light_kinds.add("sphere" if lamp is not None else
+                             "directional" if "light_direction" in kwargs else "point")
         description = FaceScene(face_model, vertices).scene(brdf, albedo, camera, **kwargs)
         labels = coverage(mi.load_dict({"type": "scene", **{key: v for key, v in description.items()
                                                           if key.startswith("face_")}}),
@@ -396,14 +340,20 @@ def _kernels() -> tuple[int, int, float]:
     return len(kernels), len(compiled), round(seconds, 4)
 
 
+def _rates(problem: RefineProblem, schedule: RefineSchedule, iteration: int) -> dict:
+    """Each variable's learning rate at ``iteration`` (:meth:`RefineSchedule.rate`)."""
+    return {name: schedule.rate(name, iteration, problem.pixels.get(name.rsplit(".", 1)[0]))
+            for name in problem.variables}
+
+
 def _optimizer(problem: RefineProblem, schedule: RefineSchedule):
     opt = mi.ad.Adam(lr=schedule.learning_rate)
     for name, value in problem.variables.items():
         if name == "albedo":
             opt[name] = mi.TensorXf(np.ascontiguousarray(value, np.float32))
-            opt.set_learning_rate({name: schedule.albedo_learning_rate})
         else:
             opt[name] = mi.Float(value)
+    opt.set_learning_rate(_rates(problem, schedule, 0))
     return opt
 
 
@@ -433,13 +383,15 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
     callback : callable, optional
         Called after each step as ``callback(iteration, seconds, estimate)``,
         ``seconds`` since the start, ``estimate()`` giving the estimate at
-        that step (for error-against-time curves).
+        that step (the running average of the iterates once ``schedule.average``
+        starts; for error-against-time curves).
 
     Returns
     -------
     BRDFEstimate
         With the refined glossy parameters per region seen by enough pixels
-        (and the albedo with ``schedule.albedo_learning_rate``), and
+        (and the albedo with ``schedule.albedo_learning_rate``), the average
+        of the last iterates (``schedule.average``), and
         ``refinement``: the schedule, the loss before and after, the loss per
         iteration, the regions refined, times and kernel launches.
     """
@@ -454,7 +406,7 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
         start = {k: mi.TensorXf(opt[k]) if k == "albedo" else mi.Float(opt[k]) for k in problem.variables}
     before = problem.total_loss(start, schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
     t_before = time.perf_counter()
-    history = []
+    history, average = [], IterateAverage(problem.variables, schedule)
     bar = progress_bar(range(schedule.iterations), desc="refining", unit="it", enabled=progress)
     with _kernel_history():
         for it in bar:
@@ -463,25 +415,25 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
             loss = problem.loss(photo, opt, schedule.spp, seed=seed * 7919 + 2 * it)
             dr.backward(loss)
             opt.step()
-            opt.set_learning_rate({name: _decayed(schedule.albedo_learning_rate if name == "albedo"
-                                                  else schedule.learning_rate, it + 1, schedule)
-                                   for name in problem.variables})
+            opt.set_learning_rate(_rates(problem, schedule, it + 1))
             dr.eval()
+            average.add(it, opt)
             history.append([round(time.perf_counter() - t, 4), photo.name, float(loss[0]), *_kernels()])
             bar.set_postfix_str(f"loss {float(loss[0]):.4g}")
             if callback is not None:
-                callback(it + 1, time.perf_counter() - t0, lambda: problem.estimate_of(opt, None))
+                callback(it + 1, time.perf_counter() - t0, lambda: problem.estimate_of(average.mean(opt), None))
     t_iterate = time.perf_counter()
-    after = problem.total_loss(opt, schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
+    result = average.mean(opt)
+    after = problem.total_loss(result, schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
     t_end = time.perf_counter()
     first = len(problem.photographs)  # the first pass over the photographs compiles the kernels
     refinement = {
         "method": "prb",
         "schedule": dataclasses.asdict(schedule),
-        "lamp_radius_mm": float(lamp_radius) if lamp_radius else None,
+        "lamp_radius_mm": float(lamp_radius) if lamp_radius else None, "lights": sorted(problem.light_kinds),
         "photographs": [p.name for p in problem.photographs],
         "regions": sorted(problem.spaces), "region_pixels": problem.pixels,
-        "loss_before": before, "loss_after": after,
+        "loss_before": before, "loss_after": after, "iterates_averaged": average.count,
         "history_keys": ["seconds", "photograph", "loss", "launches", "compiled", "compile_seconds"],
         "history": history,
         "launches_per_iteration": float(np.mean([h[3] for h in history])),
@@ -494,7 +446,7 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
                     if len(history) > first else None,
                     "loss_after": t_end - t_iterate, "total": t_end - t0},
     }
-    return problem.estimate_of(opt, refinement)
+    return problem.estimate_of(result, refinement)
 
 
 __all__ = ["LAMP_RADIUS_KEY", "RefineSchedule", "RefineProblem", "image_loss", "coverage", "refine_estimate"]

@@ -1,0 +1,148 @@
+"""The schedule of the refinement by differentiable rendering
+(:mod:`mifaces.reflectance.refine`): iterations, samples, learning rates per
+variable, and the average of the last iterates that the result is taken from.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+#: Largest factor by which ``RefineSchedule.pixel_reference`` raises a small region's learning rate.
+MAX_RATE_SCALE = 2.0
+
+
+@dataclass(frozen=True)
+class RefineSchedule:
+    """How the refinement runs.
+
+    Attributes
+    ----------
+    iterations : int
+        Adam steps; each renders one photograph (in turn) forward and backward.
+    spp : int
+        Samples per pixel of each render (the backward pass uses as many,
+        with a decorrelated seed).
+    downsample : int
+        Render at 1/``downsample`` of the camera's resolution against the
+        photograph averaged over ``downsample``² blocks.
+    max_depth : int
+        Path length: 2 direct light only, 3 one interreflection, ...
+    learning_rate : float
+        Adam's step in the unconstrained parameters (about the relative change
+        per step of a parameter in logarithmic form).
+    albedo_learning_rate : float or None
+        With a number, the albedo is a variable too
+        (:class:`~mifaces.reflectance.albedo_correction.AlbedoCorrection`),
+        with this step (about the relative change per step); None keeps the
+        texture-space albedo.
+    albedo_cell : int
+        Texels per side of a cell of the albedo's correction grid.
+    decay : float
+        The learning rates fall from their value to ``decay`` times it over
+        the iterations (half a cosine).
+    epsilon : float
+        ε of the Charbonnier penalty, relative to the photograph's mean.
+    evaluation_spp : int
+        Samples per pixel of the loss reported before and after.
+    average : float
+        Fraction of the iterations, the last ones, whose iterates (in the
+        unconstrained variables) are averaged into the result (Polyak-Ruppert
+        averaging: the Monte Carlo noise of the last steps' gradients averages
+        out instead of being left in the parameters); 0 keeps the last iterate.
+    pixel_reference : int or None
+        With a number, a region seen by ``pixels`` pixels (over all
+        photographs) takes steps ``sqrt(pixel_reference / pixels)`` times the
+        learning rate (at most :data:`MAX_RATE_SCALE` times): the texture-space
+        fit's errors come from a region's border (blur, pixel footprint,
+        interreflection at its edges), a fraction of its pixels that falls
+        as 1/sqrt(pixels), so a large region needs smaller corrections (its
+        well-determined start is not pulled about by the others' errors) and
+        a small one larger. None: the same rate for every region.
+    held_regions : tuple of str
+        Regions whose glossy parameters keep their texture-space fit (the
+        albedo correction still covers them).
+
+    The defaults come from the error-against-time measurements of
+    ``validation/refine.py`` (``validation/results/refine.json``) and the
+    variants compared in ``docs/refine.md`` (simulated default capture, 512²):
+    cells of 2 texels (4: eyebrow ρs 17 %, 16: worse still; 1: 13 %; 2: 12 %
+    after 72 iterations, still falling), skin and beard held (every variant
+    that refined them moved them away from the truth, 1.4 % to 2-5 % in skin ρs,
+    at no gain in image loss), the last quarter of the iterates averaged.
+    """
+
+    iterations: int = 96
+    spp: int = 4
+    downsample: int = 1
+    max_depth: int = 3
+    learning_rate: float = 0.05
+    albedo_learning_rate: float | None = 0.02
+    albedo_cell: int = 2
+    decay: float = 0.1
+    epsilon: float = 0.02
+    evaluation_spp: int = 16
+    average: float = 0.25
+    pixel_reference: int | None = 20_000
+    held_regions: tuple[str, ...] = ("skin", "beard")
+
+    def __post_init__(self):
+        object.__setattr__(self, "held_regions", tuple(self.held_regions))
+        for name in ("iterations", "spp", "downsample", "evaluation_spp", "albedo_cell"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"RefineSchedule.{name} must be >= 1, got {getattr(self, name)!r}")
+        if self.max_depth < 2:
+            raise ValueError(f"RefineSchedule.max_depth must be >= 2 (direct light), got {self.max_depth!r}")
+        if self.pixel_reference is not None and self.pixel_reference < 1:
+            raise ValueError(f"RefineSchedule.pixel_reference must be >= 1 or None, got {self.pixel_reference!r}")
+        if not 0.0 <= self.average < 1.0:
+            raise ValueError(f"RefineSchedule.average must be in [0, 1), got {self.average!r}")
+
+    def rate(self, name: str, iteration: int, pixels: int | None = None) -> float:
+        """Learning rate of variable ``name`` (``albedo`` or a region's, seen
+        by ``pixels``) at ``iteration``: from its value (scaled by
+        ``pixel_reference``) down to ``decay`` times it by half a cosine."""
+        rate = self.albedo_learning_rate if name == "albedo" else self.learning_rate
+        if name != "albedo" and self.pixel_reference is not None and pixels:
+            rate *= min(MAX_RATE_SCALE, float(np.sqrt(self.pixel_reference / pixels)))
+        t = iteration / max(self.iterations - 1, 1)
+        return rate * (self.decay + (1 - self.decay) * 0.5 * (1 + np.cos(np.pi * t)))
+
+    @property
+    def averaged_from(self) -> int:
+        """First iteration (0-based) whose iterate enters the average."""
+        return self.iterations - max(1, int(round(self.average * self.iterations)))
+
+
+class IterateAverage:
+    """Running mean of the optimiser's variables over the iterations from
+    :attr:`RefineSchedule.averaged_from` on (the last iterate alone when
+    ``average`` is 0)."""
+
+    def __init__(self, names, schedule: RefineSchedule):
+        self.names, self.start = list(names), schedule.averaged_from
+        self.sums, self.count = {}, 0
+
+    def add(self, iteration: int, variables) -> None:
+        """Add the variables after step ``iteration`` (0-based) if it is averaged."""
+        if iteration < self.start:
+            return
+        with dr.suspend_grad():
+            for name in self.names:
+                value = dr.detach(variables[name])
+                self.sums[name] = value if name not in self.sums else self.sums[name] + value
+            dr.eval(self.sums)
+        self.count += 1
+
+    def mean(self, variables) -> dict:
+        """The averaged variables (``variables`` as they are before any average)."""
+        if not self.count:
+            return {name: variables[name] for name in self.names}
+        out = {name: value / self.count for name, value in self.sums.items()}
+        return {name: mi.TensorXf(v) if isinstance(variables[name], mi.TensorXf) else v for name, v in out.items()}
+
+
+__all__ = ["RefineSchedule", "IterateAverage"]
