@@ -86,7 +86,9 @@ SPP = 16
 #: Candidate held-out light directions about the camera (azimuth, elevation in
 #: degrees, :meth:`mifaces.capture.Camera.direction`), of which those farthest
 #: from every capture light are taken.
-LIGHT_CANDIDATES = tuple((a, e) for a in (-60.0, -30.0, 0.0, 30.0, 60.0) for e in (-25.0, 0.0, 25.0, 50.0))
+#: They stay within 45° of the camera's axis sideways and between 15° below and 40° above it, lighting the front
+#: of the face as a photographer would.
+LIGHT_CANDIDATES = tuple((a, e) for a in (-45.0, -22.5, 0.0, 22.5, 45.0) for e in (-15.0, 5.0, 25.0, 40.0))
 #: Seed of every validation render (common random numbers, module docstring).
 SEED = 101
 
@@ -200,7 +202,7 @@ def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -
     return out
 
 
-def face_camera(camera, vertices: np.ndarray, size: int = RENDER_SIZE, margin: float = 0.08) -> Camera:
+def face_camera(camera, vertices: np.ndarray, size: int = RENDER_SIZE, margin: float = 0.1) -> Camera:
     """``camera`` cropped to the box around the projected ``vertices`` (with
     ``margin`` of its size around) and scaled so that its longer side is
     ``size`` pixels; same pose, no lens distortion (renders compared with
@@ -211,8 +213,9 @@ def face_camera(camera, vertices: np.ndarray, size: int = RENDER_SIZE, margin: f
     lo, hi = lo - pad, hi + pad
     scale = size / float(max(hi - lo))
     width, height = (max(8, int(round(s * scale))) for s in hi - lo)
-    return Camera(width, height, camera.fx * scale, camera.fy * scale, (camera.cx - lo[0] + 0.5) * scale - 0.5,
-                  (camera.cy - lo[1] + 0.5) * scale - 0.5, np.zeros(0), camera.rotation, camera.translation)
+    # pixel centres at integers: the crop's pixel j spans [lo + j / scale, lo + (j + 1) / scale] - 1/2 of the camera's
+    return Camera(width, height, camera.fx * scale, camera.fy * scale, (camera.cx - lo[0]) * scale - 0.5,
+                  (camera.cy - lo[1]) * scale - 0.5, np.zeros(0), camera.rotation, camera.translation)
 
 
 def coverage(scene: FaceScene, camera, spp: int = 4) -> np.ndarray:
@@ -282,6 +285,7 @@ class Validator:
         if (environments is not None and not environments) or lights < 1:
             raise ValueError("a validation needs at least one environment and one held-out light")
         self.capture = capture
+        self._albedo = {}  # the true albedo map at each fit resolution
         self.ground_truth = read_ground_truth(capture)
         if self.ground_truth is None:
             raise ValueError(f"{capture.path}: only a simulated capture (with ground truth) can be validated")
@@ -355,7 +359,9 @@ class Validator:
         t = time.perf_counter()
         fit, albedo = estimate.to_json(), estimate.albedo.albedo
         r = estimate.resolution
-        true_albedo = resize(self.ground_truth.albedo, (r, r, 3), anti_aliasing=True, order=1)
+        if r not in self._albedo:
+            self._albedo[r] = resize(self.ground_truth.albedo, (r, r, 3), anti_aliasing=True, order=1)
+        true_albedo = self._albedo[r]
         regions = {}
         for name in estimate.fits:
             texels = estimate.region_map == REGIONS[name]
