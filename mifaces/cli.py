@@ -219,6 +219,10 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")
         errors = f"  (vs ground truth: {', '.join(f'{k} {100 * v:.1f}%' for k, v in truth.items())})" if truth else ""
         click.echo(f"{model:13s} skin: {', '.join(f'{k}={_short(v)}' for k, v in skin.items())}{errors}")
+    for key, label in (("heldout_rmse", "held-out lights"), ("environment_rmse", "environments")):
+        if key in report.get("ranking", {}):
+            click.echo(f"ranked by {label} (novel pose, relative image RMSE): " + " < ".join(
+                f"{m} {100 * report['models'][m]['validation'][key]:.1f}%" for m in report["ranking"][key]))
     click.echo(f"done in {report['seconds']['total']:.0f} s; report: {out_dir}/report.md and report.png")
 
 

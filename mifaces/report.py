@@ -170,8 +170,8 @@ def validation_markdown(report: dict) -> list[str]:
     for model in report["ranking"]["heldout_rmse"]:
         entry = report["models"][model]
         v = entry["validation"]
-        regions = ", ".join(f"{k} {100 * e:.0f}%" for k, e in v["brdf_rmse"].items())
-        skin = f"{100 * v['brdf_rmse']['skin']:.1f}%" if "skin" in v["brdf_rmse"] else ""
+        regions = ", ".join(f"{k} {100 * e:.0f}%" for k, e in v["brdf_rmse"].items() if e is not None)
+        skin = f"{100 * v['brdf_rmse']['skin']:.1f}%" if v["brdf_rmse"].get("skin") is not None else "n/a"
         lines.append(f"| {model} | {skin} | {regions} | {v['albedo_rmse']:.4f} | {100 * v['heldout_rmse']:.2f}% | "
                      f"{100 * v['environment_rmse']:.2f}% | {100 * entry['training_rmse']:.2f}% |")
     lines.append("")

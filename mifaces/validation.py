@@ -22,7 +22,7 @@ Four numbers per fitted model (:meth:`Validator.validate`):
 
     summed over direction pairs, texels and RGB: the RMSE of f cos θo
     relative to the truth's RMS (0 for a perfect fit, 1 for a fit that
-    returns nothing).
+    returns nothing; None for a truth whose ``eval`` is zero, a delta BSDF).
 ``albedo_rmse``
     RMSE of the fitted albedo map against the truth's (resized to the fit's
     resolution), on texels with samples (linear reflectance units;
@@ -136,10 +136,12 @@ def region_texels(region_map: np.ndarray, label: int, count: int = UV_SAMPLES, s
 
 
 def brdf_rmse(truth: dict, fit: dict, region: str, true_albedo, fit_albedo, uv: np.ndarray,
-              grid: int = GRID) -> float:
+              grid: int = GRID) -> float | None:
     """The relative BRDF error of one region (module docstring): truth and fit
     (``brdf.json`` documents) at texture coordinates ``uv`` (k, 2), with the
-    diffuse reflectances ``true_albedo`` and ``fit_albedo`` (RGB)."""
+    diffuse reflectances ``true_albedo`` and ``fit_albedo`` (RGB). None where
+    the truth's ``eval`` is zero everywhere (a delta BSDF, such as the smooth
+    boundary of a subsurface truth)."""
     d = hemisphere_grid(grid)
     i, o = np.meshgrid(np.arange(len(d)), np.arange(len(d)), indexing="ij")
     pairs = i.size
@@ -147,7 +149,10 @@ def brdf_rmse(truth: dict, fit: dict, region: str, true_albedo, fit_albedo, uv: 
     at = np.repeat(uv, pairs, axis=0)
     f_true = eval_bsdf(region_bsdf(truth, region, rgb(true_albedo)), at, wi, wo)
     f_fit = eval_bsdf(region_bsdf(fit, region, rgb(fit_albedo)), at, wi, wo)
-    return float(np.sqrt(np.sum((f_fit - f_true) ** 2) / np.sum(f_true ** 2)))
+    scale = float(np.sum(f_true ** 2))
+    if not scale > 0 or not np.isfinite(scale):
+        return None  # a truth without a finite BRDF (a smooth boundary over a scattering medium): no BRDF error
+    return float(np.sqrt(np.sum((f_fit - f_true) ** 2) / scale))
 
 
 # --------------------------------------------------------------------------------------------
@@ -213,7 +218,7 @@ def face_camera(camera, vertices: np.ndarray, size: int = RENDER_SIZE, margin: f
     lo, hi = lo - pad, hi + pad
     scale = size / float(max(hi - lo))
     width, height = (max(8, int(round(s * scale))) for s in hi - lo)
-    # pixel centres at integers: the crop's pixel j spans [lo + j / scale, lo + (j + 1) / scale] - 1/2 of the camera's
+    # the crop's left and top edges at lo (the camera's pixel coordinates, centres at integers)
     return Camera(width, height, camera.fx * scale, camera.fy * scale, (camera.cx - lo[0]) * scale - 0.5,
                   (camera.cy - lo[1]) * scale - 0.5, np.zeros(0), camera.rotation, camera.translation)
 
