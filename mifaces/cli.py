@@ -27,6 +27,7 @@ from .landmarks import NoFaceError, detect_landmarks
 from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
 from .reflectance import fit_brdf as fit_brdf_model, render_fitted
 from .reflectance.io import KIND as BRDF_KIND
+from .report import RANKED
 from .shape import fit_shape as fit_shapes
 from .shape.io import INDEX as SHAPES_INDEX
 from .status import CONVERGED
@@ -219,10 +220,9 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")
         errors = f"  (vs ground truth: {', '.join(f'{k} {100 * v:.1f}%' for k, v in truth.items())})" if truth else ""
         click.echo(f"{model:13s} skin: {', '.join(f'{k}={_short(v)}' for k, v in skin.items())}{errors}")
-    for key, label in (("heldout_rmse", "held-out lights"), ("environment_rmse", "environments")):
-        if key in report.get("ranking", {}):
-            click.echo(f"ranked by {label} (novel pose, relative image RMSE): " + " < ".join(
-                f"{m} {100 * report['models'][m]['validation'][key]:.1f}%" for m in report["ranking"][key]))
+    for key, order in report.get("ranking", {}).items():
+        click.echo(f"ranked by {RANKED[key]} (novel pose, relative image RMSE): " + " < ".join(
+            f"{m} {100 * report['models'][m]['validation'][key]:.1f}%" for m in order))
     click.echo(f"done in {report['seconds']['total']:.0f} s; report: {out_dir}/report.md and report.png")
 
 

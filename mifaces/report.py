@@ -11,6 +11,7 @@ from .capture import read_ground_truth
 from .files import atomic_path, atomic_write
 from .model.regions import REGIONS
 from .status import PRIOR
+from .validation import TRUE_SHAPE
 
 
 def ground_truth_errors(estimate, capture, ground_truth=None) -> dict | None:
@@ -53,14 +54,19 @@ def ground_truth_errors(estimate, capture, ground_truth=None) -> dict | None:
 
 
 
-#: The validation's image errors the report ranks the models by.
-RANKED = ("heldout_rmse", "environment_rmse")
+#: The validation's image errors the report ranks the models by, and their labels: the fitted faces, and
+#: the fitted reflectance on the true shape (where the validation has it).
+RANKED = {"heldout_rmse": "held-out lights", "environment_rmse": "environments",
+          f"heldout_rmse{TRUE_SHAPE}": "held-out lights, on the true shape",
+          f"environment_rmse{TRUE_SHAPE}": "environments, on the true shape"}
 
 
 def ranking(models: dict) -> dict:
     """Measure -> model names, best (smallest error) first, for each of
-    :data:`RANKED`; ``models`` is the report's ``models`` with their ``validation``."""
-    return {key: sorted(models, key=lambda m: models[m]["validation"][key]) for key in RANKED}
+    :data:`RANKED` the validations hold; ``models`` is the report's
+    ``models`` with their ``validation``."""
+    return {key: sorted(models, key=lambda m: models[m]["validation"][key]) for key in RANKED
+            if all(key in entry["validation"] for entry in models.values())}
 
 
 def _show(ax, image, title, scale) -> None:
@@ -156,7 +162,9 @@ def validation_markdown(report: dict) -> list[str]:
     floor = summary["shape_floor"]
     floor_text = ("The fitted face model's texture space is not the truth's: no shape floor." if floor is None else
                   f"Shape floor (the true BSDF and albedo on the fitted shape): held-out "
-                  f"{100 * floor['heldout_rmse']:.1f}%, environments {100 * floor['environment_rmse']:.1f}%.")
+                  f"{100 * floor['heldout_rmse']:.1f}%, environments {100 * floor['environment_rmse']:.1f}%"
+                  + ("; the fitted reflectance on the true shape shows the reflectance's own error." if
+                     floor["heldout_rmse"] > 0 else "."))
     lines = ["", "## Validation against the ground truth (simulated capture)", "",
              f"Truth: `{summary['truth_model']}`. The true face (true shape, BSDF and albedo) and each fitted face "
              f"(fitted shape, BRDF and albedo) are rendered in a novel pose (yaw {summary['novel_pose'][0]:g}°, "
@@ -166,17 +174,20 @@ def validation_markdown(report: dict) -> list[str]:
              f"{summary['render']['width']}x{summary['render']['height']} px at {summary['render']['spp']} spp, and "
              f"compared on the face mask, rendered with the same random numbers. {floor_text}", "",
              "| model | BRDF RMSE (skin, relative) | BRDF RMSE (all regions) | albedo RMSE | held-out-light RMSE | "
-             "environment RMSE | training RMSE |", "|---|---|---|---|---|---|---|"]
+             "environment RMSE | same, fitted reflectance on the true shape | training RMSE |",
+             "|---|---|---|---|---|---|---|---|"]
     for model in report["ranking"]["heldout_rmse"]:
         entry = report["models"][model]
         v = entry["validation"]
         regions = ", ".join(f"{k} {100 * e:.0f}%" for k, e in v["brdf_rmse"].items() if e is not None)
         skin = f"{100 * v['brdf_rmse']['skin']:.1f}%" if v["brdf_rmse"].get("skin") is not None else "n/a"
+        true_shape = (f"{100 * v[f'heldout_rmse{TRUE_SHAPE}']:.2f}%, {100 * v[f'environment_rmse{TRUE_SHAPE}']:.2f}%"
+                      if f"heldout_rmse{TRUE_SHAPE}" in v else "n/a")
         lines.append(f"| {model} | {skin} | {regions} | {v['albedo_rmse']:.4f} | {100 * v['heldout_rmse']:.2f}% | "
-                     f"{100 * v['environment_rmse']:.2f}% | {100 * entry['training_rmse']:.2f}% |")
+                     f"{100 * v['environment_rmse']:.2f}% | {true_shape} | {100 * entry['training_rmse']:.2f}% |")
     lines.append("")
-    for key, label in zip(RANKED, ("held-out lights", "environments")):
-        order = report["ranking"][key]
+    for key, order in report["ranking"].items():
+        label = RANKED[key]
         errors = [report["models"][m]["validation"][key] for m in order]
         text = " < ".join(f"{m} {100 * e:.2f}%" for m, e in zip(order, errors))
         margin = (f"; {order[0]} wins by {100 * (errors[1] - errors[0]):.2f} points "

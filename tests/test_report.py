@@ -79,8 +79,9 @@ def test_validation_keys_present_and_finite(validator, estimate):
     assert set(images) == set(validator.truth) == {"light_1", "light_2", "studio", "sky"}
     for name, image in images.items():
         assert image.shape == validator.truth[name].shape and validator.truth[name][validator.mask].mean() > 0
-    # the true shape was used: the shape floor is exactly 0
+    # the true shape was used: the shape floor is exactly 0, and the reflectance's own error is the image error
     assert validator.summary["shape_floor"]["heldout_rmse"] == 0.0
+    assert entry["heldout_rmse_true_shape"] == entry["heldout_rmse"]
 
 
 def test_wrong_parameters_score_worse_than_true_ones(validator, estimate, capture):
@@ -123,3 +124,20 @@ def test_relative_rmse_and_bad_requests(capture):
     first = capture.measurements[0].name
     with pytest.raises(ValueError, match="at least one environment"):
         Validator(capture, face, shapes[first], first, environments={})
+
+
+def test_a_fitted_shape_is_told_apart_from_the_reflectance(capture, estimate):
+    """On a shape 3 mm off, the images carry the shape's error (the shape floor); the fitted reflectance rendered
+    on the true shape still tells true parameters from wrong ones."""
+    face, shapes = load_geometry(capture, "ground-truth")
+    first = capture.measurements[0].name
+    shifted = Validator(capture, face, shapes[first] + [3.0, 0.0, 0.0], first, size=40, spp=4)
+    floor = shifted.summary["shape_floor"]
+    assert floor["heldout_rmse"] > 0.02 and floor["environment_rmse"] > 0.02
+    truth = read_ground_truth(capture).brdf["regions"]
+    good, _ = shifted.validate(with_params(estimate, lambda region: truth[region]))
+    bad, _ = shifted.validate(with_params(estimate, lambda region: {"roughness": 0.9 * truth[region]["roughness"] + 0.5,
+                                                                    "specular_reflectance": [0.2] * 3}))
+    assert good["heldout_rmse_true_shape"] < good["heldout_rmse"]
+    assert good["heldout_rmse_true_shape"] < bad["heldout_rmse_true_shape"]
+    assert good["environment_rmse_true_shape"] < bad["environment_rmse_true_shape"]
