@@ -88,17 +88,20 @@ def write_validation_picture(path: Path, truth: dict, images: dict, report: dict
     summary = report["validation"]
     names = summary["environments"] + [n for n in truth if n not in summary["environments"]]
     models = list(images)
-    fig, axes = plt.subplots(len(names), 1 + len(models), figsize=(2.2 * (1 + len(models)), 2.5 * len(names)),
+    fig, axes = plt.subplots(len(names), 1 + len(models), figsize=(2.6 * (1 + len(models)), 2.5 * len(names)),
                              squeeze=False)
     for row, name in zip(axes, names):
         scale = 0.8 / max(float(np.percentile(truth[name], 99.5)), 1e-12)
         _show(row[0], truth[name], f"truth ({summary['truth_model']}): {name}", scale)
         for ax, model in zip(row[1:], models):
-            error = report["models"][model]["validation"]["per_condition"][name]
-            _show(ax, images[model][name], f"{model}: {100 * error:.1f}%", scale)
+            validation = report["models"][model]["validation"]
+            error, on_truth = validation["per_condition"][name], validation.get(f"per_condition{TRUE_SHAPE}", {})
+            extra = f" ({100 * on_truth[name]:.1f}% on true shape)" if on_truth.get(name, error) != error else ""
+            _show(ax, images[model][name], f"{model}: {100 * error:.1f}%{extra}", scale)
     fig.suptitle(f"SIMULATED capture, truth {summary['truth_model']}: true and fitted faces in a novel pose "
                  f"(yaw {summary['novel_pose'][0]:g}°, pitch {summary['novel_pose'][1]:g}°) under lights and "
-                 "environments the fit never saw; relative RMSE on the face", fontsize=9)
+                 "environments the fit never saw; relative RMSE on the face (and of the fitted reflectance on the "
+                 "true shape)", fontsize=9)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=90, format="png")

@@ -57,7 +57,7 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
     picture = skimage.io.imread(tmp_path / "m" / "report_training.png")
     assert picture.shape[0] / picture.shape[1] == pytest.approx(2 / 4, rel=0.1)  # a row of four panels per model
     picture = skimage.io.imread(tmp_path / "m" / "report.png")  # truth and two fits, four conditions
-    assert picture.shape[0] / picture.shape[1] == pytest.approx(4 * 2.5 / (3 * 2.2), rel=0.1)
+    assert picture.shape[0] / picture.shape[1] == pytest.approx(4 * 2.5 / (3 * 2.6), rel=0.1)
     with pytest.raises(ValueError, match="unknown BRDF model"):
         measure(tmp_path / "x", capture_dir, models=("blinn",))
     with pytest.raises(ValueError, match="geometry must be"):
