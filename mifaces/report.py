@@ -99,7 +99,7 @@ def write_validation_picture(path: Path, truth: dict, images: dict, report: dict
             extra = f" ({100 * on_truth[name]:.1f}% on true shape)" if on_truth.get(name, error) != error else ""
             _show(ax, images[model][name], f"{model}: {100 * error:.1f}%{extra}", scale)
     fig.suptitle(f"SIMULATED capture, truth {summary['truth_model']}: true and fitted faces in a novel pose "
-                 f"(yaw {summary['novel_pose'][0]:g}°, pitch {summary['novel_pose'][1]:g}°) under lights and "
+                 f"(yaw {summary['novel_pose'][0]:g}°, pitch {summary['novel_pose'][1]:g}°)\nunder lights and "
                  "environments the fit never saw; relative RMSE on the face (and of the fitted reflectance on the "
                  "true shape)", fontsize=9)
     fig.tight_layout()
