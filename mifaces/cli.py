@@ -18,6 +18,7 @@ import mifaces
 from .brdf import BUILTIN_NAMES, MAX_LOBES, NAMES as BRDF_MODELS
 from .capture import load_capture
 from .capture.ground_truth import ground_truth_folder
+from .environment import SKY_SUN_ANGLES, TURBIDITY, sky_emitter
 from .files import MAX_IMAGE_PIXELS, check_result_target, check_writable, write_json
 from .gallery import render_gallery
 from .importers.diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
@@ -26,6 +27,7 @@ from .landmarks import NoFaceError, detect_landmarks
 from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
 from .reflectance import fit_brdf as fit_brdf_model, render_fitted
 from .reflectance.io import KIND as BRDF_KIND
+from .report import RANKED
 from .shape import fit_shape as fit_shapes
 from .shape.io import INDEX as SHAPES_INDEX
 from .status import CONVERGED
@@ -235,6 +237,9 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")
         errors = f"  (vs ground truth: {', '.join(f'{k} {100 * v:.1f}%' for k, v in truth.items())})" if truth else ""
         click.echo(f"{model:13s} skin: {', '.join(f'{k}={_short(v)}' for k, v in skin.items())}{errors}")
+    for key, order in report.get("ranking", {}).items():
+        click.echo(f"ranked by {RANKED[key]} (novel pose, relative image RMSE): " + " < ".join(
+            f"{m} {100 * report['models'][m]['validation'][key]:.1f}%" for m in order))
     click.echo(f"done in {report['seconds']['total']:.0f} s; report: {out_dir}/report.md and report.png")
 
 
@@ -259,25 +264,59 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
 @click.option("--intensity", default=None, type=float,
               help="The light's intensity (irradiance for a directional light; default: the measurement light's).")
 @click.option("--envmap", default=None, type=click.Path(exists=True, dir_okay=False),
-              help="Light by this equirectangular environment map (EXR) instead.")
+              help="Light by this equirectangular environment map (EXR) instead, placed in the camera's frame "
+                   "(its +y the camera's up, its centre column behind the camera).")
+@click.option("--sky", is_flag=True, help="Light by Mitsuba's sun and sky (sunsky) instead; the face looks south.")
+@click.option("--sun-direction", default=None, type=(float, float, float),
+              help="With --sky: x y z from the face towards the sun (world frame).")
+@click.option("--sun-angles", default=None, type=(float, float),
+              help="With --sky: the sun at azimuth and elevation (degrees) about the camera, as --light-angles "
+                   f"[default: {' '.join(f'{x:g}' for x in SKY_SUN_ANGLES)}].")
+@click.option("--sky-time", default=None,
+              help="With --sky: the local date and time that places the sun, ISO 8601 (2024-06-21T08:30).")
+@click.option("--place", default=None, type=(float, float, float),
+              help="With --sky-time: latitude (north), longitude (east) in degrees and the time zone in hours "
+                   "ahead of UTC [default: 0 0 0].")
+@click.option("--turbidity", default=None, type=click.FloatRange(*TURBIDITY),
+              help="With --sky: haze (2 arctic clear, 3 clear, 10 hazy) "
+                   f"[default: {default(sky_emitter, 'turbidity'):g}].")
 @click.option("--envmap-scale", default=default(render_fitted, "envmap_scale"), show_default=True, type=float,
-              help="Scale of the environment map.")
+              help="Scale of the environment map or the sky.")
 @click.option("--spp", default=default(render_fitted, "spp"), show_default=True, type=click.IntRange(1),
               help="Samples per pixel.")
 def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, geometry: str, yaw: float,
-           light_position, light_direction, light_angles, intensity: float | None, envmap: str | None,
-           envmap_scale: float, spp: int) -> None:
+           light_position, light_direction, light_angles, intensity: float | None, envmap: str | None, sky: bool,
+           sun_direction, sun_angles, sky_time: str | None, place, turbidity: float | None, envmap_scale: float,
+           spp: int) -> None:
     """Render the BRDF fitted in BRDF_DIR on a face of CAPTURE, in the capture's camera and units: novel poses,
-    point or directional lights, environment maps, or another person's face (BRDF transfer)."""
+    point or directional lights, environment maps, a sun and sky, or another person's face (BRDF transfer)."""
     if sum(x is not None for x in (light_position, light_direction, light_angles)) > 1:
         raise click.UsageError("give one of --light, --light-direction and --light-angles")
+    sky_options = {"--sun-direction": sun_direction, "--sun-angles": sun_angles, "--sky-time": sky_time,
+                   "--place": place, "--turbidity": turbidity}
+    if not sky and any(v is not None for v in sky_options.values()):
+        raise click.UsageError(f"{', '.join(k for k, v in sky_options.items() if v is not None)} need --sky")
+    if sky and envmap is not None:
+        raise click.UsageError("give --sky or --envmap, not both")
+    if sum(x is not None for x in (sun_direction, sun_angles, sky_time)) > 1:
+        raise click.UsageError("give one of --sun-direction, --sun-angles and --sky-time")
+    if place is not None and sky_time is None:
+        raise click.UsageError("--place needs --sky-time (the sun's position follows from both)")
     check_writable(Path(out_stem).parent)
     loaded = load_capture(capture)
     if light_angles is not None:
         light_direction = loaded.camera.direction(*light_angles)
+    environment = envmap
+    if sky:
+        if sun_angles is not None:
+            sun_direction = loaded.camera.direction(*sun_angles)
+        environment = sky_emitter(loaded.camera, sun_direction, sky_time, place,
+                                  default(sky_emitter, "turbidity") if turbidity is None else turbidity,
+                                  scale=envmap_scale)
+        envmap_scale = 1.0  # the sky carries it
     paths = render_fitted(brdf_dir, loaded, out_stem, measurement, geometry, yaw=yaw,
                           light_position=light_position, light_direction=light_direction,
-                          intensity=None if intensity is None else [intensity] * 3, envmap=envmap,
+                          intensity=None if intensity is None else [intensity] * 3, envmap=environment,
                           envmap_scale=envmap_scale, spp=spp)
     click.echo(f"wrote {paths['exr']} and {paths['png']}")
 

@@ -6,10 +6,18 @@ without one, a capture it simulates from the built-in face with ground
 truth), it fits the face model to every photograph (or takes the
 simulator's ground-truth shapes), fits each BRDF model per region, and
 writes a report: ``report.md`` and ``report.json`` with every region's
-parameters, losses, sample counts and times (and the errors against the
-ground truth where the capture has one), and ``report.png``, per model the
-first photograph, the fitted face rendered in its place, their difference,
-and the fitted face under a novel light.
+parameters, losses, sample counts and times, each model's relative RMSE on
+the first photograph (``training_rmse``: a photograph the fit saw), and
+``report.png``, per model the first photograph, the fitted face rendered in
+its place, their difference, and the fitted face under a novel light.
+
+For a simulated capture (with ground truth) the report also separates the
+models by what the fit never saw (:mod:`mifaces.validation`):
+``models.<model>.validation`` holds ``brdf_rmse`` per region,
+``albedo_rmse``, ``heldout_rmse`` and ``environment_rmse``, ``ranking``
+orders the models by the last two, ``report.png`` shows the true face and
+the fits side by side in a novel pose under the held-out lights and the
+environments, and the training panels move to ``report_training.png``.
 """
 
 from __future__ import annotations
@@ -21,15 +29,16 @@ from pathlib import Path
 import numpy as np
 
 from .brdf import NAMES
-from .capture import Capture, load_capture
+from .capture import Capture, load_capture, read_ground_truth
 from .files import write_json
 from .geometry import load_geometry
 from .model import load_model
 from .reflectance import capture_samples, fit_brdf, write_estimate
 from .render import FaceScene
-from .report import ground_truth_errors, write_markdown, write_picture
+from .report import ground_truth_errors, ranking, write_markdown, write_picture, write_validation_picture
 from .shape import fit_shape, shapes_in_world
 from .studio import simulate
+from .validation import Validator, relative_rmse
 
 #: Models ``measure`` fits unless told otherwise.
 MODELS = NAMES
@@ -97,7 +106,8 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     ----------
     out : path
         Output folder: ``capture/`` (when simulated), ``shapes/``,
-        ``brdf/<model>/``, ``report.{md,json,png}``.
+        ``brdf/<model>/``, ``report.{md,json,png}`` (and
+        ``report_training.png`` for a capture with ground truth).
     capture : path or Capture, optional
         A capture folder; without one, the default capture of
         :func:`mifaces.studio.simulate` (built-in face, Cook-Torrance
@@ -150,17 +160,31 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     first = next(m for m in capture.measurements if m.name in shapes)
     novel = novel_light(capture, np.asarray(shapes[first.name]).mean(axis=0))
     scene = FaceScene(face, shapes[first.name])  # the first photograph's face, built once for every model
-    panels = []
+    validator = None
+    if read_ground_truth(capture) is not None:
+        t = time.perf_counter()
+        validator = Validator(capture, face, shapes[first.name], first.name)
+        timings["validation_truth"] = time.perf_counter() - t
+        report["validation"] = validator.summary
+    panels, validation_images = [], {}
     for model in models:
         entry, panel = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, resolution, spp,
                                   timings, progress, refine, normals)
+        if validator is not None:
+            t = time.perf_counter()
+            entry["validation"], validation_images[model] = validator.validate(panel[-1])
+            timings[f"validation_{model}"] = time.perf_counter() - t
         report["models"][model] = entry
-        panels.append(panel)
+        panels.append(panel[:-1])
     timings["total"] = time.perf_counter() - t0
     report["seconds"] = timings
     report["novel_light"] = {key: np.asarray(value).tolist() for key, value in novel.items()}
+    if validator is not None:
+        report["ranking"] = ranking(report["models"])
     write_json(out / "report.json", report)
-    write_picture(out / "report.png", panels, first.name)
+    if validator is not None:
+        write_validation_picture(out / "report.png", validator.truth, validation_images, report)
+    write_picture(out / ("report.png" if validator is None else "report_training.png"), panels, first.name)
     write_markdown(out / "report.md", report, first.name)
     return report
 
@@ -201,7 +225,8 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
                novel, resolution: int, spp: int, timings: dict, progress: bool, refine: bool = False,
                normals: bool = False):
     """Fit one BRDF model, write it, render it in the first photograph's place
-    and under the novel light; the report's entry and picture row."""
+    and under the novel light; the report's entry, and its picture row
+    followed by the estimate."""
     t = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -221,6 +246,5 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
     relit = scene.render(brdf, albedo, capture.camera, spp=spp, normals=normals, **novel)
     photo = first.image.pixels
     face_pixels = photo.mean(axis=2) > 0.02 * photo.max()
-    entry["image_relative_rmse"] = float(np.sqrt(np.mean((rendered[face_pixels] - photo[face_pixels]) ** 2))
-                                         / np.mean(photo[face_pixels]))
-    return entry, (model, photo, rendered, relit)
+    entry["training_rmse"] = relative_rmse(rendered, photo, face_pixels)
+    return entry, (model, photo, rendered, relit, estimate)

@@ -26,6 +26,7 @@ import numpy as np
 from . import brdf as brdf_models
 from .brdf.builtin import region_bsdf as builtin_region_bsdf
 from .brdf.model import check_numbers
+from .environment import environment_emitter
 from .files import atomic_path, check_render_size, write_exr, write_png
 from .progress import progress
 from .model.mesh import mitsuba_mesh
@@ -226,10 +227,12 @@ class FaceScene:
             ``light_direction`` instead, ``intensity`` is the directional
             light's irradiance (pixel units: a white Lambertian surface facing
             it shows intensity/π).
-        envmap : path or (H, W, 3) array, optional
+        envmap : path, (H, W, 3) array or dict, optional
             An equirectangular environment map (linear RGB) instead of, or
-            besides, the point light, scaled by ``envmap_scale``. A scene
-            holds only the emitters it is given.
+            besides, the point light, scaled by ``envmap_scale`` and placed in
+            the camera's frame (:func:`mifaces.environment.environment_emitter`);
+            or an emitter dict such as :func:`mifaces.environment.sky_emitter`'s,
+            used as it is. A scene holds only the emitters it is given.
         spp, max_depth : int
             Samples per pixel and the path tracer's depth (shadows and
             interreflection).
@@ -284,15 +287,15 @@ class FaceScene:
             # Mitsuba's directional emitter takes the direction light travels in
             scene["light"] = {"type": "directional", "direction": [float(-x / norm) for x in towards],
                               "irradiance": rgb(intensity)}
-        if envmap is not None:
-            environment = {"type": "envmap", "scale": float(envmap_scale)}
-            if isinstance(envmap, (str, os.PathLike)):
-                if not Path(envmap).is_file():
-                    raise FileNotFoundError(f"environment map not found: {envmap}")
-                environment["filename"] = str(envmap)
-            else:
-                environment["bitmap"] = mi.Bitmap(np.ascontiguousarray(envmap, np.float32))
-            scene["environment"] = environment
+        if isinstance(envmap, dict):  # an emitter, e.g. mifaces.environment.sky_emitter's
+            if envmap_scale != 1.0:
+                raise ValueError("an environment given as an emitter carries its own scale: leave envmap_scale at 1")
+            scene["environment"] = envmap
+        elif envmap is not None:
+            if isinstance(envmap, (str, os.PathLike)) and not Path(envmap).is_file():
+                raise FileNotFoundError(f"environment map not found: {envmap}")
+            source = str(envmap) if isinstance(envmap, (str, os.PathLike)) else np.asarray(envmap, np.float32)
+            scene["environment"] = environment_emitter(source, camera, envmap_scale)
         return scene
 
     def scene(self, brdf: dict, albedo: np.ndarray, camera, light_position=None, intensity=None, envmap=None,

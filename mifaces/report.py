@@ -11,9 +11,10 @@ from .capture import read_ground_truth
 from .files import atomic_path, atomic_write
 from .model.regions import REGIONS
 from .status import PRIOR
+from .validation import TRUE_SHAPE
 
 
-def ground_truth_errors(estimate, capture) -> dict | None:
+def ground_truth_errors(estimate, capture, ground_truth=None) -> dict | None:
     """How far a fit is from a simulated capture's ground truth (``ground_truth/``).
 
     Returns None for a capture without ground truth, else ``{"truth_model",
@@ -23,10 +24,11 @@ def ground_truth_errors(estimate, capture) -> dict | None:
     published value, is left out); the albedo errors, RMSE and mean error of
     the refined map against the truth's (downsampled to the fit's
     resolution), on texels with samples and on all face texels, always.
+    ``ground_truth`` (the capture's, already read) saves reading it again.
     """
     from skimage.transform import resize
 
-    ground_truth = read_ground_truth(capture)
+    ground_truth = read_ground_truth(capture) if ground_truth is None else ground_truth
     if ground_truth is None:
         return None
     truth = ground_truth.brdf
@@ -52,17 +54,67 @@ def ground_truth_errors(estimate, capture) -> dict | None:
 
 
 
+#: The validation's image errors the report ranks the models by, and their labels: the fitted faces, and
+#: the fitted reflectance on the true shape (where the validation has it).
+RANKED = {"heldout_rmse": "held-out lights", "environment_rmse": "environments",
+          f"heldout_rmse{TRUE_SHAPE}": "held-out lights, on the true shape",
+          f"environment_rmse{TRUE_SHAPE}": "environments, on the true shape"}
+
+
+def ranking(models: dict) -> dict:
+    """Measure -> model names, best (smallest error) first, for each of
+    :data:`RANKED` the validations hold; ``models`` is the report's
+    ``models`` with their ``validation``."""
+    return {key: sorted(models, key=lambda m: models[m]["validation"][key]) for key in RANKED
+            if all(key in entry["validation"] for entry in models.values())}
+
+
+def _show(ax, image, title, scale) -> None:
+    ax.imshow(np.clip(np.clip(image * scale, 0, 1) ** (1 / 2.2), 0, 1))
+    ax.set_title(title, fontsize=8)
+    ax.axis("off")
+
+
+def write_validation_picture(path: Path, truth: dict, images: dict, report: dict) -> None:
+    """``report.png`` of a simulated capture: per condition (the environments,
+    then the held-out lights) a row of the true face and each fitted face in
+    the novel pose, each fit titled with its relative image error. Labelled
+    simulated, with the truth's BRDF family."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    summary = report["validation"]
+    names = summary["environments"] + [n for n in truth if n not in summary["environments"]]
+    models = list(images)
+    fig, axes = plt.subplots(len(names), 1 + len(models), figsize=(2.6 * (1 + len(models)), 2.5 * len(names)),
+                             squeeze=False)
+    for row, name in zip(axes, names):
+        scale = 0.8 / max(float(np.percentile(truth[name], 99.5)), 1e-12)
+        _show(row[0], truth[name], f"truth ({summary['truth_model']}): {name}", scale)
+        for ax, model in zip(row[1:], models):
+            validation = report["models"][model]["validation"]
+            error, on_truth = validation["per_condition"][name], validation.get(f"per_condition{TRUE_SHAPE}", {})
+            extra = f" ({100 * on_truth[name]:.1f}% on true shape)" if on_truth.get(name, error) != error else ""
+            _show(ax, images[model][name], f"{model}: {100 * error:.1f}%{extra}", scale)
+    fig.suptitle(f"SIMULATED capture, truth {summary['truth_model']}: true and fitted faces in a novel pose "
+                 f"(yaw {summary['novel_pose'][0]:g}°, pitch {summary['novel_pose'][1]:g}°)\nunder lights and "
+                 "environments the fit never saw; relative RMSE on the face (and of the fitted reflectance on the "
+                 "true shape)", fontsize=9)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
+    plt.close(fig)
+
+
 def write_picture(path: Path, panels, photo_name: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    def show(ax, image, title, scale):
-        ax.imshow(np.clip((np.clip(image * scale, 0, 1)) ** (1 / 2.2), 0, 1))
-        ax.set_title(title, fontsize=9)
-        ax.axis("off")
-
+    show = _show
     fig, axes = plt.subplots(len(panels), 4, figsize=(12, 3 * len(panels)), squeeze=False)
     for row, (model, photo, rendered, relit) in zip(axes, panels):
         scale = 0.8 / max(np.percentile(photo, 99.5), 1e-12)
@@ -91,16 +143,62 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
             err_text = ", ".join(f"{k} {100 * v:.1f}%" for k, v in err.items()) if err else ""
             lines.append(f"| {model} | {region} | {fit['samples']} | {fit['status']} | {text} | "
                          f"{_fmt(fit['loss'])} | {err_text} |")
-    lines += ["", "| model | image RMSE (first photograph, relative) | albedo RMSE vs ground truth | fit time (s) |",
+    lines += ["", "| model | training RMSE (first photograph, relative) | albedo RMSE vs ground truth | fit time (s) |",
               "|---|---|---|---|"]
     for model, entry in report["models"].items():
         truth = entry.get("ground_truth") or {}
         albedo = f"{truth['albedo']['rmse_sampled']:.4f}" if "albedo" in truth else ""
-        lines.append(f"| {model} | {100 * entry['image_relative_rmse']:.2f}% | {albedo} | "
+        lines.append(f"| {model} | {100 * entry['training_rmse']:.2f}% | {albedo} | "
                      f"{report['seconds'][f'fit_brdf_{model}']:.1f} |")
+    if "validation" in report:
+        lines += validation_markdown(report)
     lines += ["", "Times (s): " + ", ".join(f"{k} {v:.1f}" for k, v in report["seconds"].items()), ""]
     with atomic_write(path, "w") as f:
         f.write("\n".join(lines))
+
+
+def validation_markdown(report: dict) -> list[str]:
+    """The report's lines on the validation (:mod:`mifaces.validation`): what
+    was compared, the table of the four measures, the rankings."""
+    summary = report["validation"]
+    lights = ", ".join(f"{light['angle_to_capture']:.0f}°" for light in summary["held_out_lights"])
+    floor = summary["shape_floor"]
+    floor_text = ("The fitted face model's texture space is not the truth's: no shape floor." if floor is None else
+                  f"Shape floor (the true BSDF and albedo on the fitted shape): held-out "
+                  f"{100 * floor['heldout_rmse']:.1f}%, environments {100 * floor['environment_rmse']:.1f}%"
+                  + ("; the fitted reflectance on the true shape shows the reflectance's own error." if
+                     floor["heldout_rmse"] > 0 else "."))
+    lines = ["", "## Validation against the ground truth (simulated capture)", "",
+             f"Truth: `{summary['truth_model']}`. The true face (true shape, BSDF and albedo) and each fitted face "
+             f"(fitted shape, BRDF and albedo) are rendered in a novel pose (yaw {summary['novel_pose'][0]:g}°, "
+             f"pitch {summary['novel_pose'][1]:g}°; {summary['novel_pose_angle_to_capture']:.0f}° from every "
+             f"photographed pose) under {len(summary['held_out_lights'])} held-out point lights ({lights} from the "
+             f"nearest capture light) and the environments {', '.join(summary['environments'])}, "
+             f"{summary['render']['width']}x{summary['render']['height']} px at {summary['render']['spp']} spp, and "
+             f"compared on the face mask, rendered with the same random numbers. {floor_text}", "",
+             "| model | BRDF RMSE (skin, relative) | BRDF RMSE (all regions) | albedo RMSE | held-out-light RMSE | "
+             "environment RMSE | same, fitted reflectance on the true shape | training RMSE |",
+             "|---|---|---|---|---|---|---|---|"]
+    for model in report["ranking"]["heldout_rmse"]:
+        entry = report["models"][model]
+        v = entry["validation"]
+        regions = ", ".join(f"{k} {100 * e:.0f}%" for k, e in v["brdf_rmse"].items() if e is not None)
+        skin = f"{100 * v['brdf_rmse']['skin']:.1f}%" if v["brdf_rmse"].get("skin") is not None else "n/a"
+        true_shape = (f"{100 * v[f'heldout_rmse{TRUE_SHAPE}']:.2f}%, {100 * v[f'environment_rmse{TRUE_SHAPE}']:.2f}%"
+                      if f"heldout_rmse{TRUE_SHAPE}" in v else "n/a")
+        lines.append(f"| {model} | {skin} | {regions} | {v['albedo_rmse']:.4f} | {100 * v['heldout_rmse']:.2f}% | "
+                     f"{100 * v['environment_rmse']:.2f}% | {true_shape} | {100 * entry['training_rmse']:.2f}% |")
+    lines.append("")
+    for key, order in report["ranking"].items():
+        label = RANKED[key]
+        errors = [report["models"][m]["validation"][key] for m in order]
+        text = " < ".join(f"{m} {100 * e:.2f}%" for m, e in zip(order, errors))
+        margin = (f"; {order[0]} wins by {100 * (errors[1] - errors[0]):.2f} points "
+                  f"({100 * (errors[1] - errors[0]) / errors[1]:.0f}% less error than {order[1]})"
+                  if len(order) > 1 else "")
+        lines.append(f"- Ranked by {label}: {text}{margin}.")
+    lines += ["", "![training photograph](report_training.png)"]
+    return lines
 
 
 def _fmt(value) -> str:

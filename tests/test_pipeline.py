@@ -22,7 +22,8 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
     mifaces.set_variant("llvm_ad_rgb")
     report = measure(tmp_path / "m", capture_dir, models=("cooktorrance", "phong"), geometry="ground-truth",
                      resolution=64, spp=4, progress=False)
-    for name in ("report.json", "report.md", "report.png", "brdf/cooktorrance/brdf.json", "brdf/phong/scene.xml"):
+    for name in ("report.json", "report.md", "report.png", "report_training.png", "brdf/cooktorrance/brdf.json",
+                 "brdf/phong/scene.xml"):
         assert (tmp_path / "m" / name).is_file(), name
     saved = json.loads((tmp_path / "m" / "report.json").read_text())
     assert saved == json.loads(json.dumps(report))  # the file is the report returned
@@ -32,7 +33,17 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
         assert {fit["status"] for fit in entry["fit"].values()} <= set(BRDF_STATUSES)
         assert entry["fit"]["skin"]["samples"] > 1000 and entry["fit"]["skin"]["status"] != "prior"
         # the fitted face rendered under the photograph's light reproduces it, not just anything
-        assert 0 < entry["image_relative_rmse"] < 0.5
+        assert 0 < entry["training_rmse"] < 0.5
+        # a simulated capture: the measures that separate the models, against the ground truth
+        validation = entry["validation"]
+        assert set(validation["brdf_rmse"]) >= {"skin"} and validation["heldout_rmse"] > 0
+        assert all(np.isfinite(validation[k]) for k in ("albedo_rmse", "heldout_rmse", "environment_rmse"))
+    assert saved["validation"]["truth_model"] == "cooktorrance" and saved["validation"]["environments"] == ["studio",
+                                                                                                            "sky"]
+    for key in ("heldout_rmse", "environment_rmse"):
+        order = saved["ranking"][key]
+        assert sorted(order) == ["cooktorrance", "phong"]
+        assert saved["models"][order[0]]["validation"][key] <= saved["models"][order[1]]["validation"][key]
     skin = saved["models"]["cooktorrance"]["ground_truth"]["regions"]["skin"]
     assert skin["roughness"] < 0.3  # a 2-photograph, 64² fit: in the right range, not exact
     assert saved["models"]["phong"]["ground_truth"]["regions"] == {}  # another family: no parameter errors
@@ -42,8 +53,11 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
     assert stages["total"] >= sum(v for k, v in stages.items() if k != "total") * 0.99
     markdown = (tmp_path / "m" / "report.md").read_text()
     assert "| cooktorrance | skin |" in markdown and "| phong | skin |" in markdown
-    picture = skimage.io.imread(tmp_path / "m" / "report.png")
+    assert "- Ranked by held-out lights:" in markdown and "- Ranked by environments:" in markdown
+    picture = skimage.io.imread(tmp_path / "m" / "report_training.png")
     assert picture.shape[0] / picture.shape[1] == pytest.approx(2 / 4, rel=0.1)  # a row of four panels per model
+    picture = skimage.io.imread(tmp_path / "m" / "report.png")  # truth and two fits, four conditions
+    assert picture.shape[0] / picture.shape[1] == pytest.approx(4 * 2.5 / (3 * 2.6), rel=0.1)
     with pytest.raises(ValueError, match="unknown BRDF model"):
         measure(tmp_path / "x", capture_dir, models=("blinn",))
     with pytest.raises(ValueError, match="geometry must be"):
@@ -64,6 +78,7 @@ def test_cli_measure_prints_skin_and_errors(capture_dir, tmp_path):
     assert "skin:" in line and "alpha=" in line and "specular_reflectance=[" in line
     assert "vs ground truth" not in line  # the truth is Cook-Torrance: no parameter errors for Ward
     assert f"report: {out}/report.md" in result.output
+    assert "ranked by held-out lights (novel pose, relative image RMSE): ward " in result.output
     assert json.loads((out / "report.json").read_text())["models"].keys() == {"ward"}
 
 

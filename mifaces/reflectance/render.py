@@ -57,7 +57,8 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     the measurement's light unless ``light_position`` (a point light, world,
     mm), ``light_direction`` (a directional light, world frame, towards the
     light; :meth:`mifaces.capture.Camera.direction` turns an azimuth and
-    elevation into one) or an ``envmap`` is given; its intensity is the
+    elevation into one) or an ``envmap`` is given (an equirectangular map,
+    or an emitter dict such as :func:`mifaces.environment.sky_emitter`'s); its intensity is the
     measurement light's unless ``intensity`` is given. Rendered in the
     capture's camera and units, the image compares pixel for pixel with a
     photograph taken under that light.

@@ -1,0 +1,184 @@
+"""Environments that light a face for novel views: a studio generated in
+code, and Mitsuba's ``sunsky`` daylight; both placed in the camera's frame.
+
+Frames. A face scene is in its capture's world frame (mm); its camera says
+where "up" and "towards the camera" are (:func:`camera_frame`): up is the
+camera's −y axis (OpenCV: y points down in the image), "towards the camera"
+its −z axis. Every environment is placed in that frame, so it lights a face
+the same way whatever the capture's world frame is.
+
+- An equirectangular map (Mitsuba's ``envmap``: u = atan2(x, −z) / 2π,
+  v = acos(y) / π in its local frame, +y up) is turned so that its local +y
+  is the camera's up and its local +z points towards the camera: the map's
+  centre column (u = ½) lies behind the camera, its left and right edges
+  behind the face.
+- Mitsuba's ``sunsky`` (Hošek & Wilkie 2012, 2013: sky dome and sun) has its
+  zenith along local +z. Given a time and place, Mitsuba puts the sun's
+  south at local +x and east at local −y; the sky is turned so that south
+  lies towards the camera (the face looks south) with east on the image's
+  right, as it is for a camera looking north. A sun direction is given in
+  the world frame instead. Its radiance is in physical units
+  (W m⁻² sr⁻¹ nm⁻¹): a face in clear-sky daylight reads about 0.1–0.5 with
+  scale 1, like the simulated photographs.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import mitsuba as mi
+import numpy as np
+
+from .brdf.model import check_numbers
+from .capture.camera import camera_frame_direction
+
+#: The studio's soft boxes about the camera: name, azimuth and elevation
+#: (degrees, as :meth:`mifaces.capture.Camera.direction`: 0 0 from the camera,
+#: positive azimuth towards the image's left), angular radius (degrees) and
+#: radiance (linear, white).
+STUDIO_PANELS = (("key", 40.0, 30.0, 22.0, 4.0), ("fill", -50.0, 10.0, 28.0, 0.8),
+                 ("rim", -150.0, 40.0, 14.0, 2.0), ("top", 0.0, 80.0, 18.0, 0.8))
+#: Radiance of the studio's walls: above and below the horizon (a dim room).
+STUDIO_AMBIENT = (0.06, 0.02)
+#: Default height of the generated studio map (pixels; the width is twice this).
+STUDIO_HEIGHT = 128
+#: Range of the sky's turbidity that Mitsuba's sun and sky model covers.
+TURBIDITY = (1.0, 10.0)
+#: Environments the validation renders: the studio and a sky with the sun
+#: at these angles about the camera (azimuth, elevation; :meth:`Camera.direction`).
+SKY_SUN_ANGLES = (-35.0, 40.0)
+
+
+def camera_frame(camera) -> np.ndarray:
+    """The camera's frame in the world (3x3, columns): its right (+x of the
+    image), its up, and the direction from the scene towards the camera."""
+    rotation = np.asarray(camera.rotation, np.float64)
+    return np.stack([rotation[0], -rotation[1], -rotation[2]], axis=1)
+
+
+def _transform(columns: np.ndarray) -> mi.ScalarTransform4f:
+    matrix = np.eye(4)
+    matrix[:3, :3] = columns
+    return mi.ScalarTransform4f(matrix.tolist())
+
+
+def studio_environment(height: int = STUDIO_HEIGHT) -> np.ndarray:
+    """A small photo studio as an equirectangular map (``height`` x 2 ``height``
+    x 3, float32 linear radiance), generated here (no download): the
+    :data:`STUDIO_PANELS` soft boxes (discs of smooth edges, a quarter of their
+    radius wide) over dim walls (:data:`STUDIO_AMBIENT`, brighter above the
+    horizon). Directions are those of the map's local frame (+y up, +z towards
+    the camera once placed by :func:`environment_emitter`)."""
+    height = int(check_numbers("studio map height", height, minimum=8))
+    width = 2 * height
+    u = (np.arange(width) + 0.5) / width
+    v = (np.arange(height) + 0.5) / height
+    phi, theta = np.meshgrid(2 * np.pi * u, np.pi * v)
+    d = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta), -np.sin(theta) * np.cos(phi)], axis=-1)
+    above, below = STUDIO_AMBIENT
+    smooth = np.clip(d[..., 1] * 4 + 0.5, 0, 1)  # a soft horizon
+    image = (below + (above - below) * smooth)[..., None] * np.ones(3)
+    for _, azimuth, elevation, radius, radiance in STUDIO_PANELS:
+        centre = camera_frame_direction(azimuth, elevation) * [1, -1, -1]  # OpenCV axes to the map's
+        angle = np.degrees(np.arccos(np.clip(d @ centre, -1, 1)))
+        edge = 0.25 * radius
+        weight = np.clip((radius + edge / 2 - angle) / edge, 0, 1)
+        image += radiance * weight[..., None]
+    return image.astype(np.float32)
+
+
+def environment_emitter(envmap, camera, scale: float = 1.0) -> dict:
+    """A Mitsuba ``envmap`` emitter dict of an equirectangular map (a path or
+    an (H, W, 3) array, linear RGB) placed in ``camera``'s frame (see the
+    module docstring), its radiance times ``scale``."""
+    check_numbers("environment map scale", scale, minimum=0.0)
+    emitter = {"type": "envmap", "scale": float(scale), "to_world": _transform(camera_frame(camera))}
+    if isinstance(envmap, np.ndarray):
+        if envmap.ndim != 3 or envmap.shape[2] != 3 or not np.all(np.isfinite(envmap)) or envmap.min() < 0:
+            raise ValueError(f"an environment map must be a finite, non-negative (H, W, 3) array, got shape "
+                             f"{envmap.shape}")
+        emitter["bitmap"] = mi.Bitmap(np.ascontiguousarray(envmap, np.float32))
+    else:
+        emitter["filename"] = str(envmap)
+    return emitter
+
+
+def sky_emitter(camera, sun_direction=None, time: str | _dt.datetime | None = None, place=None,
+                turbidity: float = 3.0, ground_albedo: float = 0.3, scale: float = 1.0) -> dict:
+    """Mitsuba's ``sunsky`` emitter dict (Hošek–Wilkie sun and sky) placed in
+    ``camera``'s frame (module docstring).
+
+    Parameters
+    ----------
+    camera : mifaces.capture.Camera
+    sun_direction : (3,) array, optional
+        World-frame direction from the face towards the sun; it must be above
+        the camera's horizon. Default, without ``time``: the sun at
+        :data:`SKY_SUN_ANGLES` about the camera (:meth:`Camera.direction`).
+    time : str or datetime, optional
+        Local time, ISO 8601 (``'2024-06-21T08:30'``), instead of a
+        direction; with ``place``.
+    place : (latitude, longitude, timezone), optional
+        Degrees north, degrees east, hours ahead of UTC. Default (0, 0, 0).
+    turbidity : float
+        Haze, within :data:`TURBIDITY` (2: arctic clear, 3: clear, 10: hazy).
+    ground_albedo : float
+        Reflectance of the ground under the sky, in [0, 1].
+    scale : float
+        Factor on the sun's and the sky's radiance.
+    """
+    check_numbers("turbidity", turbidity)
+    if not TURBIDITY[0] <= float(turbidity) <= TURBIDITY[1]:
+        raise ValueError(f"turbidity must lie within {list(TURBIDITY)} (Mitsuba's sun and sky model), "
+                         f"got {turbidity}")
+    check_numbers("ground albedo", ground_albedo, minimum=0.0)
+    if float(ground_albedo) > 1:
+        raise ValueError(f"ground albedo must lie within [0, 1], got {ground_albedo}")
+    check_numbers("sky scale", scale, minimum=0.0)
+    frame = camera_frame(camera)
+    right, up, towards = frame.T
+    emitter = {"type": "sunsky", "turbidity": float(turbidity), "albedo": float(ground_albedo),
+               "sun_scale": float(scale), "sky_scale": float(scale),
+               # local x (south) towards the camera, local -y (east) to the image's right, local z up: a mirror
+               "to_world": _transform(np.stack([towards, -right, up], axis=1))}
+    if time is not None:
+        if sun_direction is not None:
+            raise ValueError("give the sun's direction or a time and place, not both")
+        emitter.update(_time_and_place(time, place))
+        return emitter
+    if place is not None:
+        raise ValueError("a place needs a time (the sun's position follows from both)")
+    if sun_direction is None:
+        sun_direction = camera.direction(*SKY_SUN_ANGLES)
+    sun = check_numbers("sun direction", sun_direction, 3)
+    norm = float(np.linalg.norm(sun))
+    if norm == 0:
+        raise ValueError("the sun direction must be a non-zero 3-vector")
+    sun = np.asarray(sun, np.float64) / norm
+    if sun @ up <= 0:
+        raise ValueError(f"the sun must be above the horizon (the camera's up is {np.round(up, 3).tolist()}), "
+                         f"got direction {np.round(sun, 3).tolist()}")
+    emitter["sun_direction"] = [float(x) for x in sun]
+    return emitter
+
+
+def _time_and_place(time, place) -> dict:
+    """The ``sunsky`` properties of a local time and a place."""
+    if isinstance(time, str):
+        try:
+            time = _dt.datetime.fromisoformat(time)
+        except ValueError:
+            raise ValueError(f"sky time {time!r} is not an ISO 8601 date and time such as 2024-06-21T08:30") from None
+    if not isinstance(time, _dt.datetime):
+        raise ValueError(f"sky time must be a datetime or an ISO 8601 string, got {time!r}")
+    latitude, longitude, timezone = check_numbers("place (latitude, longitude, timezone)",
+                                                  (0.0, 0.0, 0.0) if place is None else place, 3)
+    if abs(latitude) > 90 or abs(longitude) > 180 or abs(timezone) > 14:
+        raise ValueError(f"place must be latitude in [-90, 90], longitude in [-180, 180] degrees and a timezone "
+                         f"within ±14 h, got {list(place)}")
+    return {"latitude": float(latitude), "longitude": float(longitude), "timezone": float(timezone),
+            "year": time.year, "month": time.month, "day": time.day, "hour": float(time.hour),
+            "minute": float(time.minute), "second": float(time.second)}
+
+
+__all__ = ["STUDIO_PANELS", "STUDIO_AMBIENT", "STUDIO_HEIGHT", "TURBIDITY", "SKY_SUN_ANGLES", "camera_frame",
+           "studio_environment", "environment_emitter", "sky_emitter"]

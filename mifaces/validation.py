@@ -1,0 +1,413 @@
+"""Validation of fitted BRDFs against a simulated capture's ground truth, in
+measures that separate the models: BRDF error over the hemisphere, albedo
+error, and image error of the face in a novel pose under lights and
+environments the fit never saw.
+
+Four numbers per fitted model (:meth:`Validator.validate`):
+
+``brdf_rmse`` (per region)
+    The BRDF error over the hemisphere, for any truth that
+    :func:`mifaces.render.region_bsdf` builds (the four plugins, Mitsuba's
+    built-ins, spatially varying maps). Truth and fit are loaded as Mitsuba
+    BSDFs and evaluated by their ``eval``, which returns F = f(ωi, ωo) cos θo,
+    on every pair of a fixed set of directions (:func:`hemisphere_grid`:
+    :data:`GRID` ² directions, stratified and cosine-weighted, so that a
+    sample mean is a cosine-weighted hemispherical mean) at
+    :data:`UV_SAMPLES` texels of the region (where the truth varies over
+    the face). The diffuse reflectance is the region's mean albedo, the
+    truth's for the truth and the fit's for the fit, so that a wrong albedo
+    level counts but texel noise does not::
+
+        brdf_rmse = sqrt( Σ (F_fit − F_true)² / Σ F_true² )
+
+    summed over direction pairs, texels and RGB: the RMSE of f cos θo
+    relative to the truth's RMS (0 for a perfect fit, 1 for a fit that
+    returns nothing; None for a truth whose ``eval`` is zero, a delta BSDF).
+``albedo_rmse``
+    RMSE of the fitted albedo map against the truth's (resized to the fit's
+    resolution), on texels with samples (linear reflectance units;
+    :func:`mifaces.report.ground_truth_errors`).
+``heldout_rmse``
+    Image error under :data:`HELD_OUT_LIGHTS` point lights none of the
+    photographs used (:func:`held_out_lights`), in a novel pose
+    (:data:`NOVEL_POSE`, :func:`novel_rotation`): the true face (true shape
+    from the ground truth, true BSDF, true albedo) and the fitted face
+    (fitted shape, fitted BRDF, fitted albedo) rendered by the same camera,
+    cropped to the face (:func:`face_camera`, :data:`RENDER_SIZE`,
+    :data:`SPP`); per image the relative RMSE on the face mask (pixels
+    either face covers)::
+
+        e = sqrt(mean (I_fit − I_true)²) / mean I_true
+
+    and over the lights the root mean square of the e's.
+``environment_rmse``
+    The same under the generated studio and a sunsky
+    (:mod:`mifaces.environment`).
+
+Renders are Monte Carlo estimates. The truth and every fit are rendered
+with the same seed (common random numbers: the same camera rays and light
+samples), so that the noise of the two images largely cancels in their
+difference and what remains is the difference of the faces. The error a
+perfect reflectance fit would still show is that of the fitted *shape*: the
+true BSDF and albedo rendered on the fitted face (``shape_floor`` of
+:attr:`Validator.summary`; 0 where the fit used the true shape, None where
+the fitted face model's texture space is not the truth's). With fitted
+shapes that floor dominates the image errors (pixels of a face a few mm
+off), so each fit is also rendered on the true shape
+(``heldout_rmse_true_shape``, ``environment_rmse_true_shape``): the error
+of its reflectance alone, which separates the models.
+"""
+
+from __future__ import annotations
+
+import time
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+from scipy.spatial.transform import Rotation
+from skimage.transform import resize
+
+from .capture import Camera, read_ground_truth
+from .environment import SKY_SUN_ANGLES, camera_frame, sky_emitter, studio_environment
+from .geometry import load_geometry
+from .model.regions import REGIONS
+from .render import FaceScene, mitsuba_sensor, region_bsdf, rgb
+
+#: Directions per axis of the hemisphere grid: GRID² directions, GRID⁴ (ωi, ωo) pairs.
+GRID = 12
+#: Texels per region at which the BRDFs are compared.
+UV_SAMPLES = 8
+#: The novel pose: yaw about the camera's up axis, then pitch about its right
+#: axis (degrees, through the true face's centroid; positive yaw turns the face
+#: towards the image's left, positive pitch tips the top of the head towards the camera).
+NOVEL_POSE = (35.0, 15.0)
+#: Number of held-out point lights.
+HELD_OUT_LIGHTS = 2
+#: Longer side of the face crop rendered (pixels), and samples per pixel.
+RENDER_SIZE = 112
+SPP = 16
+#: Candidate held-out light directions about the camera (azimuth, elevation in
+#: degrees, :meth:`mifaces.capture.Camera.direction`), of which those farthest
+#: from every capture light are taken.
+#: They stay within 45° of the camera's axis sideways and between 15° below and 40° above it, lighting the front
+#: of the face as a photographer would.
+LIGHT_CANDIDATES = tuple((a, e) for a in (-45.0, -22.5, 0.0, 22.5, 45.0) for e in (-15.0, 5.0, 25.0, 40.0))
+#: Seed of every validation render (common random numbers, module docstring).
+SEED = 101
+#: Suffix of the image errors of the fitted reflectance on the true shape.
+TRUE_SHAPE = "_true_shape"
+
+
+# --------------------------------------------------------------------------------------------
+# BRDF error over the hemisphere
+# --------------------------------------------------------------------------------------------
+def hemisphere_grid(n: int = GRID) -> np.ndarray:
+    """n² unit directions (local frame, z the normal), one per cell of an n x n
+    grid of the unit square mapped by Mitsuba's cosine-weighted hemisphere
+    warp (Shirley–Chiu concentric map): stratified, each with the same
+    share of the projected solid angle."""
+    u = (np.arange(n) + 0.5) / n
+    x, y = np.meshgrid(u, u)
+    d = mi.warp.square_to_cosine_hemisphere(mi.Point2f(x.ravel(), y.ravel()))
+    return np.stack([np.asarray(d[i], np.float64) for i in range(3)], axis=1)
+
+
+def eval_bsdf(bsdf: dict, uv: np.ndarray, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """f(ωi, ωo) cos θo of a Mitsuba BSDF dict (``mi.load_dict``'s layout) at
+    texture coordinates ``uv`` (N, 2) and local directions ``wi``, ``wo``
+    (N, 3, z the normal): ``BSDF.eval`` in one kernel. Returns (N, 3)."""
+    loaded = mi.load_dict(bsdf)
+    n = len(uv)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    normal = mi.Normal3f(0.0, 0.0, 1.0)
+    si.n = normal
+    si.sh_frame = mi.Frame3f(normal)
+    si.uv = mi.Point2f(*(np.ascontiguousarray(uv[:, k], np.float32) for k in range(2)))
+    si.wi = mi.Vector3f(*(np.ascontiguousarray(wi[:, k], np.float32) for k in range(3)))
+    value = loaded.eval(mi.BSDFContext(), si, mi.Vector3f(*(np.ascontiguousarray(wo[:, k], np.float32)
+                                                            for k in range(3))))
+    return np.stack([np.asarray(value[c], np.float64) for c in range(3)], axis=1)
+
+
+def region_texels(region_map: np.ndarray, label: int, count: int = UV_SAMPLES, seed: int = 0) -> np.ndarray:
+    """(k, 2) texture coordinates of up to ``count`` texel centres of region
+    ``label`` (row 0 at v = 0), drawn without replacement by a fixed seed."""
+    rows, cols = np.nonzero(region_map == label)
+    if rows.size == 0:
+        return np.zeros((0, 2))
+    r = region_map.shape[0]
+    pick = np.random.default_rng(seed).choice(rows.size, min(count, rows.size), replace=False)
+    return np.stack([(cols[pick] + 0.5) / r, (rows[pick] + 0.5) / r], axis=1)
+
+
+def brdf_rmse(truth: dict, fit: dict, region: str, true_albedo, fit_albedo, uv: np.ndarray,
+              grid: int = GRID) -> float | None:
+    """The relative BRDF error of one region (module docstring): truth and fit
+    (``brdf.json`` documents) at texture coordinates ``uv`` (k, 2), with the
+    diffuse reflectances ``true_albedo`` and ``fit_albedo`` (RGB). None where
+    the truth's ``eval`` is zero everywhere (a delta BSDF, such as the smooth
+    boundary of a subsurface truth)."""
+    d = hemisphere_grid(grid)
+    i, o = np.meshgrid(np.arange(len(d)), np.arange(len(d)), indexing="ij")
+    pairs = i.size
+    wi, wo = np.tile(d[i.ravel()], (len(uv), 1)), np.tile(d[o.ravel()], (len(uv), 1))
+    at = np.repeat(uv, pairs, axis=0)
+    f_true = eval_bsdf(region_bsdf(truth, region, rgb(true_albedo)), at, wi, wo)
+    f_fit = eval_bsdf(region_bsdf(fit, region, rgb(fit_albedo)), at, wi, wo)
+    scale = float(np.sum(f_true ** 2))
+    if not scale > 0 or not np.isfinite(scale):
+        return None  # a truth without a finite BRDF (a smooth boundary over a scattering medium): no BRDF error
+    return float(np.sqrt(np.sum((f_fit - f_true) ** 2) / scale))
+
+
+# --------------------------------------------------------------------------------------------
+# The novel view: pose, held-out lights, the camera's crop
+# --------------------------------------------------------------------------------------------
+def novel_rotation(camera, pose=NOVEL_POSE) -> np.ndarray:
+    """The world-frame rotation (3x3) of the novel pose: ``pose`` = (yaw,
+    pitch) degrees about the camera's up and then its right axis."""
+    right, up, _ = camera_frame(camera).T
+    yaw = Rotation.from_rotvec(np.radians(pose[0]) * up)
+    pitch = Rotation.from_rotvec(np.radians(pose[1]) * right)
+    return (pitch * yaw).as_matrix()
+
+
+def turned(vertices: np.ndarray, rotation: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """``vertices`` (V, 3) turned by ``rotation`` about ``centre`` (world, mm)."""
+    return (np.asarray(vertices, np.float64) - centre) @ np.asarray(rotation).T + centre
+
+
+def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -> list[dict]:
+    """``count`` lights none of the capture's photographs used, as keyword
+    arguments of :meth:`mifaces.render.FaceScene.render`: of
+    :data:`LIGHT_CANDIDATES`, those whose smallest angle (seen from
+    ``centre``) to every capture light and to each other is largest; point
+    lights at the capture lights' mean distance with the first light's
+    intensity (directional lights for a capture of directional lights).
+    Each dict also holds ``angle_to_capture`` (degrees)."""
+    lights = list(capture.lights)
+    directional = lights[0].directional
+    if directional:
+        used = np.array([light.direction for light in lights], np.float64)
+    else:
+        used = np.array([light.position for light in lights], np.float64) - centre
+    used /= np.linalg.norm(used, axis=1, keepdims=True)
+    candidates = np.array([capture.camera.direction(a, e) for a, e in LIGHT_CANDIDATES])
+    chosen = []
+    for _ in range(count):
+        taken = np.concatenate([used, candidates[chosen]]) if chosen else used
+        separation = np.degrees(np.arccos(np.clip(candidates @ taken.T, -1, 1))).min(axis=1)
+        separation[chosen] = -1
+        chosen.append(int(np.argmax(separation)))
+    distance = 1.0 if directional else float(np.mean([np.linalg.norm(l.position - centre) for l in lights]))
+    out = []
+    for k in chosen:
+        angle = float(np.degrees(np.arccos(np.clip(used @ candidates[k], -1, 1))).min())
+        light = {"intensity": np.asarray(lights[0].intensity, np.float64), "angle_to_capture": angle}
+        if directional:
+            light["light_direction"] = candidates[k]
+        else:
+            light["light_position"] = centre + distance * candidates[k]
+        out.append(light)
+    return out
+
+
+def face_camera(camera, vertices: np.ndarray, size: int = RENDER_SIZE, margin: float = 0.1) -> Camera:
+    """``camera`` cropped to the box around the projected ``vertices`` (with
+    ``margin`` of its size around) and scaled so that its longer side is
+    ``size`` pixels; same pose, no lens distortion (renders compared with
+    each other, not with photographs)."""
+    xy = camera.project(vertices)
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    pad = margin * (hi - lo)
+    lo, hi = lo - pad, hi + pad
+    scale = size / float(max(hi - lo))
+    width, height = (max(8, int(round(s * scale))) for s in hi - lo)
+    # the crop's left and top edges at lo (the camera's pixel coordinates, centres at integers)
+    return Camera(width, height, camera.fx * scale, camera.fy * scale, (camera.cx - lo[0]) * scale - 0.5,
+                  (camera.cy - lo[1]) * scale - 0.5, np.zeros(0), camera.rotation, camera.translation)
+
+
+def coverage(scene: FaceScene, camera, spp: int = 4) -> np.ndarray:
+    """Pixels of ``camera``'s image where the face of ``scene`` is seen (bool (H, W))."""
+    description = {"type": "scene", "integrator": {"type": "aov", "aovs": "depth:depth"},
+                   "sensor": mitsuba_sensor(camera, spp),
+                   **{key: part.mesh({"type": "diffuse"}) for key, part in scene.meshes.items()}}
+    depth = np.array(mi.render(mi.load_dict(description), spp=spp), np.float32)
+    return depth[..., 0] > 0
+
+
+def relative_rmse(image: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
+    """sqrt(mean (image − truth)²) / mean truth over the pixels of ``mask`` and the channels."""
+    error = np.asarray(image, np.float64)[mask] - np.asarray(truth, np.float64)[mask]
+    return float(np.sqrt(np.mean(error ** 2)) / max(float(np.mean(np.asarray(truth, np.float64)[mask])), 1e-12))
+
+
+def pose_angle(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle (degrees) of the rotation between two rotations (3x3)."""
+    return float(np.degrees(Rotation.from_matrix(np.asarray(a) @ np.asarray(b).T).magnitude()))
+
+
+# --------------------------------------------------------------------------------------------
+# The truth rendered once, every fit compared with it
+# --------------------------------------------------------------------------------------------
+class Validator:
+    """A simulated capture's true face, rendered once in a novel pose under
+    held-out lights and environments, against which every fitted model is
+    measured (:meth:`validate`; the measures are in the module docstring).
+
+    Parameters
+    ----------
+    capture : Capture
+        A simulated capture (with ``ground_truth/``).
+    face_model : MorphableModel
+        The model of the fitted shape.
+    fit_vertices : (V, 3) array
+        The fitted face of ``measurement`` (world, mm).
+    measurement : str
+        The measurement whose true and fitted faces are turned into the novel pose.
+    size, spp : int
+        Longer side of the rendered face crop (pixels), samples per pixel.
+    pose : (yaw, pitch)
+        The novel pose, degrees (:func:`novel_rotation`).
+    lights : int
+        Number of held-out point lights (:func:`held_out_lights`).
+    environments : dict, optional
+        Name -> environment (an equirectangular map or an emitter dict, as
+        :meth:`mifaces.render.FaceScene.description` takes them); default the
+        generated studio and a sunsky with the sun at :data:`SKY_SUN_ANGLES`.
+
+    Attributes
+    ----------
+    conditions : dict
+        Name -> the light keyword arguments of :meth:`FaceScene.render`.
+    truth : dict
+        Name -> the true face's image (H, W, 3).
+    mask, truth_mask : (H, W) bool
+        The pixels compared: where either face is seen; where the true face is.
+    summary : dict
+        What was compared, for the report (pose, lights, environments, shape floor, sizes, seconds).
+    """
+
+    def __init__(self, capture, face_model, fit_vertices: np.ndarray, measurement: str, *, size: int = RENDER_SIZE,
+                 spp: int = SPP, pose=NOVEL_POSE, lights: int = HELD_OUT_LIGHTS, environments: dict | None = None):
+        t = time.perf_counter()
+        if (environments is not None and not environments) or lights < 1:
+            raise ValueError("a validation needs at least one environment and one held-out light")
+        self.capture = capture
+        self._albedo = {}  # the true albedo map at each fit resolution
+        self.ground_truth = read_ground_truth(capture)
+        if self.ground_truth is None:
+            raise ValueError(f"{capture.path}: only a simulated capture (with ground truth) can be validated")
+        truth_model, true_shapes = load_geometry(capture, "ground-truth")
+        true_vertices = true_shapes[measurement]
+        centre = true_vertices.mean(axis=0)
+        rotation = novel_rotation(capture.camera, pose)
+        self.truth_scene = FaceScene(truth_model, turned(true_vertices, rotation, centre))
+        self.fit_scene = FaceScene(face_model, turned(fit_vertices, rotation, centre))
+        self.camera = face_camera(capture.camera, turned(true_vertices, rotation, centre), size)
+        self.spp = int(spp)
+        held_out = held_out_lights(capture, centre, lights)
+        self.conditions = {f"light_{k + 1}": {key: value for key, value in light.items() if key != "angle_to_capture"}
+                           for k, light in enumerate(held_out)}
+        if environments is None:
+            environments = {"studio": studio_environment(), "sky": sky_emitter(self.camera)}
+        self.environments = tuple(environments)
+        self.conditions.update({name: {"envmap": value} for name, value in environments.items()})
+        self.truth_mask = coverage(self.truth_scene, self.camera)
+        self.mask = self.truth_mask | coverage(self.fit_scene, self.camera)
+        truth, albedo = self.ground_truth.brdf, self.ground_truth.albedo
+        self.truth = {name: self.truth_scene.render(truth, albedo, self.camera, spp=self.spp, seed=SEED, **light)
+                      for name, light in self.conditions.items()}
+        floor = self._shape_floor(truth_model, face_model, true_vertices, fit_vertices)
+        # where the shapes differ but share a texture space, the fitted reflectance is also judged on the true shape
+        self._true_shape = None if floor is None else any(v > 0 for v in floor.values())
+        first = next(m for m in self.ground_truth.measurements if m.name == measurement)
+        novel = rotation @ first.rotation
+        self.summary = {
+            "truth_model": truth["model"], "measurement": measurement, "novel_pose": list(pose),
+            "novel_pose_angle_to_capture": min(pose_angle(novel, m.rotation) for m in self.ground_truth.measurements),
+            "held_out_lights": [{key: np.asarray(v).tolist() for key, v in light.items()} for light in held_out],
+            "environments": [name for name in environments], "sky_sun_angles": list(SKY_SUN_ANGLES),
+            "render": {"width": self.camera.width, "height": self.camera.height, "spp": self.spp,
+                       "mask_pixels": int(self.mask.sum())},
+            "shape_floor": None if floor is None else {**self._pooled(floor), "per_condition": floor},
+            "seconds": time.perf_counter() - t}
+
+    def _shape_floor(self, truth_model, face_model, true_vertices, fit_vertices) -> dict | None:
+        """Per condition, the error of the true BSDF and albedo on the fitted
+        face: 0 without rendering where the fitted face is the true one, None
+        where the two face models do not share a texture space."""
+        if not (np.array_equal(truth_model.uv, face_model.uv) and
+                np.array_equal(truth_model.triangles, face_model.triangles)):
+            return None
+        if np.array_equal(np.asarray(true_vertices, np.float64), np.asarray(fit_vertices, np.float64)):
+            return {name: 0.0 for name in self.conditions}
+        truth, albedo = self.ground_truth.brdf, self.ground_truth.albedo
+        return {name: relative_rmse(self.fit_scene.render(truth, albedo, self.camera, spp=self.spp, seed=SEED,
+                                                          **light), self.truth[name], self.mask)
+                for name, light in self.conditions.items()}
+
+    def _pooled(self, per_condition: dict) -> dict:
+        """``heldout_rmse`` and ``environment_rmse`` pooled (root mean square) from per-condition errors."""
+        lights = [v for k, v in per_condition.items() if k not in self.environments]
+        environments = [v for k, v in per_condition.items() if k in self.environments]
+        return {"heldout_rmse": float(np.sqrt(np.mean(np.square(lights)))),
+                "environment_rmse": float(np.sqrt(np.mean(np.square(environments))))}
+
+    def validate(self, estimate) -> tuple[dict, dict]:
+        """The measures of one fitted model (module docstring) and its images.
+
+        Returns
+        -------
+        entry : dict
+            ``brdf_rmse`` {region: float}, ``albedo_rmse``, ``heldout_rmse``,
+            ``environment_rmse``, the per-condition errors
+            (``per_condition``) and ``seconds``; where the fitted face
+            model shares the truth's texture space, also
+            ``heldout_rmse_true_shape``, ``environment_rmse_true_shape`` and
+            ``per_condition_true_shape``: the fitted BRDF and albedo
+            rendered on the *true* shape (the reflectance alone; equal to
+            the others where the fit used the true shape).
+        images : dict
+            Condition name -> the fitted face's image (H, W, 3).
+        """
+        from .report import ground_truth_errors  # here: mifaces.report imports this module
+
+        t = time.perf_counter()
+        fit, albedo = estimate.to_json(), estimate.albedo.albedo
+        r = estimate.resolution
+        if r not in self._albedo:
+            self._albedo[r] = resize(self.ground_truth.albedo, (r, r, 3), anti_aliasing=True, order=1)
+        true_albedo = self._albedo[r]
+        regions = {}
+        for name in estimate.fits:
+            texels = estimate.region_map == REGIONS[name]
+            uv = region_texels(estimate.region_map, REGIONS[name])
+            if len(uv):
+                regions[name] = brdf_rmse(self.ground_truth.brdf, fit, name, true_albedo[texels].mean(axis=0),
+                                          albedo[texels].mean(axis=0), uv)
+        errors = ground_truth_errors(estimate, self.capture, self.ground_truth)
+        images, per_condition = {}, {}
+        for name, light in self.conditions.items():
+            images[name] = self.fit_scene.render(fit, albedo, self.camera, spp=self.spp, seed=SEED, **light)
+            per_condition[name] = relative_rmse(images[name], self.truth[name], self.mask)
+        entry = {"brdf_rmse": regions, "albedo_rmse": errors["albedo"]["rmse_sampled"], **self._pooled(per_condition),
+                 "per_condition": per_condition}
+        if self._true_shape is not None:
+            on_truth = per_condition
+            if self._true_shape:
+                on_truth = {name: relative_rmse(self.truth_scene.render(fit, albedo, self.camera, spp=self.spp,
+                                                                        seed=SEED, **light),
+                                                self.truth[name], self.truth_mask)
+                            for name, light in self.conditions.items()}
+            entry.update({f"{k}{TRUE_SHAPE}": v for k, v in self._pooled(on_truth).items()})
+            entry[f"per_condition{TRUE_SHAPE}"] = on_truth
+        entry["seconds"] = time.perf_counter() - t
+        return entry, images
+
+
+__all__ = ["GRID", "UV_SAMPLES", "NOVEL_POSE", "HELD_OUT_LIGHTS", "RENDER_SIZE", "SPP", "LIGHT_CANDIDATES",
+           "TRUE_SHAPE", "hemisphere_grid", "eval_bsdf", "region_texels", "brdf_rmse", "novel_rotation", "turned",
+           "held_out_lights", "face_camera", "coverage", "relative_rmse", "pose_angle", "Validator"]

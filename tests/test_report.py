@@ -1,0 +1,143 @@
+"""The report's validation against a simulated capture's ground truth: BRDF error over the hemisphere,
+albedo error, held-out-light and environment-lit image errors in a novel pose (mifaces.validation)."""
+
+from __future__ import annotations
+
+import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+
+from mifaces.capture import load_capture, read_ground_truth
+from mifaces.geometry import load_geometry
+from mifaces.reflectance import fit_brdf
+from mifaces.validation import (Validator, brdf_rmse, hemisphere_grid, held_out_lights, novel_rotation,
+                                relative_rmse)
+
+MIN_SEPARATION = 10.0  # degrees between anything held out and anything the fit saw
+
+
+@pytest.fixture(scope="module")
+def capture(small_capture):
+    return load_capture(small_capture("report", measurements=3, resolution=(128, 128), spp=4, albedo_resolution=64,
+                                      seed=6))
+
+
+@pytest.fixture(scope="module")
+def validator(capture):
+    mifaces.set_variant("llvm_ad_rgb")
+    face, shapes = load_geometry(capture, "ground-truth")
+    first = capture.measurements[0].name
+    return Validator(capture, face, shapes[first], first, size=40, spp=4)
+
+
+@pytest.fixture(scope="module")
+def estimate(capture):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fit_brdf(capture, "cooktorrance", resolution=32, progress=False)
+
+
+def with_params(estimate, change):
+    """``estimate`` with every region's glossy parameters replaced by ``change(region)``."""
+    fits = {name: dataclasses.replace(fit, params={**fit.params, **change(name)}) for name, fit in estimate.fits.items()}
+    return dataclasses.replace(estimate, fits=fits)
+
+
+def test_hemisphere_grid_is_stratified_and_cosine_weighted():
+    d = hemisphere_grid(16)
+    assert d.shape == (256, 3) and np.allclose(np.linalg.norm(d, axis=1), 1, atol=1e-5) and d[:, 2].min() > 0
+    # under the cosine-weighted measure E[cos θ] = 2/3 and E[cos² θ] = 1/2
+    assert d[:, 2].mean() == pytest.approx(2 / 3, abs=0.01)
+    assert (d[:, 2] ** 2).mean() == pytest.approx(1 / 2, abs=0.01)
+
+
+def test_brdf_rmse_is_zero_for_the_truth_and_grows_with_the_error(capture):
+    truth = read_ground_truth(capture).brdf
+    uv = np.array([[0.5, 0.5]])
+    albedo = [0.5, 0.4, 0.3]
+    assert brdf_rmse(truth, truth, "skin", albedo, albedo, uv) == 0.0
+    skin = truth["regions"]["skin"]
+    near = {**truth, "regions": {"skin": {**skin, "roughness": skin["roughness"] * 1.1}}}
+    far = {**truth, "regions": {"skin": {**skin, "roughness": skin["roughness"] * 2.0}}}
+    e_near, e_far = (brdf_rmse(truth, doc, "skin", albedo, albedo, uv) for doc in (near, far))
+    assert 0 < e_near < e_far
+    # a wrong albedo level counts: 20 % more diffuse reflectance
+    assert brdf_rmse(truth, truth, "skin", albedo, np.multiply(albedo, 1.2), uv) > 0.05
+
+
+def test_validation_keys_present_and_finite(validator, estimate):
+    entry, images = validator.validate(estimate)
+    assert set(entry) >= {"brdf_rmse", "albedo_rmse", "heldout_rmse", "environment_rmse", "per_condition"}
+    assert "skin" in entry["brdf_rmse"]
+    values = [*entry["brdf_rmse"].values(), entry["albedo_rmse"], entry["heldout_rmse"], entry["environment_rmse"],
+              *entry["per_condition"].values()]
+    assert all(np.isfinite(v) and v >= 0 for v in values)
+    assert set(images) == set(validator.truth) == {"light_1", "light_2", "studio", "sky"}
+    for name, image in images.items():
+        assert image.shape == validator.truth[name].shape and validator.truth[name][validator.mask].mean() > 0
+    # the true shape was used: the shape floor is exactly 0, and the reflectance's own error is the image error
+    assert validator.summary["shape_floor"]["heldout_rmse"] == 0.0
+    assert entry["heldout_rmse_true_shape"] == entry["heldout_rmse"]
+
+
+def test_wrong_parameters_score_worse_than_true_ones(validator, estimate, capture):
+    """The fit given the true glossy parameters scores better than the fit given wrong ones, in BRDF and image error."""
+    truth = read_ground_truth(capture).brdf["regions"]
+    right = with_params(estimate, lambda region: truth[region])
+    wrong = with_params(estimate, lambda region: {"roughness": 0.9 * truth[region]["roughness"] + 0.5,
+                                                  "specular_reflectance": [0.2] * 3})
+    good, _ = validator.validate(right)
+    bad, _ = validator.validate(wrong)
+    assert good["brdf_rmse"]["skin"] < 0.5 * bad["brdf_rmse"]["skin"]
+    assert good["heldout_rmse"] < bad["heldout_rmse"]
+    assert good["environment_rmse"] < bad["environment_rmse"]
+    assert good["albedo_rmse"] == bad["albedo_rmse"]  # the same albedo map
+
+
+def test_held_out_lights_and_view_were_never_photographed(validator, capture):
+    """Every held-out light is at least MIN_SEPARATION from every capture light, and the novel pose from every
+    photographed pose: the fit never saw them."""
+    summary = validator.summary
+    centre = np.mean([m.vertices.mean(axis=0) for m in read_ground_truth(capture).measurements], axis=0)
+    used = np.array([light.position for light in capture.lights]) - centre
+    used /= np.linalg.norm(used, axis=1, keepdims=True)
+    for light in summary["held_out_lights"]:
+        assert light["angle_to_capture"] > MIN_SEPARATION
+        towards = np.asarray(light["light_position"]) - centre
+        angles = np.degrees(np.arccos(np.clip(used @ (towards / np.linalg.norm(towards)), -1, 1)))
+        assert angles.min() > MIN_SEPARATION - 2  # measured from the mean head centre, not the validation's
+    assert summary["novel_pose_angle_to_capture"] > MIN_SEPARATION
+    assert held_out_lights(capture, centre, 1)[0]["angle_to_capture"] > MIN_SEPARATION
+    assert np.allclose(novel_rotation(capture.camera, (0.0, 0.0)), np.eye(3))
+
+
+def test_relative_rmse_and_bad_requests(capture):
+    truth = np.ones((4, 4, 3))
+    mask = np.zeros((4, 4), bool)
+    mask[1:3, 1:3] = True
+    assert relative_rmse(truth * 1.1, truth, mask) == pytest.approx(0.1)
+    face, shapes = load_geometry(capture, "ground-truth")
+    first = capture.measurements[0].name
+    with pytest.raises(ValueError, match="at least one environment"):
+        Validator(capture, face, shapes[first], first, environments={})
+
+
+def test_a_fitted_shape_is_told_apart_from_the_reflectance(capture, estimate):
+    """On a shape 3 mm off, the images carry the shape's error (the shape floor); the fitted reflectance rendered
+    on the true shape still tells true parameters from wrong ones."""
+    face, shapes = load_geometry(capture, "ground-truth")
+    first = capture.measurements[0].name
+    shifted = Validator(capture, face, shapes[first] + [3.0, 0.0, 0.0], first, size=40, spp=4)
+    floor = shifted.summary["shape_floor"]
+    assert floor["heldout_rmse"] > 0.02 and floor["environment_rmse"] > 0.02
+    truth = read_ground_truth(capture).brdf["regions"]
+    good, _ = shifted.validate(with_params(estimate, lambda region: truth[region]))
+    bad, _ = shifted.validate(with_params(estimate, lambda region: {"roughness": 0.9 * truth[region]["roughness"] + 0.5,
+                                                                    "specular_reflectance": [0.2] * 3}))
+    assert good["heldout_rmse_true_shape"] < good["heldout_rmse"]
+    assert good["heldout_rmse_true_shape"] < bad["heldout_rmse_true_shape"]
+    assert good["environment_rmse_true_shape"] < bad["environment_rmse_true_shape"]

@@ -1,0 +1,192 @@
+"""Error against run time for the whole pipeline (SIMULATED captures).
+
+For every combination of the number of measurements (photographs), the
+photographs' resolution and their samples per pixel (the simulated
+photographs' Monte Carlo noise, standing in for a camera's noise), this
+simulates a capture of the built-in face (Cook–Torrance truth,
+:func:`mifaces.studio.simulate`) and runs the main job on it
+(:func:`mifaces.pipeline.measure`: fit the face model to each photograph,
+sample reflectance, fit the BRDF models), then reads from its report
+(:mod:`mifaces.validation`):
+
+- the BRDF error over the hemisphere (skin, ``brdf_rmse``),
+- the albedo error (``albedo_rmse``),
+- the environment-lit novel-view image error (``environment_rmse``),
+
+against the wall time of ``mifaces measure`` as a user runs it without a
+capture: simulating the photographs plus the measurement, without the
+validation's own renders (reported apart). The Pareto front of each error
+against time is drawn, and the README's defaults (:data:`DEFAULT`) are
+marked, with whether they lie on the front.
+
+    python validation/pareto.py                       # the full grid (hours on 2 cores)
+    python validation/pareto.py --measurements 2 6 --resolutions 256 512 --spp 16 64 --geometry ground-truth
+
+Writes ``validation/results/pareto.json`` and ``pareto.png``; a run adds its
+points to an existing ``pareto.json`` of the same options (resumable), and
+``--work`` keeps the simulated captures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import mifaces  # first: libLLVM  # isort: skip
+
+import mitsuba as mi
+import numpy as np
+
+from mifaces.files import atomic_path, write_json
+from mifaces.pipeline import measure
+from mifaces.studio import simulate
+
+RESULTS = Path(__file__).resolve().parent / "results"
+#: The full grid: measurements, photograph resolutions (square), samples per pixel of the photographs.
+MEASUREMENTS = (2, 4, 8, 16, 22)
+RESOLUTIONS = (256, 512, 1024)
+SPP = (16, 64, 256)
+#: The README's defaults: ``mifaces measure`` simulates this capture (mifaces.studio.simulate's defaults).
+DEFAULT = {"measurements": 6, "resolution": 512, "spp": 64}
+#: The errors read from each model's validation, and their labels.
+ERRORS = {"brdf_skin": "BRDF RMSE (skin, relative)", "albedo_rmse": "albedo RMSE",
+          "environment_rmse": "environment-lit image RMSE (relative)"}
+
+
+def point(work: Path, measurements: int, resolution: int, spp: int, args) -> dict:
+    """Simulate one capture, measure it, and return its errors and times."""
+    capture = work / f"capture_{measurements}_{resolution}_{spp}"
+    t = time.perf_counter()
+    simulate(capture, measurements=measurements, resolution=(resolution, resolution), spp=spp, seed=args.seed,
+             progress=False, force=True)
+    simulate_s = time.perf_counter() - t
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        report = measure(work / f"measure_{measurements}_{resolution}_{spp}", capture, models=args.models,
+                         geometry=args.geometry, resolution=args.texture, progress=False)
+    seconds = report["seconds"]
+    validation_s = sum(v for k, v in seconds.items() if k.startswith("validation"))
+    models = {}
+    for model, entry in report["models"].items():
+        v = entry["validation"]
+        models[model] = {"brdf_skin": v["brdf_rmse"].get("skin"), "brdf_rmse": v["brdf_rmse"],
+                         "albedo_rmse": v["albedo_rmse"], "heldout_rmse": v["heldout_rmse"],
+                         "environment_rmse": v["environment_rmse"], "training_rmse": entry["training_rmse"]}
+    return {"measurements": measurements, "resolution": resolution, "spp": spp,
+            "wall_s": simulate_s + seconds["total"] - validation_s, "simulate_s": simulate_s,
+            "measure_s": seconds["total"] - validation_s, "validation_s": validation_s,
+            "shape_floor": report["validation"]["shape_floor"], "models": models}
+
+
+def pareto_front(times: np.ndarray, errors: np.ndarray) -> np.ndarray:
+    """Indices of the points no other point beats in both time and error, by increasing time."""
+    order = np.lexsort((errors, times))
+    front, best = [], np.inf
+    for i in order:
+        if errors[i] < best:
+            front.append(int(i))
+            best = errors[i]
+    return np.array(front, int)
+
+
+def fronts(points: list[dict], model: str) -> dict:
+    """Per error: the front's points (as grid keys) and whether the default lies on it."""
+    times = np.array([p["wall_s"] for p in points])
+    out = {}
+    for key in ERRORS:
+        errors = np.array([p["models"][model][key] for p in points], float)
+        front = pareto_front(times, errors)
+        keys = [(p["measurements"], p["resolution"], p["spp"]) for p in points]
+        default = (DEFAULT["measurements"], DEFAULT["resolution"], DEFAULT["spp"])
+        out[key] = {"front": [list(keys[i]) for i in front],
+                    "default_on_front": bool(keys.index(default) in front) if default in keys else None}
+    return out
+
+
+def figure(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    points, model = result["points"], result["model"]
+    times = np.array([p["wall_s"] for p in points])
+    fig, axes = plt.subplots(1, len(ERRORS), figsize=(5 * len(ERRORS), 4.2))
+    markers = {r: m for r, m in zip(sorted({p["resolution"] for p in points}), "os^D")}
+    counts = sorted({p["measurements"] for p in points})
+    colours = dict(zip(counts, plt.cm.viridis(np.linspace(0, 0.85, len(counts)))))
+    for ax, (key, label) in zip(axes, ERRORS.items()):
+        errors = np.array([p["models"][model][key] for p in points], float)
+        for p, t, e in zip(points, times, errors):
+            colour = colours[p["measurements"]]
+            ax.scatter(t, e, marker=markers[p["resolution"]], s=20 + 30 * np.log2(p["spp"] / 8), color=colour,
+                       edgecolor="k", linewidth=0.5, zorder=3)
+            ax.annotate(f"{p['measurements']}/{p['resolution']}/{p['spp']}", (t, e), fontsize=6,
+                        xytext=(3, 3), textcoords="offset points")
+            if all(p[k] == DEFAULT[k] for k in DEFAULT):
+                ax.scatter(t, e, marker="*", s=250, facecolor="none", edgecolor="r", zorder=4, label="README default")
+        front = pareto_front(times, errors)
+        ax.step(times[front], errors[front], where="post", color="r", lw=1, zorder=2, label="Pareto front")
+        ax.set_xscale("log")
+        ax.set_xlabel("wall time (s): simulate + measure, shared 2 cores")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"SIMULATED captures (truth Cook–Torrance, built-in face), model {model}, geometry "
+                 f"{result['options']['geometry']}; labels: measurements/resolution/spp; marker: resolution, "
+                 "size: spp", fontsize=9)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--measurements", type=int, nargs="+", default=list(MEASUREMENTS))
+    parser.add_argument("--resolutions", type=int, nargs="+", default=list(RESOLUTIONS))
+    parser.add_argument("--spp", type=int, nargs="+", default=list(SPP))
+    parser.add_argument("--models", nargs="+", default=["cooktorrance"], help="BRDF models to fit")
+    parser.add_argument("--geometry", default="fitted", choices=("fitted", "ground-truth"))
+    parser.add_argument("--texture", type=int, default=512, help="texture resolution R of the measurement")
+    parser.add_argument("--seed", type=int, default=3)
+    parser.add_argument("--work", type=Path, default=None, help="keep the captures and reports here")
+    parser.add_argument("--out", type=Path, default=RESULTS / "pareto.json")
+    parser.add_argument("--replot", action="store_true", help="only draw the figure of an existing --out")
+    args = parser.parse_args()
+    if args.replot:
+        figure(json.loads(args.out.read_text()), args.out.with_suffix(".png"))
+        return
+    options = {"models": args.models, "geometry": args.geometry, "texture": args.texture, "seed": args.seed}
+    result = {"label": "SIMULATED", "model": args.models[0], "options": options, "default": DEFAULT,
+              "grid": {"measurements": args.measurements, "resolutions": args.resolutions, "spp": args.spp},
+              "full_grid": {"measurements": MEASUREMENTS, "resolutions": RESOLUTIONS, "spp": SPP},
+              "machine": {"platform": platform.platform(), "variant": mi.variant(), "cores": os.cpu_count()}, "points": []}
+    if args.out.is_file():
+        previous = json.loads(args.out.read_text())
+        if previous.get("options") == options:
+            result["points"] = previous["points"]
+    done = {(p["measurements"], p["resolution"], p["spp"]) for p in result["points"]}
+    grid = [(k, r, s) for k in args.measurements for r in args.resolutions for s in args.spp if (k, r, s) not in done]
+    grid.sort(key=lambda c: (c[0] * c[1] ** 2, c[2]))  # cheapest first: an interrupted run keeps a usable front
+    with tempfile.TemporaryDirectory() as tmp:
+        work = args.work or Path(tmp)
+        for measurements, resolution, spp in grid:
+            p = point(work, measurements, resolution, spp, args)
+            result["points"].append(p)
+            errors = ", ".join(f"{k} {p['models'][result['model']][k]:.4f}" for k in ERRORS)
+            print(f"{measurements:3d} photos {resolution:5d} px {spp:4d} spp: {p['wall_s']:7.1f} s; {errors}",
+                  flush=True)
+            result["fronts"] = fronts(result["points"], result["model"])
+            write_json(args.out, result)
+            figure(result, args.out.with_suffix(".png"))
+
+
+if __name__ == "__main__":
+    main()
