@@ -72,7 +72,11 @@ from .capture import Camera, read_ground_truth
 from .environment import SKY_SUN_ANGLES, camera_frame, sky_emitter, studio_environment
 from .geometry import load_geometry
 from .model.regions import REGIONS
-from .render import FaceScene, mitsuba_sensor, region_bsdf, rgb
+from .render import ALBEDO, FaceScene, mitsuba_sensor, region_bsdf, rgb
+from .studio import subsurface as translucent
+from .studio.photograph import albedo_texture
+from .studio.simulate import true_face_shapes
+from .studio.varying import map_textures
 
 #: Directions per axis of the hemisphere grid: GRID² directions, GRID⁴ (ωi, ωo) pairs.
 GRID = 12
@@ -142,18 +146,20 @@ def region_texels(region_map: np.ndarray, label: int, count: int = UV_SAMPLES, s
 
 
 def brdf_rmse(truth: dict, fit: dict, region: str, true_albedo, fit_albedo, uv: np.ndarray,
-              grid: int = GRID) -> float | None:
+              grid: int = GRID, truth_maps: dict | None = None) -> float | None:
     """The relative BRDF error of one region (module docstring): truth and fit
     (``brdf.json`` documents) at texture coordinates ``uv`` (k, 2), with the
     diffuse reflectances ``true_albedo`` and ``fit_albedo`` (RGB). None where
     the truth's ``eval`` is zero everywhere (a delta BSDF, such as the smooth
-    boundary of a subsurface truth)."""
+    boundary of a subsurface truth). ``truth_maps``: a spatially varying
+    truth's parameter textures (:func:`mifaces.studio.varying.map_textures`),
+    read at ``uv``."""
     d = hemisphere_grid(grid)
     i, o = np.meshgrid(np.arange(len(d)), np.arange(len(d)), indexing="ij")
     pairs = i.size
     wi, wo = np.tile(d[i.ravel()], (len(uv), 1)), np.tile(d[o.ravel()], (len(uv), 1))
     at = np.repeat(uv, pairs, axis=0)
-    f_true = eval_bsdf(region_bsdf(truth, region, rgb(true_albedo)), at, wi, wo)
+    f_true = eval_bsdf(region_bsdf(truth, region, rgb(true_albedo), maps=truth_maps), at, wi, wo)
     f_fit = eval_bsdf(region_bsdf(fit, region, rgb(fit_albedo)), at, wi, wo)
     scale = float(np.sum(f_true ** 2))
     if not scale > 0 or not np.isfinite(scale):
@@ -317,10 +323,10 @@ class Validator:
         self.conditions.update({name: {"envmap": value} for name, value in environments.items()})
         self.truth_mask = coverage(self.truth_scene, self.camera)
         self.mask = self.truth_mask | coverage(self.fit_scene, self.camera)
-        truth, albedo = self.ground_truth.brdf, self.ground_truth.albedo
-        self.truth = {name: self.truth_scene.render(truth, albedo, self.camera, spp=self.spp, seed=SEED, **light)
-                      for name, light in self.conditions.items()}
-        floor = self._shape_floor(truth_model, face_model, true_vertices, fit_vertices)
+        truth = self.ground_truth.brdf
+        true_shapes = self._true_face(truth_model, self.truth_scene, turned(true_vertices, rotation, centre))
+        self.truth = {name: self._render_truth(true_shapes, light) for name, light in self.conditions.items()}
+        floor = self._shape_floor(truth_model, face_model, true_vertices, fit_vertices, rotation, centre)
         # where the shapes differ but share a texture space, the fitted reflectance is also judged on the true shape
         self._true_shape = None if floor is None else any(v > 0 for v in floor.values())
         first = next(m for m in self.ground_truth.measurements if m.name == measurement)
@@ -335,8 +341,32 @@ class Validator:
             "shape_floor": None if floor is None else {**self._pooled(floor), "per_condition": floor},
             "seconds": time.perf_counter() - t}
 
-    def _shape_floor(self, truth_model, face_model, true_vertices, fit_vertices) -> dict | None:
-        """Per condition, the error of the true BSDF and albedo on the fitted
+    def _true_face(self, face_model, scene: FaceScene, vertices: np.ndarray) -> dict:
+        """The true reflectance on ``vertices`` as the simulator photographed it
+        (:func:`mifaces.studio.simulate.true_face_shapes`): parameter maps of a
+        spatially varying truth, translucent skin of a subsurface one."""
+        truth = self.ground_truth
+        shapes = true_face_shapes(face_model, np.asarray(vertices, np.float32), truth.brdf,
+                                  albedo_texture(truth.albedo), map_textures(truth.maps), self._subsurface)
+        return {key: shapes[key] for key in scene.meshes}  # keyed as the scene's meshes
+
+    @property
+    def _subsurface(self) -> bool:
+        return "subsurface" in self.ground_truth.description
+
+    def _render_truth(self, shapes: dict, light: dict) -> np.ndarray:
+        """An image of the true face ``shapes`` (:meth:`_true_face`) under condition ``light``: the
+        validation's camera and emitters, the simulator's integrator for a translucent truth."""
+        scene = self.truth_scene.description(self.ground_truth.brdf, self.camera, spp=self.spp, **light)
+        for key in (ALBEDO, *self.truth_scene.meshes):
+            scene.pop(key)
+        scene.update(shapes)
+        if self._subsurface:
+            scene["integrator"] = translucent.INTEGRATOR
+        return np.array(mi.render(mi.load_dict(scene), spp=self.spp, seed=SEED), dtype=np.float32)[..., :3]
+
+    def _shape_floor(self, truth_model, face_model, true_vertices, fit_vertices, rotation, centre) -> dict | None:
+        """Per condition, the error of the true reflectance on the fitted
         face: 0 without rendering where the fitted face is the true one, None
         where the two face models do not share a texture space."""
         if not (np.array_equal(truth_model.uv, face_model.uv) and
@@ -344,9 +374,8 @@ class Validator:
             return None
         if np.array_equal(np.asarray(true_vertices, np.float64), np.asarray(fit_vertices, np.float64)):
             return {name: 0.0 for name in self.conditions}
-        truth, albedo = self.ground_truth.brdf, self.ground_truth.albedo
-        return {name: relative_rmse(self.fit_scene.render(truth, albedo, self.camera, spp=self.spp, seed=SEED,
-                                                          **light), self.truth[name], self.mask)
+        shapes = self._true_face(face_model, self.fit_scene, turned(fit_vertices, rotation, centre))
+        return {name: relative_rmse(self._render_truth(shapes, light), self.truth[name], self.mask)
                 for name, light in self.conditions.items()}
 
     def _pooled(self, per_condition: dict) -> dict:
@@ -376,7 +405,7 @@ class Validator:
         from .report import ground_truth_errors  # here: mifaces.report imports this module
 
         t = time.perf_counter()
-        fit, albedo = estimate.to_json(), estimate.albedo.albedo
+        fit, albedo, normals = estimate.to_json(), estimate.albedo.albedo, estimate.normal_texture()
         r = estimate.resolution
         if r not in self._albedo:
             self._albedo[r] = resize(self.ground_truth.albedo, (r, r, 3), anti_aliasing=True, order=1)
@@ -387,11 +416,13 @@ class Validator:
             uv = region_texels(estimate.region_map, REGIONS[name])
             if len(uv):
                 regions[name] = brdf_rmse(self.ground_truth.brdf, fit, name, true_albedo[texels].mean(axis=0),
-                                          albedo[texels].mean(axis=0), uv)
+                                          albedo[texels].mean(axis=0), uv,
+                                          truth_maps=map_textures(self.ground_truth.maps) or None)
         errors = ground_truth_errors(estimate, self.capture, self.ground_truth)
         images, per_condition = {}, {}
         for name, light in self.conditions.items():
-            images[name] = self.fit_scene.render(fit, albedo, self.camera, spp=self.spp, seed=SEED, **light)
+            images[name] = self.fit_scene.render(fit, albedo, self.camera, spp=self.spp, seed=SEED, normals=normals,
+                                                 **light)
             per_condition[name] = relative_rmse(images[name], self.truth[name], self.mask)
         entry = {"brdf_rmse": regions, "albedo_rmse": errors["albedo"]["rmse_sampled"], **self._pooled(per_condition),
                  "per_condition": per_condition}
@@ -399,7 +430,7 @@ class Validator:
             on_truth = per_condition
             if self._true_shape:
                 on_truth = {name: relative_rmse(self.truth_scene.render(fit, albedo, self.camera, spp=self.spp,
-                                                                        seed=SEED, **light),
+                                                                        seed=SEED, normals=normals, **light),
                                                 self.truth[name], self.truth_mask)
                             for name, light in self.conditions.items()}
             entry.update({f"{k}{TRUE_SHAPE}": v for k, v in self._pooled(on_truth).items()})

@@ -256,3 +256,27 @@ def test_cli_simulate_offers_the_truths_and_names_bad_combinations(tmp_path):
                           (["--brdf", "principled", "--subsurface"], "subsurface truth")):
         result = CliRunner().invoke(main, ["--variant", "llvm_ad_rgb", "simulate", str(tmp_path / "c"), *args])
         assert result.exit_code == 1 and message in result.output, result.output
+
+
+def test_validation_judges_against_the_truth_with_its_maps(captures):
+    """The report's validation renders and evaluates a spatially varying truth with its per-texel
+    maps, as the simulator photographed it, not with the region means its brdf.json records: the
+    means differ from the truth in images and in BRDF, and agree with a uniform truth exactly."""
+    from mifaces.studio.varying import map_textures
+    from mifaces.validation import SEED, Validator, brdf_rmse, region_texels, relative_rmse
+
+    path = captures("varying", varying=True)
+    truth = read_ground_truth(path)
+    model = load_model("builtin")
+    first = truth.measurements[0]
+    validator = Validator(load_capture(path), model, first.vertices, first.name, size=48, spp=4,
+                          lights=1)
+    means = validator.truth_scene.render(truth.brdf, truth.albedo, validator.camera, spp=validator.spp, seed=SEED,
+                                         **validator.conditions["light_1"])
+    assert relative_rmse(means, validator.truth["light_1"], validator.mask) > 0.01
+    labels = texel_regions(model, 64)
+    uv = region_texels(labels, REGIONS["skin"])
+    albedo = [0.4, 0.3, 0.2]
+    maps = map_textures(truth.maps)
+    assert brdf_rmse(truth.brdf, truth.brdf, "skin", albedo, albedo, uv, truth_maps=maps) > 0.05
+    assert brdf_rmse(truth.brdf, truth.brdf, "skin", albedo, albedo, uv) == 0.0

@@ -25,10 +25,13 @@ texture 512²):
     ``cooktorrance`` at the same size and samples is the bias translucency causes.
 
 Records per truth and model the report's numbers (``report.json``): the
-relative RMSE of the fitted render against the first photograph (a
-training image), the albedo errors against the truth's map, the relative
-parameter errors where the truth is the fitted model, the skin parameters,
-and the fit times. Writes ``validation/results/truths.json`` and
+validation that separates the models (``models.<model>.validation``,
+:mod:`mifaces.validation`: BRDF error per region, albedo error, held-out-light
+and environment-lit image errors of a novel pose, on the fitted and on the
+true shape) and the report's ranking, the relative RMSE of the fitted render
+against the first photograph (a training image, labelled so), the albedo
+errors against the truth's map, the relative parameter errors where the
+truth is the fitted model, the skin parameters, and the fit times. Writes ``validation/results/truths.json`` and
 ``truths.png`` (entries of earlier runs of other truths are kept).
 
     python validation/truths.py [--truths roughplastic detail] [--resolution 256 --spp 32] [--work DIR]
@@ -73,13 +76,16 @@ def run_truth(name: str, work: Path, size: int, spp: int) -> dict:
     models = {}
     for model, entry in report["models"].items():
         gt = entry.get("ground_truth") or {}
-        models[model] = {"image_relative_rmse_first_photo_training": entry["image_relative_rmse"],
+        validation = {k: v for k, v in entry["validation"].items() if not k.startswith("per_condition")}
+        models[model] = {"image_relative_rmse_first_photo_training": entry["training_rmse"],
                          "albedo": gt.get("albedo"), "parameter_relative_errors": gt.get("regions"),
-                         "skin": entry["regions"].get("skin"), "fit_seconds": report["seconds"][f"fit_brdf_{model}"]}
+                         "skin": entry["regions"].get("skin"), "fit_seconds": report["seconds"][f"fit_brdf_{model}"],
+                         "validation": validation}
     fitted_skin_albedo(folder, models)
     return {"truth": truth.description, "truth_brdf_skin": truth.brdf["regions"]["skin"],
             "truth_albedo_skin_mean": _skin_albedo(truth), "simulate_options": options,
             "simulate_seconds": simulated, "measure_seconds": report["seconds"], "models": models,
+            "ranking": report["ranking"], "shape_floor": report["validation"]["shape_floor"],
             "shapes": report.get("shapes")}
 
 
@@ -107,18 +113,21 @@ def figure(results: dict, path: Path) -> None:
 
     truths = list(results["truths"])
     models = list(next(iter(results["truths"].values()))["models"])
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
+    panels = (("heldout_rmse_true_shape", "held-out lights, novel pose, fitted reflectance on the true shape, %"),
+              ("environment_rmse_true_shape", "studio and sky, novel pose, on the true shape, %"),
+              ("albedo", "albedo RMSE vs truth (sampled texels)"))
+    fig, axes = plt.subplots(1, len(panels), figsize=(16, 4))
     width = 0.8 / len(models)
     for k, model in enumerate(models):
         x = np.arange(len(truths)) + (k - (len(models) - 1) / 2) * width
-        image = [100 * results["truths"][t]["models"][model]["image_relative_rmse_first_photo_training"]
-                 for t in truths]
-        albedo = [results["truths"][t]["models"][model]["albedo"]["rmse_sampled"] for t in truths]
-        axes[0].bar(x, image, width, label=model)
-        axes[1].bar(x, albedo, width, label=model)
-    for ax, title in zip(axes, ("image RMSE, first (training) photograph, %", "albedo RMSE vs truth (sampled texels)")):
+        for ax, (key, _) in zip(axes, panels):
+            entries = [results["truths"][t]["models"][model] for t in truths]
+            values = ([e["albedo"]["rmse_sampled"] for e in entries] if key == "albedo" else
+                      [100 * (e.get("validation", {}).get(key) or np.nan) for e in entries])
+            ax.bar(x, values, width, label=model)
+    for ax, (_, title) in zip(axes, panels):
         ax.set_xticks(range(len(truths)), [t.rsplit("_", 1)[0] for t in truths], rotation=20, fontsize=8)
-        ax.set_title(f"SIMULATED: {title}", fontsize=9)
+        ax.set_title(f"SIMULATED: {title}", fontsize=8)
     axes[0].legend(fontsize=8)
     sizes = sorted({"{}² {} spp".format(e["simulate_options"]["resolution"][0], e["simulate_options"]["spp"])
                     for e in results["truths"].values()})
@@ -134,17 +143,35 @@ def _rgb(values) -> str:
     return "" if values is None else "(" + ", ".join(f"{v:.3f}" for v in values) + ")"
 
 
+def _percent(value) -> str:
+    return "–" if value is None else f"{100 * value:.1f}%"
+
+
 def table(results: dict) -> str:
-    """The results as a Markdown table: per truth and model the training-photo RMSE,
-    the albedo RMSE and bias against the truth's map, and the skin's lobe width."""
-    lines = ["| truth | model | image RMSE, first photo (training) | albedo RMSE | albedo bias | skin albedo (truth) "
-             "| skin parameters |", "|---|---|---|---|---|---|---|"]
+    """The results as Markdown tables. Per truth and model: the validation (held-out-light and
+    environment-lit image errors in the novel pose, on the fitted shape and on the true shape;
+    skin BRDF error; albedo RMSE), the training-photo RMSE, and the skin's fitted parameters
+    against the truth's albedo; then each truth's ranking."""
+    lines = ["| truth | model | held-out lights | environments | held-out, true shape | environments, true shape "
+             "| skin BRDF | albedo RMSE | training photo | skin albedo (truth) | skin parameters |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, entry in results["truths"].items():
         for model, m in entry["models"].items():
-            skin = ", ".join(f"{k} {np.mean(v):.3g}" for k, v in (m["skin"] or {}).items() if k != "eta")
-            lines.append(f"| {name} | {model} | {100 * m['image_relative_rmse_first_photo_training']:.2f}% | "
-                         f"{m['albedo']['rmse_sampled']:.4f} | {m['albedo']['bias_sampled']:+.4f} | "
+            v = m.get("validation", {})
+            skin = ", ".join(f"{k} {np.mean(x):.3g}" for k, x in (m["skin"] or {}).items() if k != "eta")
+            lines.append(f"| {name} | {model} | {_percent(v.get('heldout_rmse'))} | "
+                         f"{_percent(v.get('environment_rmse'))} | {_percent(v.get('heldout_rmse_true_shape'))} | "
+                         f"{_percent(v.get('environment_rmse_true_shape'))} | "
+                         f"{_percent((v.get('brdf_rmse') or {}).get('skin'))} | {m['albedo']['rmse_sampled']:.4f} | "
+                         f"{_percent(m['image_relative_rmse_first_photo_training'])} | "
                          f"{_rgb(m.get('albedo_skin_mean'))} ({_rgb(entry.get('truth_albedo_skin_mean'))}) | {skin} |")
+    lines += ["", "| truth | shape floor (held-out, environments) | ranking by held-out lights, true shape "
+              "| ranking by environments, true shape |", "|---|---|---|---|"]
+    for name, entry in results["truths"].items():
+        floor, order = entry.get("shape_floor") or {}, entry.get("ranking", {})
+        lines.append(f"| {name} | {_percent(floor.get('heldout_rmse'))}, {_percent(floor.get('environment_rmse'))} | "
+                     f"{' < '.join(order.get('heldout_rmse_true_shape', []))} | "
+                     f"{' < '.join(order.get('environment_rmse_true_shape', []))} |")
     return "\n".join(lines)
 
 

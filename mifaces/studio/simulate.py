@@ -237,7 +237,7 @@ def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width:
         name = f"m{index:02d}"
         pose = head_pose(face_model, subject, pi, rng)
         vertices = pose.vertices.astype(np.float32)
-        shapes = _face(face_model, vertices, truth, texture, textures, variation["subsurface"])
+        shapes = true_face_shapes(face_model, vertices, truth, texture, textures, variation["subsurface"])
         photographs = photograph_face(studio, shapes, li, companion, spp, seeds, rng)
         bar.update(1 + (photographs.diffuse is not None) + bool(photographs.exposures))
         entry = write_photographs(out, name, li, pi, photographs)
@@ -254,8 +254,10 @@ def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width:
     return len(studio.per_light), render_seconds
 
 
-def _face(face_model, vertices: np.ndarray, truth: dict, texture, maps: dict, subsurface: bool) -> dict:
-    """The face's Mitsuba meshes with their truth: surfaces (with parameter ``maps``), or translucent skin."""
+def true_face_shapes(face_model, vertices: np.ndarray, truth: dict, texture, maps: dict, subsurface: bool) -> dict:
+    """The face's Mitsuba meshes with their truth, as the photographs show it: surfaces (with
+    parameter ``maps``, textures of :func:`~mifaces.studio.varying.map_textures`), or translucent
+    skin (render with :data:`mifaces.studio.subsurface.INTEGRATOR`). ``texture``: the albedo."""
     normals = face_model.vertex_normals(vertices)
     if subsurface:
         return translucent.subsurface_shapes(region_meshes(face_model, vertices, normals), truth,
