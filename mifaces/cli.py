@@ -226,12 +226,14 @@ def _short(value) -> str:
               help="Refine each fit by differentiable rendering against the photographs.")
 @click.option("--normals/--no-normals", default=default(measure_capture, "normals"), show_default=True,
               help="Estimate a normal per texel alternating with each fit.")
+@click.option("--specular-maps/--no-specular-maps", default=default(measure_capture, "specular_maps"),
+              show_default=True, help="Estimate the specular reflectance per texel (specular.exr; renders read it).")
 def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int,
-            refine: bool, normals: bool) -> None:
+            refine: bool, normals: bool, specular_maps: bool) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
     check_writable(out_dir)
     report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution,
-                             refine=refine, normals=normals)
+                             refine=refine, normals=normals, specular_maps=specular_maps)
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")

@@ -94,7 +94,7 @@ def novel_point_light(capture, centre: np.ndarray) -> np.ndarray:
 
 def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resolution: int = 512,
             shape_iterations: float | None = None, spp: int = 64, face_model="builtin", progress: bool = True,
-            refine: bool = False, normals: bool = False) -> dict:
+            refine: bool = False, normals: bool = False, specular_maps: bool = False) -> dict:
     """Measure the reflectance of the face in ``capture``, writing everything to ``out``.
 
     The stages hand their results to each other in memory: the face model is
@@ -131,6 +131,9 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     normals : bool
         Estimate a normal per texel alternating with each fit
         (``fit_brdf(..., normals=True)``); the renders show it.
+    specular_maps : bool
+        Estimate the specular reflectance per texel, shrunk towards each
+        region's (``fit_brdf(..., specular_maps=True)``); the renders show it.
 
     Returns
     -------
@@ -169,7 +172,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     panels, validation_images = [], {}
     for model in models:
         entry, panel = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, resolution, spp,
-                                  timings, progress, refine, normals)
+                                  timings, progress, refine, normals, specular_maps)
         if validator is not None:
             t = time.perf_counter()
             entry["validation"], validation_images[model] = validator.validate(panel[-1])
@@ -223,7 +226,7 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
 
 def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, scene: FaceScene, first,
                novel, resolution: int, spp: int, timings: dict, progress: bool, refine: bool = False,
-               normals: bool = False):
+               normals: bool = False, specular_maps: bool = False):
     """Fit one BRDF model, write it, render it in the first photograph's place
     and under the novel light; the report's entry, and its picture row
     followed by the estimate."""
@@ -231,7 +234,7 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
-                            progress=progress, refine=refine, normals=normals)
+                            progress=progress, refine=refine, normals=normals, specular_maps=specular_maps)
     lamp = capture.light(first.light)
     write_estimate(estimate, out / "brdf" / model, scene, capture.camera, lamp.position, lamp.intensity,
                    light_direction=lamp.direction, force=True)  # measure's own folder
@@ -240,10 +243,10 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
     entry["warnings"] = [str(w.message) for w in caught]
     entry["ground_truth"] = ground_truth_errors(estimate, capture)
     brdf, albedo = estimate.to_json(), estimate.albedo.albedo
-    normals = estimate.normal_texture()
+    maps = {"normals": estimate.normal_texture(), "specular": estimate.specular_texture()}
     rendered = scene.render(brdf, albedo, capture.camera, lamp.position, lamp.intensity, spp=spp,
-                            light_direction=lamp.direction, normals=normals)
-    relit = scene.render(brdf, albedo, capture.camera, spp=spp, normals=normals, **novel)
+                            light_direction=lamp.direction, **maps)
+    relit = scene.render(brdf, albedo, capture.camera, spp=spp, **novel, **maps)
     photo = first.image.pixels
     face_pixels = photo.mean(axis=2) > 0.02 * photo.max()
     entry["training_rmse"] = relative_rmse(rendered, photo, face_pixels)

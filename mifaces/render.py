@@ -38,6 +38,8 @@ ALBEDO = "albedo"
 ALBEDO_REF = {"type": "ref", "id": ALBEDO}
 #: Id of the tangent-space normal map in a face scene with per-texel normals.
 NORMALS = "normals"
+#: Id of the per-texel specular reflectance map in a face scene.
+SPECULAR = "specular"
 #: Folder of a face scene's meshes, beside its ``scene.xml``.
 MESH_FOLDER = "meshes"
 
@@ -212,7 +214,7 @@ class FaceScene:
 
     def description(self, brdf: dict, camera, light_position=None, intensity=None, envmap=None,
                     envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, albedo: str = "albedo.exr", *,
-                    light_direction=None, normals: str | None = None) -> dict:
+                    light_direction=None, normals: str | None = None, specular: str | None = None) -> dict:
         """The Mitsuba scene dict of the face with a per-region BRDF over an
         albedo map, as ``camera`` sees it; meshes and albedo map named by
         file (:meth:`mesh_file`, ``albedo``), relative to the scene's folder.
@@ -247,6 +249,11 @@ class FaceScene:
             Mitsuba's ``normalmap`` encoding (n + 1) / 2 relative to the
             mesh's shading frame: :mod:`mifaces.reflectance.texel_normals`):
             each region's BSDF is then wrapped in a ``normalmap`` BSDF.
+        specular : str, optional
+            A per-texel specular reflectance map's file (texture space as
+            ``albedo``, linear RGB: :mod:`mifaces.reflectance.specular_maps`),
+            read by every region's ``specular_reflectance`` in place of the
+            region's value (models that have one).
         """
         brdf = brdf_models.validate_brdf(brdf)
         for name, value, minimum in (("light position", light_position, None),
@@ -264,11 +271,13 @@ class FaceScene:
                  "sensor": mitsuba_sensor(camera, spp),
                  ALBEDO: {"type": "bitmap", "filename": albedo, "raw": True, "filter_type": "bilinear",
                           "wrap_mode": "clamp"}}
-        if normals is not None:
-            scene[NORMALS] = {"type": "bitmap", "filename": normals, "raw": True, "filter_type": "bilinear",
-                              "wrap_mode": "clamp"}
+        for name, filename in ((NORMALS, normals), (SPECULAR, specular)):
+            if filename is not None:
+                scene[name] = {"type": "bitmap", "filename": filename, "raw": True, "filter_type": "bilinear",
+                               "wrap_mode": "clamp"}
+        maps = None if specular is None else {"specular_reflectance": {"type": "ref", "id": SPECULAR}}
         for key, part in self.meshes.items():
-            bsdf = region_bsdf(brdf, part.region, ALBEDO_REF)
+            bsdf = region_bsdf(brdf, part.region, ALBEDO_REF, maps=maps)
             if normals is not None:
                 bsdf = {"type": "normalmap", "normalmap": {"type": "ref", "id": NORMALS}, "bsdf": bsdf}
             scene[key] = {"type": "ply", "filename": self.mesh_file(key), "bsdf": bsdf}
@@ -300,14 +309,16 @@ class FaceScene:
 
     def scene(self, brdf: dict, albedo: np.ndarray, camera, light_position=None, intensity=None, envmap=None,
               envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, *, light_direction=None,
-              normals: np.ndarray | None = None) -> dict:
-        """:meth:`description` with the meshes, the ``albedo`` array (R, R, 3) and the
-        tangent-space ``normals`` texture (R', R', 3, encoded, or None) in memory in place of
-        their files: a dict for ``mi.load_dict``."""
+              normals: np.ndarray | None = None, specular: np.ndarray | None = None) -> dict:
+        """:meth:`description` with the meshes, the ``albedo`` array (R, R, 3), the
+        tangent-space ``normals`` texture (R', R', 3, encoded, or None) and the ``specular``
+        reflectance map (R', R', 3 or None) in memory in place of their files: a dict for
+        ``mi.load_dict``."""
         scene = self.description(brdf, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth,
-                                 light_direction=light_direction, normals=None if normals is None else NORMALS)
+                                 light_direction=light_direction, normals=None if normals is None else NORMALS,
+                                 specular=None if specular is None else SPECULAR)
         textures = {}
-        for name, data in ((ALBEDO, albedo), (NORMALS, normals)):
+        for name, data in ((ALBEDO, albedo), (NORMALS, normals), (SPECULAR, specular)):
             if data is not None:
                 texture = {k: v for k, v in scene.pop(name).items() if k != "filename"}
                 textures[name] = mi.load_dict({**texture, "bitmap": mi.Bitmap(np.ascontiguousarray(data, np.float32))})
@@ -317,10 +328,11 @@ class FaceScene:
 
     def render(self, brdf: dict, albedo: np.ndarray, camera, light_position=None, intensity=None, envmap=None,
                envmap_scale: float = 1.0, spp: int = 64, seed: int = 0, max_depth: int = 4, *,
-               light_direction=None, normals: np.ndarray | None = None) -> np.ndarray:
+               light_direction=None, normals: np.ndarray | None = None,
+               specular: np.ndarray | None = None) -> np.ndarray:
         """Render :meth:`scene`: (H, W, 3) float32 linear radiance."""
         scene = self.scene(brdf, albedo, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth,
-                           light_direction=light_direction, normals=normals)
+                           light_direction=light_direction, normals=normals, specular=specular)
         return np.array(mi.render(mi.load_dict(scene), spp=spp, seed=seed), dtype=np.float32)[..., :3]
 
     def write_meshes(self, folder: str | os.PathLike) -> dict[str, Path]:
@@ -464,6 +476,6 @@ def scene_xml(scene: dict, parameters: Mapping[str, tuple[str, ...]] | None = No
     return header + ET.tostring(root, encoding="unicode") + "\n"
 
 
-__all__ = ["ALBEDO", "ALBEDO_REF", "NORMALS", "MESH_FOLDER", "render_passes", "save_image", "mitsuba_sensor", "rgb",
+__all__ = ["ALBEDO", "ALBEDO_REF", "NORMALS", "SPECULAR", "MESH_FOLDER", "render_passes", "save_image", "mitsuba_sensor", "rgb",
            "region_bsdf",
            "RegionMesh", "region_meshes", "face_shapes", "FaceScene", "face_scene", "render_face", "scene_xml"]

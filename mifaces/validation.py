@@ -405,7 +405,8 @@ class Validator:
         from .report import ground_truth_errors  # here: mifaces.report imports this module
 
         t = time.perf_counter()
-        fit, albedo, normals = estimate.to_json(), estimate.albedo.albedo, estimate.normal_texture()
+        fit, albedo = estimate.to_json(), estimate.albedo.albedo
+        maps = {"normals": estimate.normal_texture(), "specular": estimate.specular_texture()}
         r = estimate.resolution
         if r not in self._albedo:
             self._albedo[r] = resize(self.ground_truth.albedo, (r, r, 3), anti_aliasing=True, order=1)
@@ -421,8 +422,7 @@ class Validator:
         errors = ground_truth_errors(estimate, self.capture, self.ground_truth)
         images, per_condition = {}, {}
         for name, light in self.conditions.items():
-            images[name] = self.fit_scene.render(fit, albedo, self.camera, spp=self.spp, seed=SEED, normals=normals,
-                                                 **light)
+            images[name] = self.fit_scene.render(fit, albedo, self.camera, spp=self.spp, seed=SEED, **light, **maps)
             per_condition[name] = relative_rmse(images[name], self.truth[name], self.mask)
         entry = {"brdf_rmse": regions, "albedo_rmse": errors["albedo"]["rmse_sampled"], **self._pooled(per_condition),
                  "per_condition": per_condition}
@@ -430,7 +430,7 @@ class Validator:
             on_truth = per_condition
             if self._true_shape:
                 on_truth = {name: relative_rmse(self.truth_scene.render(fit, albedo, self.camera, spp=self.spp,
-                                                                        seed=SEED, normals=normals, **light),
+                                                                        seed=SEED, **light, **maps),
                                                 self.truth[name], self.truth_mask)
                             for name, light in self.conditions.items()}
             entry.update({f"{k}{TRUE_SHAPE}": v for k, v in self._pooled(on_truth).items()})

@@ -229,6 +229,28 @@ def test_scene_wraps_every_region_in_the_normal_map(face_model):
     assert text.count('type="normalmap"') == len(scene.meshes) and '<ref id="normals" name="normalmap"' in text
 
 
+def test_renders_read_the_specular_map(face_model):
+    """A specular map of twice the region's ρs renders as the region fitted with twice its ρs, and
+    the scene description points every region's specular_reflectance at the map."""
+    mifaces.set_variant("llvm_ad_rgb")
+    scene = FaceScene(face_model, face_model.shape_mean)
+    camera = SimpleNamespace(width=48, height=48, fx=100.0, fy=100.0, cx=24.0, cy=24.0, distortion=np.zeros(5),
+                             rotation=np.diag([1.0, -1.0, -1.0]), position=np.array([0.0, 0.0, 600.0]))
+    document = {"model": "cooktorrance", "options": {},
+                "regions": {"skin": {"specular_reflectance": [0.5] * 3, "roughness": 0.3, "eta": 1.38}}}
+    doubled = {**document, "regions": {"skin": {**document["regions"]["skin"], "specular_reflectance": [1.0] * 3}}}
+    albedo = np.full((16, 16, 3), 0.1, np.float32)
+    light = {"light_position": [0.0, 0.0, 600.0], "intensity": [3e5] * 3}
+    with_map = scene.render(document, albedo, camera, spp=8, **light, specular=np.ones((16, 16, 3), np.float32))
+    expected = scene.render(doubled, albedo, camera, spp=8, **light)
+    plain = scene.render(document, albedo, camera, spp=8, **light)
+    assert np.abs(plain - expected).mean() > 5 * np.abs(with_map - expected).mean()
+    description = scene.description(document, camera, **light, specular="specular.exr")
+    assert description["specular"]["filename"] == "specular.exr"
+    for key in scene.meshes:
+        assert description[key]["bsdf"]["specular_reflectance"] == {"type": "ref", "id": "specular"}
+
+
 @pytest.fixture(scope="module")
 def face_model():
     return mifaces.load_model("builtin")
@@ -254,7 +276,7 @@ def test_fit_brdf_with_normals_writes_the_normal_map(capture_dir, tmp_path):
     assert set(data["specular_shrinkage"]) == set(estimate.fits)
     assert data["normal_refinement"]["median_tilt_deg"] < 3.0
     text = (out / "scene.xml").read_text()
-    assert 'type="normalmap"' in text and 'value="normals.exr"' in text
+    assert 'type="normalmap"' in text and 'value="normals.exr"' in text and 'value="specular.exr"' in text
     image = np.array(mi.render(mi.load_file(str(out / "scene.xml"), spp=2)))
     assert np.isfinite(image).all() and image.max() > 0
     # one measurement: no texel has the samples a normal needs; left out with a message
@@ -282,7 +304,10 @@ def test_cli_normals_flags_reach_the_api(monkeypatch, tmp_path):
         calls.clear()
         CliRunner().invoke(main, command)
         assert calls.get("normals") is True, command
-    assert calls.get("specular_maps") is None  # measure: not a flag of its own
+    assert calls.get("specular_maps") is False  # measure: its own flag, off unless given
+    calls.clear()
+    CliRunner().invoke(main, ["measure", str(capture), "--out", str(tmp_path / "s"), "--specular-maps"])
+    assert calls.get("specular_maps") is True and calls.get("normals") is False
     calls.clear()
     CliRunner().invoke(main, ["fit-brdf", str(capture), "--out", str(tmp_path / "p")])
     assert calls.get("normals") is False and calls.get("specular_maps") is False

@@ -163,7 +163,8 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
         predictions = {"photometric_stereo": photometric_stereo.predict(albedo_ps, normals_ps, image.direction)}
         for model, data in estimates.items():
             rendered = scene.render(data, data["albedo"], camera, None, irradiance, spp=spp,
-                                    light_direction=direction, normals=data.get("normals")).mean(axis=2)
+                                    light_direction=direction, normals=data.get("normals"),
+                                    specular=data.get("specular")).mean(axis=2)
             rendered[~mask] = 0.0
             write_exr(out / "heldout" / model / f"{image.stem}.exr", rendered[:, :, None].repeat(3, axis=2))
             predictions[model] = rendered
@@ -171,7 +172,7 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
                 continue
             predictions[f"{model}_diffuse_only"] = scene.render(
                 diffuse_only(data), data["albedo"], camera, None, irradiance, spp=spp,
-                light_direction=direction, normals=data.get("normals")).mean(axis=2)
+                light_direction=direction, normals=data.get("normals"), specular=data.get("specular")).mean(axis=2)
         for key, prediction in predictions.items():
             errors.add(key, group, prediction, photo, valid)
         per_light[image.stem] = {"azimuth": image.azimuth, "elevation": image.elevation, "group": group,

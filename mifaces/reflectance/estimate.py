@@ -104,6 +104,10 @@ class BRDFEstimate:
         """The normals as a ``normalmap`` texture ((n + 1) / 2), or None."""
         return None if self.normals is None else encode(self.normals)
 
+    def specular_texture(self) -> np.ndarray | None:
+        """The per-texel specular reflectance (R, R, 3) that renders read, or None."""
+        return None if self.specular is None else self.specular.specular
+
     @property
     def resolution(self) -> int:
         return int(self.region_map.shape[0])

@@ -65,9 +65,10 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
     """
     out = Path(out)
     document = estimate.to_json()
-    normals = estimate.normal_texture()
+    normals, specular = estimate.normal_texture(), estimate.specular_texture()
     scene = face.description(document, camera, light_position, intensity, spp=SCENE_SPP, albedo=FILES["albedo"],
-                             light_direction=light_direction, normals=None if normals is None else FILES["normals"])
+                             light_direction=light_direction, normals=None if normals is None else FILES["normals"],
+                             specular=None if specular is None else FILES["specular"])
     # (description checks the BRDF and the light before anything is written)
     comment = (f"The face as fitted by mifaces fit-brdf: per-region {estimate.model} BSDFs over the refined albedo "
                "map, seen by the capture's camera under the light of its first measurement. Render: "
@@ -80,12 +81,12 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
         write_png(folder / FILES["preview"], estimate.albedo.albedo)
         if normals is not None:
             write_exr(folder / FILES["normals"], normals)
-        if estimate.specular is not None:
-            write_exr(folder / FILES["specular"], estimate.specular.specular)
+        if specular is not None:
+            write_exr(folder / FILES["specular"], specular)
         face.write_meshes(folder)
         with atomic_write(folder / FILES["scene"], "w") as f:
             f.write(scene_xml(scene, {"spp": SPP_PATH}, comment))
-    optional = {"normals": normals is not None, "specular": estimate.specular is not None}
+    optional = {"normals": normals is not None, "specular": specular is not None}
     return {key: out / name for key, name in FILES.items() if optional.get(key, True)}
 
 

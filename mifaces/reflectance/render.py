@@ -33,7 +33,8 @@ def render_estimate(estimate: BRDFEstimate, face_model: MorphableModel, vertices
     :class:`~mifaces.render.FaceScene` once and call its ``render``."""
     return FaceScene(face_model, vertices).render(estimate.to_json(), estimate.albedo.albedo, camera, light_position,
                                                   intensity, envmap, envmap_scale, spp, seed,
-                                                  light_direction=light_direction, normals=estimate.normal_texture())
+                                                  light_direction=light_direction, normals=estimate.normal_texture(),
+                                                  specular=estimate.specular_texture())
 
 
 def turn(vertices: np.ndarray, yaw: float, up: np.ndarray) -> np.ndarray:
@@ -86,7 +87,7 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
         intensity = lamp.intensity
     image = FaceScene(face, vertices).render(data, albedo, capture.camera, light_position, intensity, envmap,
                                              envmap_scale, spp, light_direction=light_direction,
-                                             normals=data.get("normals"))
+                                             normals=data.get("normals"), specular=data.get("specular"))
     return save_image(image, out)
 
 
