@@ -30,7 +30,7 @@ import numpy as np
 from .. import brdf as brdf_models
 from ..brdf.model import BRDFModel
 from ..progress import progress as progress_bar
-from ..shape.layout import device_array
+from ..arrays import device_array
 from ..status import AT_BOUND, CONVERGED, PRIOR
 from .levenberg_marquardt import levenberg_marquardt
 from .parameters import ParameterSpace, conservative_start, linear_start

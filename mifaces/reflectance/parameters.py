@@ -15,7 +15,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..brdf.model import BRDFModel, Parameter
-from ..shape.layout import device_array
+from ..arrays import device_array
 
 
 @dataclass(frozen=True)

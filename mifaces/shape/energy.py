@@ -27,7 +27,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .layout import Layout, device_array
+from ..arrays import device_array
+from .layout import Layout
 from .layout import adjacency as triangle_adjacency
 from .result import Weights
 from .targets import FRONTAL, blurred
