@@ -178,6 +178,18 @@ def atomic_path(path: str | os.PathLike):
         raise
 
 
+def save_figure(fig, path: str | os.PathLike, dpi: int | None = 110) -> None:
+    """Write a Matplotlib figure as a PNG at ``path``, atomically (:func:`atomic_path`), and
+    close it (``dpi`` None: the figure's own)."""
+    import matplotlib.pyplot as plt
+
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", **({} if dpi is None else {"dpi": dpi}))
+    finally:
+        plt.close(fig)
+
+
 @contextlib.contextmanager
 def atomic_write(path: str | os.PathLike, mode: str = "wb"):
     """Open a file for writing that appears at ``path`` only once complete.

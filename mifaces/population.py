@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import atomic_path, atomic_write, write_json
+from .files import atomic_write, save_figure, write_json
 from .status import PRIOR
 
 #: Scale that makes the median absolute deviation estimate a normal distribution's σ.
@@ -245,9 +245,7 @@ def write_picture(path, stats: dict) -> None:
     for ax in list(axes.flat)[len(panels):]:
         ax.axis("off")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
+    save_figure(fig, path, dpi=100)
 
 
 __all__ = ["population", "write_population", "robust_summary", "components", "markdown", "write_picture"]

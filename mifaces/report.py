@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .capture import read_ground_truth
-from .files import atomic_path, atomic_write
+from .files import atomic_write, save_figure
 from .model.regions import REGIONS
 from .status import PRIOR
 from .validation import TRUE_SHAPE
@@ -103,9 +103,7 @@ def write_validation_picture(path: Path, truth: dict, images: dict, report: dict
                  "environments the fit never saw; relative RMSE on the face (and of the fitted reflectance on the "
                  "true shape)", fontsize=9)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90, format="png")
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)
 
 
 def write_picture(path: Path, panels, photo_name: str) -> None:
@@ -123,9 +121,7 @@ def write_picture(path: Path, panels, photo_name: str) -> None:
         show(row[2], 4 * np.abs(rendered - photo), "|difference| x 4", scale)
         show(row[3], relit, f"{model}: novel light", scale)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90, format="png")
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)
 
 
 def write_markdown(path: Path, report: dict, photo_name: str) -> None:

@@ -42,7 +42,7 @@ import scipy.optimize
 from mifaces import brdf
 from mifaces.reflectance.fitting import (FULL_DATA, ParameterSpace, SubsetSchedule, _Problem,
                                          fit_region, linear_start)
-from mifaces.files import atomic_path, write_json
+from mifaces.files import save_figure, write_json
 
 OUT = Path(__file__).resolve().parent / "results"
 
@@ -215,8 +215,7 @@ def plot(curves, path):
     axes[0].set_ylabel("full-data loss / best final - 1")
     axes[-1].legend(fontsize=7)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
+    save_figure(fig, path, dpi=110)
 
 
 if __name__ == "__main__":

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 
-from mifaces.files import atomic_path, write_json
+from mifaces.files import save_figure, write_json
 
 RESULTS = Path(__file__).resolve().parent / "results"
 MIFACES = Path(sys.executable).parent / "mifaces"
@@ -76,9 +76,7 @@ def figure(results: dict, path: Path) -> None:
     ax.legend(fontsize=7, ncol=3, loc="lower right")
     ax.set_title("mifaces measure on the built-in default (simulated capture)", fontsize=9)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90, format="png")
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)
 
 
 def main(argv=None) -> int:

@@ -19,7 +19,7 @@ import numpy as np
 
 from mifaces import brdf
 from mifaces.brdf.albedo import glossy_albedo
-from mifaces.files import atomic_path, write_json
+from mifaces.files import save_figure, write_json
 
 OUT = Path(__file__).resolve().parent / "results"
 ANGLES = np.linspace(0.0, 89.9, 46)
@@ -91,8 +91,7 @@ def plot(results, labels, path):
         ax.legend(fontsize=6)
     axes[0].set_ylabel("albedo of the glossy part")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
+    save_figure(fig, path, dpi=100)
 
 
 if __name__ == "__main__":

@@ -130,7 +130,7 @@ def main(argv=None) -> int:
     import matplotlib.pyplot as plt
     from matplotlib.patches import Patch
 
-    from mifaces.files import atomic_path
+    from mifaces.files import save_figure
 
     maps = [("built-in (cylindrical h, phi)", builtin.region_map)]
     if sfm is not None:
@@ -144,9 +144,7 @@ def main(argv=None) -> int:
     fig.legend(handles=[Patch(color=REGION_COLOURS[i], label=name) for i, name in enumerate(REGION_NAMES)],
                loc="center right", fontsize=9, frameon=False)
     fig.subplots_adjust(left=0.06, right=0.83, wspace=0.25)
-    with atomic_path(args.out / "model_regions.png") as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
+    save_figure(fig, args.out / "model_regions.png", dpi=None)
     print(f"wrote model_faces.png, model_builtin_mean.png, model_regions.png to {args.out} "
           f"in {time.perf_counter() - start:.0f} s")
     return 0

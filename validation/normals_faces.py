@@ -39,7 +39,7 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.files import atomic_path, write_json
+from mifaces.files import save_figure, write_json
 from mifaces.geometry import load_geometry
 from mifaces.model.regions import REGIONS
 from mifaces.model.texture_space import rasterize
@@ -180,9 +180,7 @@ def figure(result: dict, maps: dict, path: Path) -> None:
     fig.suptitle("SIMULATED Surrey capture, fitted shapes: per-texel normals (Cook-Torrance, "
                  f"{result['resolution']}² texture)")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 if __name__ == "__main__":

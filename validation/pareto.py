@@ -43,7 +43,7 @@ import mifaces  # first: libLLVM  # isort: skip
 import mitsuba as mi
 import numpy as np
 
-from mifaces.files import atomic_path, write_json
+from mifaces.files import save_figure, write_json
 from mifaces.pipeline import measure
 from mifaces.studio import simulate
 
@@ -142,9 +142,7 @@ def figure(result: dict, path: Path) -> None:
                  f"{result['options']['geometry']}; labels: measurements/resolution/spp; marker: resolution, "
                  "size: spp", fontsize=9)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def main() -> None:

@@ -56,7 +56,7 @@ import numpy as np
 from mifaces import photometric_stereo
 from mifaces.brdf import NAMES
 from mifaces.capture import load_capture
-from mifaces.files import atomic_path, write_exr, write_json, write_png
+from mifaces.files import save_figure, write_exr, write_json, write_png
 from mifaces.geometry import load_geometry
 from mifaces.importers.yaleb import default_split, import_subject, read_subject
 from mifaces.pipeline import measure
@@ -250,9 +250,7 @@ def figure(results: list[dict], out: Path, data_dir: Path, run_dir: Path, best: 
     fig.suptitle("Real photographs (Extended Yale B): held-out lights, predicted from 8 training photographs",
                  fontsize=10)
     fig.tight_layout()
-    with atomic_path(out) as tmp:
-        fig.savefig(tmp, dpi=80, format="png")
-    plt.close(fig)
+    save_figure(fig, out, dpi=80)
 
 
 def normals_comparison(args, subjects, models, argv) -> int:
@@ -297,9 +295,7 @@ def normals_comparison(args, subjects, models, argv) -> int:
     ax.set_title(f"Yale B, real photographs: held-out relighting ({args.train} training lights)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    with atomic_path(args.results / "real_yaleb_normals.png") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, args.results / "real_yaleb_normals.png", dpi=110)
     print(f"{best}: {document['best_model_error']['without']:.4f} without, {document['best_model_error']['with']:.4f} "
           "with per-texel normals")
     return 0

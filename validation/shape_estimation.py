@@ -56,7 +56,7 @@ from scipy.spatial import cKDTree
 
 from mifaces import shape as se
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.files import atomic_path, write_json
+from mifaces.files import save_figure, write_json
 from mifaces.model.landmarks import FEATURE_POINTS
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -359,9 +359,7 @@ def figure(result: dict, path: Path) -> None:
     fig.suptitle("Shape estimation (paper sec. 4.2), measurement m00 of the default simulated capture; "
                  "labels: iterations")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def brdf_table(result: dict) -> str:

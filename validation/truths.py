@@ -51,7 +51,7 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 import numpy as np
 
 from mifaces.capture import read_ground_truth
-from mifaces.files import atomic_path, read_exr, write_json
+from mifaces.files import read_exr, save_figure, write_json
 from mifaces.model import load_model
 from mifaces.model.regions import REGIONS
 from mifaces.pipeline import measure
@@ -134,9 +134,7 @@ def figure(results: dict, path: Path) -> None:
     fig.suptitle(f"SIMULATED: mifaces measure on truths outside the fit (6 measurements, {', '.join(sizes)}; "
                  "truth on the x axis)", fontsize=10)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90, format="png")
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)
 
 
 def _rgb(values) -> str:
