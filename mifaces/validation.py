@@ -306,6 +306,7 @@ class Validator:
         self.ground_truth = read_ground_truth(capture)
         if self.ground_truth is None:
             raise ValueError(f"{capture.path}: only a simulated capture (with ground truth) can be validated")
+        self._truth_maps = map_textures(self.ground_truth.maps) or None  # a spatially varying truth's textures
         truth_model, true_shapes = load_geometry(capture, "ground-truth")
         true_vertices = true_shapes[measurement]
         centre = true_vertices.mean(axis=0)
@@ -417,8 +418,7 @@ class Validator:
             uv = region_texels(estimate.region_map, REGIONS[name])
             if len(uv):
                 regions[name] = brdf_rmse(self.ground_truth.brdf, fit, name, true_albedo[texels].mean(axis=0),
-                                          albedo[texels].mean(axis=0), uv,
-                                          truth_maps=map_textures(self.ground_truth.maps) or None)
+                                          albedo[texels].mean(axis=0), uv, truth_maps=self._truth_maps)
         errors = ground_truth_errors(estimate, self.capture, self.ground_truth)
         images, per_condition = {}, {}
         for name, light in self.conditions.items():
