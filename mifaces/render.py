@@ -80,8 +80,9 @@ def mitsuba_sensor(camera, spp: int) -> dict:
     to_world[:3, :3] = camera.rotation.T @ np.diag([-1.0, -1.0, 1.0])
     to_world[:3, 3] = camera.position
     return {"type": "perspective", "fov": fov, "fov_axis": "y",
-            "principal_point_offset_x": (camera.cx + 0.5 - camera.width / 2) / camera.width,
-            "principal_point_offset_y": (camera.cy + 0.5 - camera.height / 2) / camera.height,
+            # Mitsuba shifts the image against its offsets (checked by tests/test_render.py)
+            "principal_point_offset_x": (camera.width / 2 - camera.cx - 0.5) / camera.width,
+            "principal_point_offset_y": (camera.height / 2 - camera.cy - 0.5) / camera.height,
             "near_clip": 10.0, "far_clip": 1e5, "to_world": mi.ScalarTransform4f(to_world.tolist()),
             "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
                      # the optics' blur: a Gaussian point spread function of 0.5 px

@@ -123,3 +123,22 @@ def test_directional_light_lights_a_white_face_at_e_over_pi(face):
         scene.description(brdf, camera(), None, [1.0] * 3, light_direction=[0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="needs a light"):
         scene.description(brdf, camera(), None, [1.0] * 3)
+
+
+@pytest.mark.parametrize("cx, cy", [(20.0, 50.0), (49.5, 39.5), (70.0, 10.0)])
+def test_sensor_puts_a_point_where_the_camera_projects_it(cx, cy):
+    """An off-centre principal point: the render of a small sphere is centred where
+    Camera.project puts its centre (Mitsuba's offsets have the opposite sign of OpenCV's)."""
+    import mitsuba as mi
+
+    from mifaces.capture import Camera
+    from mifaces.render import mitsuba_sensor
+
+    mifaces.set_variant("llvm_ad_rgb")
+    camera = Camera(100, 80, 200.0, 200.0, cx, cy, np.zeros(0), np.diag([1.0, -1.0, -1.0]), np.array([0, 0, 1000.0]))
+    point = np.array([[30.0, 20.0, 0.0]])
+    scene = mi.load_dict({"type": "scene", "integrator": {"type": "direct", "hide_emitters": True},
+                          "sensor": mitsuba_sensor(camera, 16), "emitter": {"type": "constant"},
+                          "ball": {"type": "sphere", "center": point[0].tolist(), "radius": 5.0}})
+    rows, cols = np.nonzero(np.array(mi.render(scene))[..., 0] > 0.1)
+    np.testing.assert_allclose([cols.mean(), rows.mean()], camera.project(point)[0], atol=0.5)

@@ -1,7 +1,7 @@
 """Morphable face models (paper sections 4.1 and 4.4).
 
 :func:`load_model` returns a :class:`MorphableModel` for ``'builtin'`` (the
-model mifaces generates itself) or for a file: the Surrey Face Model (npz or
+ICT Face Model Light, shipped with mifaces) or for a file: the Surrey Face Model (npz or
 eos ``.bin``), the Basel Face Models 2009 (``.mat``) and 2017/2019 (``.h5``),
 or a model saved by :meth:`MorphableModel.save`.
 """
@@ -24,8 +24,8 @@ def load_model(source: str | os.PathLike | MorphableModel = "builtin", **kwargs)
     Parameters
     ----------
     source : str, path or MorphableModel
-        A model is returned as it is. ``'builtin'`` for the generated default model (built on first use,
-        then cached), or a model file, recognised by its suffix and content:
+        A model is returned as it is. ``'builtin'`` for the default model that ships with mifaces
+        (the ICT Face Model Light, :mod:`mifaces.model.builtin`), or a model file, recognised by its suffix and content:
         ``.npz`` (a mifaces model, or the Surrey Face Model's npz layout),
         ``.bin`` (eos, needs ``eos-py``), ``.mat`` (Basel 2009), ``.h5``
         (Basel 2017/2019).

@@ -105,3 +105,14 @@ def rotation_matrix(yaw: float, pitch: float, roll: float) -> np.ndarray:
     rx = np.array([[1, 0, 0], [0, np.cos(p), -np.sin(p)], [0, np.sin(p), np.cos(p)]])
     rz = np.array([[np.cos(r), -np.sin(r), 0], [np.sin(r), np.cos(r), 0], [0, 0, 1]])
     return ry @ rx @ rz
+
+
+def head_centre(vertices: np.ndarray, landmarks: dict[int, int] | None = None) -> np.ndarray:
+    """The centre a head turns about and a camera frames: the centre of the bounding box of the
+    vertices at or above the chin (iBUG landmark 9), so that a neck does not pull it down; of all
+    vertices for a model without that landmark. Model or world space, mm."""
+    v = np.asarray(vertices, dtype=np.float64)
+    if landmarks and 9 in landmarks:
+        above = v[v[:, 1] >= v[int(landmarks[9]), 1]]
+        v = above if len(above) else v
+    return 0.5 * (v.min(axis=0) + v.max(axis=0))

@@ -257,6 +257,29 @@ class MorphableModel:
         c = self.random_coefficients(rng)
         return self.shape(c["shape"]), (self.texture(c["color"]) if "color" in c else None)
 
+    def truncated(self, shape_modes: int | None) -> MorphableModel:
+        """The same model with only its leading ``shape_modes`` identity modes (all for None, or
+        when the model has no more). The result is memoised per model and count, so fits that
+        cache per-model arrays see one object. ``metadata['shape_modes_of']`` records the count
+        of the full model."""
+        k = self.shape_dim if shape_modes is None else int(shape_modes)
+        if k < 1:
+            raise ValueError(f"shape_modes must be at least 1, got {shape_modes}")
+        if k >= self.shape_dim:
+            return self
+        memo = self.__dict__.setdefault("_truncated", {})
+        if k not in memo:
+            memo[k] = dataclasses.replace(
+                self, shape_basis=self.shape_basis[:, :k], shape_variance=self.shape_variance[:k],
+                metadata=dict(self.metadata, shape_modes_of=self.metadata.get("shape_modes_of", self.shape_dim)))
+        return memo[k]
+
+    @property
+    def fit_shape_modes(self) -> int:
+        """Identity modes a shape fit uses by default: ``metadata['fit_shape_modes']`` where the
+        model names a number (the built-in model does), else all."""
+        return int(min(self.metadata.get("fit_shape_modes", self.shape_dim), self.shape_dim))
+
     # ---- geometry -------------------------------------------------------------------------
     def vertex_normals(self, vertices: np.ndarray | None = None) -> np.ndarray:
         """Unit outward vertex normals (N, 3) of ``vertices`` (default: the mean shape)."""

@@ -220,8 +220,8 @@ def _model_source(model) -> str:
 def fit_shape(capture, model="builtin", measurements=None, out=None,
               iterations: float | ShapeSchedule | None = None, progress: bool = True, weights: Weights | None = None,
               use_diffuse: bool = True, fit_focal: bool = True, seed: int = 0,
-              max_feature_error: float = MAX_FEATURE_ERROR, fixed=(), feature_noise: float = FEATURE_NOISE
-              ) -> list[ShapeFit]:
+              max_feature_error: float = MAX_FEATURE_ERROR, fixed=(), feature_noise: float = FEATURE_NOISE,
+              shape_modes: int | None = None) -> list[ShapeFit]:
     """Fit the morphable model to every pose of a capture, independently (paper sec. 4.2).
 
     Measurements sharing a ``pose`` label (one pose of the subject photographed
@@ -263,6 +263,10 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
         The convergence limit of the feature points (see :func:`feature_limit`).
     fixed : iterable of str
         Parameter blocks held at their start values (see :func:`fit_measurement`).
+    shape_modes : int, optional
+        Identity modes fitted, the leading ones (default: the model's
+        :attr:`~mifaces.model.MorphableModel.fit_shape_modes`, 50 of the built-in's 100).
+        ``shapes.json`` records the number.
 
     Returns
     -------
@@ -278,6 +282,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     capture = as_capture(capture)
     source = _model_source(model)
     model = load_model(model)
+    model = model.truncated(model.fit_shape_modes if shape_modes is None else shape_modes)
     if isinstance(iterations, ShapeSchedule):
         schedule = iterations
     else:

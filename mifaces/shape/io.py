@@ -74,7 +74,9 @@ def write_index(out, capture, model, fits: list[ShapeFit], reference=None, model
     out = Path(out)
     index = {"format": "mifaces-shapes", "version": 1, "capture": str(capture.path), "model": model.name,
              "model_source": str(model_source if model_source is not None else model.name),
-             "vertex_count": model.vertex_count, "frame": "camera (OpenCV), mm",
+             "vertex_count": model.vertex_count, "shape_modes": model.shape_dim,
+             "model_shape_modes": int(model.metadata.get("shape_modes_of", model.shape_dim)),
+             "frame": "camera (OpenCV), mm",
              "camera": capture.camera.to_json(), "texture_reference": reference, "measurements": {}}
     old = out / INDEX
     if old.is_file():

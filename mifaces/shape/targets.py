@@ -16,6 +16,7 @@ import math
 import numpy as np
 import scipy.ndimage as ndi
 
+from ..model.geometry import head_centre
 from ..model.landmarks import FEATURE_POINTS
 from .result import ShapeFitError
 
@@ -49,9 +50,9 @@ def start_light_angles(light, camera, head_world) -> tuple[float, float] | None:
 
 
 def rotation_centre(model) -> np.ndarray:
-    """The point ``c`` of the model the fitted rotation turns about: the centre of the
-    mean shape's bounding box (model space, mm)."""
-    return 0.5 * (model.shape_mean.min(axis=0) + model.shape_mean.max(axis=0)).astype(np.float64)
+    """The point ``c`` of the model the fitted rotation turns about: the mean shape's
+    :func:`~mifaces.model.geometry.head_centre` (model space, mm)."""
+    return head_centre(model.shape_mean, model.ibug_landmarks)
 
 
 def metric_distances(distances, model) -> list[tuple[int, int, float]]:

@@ -8,9 +8,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.ndimage as ndi
 
-from ..model.geometry import rotation_matrix
+from ..model.geometry import head_centre, rotation_matrix
 from ..model.texture_space import rasterize
 from .scene import POSES
+from .skin import paint_skin
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,7 +65,7 @@ def make_subject(face_model, rng: np.random.Generator, albedo_resolution: int) -
     if "color" in coefficients:
         coefficients["color"] *= 0.7
     neutral = face_model.shape(coefficients["shape"])
-    head = 0.5 * (neutral.min(axis=0) + neutral.max(axis=0))
+    head = head_centre(neutral, face_model.ibug_landmarks)
     albedo = albedo_map(face_model, coefficients.get("color"), rng, albedo_resolution)
     return Subject(coefficients, neutral, head, albedo)
 
@@ -98,20 +99,24 @@ def albedo_map(model, color, rng: np.random.Generator, size: int = 1024, detail:
     """Per-texel albedo (size, size, 3), linear RGB, in the model's texture space.
 
     The model's per-vertex albedo for colour coefficients ``color``,
-    interpolated over the triangles, times fine multiplicative detail:
+    interpolated over the triangles (for a model without colour model, a
+    painted skin: :func:`mifaces.studio.skin.paint_skin`), times fine multiplicative detail:
     log-normal noise at pore/freckle scales (1-2 texels and ~6 texels;
     ``detail`` is its standard deviation in log units), and a few darker
     spots. Texels no triangle covers take the nearest covered texel.
     """
-    per_vertex = model.texture(color) if model.has_texture else np.full((model.vertex_count, 3), 0.45, np.float32)
-    cov = rasterize(model.uv, model.triangles, (size, size))
-    covered = cov.covered
-    tri = model.triangles[cov.triangle[covered]]
-    bary = cov.barycentric[covered]
-    image = np.zeros((size, size, 3), np.float64)
-    image[covered] = np.einsum("nk,nkc->nc", bary, per_vertex[tri])
-    _, (ri, ci) = ndi.distance_transform_edt(~covered, return_indices=True)
-    image = image[ri, ci]
+    if model.has_texture:
+        per_vertex = model.texture(color)
+        cov = rasterize(model.uv, model.triangles, (size, size))
+        covered = cov.covered
+        tri = model.triangles[cov.triangle[covered]]
+        bary = cov.barycentric[covered]
+        image = np.zeros((size, size, 3), np.float64)
+        image[covered] = np.einsum("nk,nkc->nc", bary, per_vertex[tri])
+        _, (ri, ci) = ndi.distance_transform_edt(~covered, return_indices=True)
+        image = image[ri, ci]
+    else:
+        image = paint_skin(model, rng, size).astype(np.float64)
     fine = ndi.gaussian_filter(rng.standard_normal((size, size)), 0.8)
     medium = ndi.gaussian_filter(rng.standard_normal((size, size)), 3.0)
     fine /= fine.std()
