@@ -98,15 +98,16 @@ def test_random_faces_are_reproducible_and_differ(model):
 
 # ---- geometry and parameterization ----------------------------------------------------------
 def test_normals_point_outward(model):
+    from scipy.spatial import ConvexHull
+
     v = model.shape_mean.astype(np.float64)
     n = model.vertex_normals()
-    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-5)
-    # Outward = away from a vertical axis well behind the face (both models look along +z).
-    axis = np.array([v[:, 0].mean(), 0.0, v[:, 2].max() - 0.6 * np.ptp(v[:, 0])])
-    radial = v - axis
-    radial[:, 1] = 0
-    radial /= np.linalg.norm(radial, axis=1, keepdims=True)
-    outward = np.sum(n * radial, axis=1) > 0
+    used = np.unique(model.triangles)
+    np.testing.assert_allclose(np.linalg.norm(n[used], axis=1), 1.0, atol=1e-5)
+    # Outward: at the vertices on the convex hull of the face, the normal points away from its inside.
+    hull = ConvexHull(v[used])
+    on_hull = used[hull.vertices]
+    outward = np.sum(n[on_hull] * (v[on_hull] - v[used].mean(axis=0)), axis=1) > 0
     assert outward.mean() > 0.95
     # The nose tip's normal points forward (+z).
     tip = model.ibug_landmarks[31]
@@ -187,59 +188,117 @@ def test_landmarks_valid(model):
 
 def test_builtin_landmarks_on_their_regions(builtin):
     regions = builtin.vertex_regions()
+    p = builtin.shape_mean
     lm = builtin.ibug_landmarks
-    for i in (38, 39, 41, 42, 44, 45, 47, 48):  # eyelid margins: on or next to the eye region
-        v = lm[i]
-        near = [v, v - 1, v + 1] + [v + d * len(np.unique(builtin.uv[:, 0])) for d in (-1, 1)]
-        assert any(regions[k] == REGIONS["eyes"] for k in near), i
+    eyes = p[regions == REGIONS["eyes"]]
+    for i in (38, 39, 41, 42, 44, 45, 47, 48):  # eyelid margins: within a few mm of the eyeball
+        assert np.min(np.linalg.norm(eyes - p[lm[i]], axis=1)) < 4.0, i
     for i in (20, 25):
-        assert regions[lm[i]] == REGIONS["eyebrows"]
-    for i in (51, 52, 53, 57, 58, 59):
-        assert regions[lm[i]] == REGIONS["lips"]
+        assert regions[lm[i]] == REGIONS["eyebrows"], i
+    for i in (62, 63, 64, 66, 67, 68):  # the inner lip line (the outer one is the region's border)
+        assert regions[lm[i]] == REGIONS["lips"], i
 
 
-def test_builtin_is_a_face(builtin):
-    """Proportions: measured on the mean face, the anthropometric means the generator used."""
-    from mifaces.model.generator import TEMPLATE
-
+def test_builtin_is_a_head(builtin):
+    """The ICT Face Model Light: proportions of an adult (Farkas' anthropometry of North American
+    young adults, men and women), a head with ears, neck and a closed skull, eyeballs in their sockets."""
     p = builtin.landmark_positions()
-    n_gn = p[28][1] - p[9][1]
-    assert n_gn == pytest.approx(TEMPLATE["n_sn"] + TEMPLATE["sn_sto"] + TEMPLATE["sto_gn"], abs=4.0)
-    ch_ch = np.linalg.norm(p[55] - p[49])
-    assert ch_ch == pytest.approx(TEMPLATE["ch_ch"], rel=0.15)
-    ex_ex = np.linalg.norm(p[46] - p[37])
-    assert ex_ex == pytest.approx(TEMPLATE["ex_ex"], rel=0.15)
-    # Eyeballs sit back in their sockets: the eye is behind the brow ridge and the nose.
+    assert 105 <= p[28][1] - p[9][1] <= 130  # n-gn, morphological face height (mm): 112.8 (f) - 121.3 (m)
+    assert 45 <= np.linalg.norm(p[55] - p[49]) <= 60  # ch-ch, mouth width: 50.2 (f) - 54.5 (m)
+    assert 80 <= np.linalg.norm(p[46] - p[37]) <= 100  # ex-ex, biocular width: 87.8 (f) - 91.2 (m)
+    # eyes behind the brow ridge and the nose
     assert p[38][2] < p[20][2] and p[38][2] < p[31][2] - 15
-    assert 20_000 <= builtin.vertex_count <= 200_000
-    assert builtin.has_texture and builtin.has_expressions
-    # Lips and nostrils are darker/redder than the skin around them in the mean albedo.
-    labels = builtin.vertex_regions()
-    albedo = builtin.color_mean
-    skin = albedo[labels == REGIONS["skin"]].mean(0)
-    assert albedo[labels == REGIONS["nostrils"]].mean() < 0.5 * skin.mean()
-    lips = albedo[labels == REGIONS["lips"]].mean(0)
-    assert lips[0] / lips[1] > skin[0] / skin[1]
+    v = builtin.shape_mean
+    width = np.ptp(v[:, 0])
+    assert 140 <= width <= 260  # ears included (the face alone is about 140 mm)
+    assert np.ptp(v[:, 1]) > 250  # from the neck to the crown
+    # a closed skull: the mesh's open border lies below the chin (the neck's cut) or at the lips
+    # (the mouth's opening, whose socket is left out)
+    t = builtin.triangles
+    edges = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+    weld = {}
+    key = [weld.setdefault(tuple(np.round(x, 4)), len(weld)) for x in v]  # seam copies are one vertex
+    welded = np.sort(np.array(key)[edges], axis=1)
+    unique, count = np.unique(welded, axis=0, return_counts=True)
+    border = np.unique(unique[count == 1])
+    first = {k: i for i, k in reversed(list(enumerate(key)))}
+    border_points = v[[first[k] for k in border]]
+    below_chin = border_points[:, 1] < p[9][1]
+    at_mouth = np.linalg.norm(border_points - 0.5 * (p[49] + p[55]), axis=1) < 35
+    eyeball = np.zeros(len(border_points), bool)
+    labels = builtin.vertex_regions()[[first[k] for k in border]]
+    eyeball[labels == REGIONS["eyes"]] = True  # the eyeballs are separate closed-off shells
+    assert np.all(below_chin | at_mouth | eyeball)
+    assert builtin.has_expressions and not builtin.has_texture
+    assert builtin.shape_dim == 100 and builtin.fit_shape_modes == 50
 
 
-def test_builtin_cache_round_trip(builtin, tmp_path):
+def test_builtin_ships_with_its_licence_and_loads_fast(builtin):
+    import subprocess
+    import sys
+
+    from mifaces.model.ict_convert import LICENSE_FILE, MODEL_FILE
+
+    assert MODEL_FILE.stat().st_size <= 12e6
+    assert "Permission is hereby granted" in LICENSE_FILE.read_text()
+    assert builtin.metadata["licence"] == "MIT" and builtin.metadata["precision"]["max_mm"] <= 0.01
+    code = ("import time, mifaces; t = time.perf_counter(); mifaces.load_model(); "
+            "print(time.perf_counter() - t)")
+    seconds = float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                   check=True).stdout.split()[-1])
+    assert seconds < 2.0
+
+
+def test_builtin_round_trip(builtin, tmp_path):
     path = builtin.save(tmp_path / "m.npz")
     again = load_model(path)
     for field in ("shape_mean", "shape_basis", "shape_variance", "triangles", "uv", "region_map", "landmarks",
-                  "color_mean", "expression_basis"):
+                  "expression_basis"):
         np.testing.assert_array_equal(getattr(again, field), getattr(builtin, field))
     assert again.expression_names == builtin.expression_names
     assert again.metadata == builtin.metadata
 
 
-def test_builtin_is_deterministic(builtin):
-    from mifaces.model import generator as gen
+def test_truncated_model_keeps_the_leading_modes(builtin):
+    small = builtin.truncated(10)
+    assert small.shape_dim == 10 and builtin.truncated(10) is small and builtin.truncated(None) is builtin
+    c = np.random.default_rng(0).standard_normal(10)
+    np.testing.assert_allclose(small.shape(c), builtin.shape(c), atol=1e-4)
+    assert small.metadata["shape_modes_of"] == 100
+    with pytest.raises(ValueError, match="at least 1"):
+        builtin.truncated(0)
 
-    grid = gen.template_grid()
-    h0, phi0 = np.meshgrid(grid.h[::37], grid.phi[::41], indexing="ij")
-    a = gen.face_vertices(gen.TEMPLATE, h0.ravel(), phi0.ravel())
-    b = gen.face_vertices(gen.TEMPLATE, h0.ravel(), phi0.ravel())
-    np.testing.assert_array_equal(a, b)
+
+def test_converter_reproduces_the_packaged_model(tmp_path):
+    """The repository's script turns the shared toolkit file into the packaged one, bit for bit."""
+    from mifaces.model import ict_convert
+
+    source = REPO.parent / "shared" / "models" / "ict_facekit"
+    if not (source / "ict_facekit.npz").is_file():
+        pytest.skip(f"the ICT FaceKit conversion source is not at {source}")
+    out = tmp_path / "ict_face.npz"
+    assert ict_convert.main([str(source), "--out", str(out)]) == 0
+    with np.load(out) as fresh, np.load(ict_convert.MODEL_FILE) as packaged:
+        assert set(fresh.files) == set(packaged.files)
+        for key in fresh.files:
+            np.testing.assert_array_equal(fresh[key], packaged[key], err_msg=key)
+
+
+def test_painted_skin_looks_like_skin(builtin):
+    """The simulator's albedo for a model without colour: lips redder than skin, brows and pupils
+    dark, the sclera bright."""
+    from mifaces.model.regions import texel_regions_of_mesh
+    from mifaces.studio.skin import paint_skin
+
+    image = paint_skin(builtin, np.random.default_rng(3), 256, male=True)
+    labels = texel_regions_of_mesh(builtin.region_map, builtin.uv, builtin.triangles, 256)
+    mean = {r: image[labels == REGIONS[r]].mean(axis=0) for r in ("skin", "lips", "eyebrows", "eyes", "beard")}
+    assert mean["lips"][0] / mean["lips"][1] > 1.2 * mean["skin"][0] / mean["skin"][1]
+    assert mean["eyebrows"].mean() < 0.6 * mean["skin"].mean()
+    assert mean["beard"].mean() < mean["skin"].mean()
+    eyes = image[labels == REGIONS["eyes"]].mean(axis=1)
+    assert eyes.max() > 0.5 and eyes.min() < 0.05  # sclera and pupil
+    assert image.min() >= 0 and image.max() <= 0.95
 
 
 # ---- Mitsuba meshes ---------------------------------------------------------------------------
@@ -363,7 +422,7 @@ def test_region_map_from_landmarks_polygons():
     g = np.linspace(0, 1, 41)
     uu, vv = np.meshgrid(g, g)
     uv = np.stack([uu.ravel(), vv.ravel()], 1)
-    from mifaces.model.generator import grid_triangles
+    from mifaces.model.geometry import grid_triangles
 
     tri = grid_triangles(41, 41)
 

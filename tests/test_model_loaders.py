@@ -12,7 +12,7 @@ import pytest
 import scipy.io
 
 from mifaces.model import ModelFormatError, load_model
-from mifaces.model.generator import grid_triangles
+from mifaces.model.geometry import grid_triangles
 from mifaces.model.regions import REGIONS
 from mifaces.model.texture_space import rasterize
 

@@ -21,7 +21,7 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
 
     mifaces.set_variant("llvm_ad_rgb")
     report = measure(tmp_path / "m", capture_dir, models=("cooktorrance", "phong"), geometry="ground-truth",
-                     resolution=64, spp=4, progress=False)
+                     resolution=128, spp=4, progress=False)
     for name in ("report.json", "report.md", "report.png", "report_training.png", "brdf/cooktorrance/brdf.json",
                  "brdf/phong/scene.xml"):
         assert (tmp_path / "m" / name).is_file(), name
@@ -45,7 +45,7 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
         assert sorted(order) == ["cooktorrance", "phong"]
         assert saved["models"][order[0]]["validation"][key] <= saved["models"][order[1]]["validation"][key]
     skin = saved["models"]["cooktorrance"]["ground_truth"]["regions"]["skin"]
-    assert skin["roughness"] < 0.3  # a 2-photograph, 64² fit: in the right range, not exact
+    assert skin["roughness"] < 0.3  # a 2-photograph, 128² fit: in the right range, not exact
     assert saved["models"]["phong"]["ground_truth"]["regions"] == {}  # another family: no parameter errors
     assert saved["models"]["phong"]["ground_truth"]["albedo"]["rmse_sampled"] < 0.1
     stages = report["seconds"]

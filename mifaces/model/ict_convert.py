@@ -70,6 +70,9 @@ ATLAS = {
     "M_ScleraLeft": ((0.8, 0.3, 0.1), 0, "eyes"),
     "M_IrisLeft": ((0.9, 0.3, 0.1), 0, "eyes"),
 }
+#: Parts whose texture space folds over itself (the iris's inner rim turns back into the eye): their
+#: faces of the minority orientation move to a rectangle of their own (u0, v0, size).
+FOLDS = {"M_IrisRight": (0.8, 0.4, 0.1), "M_IrisLeft": (0.9, 0.4, 0.1)}
 #: Vertices of the mouth socket (0-based, inclusive): part of M_BackHead, left out.
 MOUTH_SOCKET = (11248, 13293)
 #: Expression blend shapes kept (ARKit names).
@@ -81,8 +84,25 @@ CONTOUR_SUBSTITUTES = {"right": (1278, 1272, 12, 1834, 243, 781, 2199, 1447),
                        "left": (3661, 4390, 3022, 2484, 4036, 2253, 3490, 3496)}
 #: iBUG points outlining the beard: the jaw from below one ear lobe to the other, then the nose base.
 BEARD_OUTLINE = (4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 36, 35, 34, 33, 32)
+#: Texels by which each island's labels reach into the background around it, so that a lookup
+#: at a vertex on an island's border (nearest texel) finds its island's label.
+REGION_MAP_MARGIN = 4
+#: The 68 iBUG landmark vertices (the toolkit's indices): chosen by ``tools/ict_landmarks.py`` where
+#: dlib's detector puts each point on renders of the model (capped RMS over 30 renders of 6 faces in
+#: 5 poses: 5.35 px with the toolkit's own table, 3.37 px with this one, at 1.7 px/mm); None would
+#: take the toolkit's table.
+LANDMARKS = (1794, 1196, 1783, 365, 747, 765, 1675, 2195, 2191, 4386, 3930, 3006, 2988, 2616, 3986, 3415, 8456,
+             268, 436, 1693, 2056, 1616, 3825, 4259, 2680, 2677, 2509, 977, 4522, 4942, 4857, 4584, 2088, 1147,
+             4282, 5049, 1546, 1576, 616, 630, 591, 1512, 3129, 2857, 3790, 3760, 3726, 2813, 5732, 5692, 6029,
+             5524, 6547, 6197, 6495, 6357, 6508, 5518, 6004, 5870, 5777, 6009, 5517, 6513, 6690, 6512, 5515, 6008)
 #: Size of the region map (texels).
 REGION_MAP_SIZE = 1024
+
+
+def source_vertices(path: Path = MODEL_FILE) -> np.ndarray:
+    """The toolkit's vertex index of each vertex of the packaged model (seam copies repeat it)."""
+    with np.load(path) as d:
+        return d["toolkit_vertex"][d["source_row"]]
 
 
 def _quantise(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -100,6 +120,22 @@ def _triangles(quads: np.ndarray) -> np.ndarray:
     quad = quads[:, 3] >= 0
     second = corner[quad][:, [0, 2, 3]]
     return np.concatenate([first, second])
+
+
+def _unfold(uv: np.ndarray, valid: np.ndarray, rect: tuple[float, float, float]) -> np.ndarray:
+    """Move the faces of a part whose texture-space orientation is the minority's (a fold) to
+    ``rect``, keeping their layout: (F, 4, 2) corner uvs in, the same out."""
+    t = uv[:, :3]
+    area = (t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1]) - (t[:, 2, 0] - t[:, 0, 0]) * (t[:, 1, 1] - t[:, 0, 1])
+    folded = np.sign(area) != np.sign(np.sum(np.sign(area)))
+    if not folded.any():
+        return uv
+    out = uv.copy()
+    corners = uv[folded][valid[folded]]
+    low, span = corners.min(axis=0), max(float(np.ptp(corners, axis=0).max()), 1e-12)
+    u0, v0, size = rect
+    out[folded] = np.array([u0, v0]) + size * (uv[folded] - low) / span
+    return out
 
 
 def _region_map(uv: np.ndarray, triangles: np.ndarray, triangle_label: np.ndarray, landmarks: dict,
@@ -144,6 +180,8 @@ def convert(source: Path) -> dict[str, np.ndarray]:
         local = np.stack([uv[..., 0] - tile, 1.0 - uv[..., 1]], axis=-1)
         corner_uv[sel] = np.array([u0, v0]) + size * np.clip(local, 0.0, 1.0)
         corner_label[sel] = REGIONS[region]
+        if name in FOLDS:
+            corner_uv[sel] = _unfold(corner_uv[sel], quads[sel] >= 0, FOLDS[name])
     # One vertex per (toolkit vertex, texture coordinate) pair.
     flat_vertex = quads.ravel()
     flat_uv = corner_uv.reshape(-1, 2)
@@ -180,11 +218,17 @@ def convert(source: Path) -> dict[str, np.ndarray]:
         triangles = triangles[:, [0, 2, 1]]
 
     first_copy = {int(k): int(np.flatnonzero(source_vertex == k)[0]) for k in
-                  set(indices["idx_to_landmark_verts"]) | {k for side in CONTOUR_SUBSTITUTES.values() for k in side}}
-    landmarks = np.array([(i + 1, first_copy[k]) for i, k in enumerate(indices["idx_to_landmark_verts"])], np.int32)
-    region_map = _region_map(vertex_uv, triangles, triangle_part, {int(i): int(k) for i, k in landmarks},
+                  set(LANDMARKS or ()) | set(indices["idx_to_landmark_verts"])
+                  | {k for side in CONTOUR_SUBSTITUTES.values() for k in side}}
+    landmarks = np.array([(i + 1, first_copy[k]) for i, k in enumerate(LANDMARKS or indices["idx_to_landmark_verts"])],
+                         np.int32)
+    # the regions follow the toolkit's own (anatomical) landmarks: the detector's points are fitted
+    # to renders painted from these regions, so the regions must not move with them
+    anatomical = {i + 1: first_copy[k] for i, k in enumerate(indices["idx_to_landmark_verts"])}
+    region_map = _region_map(vertex_uv, triangles, triangle_part, anatomical,
                              triangles[face_tri])
     region_map = _neck_and_scalp(region_map, vertex_uv, triangles, v, triangle_part)
+    region_map = _dilate(region_map, REGION_MAP_MARGIN)
 
     basis_q, basis_scale = _quantise(basis_kept)
     expr_q, expr_scale = _quantise(expressions)
@@ -193,6 +237,7 @@ def convert(source: Path) -> dict[str, np.ndarray]:
                     identity="the toolkit's 100 identity modes restricted to the kept vertices, re-diagonalised "
                              "(SVD): an orthonormal basis ordered by variance, spanning the same space")
     arrays = {"format": np.int32(FORMAT), "neutral": neutral.astype(np.float32), "source_row": source_row.astype(np.int32),
+              "toolkit_vertex": kept.astype(np.int32),
               "uv": vertex_uv.astype(np.float32), "triangles": triangles.astype(np.int32),
               "basis": basis_q, "basis_scale": basis_scale, "variance": (s ** 2).astype(np.float64),
               "expressions": expr_q, "expression_scale": expr_scale, "landmarks": landmarks,
@@ -200,6 +245,17 @@ def convert(source: Path) -> dict[str, np.ndarray]:
     arrays["metadata"] = np.array(json.dumps(dict(metadata, precision=precision(arrays, u, s, expressions,
                                                                                     neutral[source_row]))))
     return arrays
+
+
+def _dilate(region_map: np.ndarray, margin: int) -> np.ndarray:
+    """Background texels within ``margin`` texels of a labelled one take the nearest label."""
+    import scipy.ndimage as ndi
+
+    background = region_map == REGIONS["background"]
+    distance, (rows, cols) = ndi.distance_transform_edt(background, return_indices=True)
+    out = region_map[rows, cols]
+    out[distance > margin] = REGIONS["background"]
+    return out
 
 
 def _neck_and_scalp(region_map, uv, triangles, vertices, triangle_part) -> np.ndarray:

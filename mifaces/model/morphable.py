@@ -271,7 +271,8 @@ class MorphableModel:
         if k not in memo:
             memo[k] = dataclasses.replace(
                 self, shape_basis=self.shape_basis[:, :k], shape_variance=self.shape_variance[:k],
-                metadata=dict(self.metadata, shape_modes_of=self.metadata.get("shape_modes_of", self.shape_dim)))
+                metadata=dict(self.metadata, shape_modes_of=self.metadata.get("shape_modes_of", self.shape_dim),
+                              fit_shape_modes=k))
         return memo[k]
 
     @property

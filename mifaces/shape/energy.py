@@ -97,7 +97,7 @@ class Energy:
         # accumulator slots: per image (sum of w r, sum of w), then the other sums of E
         self.slots = {name: i for i, name in enumerate(
             [f"{k}.{s}" for k in self.image_names for s in ("num", "den")] +
-            ["features", "distances", "prior", "albedo"])}
+            ["features", "distances", "prior", "albedo", "albedo.r", "albedo.g", "albedo.b"])}
         # opaque indices: a literal index into an evaluated array would be read on the host
         self.dr_index = [dr.opaque(mi.UInt32, i) for i in range(max(len(self.slots), 8))]
         self.dr_fade_index = [dr.opaque(mi.UInt32, layout.size + k) for k in range(2)]
@@ -336,7 +336,11 @@ class Energy:
         w = self.weights
         e_f = slot("features") * self.dr_inv_features / w.feature_sigma ** 2
         e_d = slot("distances") * self.dr_inv_distances / w.distance_sigma ** 2
-        e_p = slot("prior") + e_d + slot("albedo") * (w.albedo * self.dr_inv_samples)
+        # the albedo's squared deviations from its mean, sum |a - mean|^2 = sum |a|^2 - |sum a|^2 / n:
+        # both sums accumulate in the samples' kernel (a mean gathered back would split it)
+        spread = slot("albedo") - (dr.square(slot("albedo.r")) + dr.square(slot("albedo.g"))
+                                   + dr.square(slot("albedo.b"))) * self.dr_inv_samples
+        e_p = slot("prior") + e_d + spread * (w.albedo * self.dr_inv_samples)
         e_i, num, den = mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)
         if use_image:
             for key in self.image_names:
@@ -376,7 +380,7 @@ class Energy:
 
     def _image_sums(self, acc, theta, pos):
         """E_I's sums per photograph (weighted squared residuals and weights) and, for a model
-        without colour model, the albedo prior's squared deviations from the mean."""
+        without colour model, the sums of the albedo prior (see :meth:`energy`)."""
         width = self.n_samples
         R, t, focal = self._pose(theta, width)
         sp = dr.gather(mi.Vector3f, pos, self.dr_sample_local)
@@ -406,7 +410,8 @@ class Energy:
 
     def _albedo(self, acc, theta):
         """The samples' albedo: the colour model's (texture coefficients beta), or the fitted
-        per-vertex albedo, whose squared deviations from its mean go into slot ``albedo``."""
+        per-vertex albedo, whose squared norms and channel sums go into slots ``albedo`` and
+        ``albedo.r/g/b`` (the prior on its deviations from its mean)."""
         width = self.n_samples
         if self.model.has_texture:
             s = self.layout["color"].start
@@ -417,11 +422,9 @@ class Energy:
             return mi.Vector3f(*alb)
         s = self.layout["albedo"].start
         albedo = mi.Vector3f(*[dr.gather(mi.Float, theta, 3 * self.dr_sample_vertex + (s + k)) for k in range(3)])
-        mean = dr.zeros(mi.Float, 3)
-        for k in range(3):
-            dr.scatter_add(mean, albedo[k], dr.full(mi.UInt32, k, width))
-        mean_albedo = dr.gather(mi.Vector3f, mean, dr.zeros(mi.UInt32, width)) * self.dr_inv_samples
-        dr.scatter_add(acc, dr.squared_norm(albedo - mean_albedo), dr.full(mi.UInt32, self.slots["albedo"], width))
+        dr.scatter_add(acc, dr.squared_norm(albedo), dr.full(mi.UInt32, self.slots["albedo"], width))
+        for k, channel in enumerate("rgb"):
+            dr.scatter_add(acc, albedo[k], dr.full(mi.UInt32, self.slots[f"albedo.{channel}"], width))
         return albedo
 
     def _shade(self, theta, key: str, albedo, nc, view, pcv, t):

@@ -70,6 +70,7 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
         where ``camera.calibrated`` is False (the principal point stays where it is: one
         view cannot tell it from the face's position).
     model : str, path or MorphableModel
+        Fitted on its leading :attr:`~mifaces.model.MorphableModel.fit_shape_modes` identity modes.
     light_position : (3,) array, optional
         World position of the point light (mm): starts the directed light's direction.
     light : mifaces.capture.Light, optional
@@ -116,6 +117,7 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
     """
     t0 = time.perf_counter()
     model = load_model(model)
+    model = model.truncated(model.fit_shape_modes)
     schedule = schedule or ShapeSchedule()
     weights = weights or Weights()
     if not getattr(camera, "calibrated", True):
