@@ -1,7 +1,7 @@
 """glTF 2.0 (``.glb`` binary or ``.gltf`` with embedded data) by pygltflib.
 
-One mesh, one primitive (POSITION, NORMAL, TANGENT, TEXCOORD_0, 32-bit
-indices), one metallic-roughness material with ``KHR_materials_specular``
+One mesh, one primitive (POSITION, NORMAL, TEXCOORD_0, TANGENT with a normal
+map, 32-bit indices), one metallic-roughness material with ``KHR_materials_specular``
 and ``KHR_materials_ior``, textures as PNG: baseColor (sRGB), metallic-roughness
 (linear: G roughness, B metallic), specular (RGB the specular colour, sRGB;
 A the specular factor, linear: both extension textures point at it) and the
@@ -51,8 +51,9 @@ def gltf_document(face: ExportedFace):
     attributes = g.Attributes(
         POSITION=add_accessor(face.positions.astype(np.float32), "VEC3", FLOAT, ARRAY_BUFFER, bounds=True),
         NORMAL=add_accessor(face.normals.astype(np.float32), "VEC3", FLOAT, ARRAY_BUFFER),
-        TANGENT=add_accessor(face.tangents.astype(np.float32), "VEC4", FLOAT, ARRAY_BUFFER),
         TEXCOORD_0=add_accessor(face.uv.astype(np.float32), "VEC2", FLOAT, ARRAY_BUFFER))
+    if "normal" in face.textures:  # tangents only serve the normal map
+        attributes.TANGENT = add_accessor(face.tangents.astype(np.float32), "VEC4", FLOAT, ARRAY_BUFFER)
     indices = add_accessor(face.triangles.astype(np.uint32).ravel(), "SCALAR", UNSIGNED_INT, ELEMENT_ARRAY_BUFFER)
     images, textures, index = [], [], {}
     for name, srgb in SRGB.items():

@@ -187,5 +187,36 @@ def fit_lafortune(params: dict, options: dict, grid: int = FIT_GRID) -> GltfLobe
     return _lobe(alpha, scale, float(np.max(scale)))
 
 
-__all__ = ["ALPHA_RANGE", "ALPHA_GRID", "GltfLobe", "gltf_lobe", "gltf_brdf", "fit_lafortune", "specular_lobe",
+
+
+def mapping_rmse(document: dict, region: str, albedo, grid: int = FIT_GRID) -> dict:
+    """How far a region's glTF material is from its fitted BRDF: the relative
+    RMSE of f cos θo over the hemisphere grid (every (ωi, ωo) pair of
+    :func:`hemisphere_pairs`, RGB), ``sqrt(Σ (F_glTF − F_fit)² / Σ F_fit²)``,
+    the fitted BRDF evaluated by its Mitsuba plugin
+    (:func:`mifaces.validation.eval_bsdf`), glTF's by :func:`gltf_brdf`;
+    ``rmse`` for the whole BRDF (diffuse ``albedo``, RGB, plus lobe) and
+    ``rmse_specular`` for the lobes alone (against the fitted lobes' RMS).
+    """
+    from ..render import region_bsdf, rgb
+    from ..validation import eval_bsdf
+
+    wi, wo = hemisphere_pairs(grid)
+    params = document["regions"].get(region, document["regions"]["skin"])
+    lobe = gltf_lobe(document["model"], params, region, document.get("options", {}))
+    albedo = _rgb(albedo)
+    uv = np.zeros((len(wi), 2))
+    fit = eval_bsdf(region_bsdf(document, region, rgb(albedo)), uv, wi, wo)
+    fit_lobe = eval_bsdf(region_bsdf(document, region, rgb(np.zeros(3))), uv, wi, wo)
+    gltf = gltf_brdf(wi, wo, lobe.base_color(albedo), lobe) * wo[:, 2:3]
+    gltf_lobe_only = gltf_brdf(wi, wo, np.zeros(3), lobe) * wo[:, 2:3]
+
+    def relative(a, b):
+        return float(np.sqrt(np.sum((a - b) ** 2) / max(float(np.sum(b ** 2)), 1e-30)))
+
+    return {"rmse": relative(gltf, fit), "rmse_specular": relative(gltf_lobe_only, fit_lobe),
+            "alpha": lobe.alpha, "roughness": lobe.roughness, "f0": lobe.f0.tolist(), "f90": lobe.f90}
+
+
+__all__ = ["ALPHA_RANGE", "ALPHA_GRID", "GltfLobe", "gltf_lobe", "gltf_brdf", "fit_lafortune", "specular_lobe", "mapping_rmse",
            "hemisphere_pairs"]
