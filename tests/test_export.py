@@ -296,3 +296,50 @@ def test_incomplete_or_mixed_result_is_refused(measured, tmp_path, damage):
         with pytest.raises(ResultSetError, match=match):
             export_face(result, tmp_path / "out" / f"face{suffix}")
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+# --------------------------------------------------------------------------------------------
+# report.html in a real browser
+# --------------------------------------------------------------------------------------------
+#: Window of the headless browser, and the square (x0, y0, x1, y1, CSS px) where the page's 3D view shows the face.
+WINDOW = (900, 900)
+FACE_BOX = (270, 360, 450, 540)
+
+
+def _chromium() -> str:
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        if shutil.which(name):
+            return shutil.which(name)
+    pytest.skip("no chromium: report.html is not opened in a browser (skipped; apt-get install chromium)")
+
+
+def test_report_html_shows_the_face_in_3d_in_a_browser(measured, tmp_path):
+    """measure writes report.html and face.glb; headless Chromium opens the page from disk, renders the
+    face in <model-viewer> (WebGL on SwiftShader) and logs no console error; nothing comes from the internet."""
+    import re
+
+    import skimage.io
+
+    page = measured / "report.html"
+    text = page.read_text()
+    assert (measured / "face.glb").is_file() and (measured / "model-viewer-umd.min.js").is_file()
+    assert "<model-viewer" in text and "camera-controls" in text and "data:model/gltf-binary;base64," in text
+    assert "<table>" in text and 'src="report.png"' in text
+    assert not re.search(r"""(src|href)=["']https?:""", text)  # nothing loaded from the internet
+    browser = _chromium()
+    shot = tmp_path / "report_html.png"
+    run = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
+                          "--enable-unsafe-swiftshader", "--enable-logging=stderr", "--v=0", "--hide-scrollbars",
+                          f"--window-size={WINDOW[0]},{WINDOW[1]}", "--virtual-time-budget=20000",
+                          f"--screenshot={shot}", page.as_uri()], capture_output=True, text=True, timeout=180)
+    assert shot.is_file(), run.stderr[-2000:]
+    console = [line for line in run.stderr.splitlines() if ":CONSOLE" in line and "GL Driver Message" not in line]
+    problems = [line for line in console if re.search(r"error|uncaught|failed|refused", line, re.I)]
+    assert not problems, problems
+    image = skimage.io.imread(shot)[:, :, :3].astype(np.float64)
+    x0, y0, x1, y1 = FACE_BOX
+    face = image[y0:y1, x0:x1]
+    shaded = np.mean(np.min(face, axis=2) < 235)  # not the white page: the face is drawn there
+    assert shaded > 0.8, shaded
+    assert face.std(axis=(0, 1)).mean() > 3  # shading and texture, not a flat fill
+    assert np.mean(np.min(image[:, 700:], axis=2) > 250) > 0.6  # the page beside the view stays background
