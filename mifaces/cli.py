@@ -243,7 +243,7 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
     for key, order in report.get("ranking", {}).items():
         click.echo(f"ranked by {RANKED[key]} (novel pose, relative image RMSE): " + " < ".join(
             f"{m} {100 * report['models'][m]['validation'][key]:.1f}%" for m in order))
-    click.echo(f"done in {report['seconds']['total']:.0f} s; report: {out_dir}/report.md and report.png")
+    click.echo(f"done in {report['seconds']['total']:.0f} s; report: {out_dir}/report.md, report.png and report.html")
 
 
 @main.command()

@@ -74,7 +74,8 @@ def test_each_model_maps_onto_a_ggx_lobe():
     np.testing.assert_allclose(ct.f0, np.array([0.5, 0.4, 0.5]) * fresnel_normal(1.4))
     phong = gltf_lobe("phong", {"specular_reflectance": 0.1, "exponent": 50.0})
     assert exponent_of_slope(phong.alpha) == pytest.approx(50.0)  # the inverse of the slope -> exponent map
-    np.testing.assert_allclose(phong.f0, 0.1) and phong.f90 == pytest.approx(0.1)
+    np.testing.assert_allclose(phong.f0, 0.1)
+    assert phong.f90 == pytest.approx(0.1)
     ward = gltf_lobe("ward", {"specular_reflectance": [0.05, 0.05, 0.05], "alpha": 0.2})
     assert ward.alpha == 0.2 and ward.f90 == pytest.approx(0.05)
     with pytest.raises(ValueError, match="no glTF mapping"):

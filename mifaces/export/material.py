@@ -126,12 +126,10 @@ def gltf_lobe(model: str, params: dict, region: str = "skin", options: dict | No
     return _lobe(params["alpha"], rho, float(np.max(rho)))  # ward
 
 
-def gltf_brdf(wi: np.ndarray, wo: np.ndarray, base_color, lobe: GltfLobe, eta: float = SKIN_REFRACTIVE_INDEX
-              ) -> np.ndarray:
+def gltf_brdf(wi: np.ndarray, wo: np.ndarray, base_color, lobe: GltfLobe) -> np.ndarray:
     """glTF's BRDF f(ωi, ωo) (module docstring), no cosine, for (N, 3) local
-    directions; (N, 3) RGB. ``eta`` only matters through r0 = f0 / f90 and is
-    given for symmetry with the material a file holds."""
-    del eta  # r0 = f0 / f90 whatever the material's index: the specular colour absorbs it
+    directions, RGB base colour and a lobe; (N, 3) RGB. The material's index
+    enters only through r0 = f0 / f90 (its specular colour absorbs it)."""
     wi, wo = np.asarray(wi, np.float64), np.asarray(wo, np.float64)
     h = wi + wo
     h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-30)
