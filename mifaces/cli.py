@@ -19,6 +19,7 @@ from .brdf import BUILTIN_NAMES, MAX_LOBES, NAMES as BRDF_MODELS
 from .capture import load_capture
 from .capture.ground_truth import ground_truth_folder
 from .environment import SKY_SUN_ANGLES, TURBIDITY, sky_emitter
+from .export import export_face
 from .files import MAX_IMAGE_PIXELS, check_result_target, check_writable, write_json
 from .gallery import render_gallery
 from .importers.diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
@@ -242,7 +243,7 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
     for key, order in report.get("ranking", {}).items():
         click.echo(f"ranked by {RANKED[key]} (novel pose, relative image RMSE): " + " < ".join(
             f"{m} {100 * report['models'][m]['validation'][key]:.1f}%" for m in order))
-    click.echo(f"done in {report['seconds']['total']:.0f} s; report: {out_dir}/report.md and report.png")
+    click.echo(f"done in {report['seconds']['total']:.0f} s; report: {out_dir}/report.md, report.png and report.html")
 
 
 @main.command()
@@ -321,6 +322,22 @@ def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, 
                           intensity=None if intensity is None else [intensity] * 3, envmap=environment,
                           envmap_scale=envmap_scale, spp=spp)
     click.echo(f"wrote {paths['exr']} and {paths['png']}")
+
+
+@main.command()
+@click.argument("result", type=click.Path(exists=True, file_okay=False))
+@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
+              help="Output file: .glb or .gltf (glTF 2.0), .obj (with .mtl and textures), .usd, .usda or .usdc.")
+@click.option("--measurement", default=None,
+              help="Export the shape fitted to this photograph (default: the face model's mean shape).")
+@click.option("--shapes", default=None, type=click.Path(exists=True, file_okay=False),
+              help="The fit-shape folder of that fit (default: shapes/ of the measure run RESULT belongs to).")
+@click.option("--face-model", default=None, help="Face model (default: the one the fitted shapes name, else builtin).")
+def export(result: str, out_path: str, measurement: str | None, shapes: str | None, face_model: str | None) -> None:
+    """Write the face measured in RESULT (a fit-brdf or measure model folder, e.g. out/measure/brdf/cooktorrance)
+    as glTF, OBJ or USD with PBR textures."""
+    written = export_face(result, out_path, measurement=measurement, shapes=shapes, face_model=face_model)
+    click.echo("wrote " + ", ".join(str(p) for p in written))
 
 
 @main.command()

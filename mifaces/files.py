@@ -254,21 +254,34 @@ def read_exr(path: str | os.PathLike) -> np.ndarray:
     return planes[0] if len(planes) == 1 else np.stack(planes, axis=-1)
 
 
-def write_png(path: str | os.PathLike, image: np.ndarray, srgb: bool = True) -> None:
-    """Write an image with values in [0, 1] as 8-bit PNG, sRGB-encoded unless
-    ``srgb`` is False (then the values are written as they are)."""
+def encode_png(image: np.ndarray, srgb: bool = True) -> bytes:
+    """An image with values in [0, 1] ((H, W), (H, W, 3) or (H, W, 4)) as the
+    bytes of an 8-bit PNG, colour channels sRGB-encoded unless ``srgb`` is
+    False (then written as they are); an alpha channel is always linear."""
+    import io
+
     import colour
-    import skimage.io
+    from PIL import Image
 
     image = _as_hwc(image)
-    if image.shape[2] == 1:
-        image = image[:, :, 0]
+    if image.shape[2] not in (1, 3, 4):
+        raise ValueError(f"PNG images need 1, 3 or 4 channels, got {image.shape[2]}")
     image = np.clip(np.nan_to_num(image), 0.0, 1.0)
     if srgb:
-        image = colour.cctf_encoding(image, function="sRGB")
+        colours = min(image.shape[2], 3)
+        image = np.concatenate([colour.cctf_encoding(image[:, :, :colours], function="sRGB"),
+                                image[:, :, colours:]], axis=2)
     data = np.round(image * 255.0).astype(np.uint8)
-    with atomic_path(path) as tmp:
-        skimage.io.imsave(tmp, data, check_contrast=False)
+    buffer = io.BytesIO()
+    Image.fromarray(data[:, :, 0] if data.shape[2] == 1 else data).save(buffer, format="PNG")
+    return buffer.getvalue()
+
+
+def write_png(path: str | os.PathLike, image: np.ndarray, srgb: bool = True) -> None:
+    """Write an image with values in [0, 1] as 8-bit PNG, atomically (:func:`encode_png`)."""
+    data = encode_png(image, srgb)
+    with atomic_write(path) as f:
+        f.write(data)
 
 
 # --------------------------------------------------------------------------------------------

@@ -30,11 +30,13 @@ import numpy as np
 
 from .brdf import NAMES
 from .capture import Capture, load_capture, read_ground_truth
+from .export import export_face
 from .files import write_json
 from .geometry import load_geometry
 from .model import load_model
 from .reflectance import capture_samples, fit_brdf, write_estimate
 from .render import FaceScene
+from .report_html import write_html
 from .report import ground_truth_errors, ranking, write_markdown, write_picture, write_validation_picture
 from .shape import fit_shape, shapes_in_world
 from .studio import simulate
@@ -42,6 +44,8 @@ from .validation import Validator, relative_rmse
 
 #: Models ``measure`` fits unless told otherwise.
 MODELS = NAMES
+#: The fitted face the report shows in 3D (the best model's, or the first's, as glTF).
+FACE_GLB = "face.glb"
 #: Where the face geometry comes from.
 GEOMETRIES = ("fitted", "ground-truth")
 
@@ -107,7 +111,11 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     out : path
         Output folder: ``capture/`` (when simulated), ``shapes/``,
         ``brdf/<model>/``, ``report.{md,json,png}`` (and
-        ``report_training.png`` for a capture with ground truth).
+        ``report_training.png`` for a capture with ground truth),
+        ``report.html`` (:mod:`mifaces.report_html`) with ``face.glb``: the
+        face of the model best under the held-out lights (else the first model),
+        in the shape fitted to the first photograph (the mean shape with
+        ``geometry='ground-truth'``).
     capture : path or Capture, optional
         A capture folder; without one, the default capture of
         :func:`mifaces.studio.simulate` (built-in face, Cook-Torrance
@@ -189,6 +197,10 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         write_validation_picture(out / "report.png", validator.truth, validation_images, report)
     write_picture(out / ("report.png" if validator is None else "report_training.png"), panels, first.name)
     write_markdown(out / "report.md", report, first.name)
+    best = report.get("ranking", {}).get("heldout_rmse", list(models))[0]
+    glb = export_face(out / "brdf" / best, out / FACE_GLB, measurement=first.name if geometry == "fitted" else None,
+                      face_model=face)[-1]
+    write_html(out / "report.html", report, glb, best)
     return report
 
 

@@ -1,0 +1,346 @@
+"""mifaces export: glTF, OBJ and USD of a measured face, the BRDF mapping onto glTF's model, bad result sets."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import mifaces  # isort: skip
+
+import numpy as np
+import pytest
+
+#: The glTF-Validator's folder (tools/web, npm install there).
+WEB = Path(__file__).resolve().parents[1] / "tools" / "web"
+
+
+@pytest.fixture(scope="module")
+def measured(small_capture, tmp_path_factory):
+    """A small default measure run (all four models, true shapes, 64² textures): its output folder."""
+    from mifaces.pipeline import measure
+
+    capture = small_capture("export", measurements=2, resolution=(256, 256), spp=8, albedo_resolution=128, seed=4)
+    out = tmp_path_factory.mktemp("export") / "m"
+    mifaces.set_variant("llvm_ad_rgb")
+    measure(out, capture, geometry="ground-truth", resolution=64, spp=2, progress=False)
+    return out
+
+
+def _validate(*files: Path) -> list[dict]:
+    """The Khronos glTF-Validator's reports, or a skip saying what is missing."""
+    if shutil.which("node") is None:
+        pytest.skip("node is not installed: the glTF-Validator cannot run (skipped)")
+    if not (WEB / "node_modules" / "gltf-validator").is_dir():
+        pytest.skip(f"gltf-validator is not installed: run `npm ci` in {WEB} (skipped)")
+    run = subprocess.run(["node", str(WEB / "validate.js"), *map(str, files)], capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr
+    return json.loads(run.stdout)
+
+
+# --------------------------------------------------------------------------------------------
+# The mapping onto glTF's model
+# --------------------------------------------------------------------------------------------
+def test_gltf_brdf_matches_mitsubas_principled_lobe():
+    """glTF's specular layer (GGX, F0 from the index, f90 = 1) against Mitsuba's principled
+    BSDF with the same roughness and index and no diffuse: an independent evaluation."""
+    from mifaces.export.material import GltfLobe, gltf_brdf, hemisphere_pairs
+    from mifaces.validation import eval_bsdf
+
+    mifaces.set_variant("llvm_ad_rgb")
+    wi, wo = hemisphere_pairs(10)
+    for roughness, eta in ((0.5, 1.4), (0.7, 1.5)):
+        f0 = ((eta - 1) / (eta + 1)) ** 2
+        ours = gltf_brdf(wi, wo, np.zeros(3), GltfLobe(roughness ** 2, np.full(3, f0), 1.0)) * wo[:, 2:3]
+        principled = eval_bsdf({"type": "principled", "base_color": {"type": "rgb", "value": [0.0, 0.0, 0.0]},
+                                "roughness": roughness, "eta": eta, "spec_tint": 0.0},
+                               np.zeros((len(wi), 2)), wi, wo)
+        near = (wi[:, 2] > 0.9) & (wo[:, 2] > 0.9)  # where Fresnel and masking are at their normal values
+        np.testing.assert_allclose(ours[near], principled[near], rtol=0.01)
+        error = np.sqrt(np.sum((ours - principled) ** 2) / np.sum(principled ** 2))
+        assert error < 0.2, (roughness, eta, error)  # Schlick vs exact Fresnel, correlated vs separable Smith
+
+
+def test_each_model_maps_onto_a_ggx_lobe():
+    from mifaces.brdf.builtin import fresnel_normal
+    from mifaces.brdf.cosine_lobe import exponent_of_slope
+    from mifaces.export.material import gltf_lobe
+
+    ct = gltf_lobe("cooktorrance", {"specular_reflectance": [0.5, 0.4, 0.5], "roughness": 0.3, "eta": 1.4})
+    assert ct.alpha == 0.3 and ct.f90 == 0.5
+    np.testing.assert_allclose(ct.f0, np.array([0.5, 0.4, 0.5]) * fresnel_normal(1.4))
+    phong = gltf_lobe("phong", {"specular_reflectance": 0.1, "exponent": 50.0})
+    assert exponent_of_slope(phong.alpha) == pytest.approx(50.0)  # the inverse of the slope -> exponent map
+    np.testing.assert_allclose(phong.f0, 0.1)
+    assert phong.f90 == pytest.approx(0.1)
+    ward = gltf_lobe("ward", {"specular_reflectance": [0.05, 0.05, 0.05], "alpha": 0.2})
+    assert ward.alpha == 0.2 and ward.f90 == pytest.approx(0.05)
+    with pytest.raises(ValueError, match="no glTF mapping"):
+        gltf_lobe("blinn", {})
+
+
+def test_lafortune_lobe_is_the_least_squares_fit():
+    """The fitted α has a smaller residual than its neighbours, and the fit is close to the lobe."""
+    from mifaces.export.material import ALPHA_GRID, GltfLobe, fit_lafortune, gltf_brdf, hemisphere_pairs, specular_lobe
+
+    mifaces.set_variant("llvm_ad_rgb")
+    params = {"cxy": -0.9, "cz": 0.9, "exponent": 20.0}
+    lobe = fit_lafortune(params, {})
+    wi, wo = hemisphere_pairs()
+    target = specular_lobe("lafortune", params, {}, wi, wo) * wo[:, 2:3]
+
+    def residual(alpha):
+        basis = gltf_brdf(wi, wo, np.zeros(3), GltfLobe(alpha, np.ones(3), 1.0)) * wo[:, 2:3]
+        return np.sum((target - basis * lobe.f0) ** 2)
+
+    k = int(np.argmin(np.abs(ALPHA_GRID - lobe.alpha)))
+    assert residual(lobe.alpha) < min(residual(ALPHA_GRID[k - 1]), residual(ALPHA_GRID[k + 1]))
+    assert residual(lobe.alpha) < 0.5 * np.sum(target ** 2)
+    assert 0.05 < lobe.alpha < 0.6 and 0 < lobe.f90 <= 1
+
+
+def test_mapping_error_is_small_for_a_mapped_cook_torrance(measured):
+    from mifaces.export.material import mapping_rmse
+    from mifaces.reflectance.io import load_estimate
+
+    document = load_estimate(measured / "brdf" / "cooktorrance")
+    error = mapping_rmse(document, "skin", [0.5, 0.4, 0.3], grid=8)
+    assert 0 < error["rmse"] < 0.15 and 0 < error["rmse_specular"] < 0.6
+
+
+# --------------------------------------------------------------------------------------------
+# The files
+# --------------------------------------------------------------------------------------------
+def test_glb_loads_with_its_textures_and_passes_the_validator(measured, tmp_path):
+    import trimesh
+
+    from mifaces.export import export_face
+    from mifaces.model import load_model
+    from mifaces.reflectance.io import load_estimate
+
+    result = measured / "brdf" / "cooktorrance"
+    (glb,) = export_face(result, tmp_path / "face.glb")
+    (gltf,) = export_face(result, tmp_path / "face.gltf")
+    model = load_model("builtin")
+    scene = trimesh.load(glb)
+    (mesh,) = scene.geometry.values()
+    assert len(mesh.vertices) == model.vertex_count and len(mesh.faces) == model.triangle_count
+    np.testing.assert_allclose(np.asarray(mesh.vertices), model.shape_mean / 1000.0, atol=1e-6)  # metres, model frame
+    assert 0.1 < np.ptp(mesh.vertices[:, 1]) < 0.5  # a head's height in metres, +y up
+    material = mesh.visual.material
+    albedo = load_estimate(result)["albedo"]
+    assert material.baseColorTexture.size == albedo.shape[1::-1]
+    assert material.metallicRoughnessTexture is not None
+    # trimesh's uv is v-up: the texel row of v = 0 is the top of the image, as the albedo map's row 0
+    base = np.asarray(material.baseColorTexture.convert("RGB"), np.float64) / 255
+    skin = base
+    encoded = np.where(albedo <= 0.0031308, 12.92 * albedo, 1.055 * np.clip(albedo, 0, None) ** (1 / 2.4) - 0.055)
+    face = albedo.mean(axis=2) > 0.05
+    assert np.corrcoef(skin[face].ravel(), encoded[face].ravel())[0, 1] > 0.98  # sRGB-encoded albedo (÷ 1 − f0)
+    assert np.all(skin[face] >= np.clip(encoded[face], 0, 1) - 2 / 255)
+    for report in _validate(glb, gltf):
+        assert report["issues"]["numErrors"] == 0, report["issues"]["messages"][:5]
+    document = json.loads(gltf.read_text())
+    assert set(document["extensionsUsed"]) == {"KHR_materials_specular", "KHR_materials_ior"}
+    assert document["materials"][0]["pbrMetallicRoughness"]["metallicFactor"] == 1.0  # × the texture's B = 0
+
+
+def test_obj_and_usd_are_written_and_open(measured, tmp_path):
+    import trimesh
+    from pxr import Usd, UsdGeom, UsdShade
+
+    from mifaces.export import export_face
+    from mifaces.model import load_model
+
+    model = load_model("builtin")
+    result = measured / "brdf" / "ward"
+    written = export_face(result, tmp_path / "face.obj")
+    assert {p.name for p in written} == {"face.obj", "face.mtl", "face.png"}
+    mesh = trimesh.load(tmp_path / "face.obj", process=False)
+    assert len(mesh.faces) == model.triangle_count and mesh.visual.material.image is not None
+    written = export_face(result, tmp_path / "face.usdc")
+    assert written[-1].name == "face.usdc" and all(p.is_file() for p in written)
+    stage = Usd.Stage.Open(str(tmp_path / "face.usdc"))
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    usd_mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Face/Mesh"))
+    points = np.asarray(usd_mesh.GetPointsAttr().Get())
+    np.testing.assert_allclose(points, model.shape_mean / 1000.0, atol=1e-6)
+    st = np.asarray(UsdGeom.PrimvarsAPI(usd_mesh).GetPrimvar("st").Get())
+    np.testing.assert_allclose(st[:, 1], 1.0 - model.uv[:, 1], atol=1e-6)  # USD counts v from the bottom
+    material, _ = UsdShade.MaterialBindingAPI(usd_mesh.GetPrim()).ComputeBoundMaterial()
+    assert material and material.GetPath() == "/Face/Material"
+    texture = stage.GetPrimAtPath("/Face/Material/BaseColor").GetAttribute("inputs:file").Get()
+    assert (tmp_path / texture.path).is_file()
+
+
+def test_cli_exports_the_fitted_shape_of_a_measurement(measured, tmp_path):
+    from click.testing import CliRunner
+
+    from mifaces.cli import main
+    from mifaces.model import load_model
+
+    model = load_model("builtin")
+    shapes = tmp_path / "shapes"
+    shapes.mkdir()
+    coefficients = np.zeros(model.shape_dim)
+    coefficients[:3] = [2.0, -1.0, 0.5]
+    (shapes / "shapes.json").write_text(json.dumps({"model_source": "builtin",
+                                                    "measurements": {"m00": {"status": "converged"}}}))
+    (shapes / "m00.json").write_text(json.dumps({"coefficients": coefficients.tolist(), "expression": None}))
+    run = CliRunner().invoke(main, ["export", str(measured / "brdf" / "phong"), "--out", str(tmp_path / "f.glb"),
+                                    "--measurement", "m00", "--shapes", str(shapes)])
+    assert run.exit_code == 0, run.output
+    import trimesh
+
+    (mesh,) = trimesh.load(tmp_path / "f.glb").geometry.values()
+    np.testing.assert_allclose(mesh.vertices, model.shape(coefficients) / 1000.0, atol=1e-6)
+    run = CliRunner().invoke(main, ["export", str(measured / "brdf" / "phong"), "--out", str(tmp_path / "g.glb"),
+                                    "--measurement", "m07", "--shapes", str(shapes)])
+    assert run.exit_code == 1 and "'m07' has no fitted shape" in run.output and not (tmp_path / "g.glb").exists()
+    run = CliRunner().invoke(main, ["export", str(measured / "brdf" / "phong"), "--out", str(tmp_path / "f.ply")])
+    assert run.exit_code == 1 and "suffix must be one of" in run.output
+
+
+# --------------------------------------------------------------------------------------------
+# The normal map's frame
+# --------------------------------------------------------------------------------------------
+def test_normal_map_is_converted_to_gltfs_tangent_frame(tmp_path):
+    """A Mitsuba normal map of a known world normal field, exported, and read back
+    with glTF's rule (interpolated vertex normal and tangent, bitangent n × t · w)
+    from the file's own NORMAL and TANGENT: the same world normals."""
+    import pygltflib
+
+    from mifaces.export.face import ExportedFace, gltf_normals
+    from mifaces.export.gltf import write_gltf
+    from mifaces.model import load_model
+    from mifaces.model.texture_space import rasterize
+    from mifaces.reflectance.texel_normals import decode, encode, mitsuba_frames
+
+    model = load_model("builtin")
+    r = 64
+    texel, mitsuba, _ = mitsuba_frames(model, model.shape_mean, r)
+    tilted = np.array([0.35, -0.25, 1.0]) / np.linalg.norm([0.35, -0.25, 1.0])
+    local = np.tile([0.0, 0.0, 1.0], (r * r, 1))
+    local[texel] = tilted
+    world_true = np.einsum("mji,j->mi", mitsuba, tilted)
+    converted = gltf_normals(encode(local.reshape(r, r, 3)), model, model.shape_mean)
+    tangent, _, normal = model.tangent_frames()
+    face = ExportedFace(model.shape_mean / 1000, normal, np.concatenate([tangent, np.ones((len(tangent), 1))], 1),
+                        model.uv, model.triangles.astype(np.uint32),
+                        {"base_color": np.full((r, r, 3), 0.5), "metallic_roughness": np.full((r, r, 3), 0.5),
+                         "specular": np.full((r, r, 4), 0.5), "normal": converted}, 1.0)
+    (path,) = write_gltf(face, tmp_path / "n.glb")
+    document = pygltflib.GLTF2().load(str(path))
+    blob = document.binary_blob()
+
+    def accessor(index, width):
+        a = document.accessors[index]
+        view = document.bufferViews[a.bufferView]
+        return np.frombuffer(blob, np.float32, a.count * width, view.byteOffset).reshape(-1, width)
+
+    attributes = document.meshes[0].primitives[0].attributes
+    n_file, t_file = accessor(attributes.NORMAL, 3), accessor(attributes.TANGENT, 4)
+    image = document.images[document.materials[0].normalTexture.index]
+    view = document.bufferViews[image.bufferView]
+    from PIL import Image
+
+    png = np.asarray(Image.open(io.BytesIO(blob[view.byteOffset:view.byteOffset + view.byteLength])), np.float64)
+    texture = decode(png / 255.0).reshape(-1, 3)
+    coverage = rasterize(model.uv, model.triangles, (r, r))
+    tri = model.triangles[coverage.triangle.ravel()[texel]]
+    bary = coverage.barycentric.reshape(-1, 3)[texel]
+    n = np.einsum("mk,mkc->mc", bary, n_file[tri])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    t = np.einsum("mk,mkc->mc", bary, t_file[tri][:, :, :3])
+    t -= n * np.sum(n * t, axis=1, keepdims=True)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    b = np.cross(n, t) * t_file[tri][:, 0, 3:4]
+    m = texture[texel]
+    world = m[:, :1] * t + m[:, 1:2] * b + m[:, 2:3] * n
+    world /= np.linalg.norm(world, axis=1, keepdims=True)
+    angle = np.degrees(np.arccos(np.clip(np.sum(world * world_true, axis=1), -1, 1)))
+    assert np.median(angle) < 1.0 and np.percentile(angle, 95) < 3.0, (np.median(angle), np.percentile(angle, 95))
+    unconverted = m.copy()
+    unconverted[:] = tilted  # had the Mitsuba normals been written as they are
+    world_raw = unconverted[:, :1] * t + unconverted[:, 1:2] * b + unconverted[:, 2:3] * n
+    world_raw /= np.linalg.norm(world_raw, axis=1, keepdims=True)
+    raw = np.degrees(np.arccos(np.clip(np.sum(world_raw * world_true, axis=1), -1, 1)))
+    assert np.percentile(angle, 99) <= np.percentile(raw, 99) + 0.5  # the conversion is no worse where frames differ
+
+
+# --------------------------------------------------------------------------------------------
+# Bad result sets: a clear error, nothing written
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("damage", ["changed", "missing", "no manifest"])
+def test_incomplete_or_mixed_result_is_refused(measured, tmp_path, damage):
+    from mifaces.export import export_face
+    from mifaces.files import SET_MANIFEST, ResultSetError
+
+    result = tmp_path / "cooktorrance"
+    shutil.copytree(measured / "brdf" / "cooktorrance", result)
+    if damage == "changed":
+        shutil.copy(measured / "brdf" / "phong" / "albedo.exr", result / "albedo.exr")  # another run's map
+        match = "albedo.exr is not the file written with the rest"
+    elif damage == "missing":
+        next((result / "meshes").glob("*.ply")).unlink()
+        match = "of the result set is missing"
+    else:
+        (result / SET_MANIFEST).unlink()
+        match = "no result-set manifest"
+    if damage == "changed" and json.loads((result / SET_MANIFEST).read_text())["files"]["albedo.exr"] == \
+            json.loads((measured / "brdf" / "phong" / SET_MANIFEST).read_text())["files"]["albedo.exr"]:
+        pytest.fail("the two models' albedo maps are identical: the test cannot mix them")
+    for suffix in (".glb", ".obj", ".usdc"):
+        with pytest.raises(ResultSetError, match=match):
+            export_face(result, tmp_path / "out" / f"face{suffix}")
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+# --------------------------------------------------------------------------------------------
+# report.html in a real browser
+# --------------------------------------------------------------------------------------------
+#: Window of the headless browser, and the square (x0, y0, x1, y1, CSS px) where the page's 3D view shows the face.
+WINDOW = (900, 900)
+FACE_BOX = (270, 360, 450, 540)
+
+
+def _chromium() -> str:
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        if shutil.which(name):
+            return shutil.which(name)
+    pytest.skip("no chromium: report.html is not opened in a browser (skipped; apt-get install chromium)")
+
+
+def test_report_html_shows_the_face_in_3d_in_a_browser(measured, tmp_path):
+    """measure writes report.html and face.glb; headless Chromium opens the page from disk, renders the
+    face in <model-viewer> (WebGL on SwiftShader) and logs no console error; nothing comes from the internet."""
+    import re
+
+    import skimage.io
+
+    page = measured / "report.html"
+    text = page.read_text()
+    assert (measured / "face.glb").is_file() and (measured / "model-viewer-umd.min.js").is_file()
+    assert "<model-viewer" in text and "camera-controls" in text and "data:model/gltf-binary;base64," in text
+    assert "<table>" in text and 'src="report.png"' in text
+    assert not re.search(r"""(src|href)=["']https?:""", text)  # nothing loaded from the internet
+    browser = _chromium()
+    shot = tmp_path / "report_html.png"
+    run = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
+                          "--enable-unsafe-swiftshader", "--enable-logging=stderr", "--v=0", "--hide-scrollbars",
+                          f"--window-size={WINDOW[0]},{WINDOW[1]}", "--virtual-time-budget=20000",
+                          f"--screenshot={shot}", page.as_uri()], capture_output=True, text=True, timeout=180)
+    assert shot.is_file(), run.stderr[-2000:]
+    console = [line for line in run.stderr.splitlines() if ":CONSOLE" in line and "GL Driver Message" not in line]
+    problems = [line for line in console if re.search(r"error|uncaught|failed|refused", line, re.I)]
+    assert not problems, problems
+    image = skimage.io.imread(shot)[:, :, :3].astype(np.float64)
+    x0, y0, x1, y1 = FACE_BOX
+    face = image[y0:y1, x0:x1]
+    shaded = np.mean(np.min(face, axis=2) < 235)  # not the white page: the face is drawn there
+    assert shaded > 0.8, shaded
+    assert face.std(axis=(0, 1)).mean() > 3  # shading and texture, not a flat fill
+    assert np.mean(np.min(image[:, 700:], axis=2) > 250) > 0.6  # the page beside the view stays background
