@@ -390,6 +390,11 @@ def check_result_target(out: str | os.PathLike, kind: str, force: bool = False) 
         ``out`` holds files mifaces did not write as a set, or another kind of set.
     OSError
         ``out`` cannot be written.
+
+    Returns
+    -------
+    Path
+        ``out``, in every case that may be written (absent, empty, a set to replace).
     """
     out = Path(out)
     check_writable(out)
@@ -400,7 +405,7 @@ def check_result_target(out: str | os.PathLike, kind: str, force: bool = False) 
         raise NotADirectoryError(f"{out} is not a folder")
     content = sorted(p.name for p in out.iterdir())
     if not content:
-        return
+        return out  # an empty folder: nothing to lose, the set takes its place
     data = read_set(out)
     if data is None:
         shown = ", ".join(content[:5]) + (", ..." if len(content) > 5 else "")
