@@ -73,6 +73,24 @@ def test_noise_free_samples_recover_parameters(jit_variant, name, schedule):
     assert all(np.isfinite(e) for _, e, _ in fit.history)
 
 
+#: Largest relative error of any recovered parameter (channel) from 20000 same-family samples with 5 %
+#: multiplicative noise: measured 0.2-1.2 % over seeds 1-3, so 3 % leaves room for other seeds, and a
+#: fit that lands on the wrong lobe (tens of %) fails.
+NOISY_TOLERANCE = 0.03
+
+
+@pytest.mark.parametrize("name", ["phong", "ward", "lafortune"])
+def test_noisy_same_family_samples_recover_the_truth(jit_variant, name):
+    """Phong, Ward and Lafortune fitted to noisy samples of their own family recover the true
+    parameters within NOISY_TOLERANCE, and say converged."""
+    options, truth = TRUTH[name]
+    model = brdf.model(name, **options)
+    fit = fit_region(model, *synthetic_samples(model, truth, 20000, seed=1, noise=0.05))
+    errors = relative_errors(fit.params, truth)
+    assert fit.status == CONVERGED, fit.reason
+    assert max(errors.values()) < NOISY_TOLERANCE, errors
+
+
 @pytest.mark.parametrize("name", brdf.NAMES)
 def test_conservative_start(name):
     """The diffuse albedo at the 40th percentile (clipped to [0.01, 0.95]),
