@@ -30,6 +30,7 @@ import os
 import re
 import shutil
 import tempfile
+import time
 import uuid
 from pathlib import Path
 
@@ -44,6 +45,12 @@ MAX_IMAGE_PIXELS = 8192 * 8192
 MAX_RENDER_SAMPLES = 2 ** 32 - 1
 #: The file a result set's folder holds, written last (:func:`result_set`).
 SET_MANIFEST = ".mifaces-set.json"
+#: Environment variable for tests only: the path of a flag file. Where set,
+#: :func:`result_set` creates that file (holding the name of the point,
+#: ``'staged'`` or ``'swapping'``) at each point of its write window and waits
+#: while it exists, so that a test can kill the process exactly there
+#: (:func:`pause_for_test`). Unset, it costs one dictionary look-up per set.
+TEST_PAUSE_ENV = "MIFACES_TEST_PAUSE_IN_WRITE"
 
 
 #: A name that may become a file name: letters, digits and ``._+-``, not
@@ -403,6 +410,11 @@ def check_result_target(out: str | os.PathLike, kind: str, force: bool = False) 
         ``out`` holds files mifaces did not write as a set, or another kind of set.
     OSError
         ``out`` cannot be written.
+
+    Returns
+    -------
+    Path
+        ``out``, in every case that may be written (absent, empty, a set to replace).
     """
     out = Path(out)
     check_writable(out)
@@ -413,7 +425,7 @@ def check_result_target(out: str | os.PathLike, kind: str, force: bool = False) 
         raise NotADirectoryError(f"{out} is not a folder")
     content = sorted(p.name for p in out.iterdir())
     if not content:
-        return
+        return out  # an empty folder: nothing to lose, the set takes its place
     data = read_set(out)
     if data is None:
         shown = ", ".join(content[:5]) + (", ..." if len(content) > 5 else "")
@@ -424,6 +436,20 @@ def check_result_target(out: str | os.PathLike, kind: str, force: bool = False) 
     if not force:
         raise FileExistsError(f"{out} holds a {kind} already; use force=True (--force) to replace it")
     return out
+
+
+def pause_for_test(point: str) -> None:
+    """Where :data:`TEST_PAUSE_ENV` names a flag file, create it holding
+    ``point`` and wait until it is removed (a test then kills the process,
+    or removes the file to let it go on); else return at once."""
+    flag = os.environ.get(TEST_PAUSE_ENV)
+    if not flag:
+        return
+    staged = f"{flag}.{os.getpid()}.tmp"
+    Path(staged).write_text(point)
+    os.replace(staged, flag)  # the test reads the point's name whole
+    while os.path.exists(flag):
+        time.sleep(0.01)
 
 
 @contextlib.contextmanager
@@ -463,9 +489,11 @@ def result_set(out: str | os.PathLike, kind: str, *, force: bool = False, info: 
         _mode = os.umask(0)
         os.umask(_mode)
         os.chmod(staging, 0o777 & ~_mode)
+        pause_for_test("staged")  # the set complete beside out, out untouched
         if out.exists():
             old = out.parent / f".{out.name}.old-{os.getpid()}-{uuid.uuid4().hex[:8]}"
             os.rename(out, old)
+            pause_for_test("swapping")  # out set aside, the new set not yet in its place
             os.rename(staging, out)
             shutil.rmtree(old, ignore_errors=True)
         else:

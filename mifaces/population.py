@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .files import atomic_write, save_figure, write_json
-from .status import PRIOR
+from .status import NOT_FITTED
 
 #: Scale that makes the median absolute deviation estimate a normal distribution's σ.
 MAD_SCALE = 1.4826
@@ -84,7 +84,7 @@ def _gather(reports: dict[str, dict]):
             counts = statuses.setdefault(model, Counter())
             for region, fit in entry["fit"].items():
                 counts[fit["status"]] += 1
-                if fit["status"] == PRIOR:
+                if fit["status"] in NOT_FITTED:
                     continue
                 for key, value in entry["regions"][region].items():
                     for label, v in components(key, value):

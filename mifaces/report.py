@@ -10,7 +10,7 @@ import numpy as np
 from .capture import read_ground_truth
 from .files import atomic_write, save_figure
 from .model.regions import REGIONS
-from .status import PRIOR
+from .status import CONVERGED, NOT_FITTED
 from .validation import TRUE_SHAPE
 
 
@@ -35,7 +35,7 @@ def ground_truth_errors(estimate, capture, ground_truth=None) -> dict | None:
     regions = {}
     if truth["model"] == estimate.model:
         for name, fit in estimate.fits.items():
-            if fit.status == PRIOR or name not in truth["regions"]:
+            if fit.status in NOT_FITTED or name not in truth["regions"]:
                 continue
             regions[name] = {key: float(np.mean(np.abs(np.asarray(fit.params[key], float) - np.asarray(value, float))
                                                 / np.abs(np.asarray(value, float))))
@@ -139,6 +139,7 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
             err_text = ", ".join(f"{k} {100 * v:.1f}%" for k, v in err.items()) if err else ""
             lines.append(f"| {model} | {region} | {fit['samples']} | {fit['status']} | {text} | "
                          f"{_fmt(fit['loss'])} | {err_text} |")
+    lines += fit_notes(report)
     lines += ["", "| model | training RMSE (first photograph, relative) | albedo RMSE vs ground truth | fit time (s) |",
               "|---|---|---|---|"]
     for model, entry in report["models"].items():
@@ -151,6 +152,18 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
     lines += ["", "Times (s): " + ", ".join(f"{k} {v:.1f}" for k, v in report["seconds"].items()), ""]
     with atomic_write(path, "w") as f:
         f.write("\n".join(lines))
+
+
+def fit_notes(report: dict) -> list[str]:
+    """The report's lines on the fits that did not simply converge: each
+    region's status and why (a parameter at its bound, a spike, values left
+    at their start, a neighbour's or the model's defaults), so that no value
+    that was not measured passes for one."""
+    notes = [f"- {model} / {region}: **{fit['status']}**: {fit.get('reason', '')}"
+             for model, entry in report["models"].items() for region, fit in entry["fit"].items()
+             if fit["status"] != CONVERGED]
+    return ["", "Fits that did not simply converge (their values are not measurements to trust as they stand):",
+            ""] + notes if notes else []
 
 
 def validation_markdown(report: dict) -> list[str]:

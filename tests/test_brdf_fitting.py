@@ -10,10 +10,10 @@ import scipy.optimize
 
 from mifaces import brdf
 from mifaces.brdf.lafortune import energy_bound
-from mifaces.reflectance.fitting import (FULL_DATA, ParameterSpace, SubsetSchedule, conservative_start, fit_region,
-                                         fit_regions, min_samples)
+from mifaces.reflectance.fitting import (FULL_DATA, SPIKE, ParameterSpace, SubsetSchedule, conservative_start,
+                                         fit_region, fit_regions, min_samples)
 from mifaces.reflectance.levenberg_marquardt import CONVERGED, levenberg_marquardt
-from mifaces.status import AT_BOUND
+from mifaces.status import AT_BOUND, AT_START, DEFAULTS
 
 TRUTH = {
     "phong": ({}, {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [0.12, 0.1, 0.09],
@@ -71,6 +71,24 @@ def test_noise_free_samples_recover_parameters(jit_variant, name, schedule):
     assert max(errors.values()) < 1e-3, errors
     assert fit.samples == len(sigma) and fit.loss < 1e-6 and fit.seconds > 0
     assert all(np.isfinite(e) for _, e, _ in fit.history)
+
+
+#: Largest relative error of any recovered parameter (channel) from 20000 same-family samples with 5 %
+#: multiplicative noise: measured 0.2-1.2 % over seeds 1-3, so 3 % leaves room for other seeds, and a
+#: fit that lands on the wrong lobe (tens of %) fails.
+NOISY_TOLERANCE = 0.03
+
+
+@pytest.mark.parametrize("name", ["phong", "ward", "lafortune"])
+def test_noisy_same_family_samples_recover_the_truth(jit_variant, name):
+    """Phong, Ward and Lafortune fitted to noisy samples of their own family recover the true
+    parameters within NOISY_TOLERANCE, and say converged."""
+    options, truth = TRUTH[name]
+    model = brdf.model(name, **options)
+    fit = fit_region(model, *synthetic_samples(model, truth, 20000, seed=1, noise=0.05))
+    errors = relative_errors(fit.params, truth)
+    assert fit.status == CONVERGED, fit.reason
+    assert max(errors.values()) < NOISY_TOLERANCE, errors
 
 
 @pytest.mark.parametrize("name", brdf.NAMES)
@@ -317,3 +335,73 @@ def test_a_spike_takes_its_neighbours_glossy_part_whatever_the_region_size(monke
     assert fits["beard"].status == "prior" and fits["beard"].params["alpha"] == 0.3
     assert fits["beard"].params["specular_reflectance"] == [0.05] * 3
     assert fits["eyebrows"].status == fitting.AT_BOUND and fits["eyebrows"].params["alpha"] == 1.0
+
+
+# --------------------------------------------------------------------------
+# Fits that end at a bound, as a spike or at their start values say so (issue 27).
+
+def _direction(theta_deg, phi_deg):
+    t, p = np.radians(theta_deg), np.radians(phi_deg)
+    return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
+
+
+def spike_samples(n=600, seed=0):
+    """Samples of a Lambertian surface (albedo 0.4, 0.3, 0.2) with a highlight seen exactly at the mirror
+    direction and nowhere else: n mirror pairs 5 above the diffuse value, n pairs 0.3-3° from the mirror and
+    n far from it at the diffuse value. Only an infinitely sharp lobe fits them."""
+    rng = np.random.default_rng(seed)
+    theta, phi = rng.uniform(10, 50, n), rng.uniform(0, 360, n)
+    light = _direction(theta, phi)
+    mirror = _direction(theta, phi + 180)
+    near = _direction(theta + rng.uniform(0.3, 3.0, n) * rng.choice([-1, 1], n), phi + 180 + rng.uniform(-2, 2, n))
+    far_l, far_v = (_direction(rng.uniform(0, 70, n), rng.uniform(0, 360, n)) for _ in range(2))
+    r = np.tile([0.4, 0.3, 0.2], (3 * n, 1))
+    r[:n] += 5.0
+    return np.concatenate([light, light, far_l]), np.concatenate([mirror, near, far_v]), r, np.ones(3 * n)
+
+
+def test_a_real_fit_whose_lobe_runs_to_the_sharp_end_is_flagged(jit_variant):
+    """fit_region on samples only a spike fits: the exponent runs to its sharp end (1e5), the fit says
+    at_bound and why; in fit_regions skin (which no region can lend a lobe to) takes the model's defaults
+    with status 'defaults', and so does a small region that would have borrowed skin's: never silent."""
+    model = brdf.model("phong")
+    light, view, r, sigma = spike_samples()
+    fit = fit_region(model, light, view, r, sigma, schedule=FULL_DATA)
+    assert fit.status == AT_BOUND and SPIKE in fit.reason, (fit.status, fit.reason)
+    assert fit.params["exponent"] > 0.99 * model.parameter("exponent").upper
+    few = min_samples(model) - 1
+    region = np.repeat([1, 2], [len(sigma) - few, few])
+    with pytest.warns(UserWarning, match="spike"):
+        fits = fit_regions(model, light, view, r, sigma, region, {1: "skin", 2: "lips"}, schedule=FULL_DATA)
+    skin = fits["skin"]
+    assert skin.status == DEFAULTS and SPIKE.split(" at ")[0] in skin.reason and "model defaults" in skin.reason
+    assert skin.params["exponent"] == model.parameter("exponent").default
+    np.testing.assert_allclose(skin.params["diffuse_reflectance"], [0.4, 0.3, 0.2], atol=0.02)  # its own albedo
+    assert fits["lips"].status == DEFAULTS and "model's defaults" in fits["lips"].reason
+
+
+def test_a_fit_that_never_sees_its_lobe_ends_at_start(jit_variant):
+    """Light and view the same direction, 50-80° from the normal: the Phong lobe around the mirror direction
+    is 0 at every sample, with zero derivatives, so the solver cannot move it (as in a region no highlight
+    reaches). The fit measures the albedo but says at_start, lends its lobe to no region and warns."""
+    model = brdf.model("phong")
+    rng = np.random.default_rng(3)
+    n = 400
+    light = _direction(rng.uniform(50, 80, n), rng.uniform(0, 360, n))
+    r, sigma = np.tile([0.4, 0.3, 0.2], (n, 1)), np.ones(n)
+    fit = fit_region(model, light, light, r, sigma, schedule=FULL_DATA)
+    assert fit.status == AT_START and "start values" in fit.reason, (fit.status, fit.reason)
+    np.testing.assert_allclose(fit.params["diffuse_reflectance"], [0.4, 0.3, 0.2], rtol=1e-3)
+    region = np.repeat([1, 2], [n - 5, 5])
+    with pytest.warns(UserWarning, match="start values"):
+        fits = fit_regions(model, light, light, r, sigma, region, {1: "skin", 2: "lips"}, schedule=FULL_DATA)
+    assert fits["skin"].status == AT_START
+    assert fits["lips"].status == DEFAULTS
+
+
+def test_a_fit_that_moves_its_lobe_is_not_at_start(jit_variant):
+    """The converse: noise-free samples of a Phong lobe converge, and are not flagged at_start."""
+    options, truth = TRUTH["phong"]
+    model = brdf.model("phong", **options)
+    fit = fit_region(model, *synthetic_samples(model, truth, 3000), schedule=FULL_DATA)
+    assert fit.status == CONVERGED, fit.reason

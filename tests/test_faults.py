@@ -33,8 +33,8 @@ from mifaces.brdf import MAX_LOBES, ParameterError, validate_brdf
 from mifaces.capture import CaptureError, load_capture
 from mifaces.capture.calibration import CalibrationError, calibrate_light
 from mifaces.cli import main
-from mifaces.files import (SET_MANIFEST, ResultSetError, check_render_size, read_exr, result_set, verify_set,
-                           write_exr, write_json)
+from mifaces.files import (SET_MANIFEST, TEST_PAUSE_ENV, ResultSetError, check_render_size, check_result_target,
+                           read_exr, result_set, verify_set, write_exr, write_json)
 from mifaces.reflectance.io import FILES, KIND, load_estimate
 from mifaces.shape.io import write_fit
 from mifaces.studio.simulate import simulate
@@ -178,6 +178,60 @@ def test_3_fit_brdf_killed_at_a_random_moment(capture, tmp_path):
     # the next run tidies the leftovers and writes a whole set
     assert _run("fit-brdf", str(capture), "--out", str(out), "--resolution", "48", "--force").exit_code == 0
     assert load_estimate(out)["resolution"] == 48
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["brdf"]
+
+
+def _kill_in_write_window(command: list[str], flag: Path, points: list[str], timeout: float = 240.0) -> None:
+    """Run ``command`` with :data:`~mifaces.files.TEST_PAUSE_ENV` set to ``flag``: let it go on at each of
+    ``points`` but the last, where it is killed, inside the write window and nowhere else."""
+    log = flag.with_suffix(".log")
+    with open(log, "wb") as output:
+        process = subprocess.Popen(command, env=dict(os.environ, **{TEST_PAUSE_ENV: str(flag)}), stdout=output,
+                                   stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        for i, point in enumerate(points):
+            deadline = time.monotonic() + timeout
+            while not flag.exists():
+                if process.poll() is not None:
+                    raise AssertionError(f"the command ended ({process.returncode}) before reaching {point!r}: "
+                                         f"{log.read_text()[-2000:]}")
+                assert time.monotonic() < deadline, f"the command did not reach {point!r} in {timeout} s"
+                time.sleep(0.02)
+            assert flag.read_text() == point
+            if i < len(points) - 1:
+                flag.unlink()  # go on to the next point
+        assert process.poll() is None  # waiting at the last point
+    finally:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+    flag.unlink()
+    log.unlink()
+
+
+@pytest.mark.parametrize("points", [["staged"], ["staged", "swapping"]], ids=["staged", "swapping"])
+def test_3_fit_brdf_killed_inside_the_write_window(capture, tmp_path, points):
+    """A kill at each point of result_set's write window, reached for certain (test_3_fit_brdf_killed_at_a_random_
+    moment may fall before or after it): with the new set staged, the previous set is untouched; with the
+    previous set moved aside, the folder is absent (no reader sees part of a set). Either way the next run
+    tidies up and leaves one whole set: the previous one, or the complete new one."""
+    out = tmp_path / "brdf"
+    fit = ["fit-brdf", str(capture), "--out", str(out), "--model", "phong"]
+    assert _run(*fit, "--resolution", "16").exit_code == 0
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    _kill_in_write_window([str(Path(sys.executable).parent / "mifaces"), "--variant", "llvm_ad_rgb", *fit,
+                           "--resolution", "24", "--force"], tmp_path / "flag", points)
+    staged = [p for p in tmp_path.iterdir() if p.name.startswith(".brdf.new-")]
+    assert len(staged) == 1 and verify_set(staged[0], KIND) is not None  # the new set was whole, beside
+    if points[-1] == "staged":
+        assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+        assert load_estimate(out)["resolution"] == 16
+    else:
+        assert not out.exists()
+        with pytest.raises(FileNotFoundError):
+            load_estimate(out)
+    check_result_target(out, KIND, force=True)  # what the next run does first
+    assert load_estimate(out)["resolution"] == (16 if points[-1] == "staged" else 24)
+    assert verify_set(out, KIND) is not None
     assert sorted(p.name for p in tmp_path.iterdir()) == ["brdf"]
 
 
@@ -372,6 +426,86 @@ def test_9_lafortune_lobes_are_bounded():
     with pytest.raises(RuntimeError, match=f"at most {MAX_LOBES} lobes"):
         mi.load_dict({"type": "lafortune", "cxy_50": -0.5, "cz_50": 0.5, "exponent_50": 3.0})
     assert _run("fit-brdf", ".", "--out", "x", "--model", "lafortune", "--lobes", "50").exit_code == 2
+
+
+# --------------------------------------------------------------------------------------------
+# 10. Results into an existing empty folder (issue 27)
+# --------------------------------------------------------------------------------------------
+def _empty(tmp_path: Path, name: str) -> Path:
+    folder = tmp_path / name
+    folder.mkdir()
+    return folder
+
+
+def test_10_result_set_into_an_existing_empty_folder(tmp_path):
+    """Before: check_result_target returned None for an empty folder, and result_set died on None.parent."""
+    out = _empty(tmp_path, "brdf")
+    assert check_result_target(out, KIND) == out
+    _brdf_set(out, 16)
+    assert verify_set(out, KIND) is not None and load_estimate(out)["resolution"] == 16
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["brdf"]  # nothing staged or set aside is left
+
+
+def test_10_simulate_into_an_existing_empty_folder(tmp_path):
+    """Before: `mifaces simulate OUT` with OUT an empty folder rendered everything, then died."""
+    out = _empty(tmp_path, "capture")
+    result = _run("simulate", str(out), "--resolution", "64x64", "--spp", "2", "--measurements", "1")
+    assert result.exit_code == 0, result.output
+    assert verify_set(out, "capture") is not None and len(load_capture(out, calibrate=False).measurements) == 1
+
+
+def test_10_fit_brdf_and_render_into_existing_empty_folders(capture, tmp_path):
+    """Before: `mifaces fit-brdf CAPTURE --out DIR` with DIR an empty folder fitted everything, then died."""
+    out = _empty(tmp_path, "brdf")
+    result = _run("fit-brdf", str(capture), "--out", str(out), "--model", "phong", "--resolution", "16")
+    assert result.exit_code == 0, result.output
+    assert verify_set(out, KIND) is not None and load_estimate(out)["resolution"] == 16
+    images = _empty(tmp_path, "images")
+    result = _run("render", str(out), str(capture), "--out", str(images / "novel"), "--spp", "1")
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in images.iterdir()) == ["novel.exr", "novel.png"]
+
+
+def test_10_fit_shape_into_an_existing_empty_folder(capture, tmp_path):
+    """`mifaces fit-shape CAPTURE --out DIR` with DIR an empty folder writes the fit and the index there."""
+    out = _empty(tmp_path, "shapes")
+    result = _run("fit-shape", str(capture), "--out", str(out), "--measurements", "m00", "--iterations", "0.01")
+    assert "Traceback" not in result.output and result.exit_code in (0, 1), result.output
+    assert result.exit_code == 0 or "did not converge" in result.output, result.output
+    assert {"shapes.json", "m00.json", "m00.npy"} <= {p.name for p in out.iterdir()}
+
+
+def test_10_measure_into_an_existing_empty_folder(capture, tmp_path):
+    """`mifaces measure CAPTURE --out DIR` with DIR an empty folder writes the report and each model's set there."""
+    out = _empty(tmp_path, "measure")
+    result = _run("measure", str(capture), "--out", str(out), "--model", "phong", "--geometry", "ground-truth",
+                  "--resolution", "16")
+    assert result.exit_code == 0, result.output
+    assert (out / "report.md").is_file() and verify_set(out / "brdf" / "phong", KIND) is not None
+
+
+def test_10_import_into_an_existing_empty_folder(tmp_path):
+    """`mifaces import diligent OBJECT OUT` with OUT an empty folder writes the import there."""
+    from test_diligent import _fake_object
+
+    _fake_object(tmp_path / "obj")
+    out = _empty(tmp_path, "out")
+    result = _run("import", "diligent", str(tmp_path / "obj"), str(out))
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in out.iterdir()) == ["diligent.npz", "split.json"]
+
+
+def test_10_batch_into_an_existing_empty_folder(tmp_path):
+    """`mifaces batch INPUTS --out DIR` with DIR an empty folder records the run there (here: one capture
+    that fails on its manifest, the cheap path through the same writer)."""
+    broken = _empty(tmp_path, "broken")
+    (broken / "capture.json").write_text('{"format": ')
+    out = _empty(tmp_path, "batch")
+    result = _run("batch", str(broken), "--out", str(out), "--workers", "1", "--model", "phong",
+                  "--geometry", "ground-truth", "--resolution", "16")
+    assert result.exit_code == 1 and "1 capture(s) failed: broken" in result.output, result.output
+    record = json.loads((out / "batch.json").read_text())
+    assert record["captures"]["broken"]["status"] == "failed" and record["failed"] == ["broken"]
 
 
 # --------------------------------------------------------------------------------------------

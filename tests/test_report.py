@@ -141,3 +141,26 @@ def test_a_fitted_shape_is_told_apart_from_the_reflectance(capture, estimate):
     assert good["heldout_rmse_true_shape"] < good["heldout_rmse"]
     assert good["heldout_rmse_true_shape"] < bad["heldout_rmse_true_shape"]
     assert good["environment_rmse_true_shape"] < bad["environment_rmse_true_shape"]
+
+
+def test_report_names_every_fit_that_did_not_simply_converge(tmp_path):
+    """report.md lists each region whose fit ended at a bound, at its start values, borrowed or at the
+    defaults, with the reason; a converged region is not listed (issue 27)."""
+    from mifaces.report import write_markdown
+
+    statuses = {"skin": ("converged", "relative loss decrease below ftol"),
+                "nostrils": ("at_start", "converged; the glossy parameters stayed at their start values"),
+                "lips": ("at_bound", "converged; at the bound of its range: exponent"),
+                "eyes": ("defaults", "0 samples, fewer than the 70 a phong fit needs: the model's defaults")}
+    fit = {name: {"samples": 100, "status": status, "reason": reason, "loss": 0.1}
+           for name, (status, reason) in statuses.items()}
+    report = {"capture": "c", "measurements": 2, "geometry": "ground-truth", "resolution": 16,
+              "models": {"phong": {"regions": {name: {"exponent": 30.0} for name in fit}, "fit": fit,
+                                   "training_rmse": 0.1}},
+              "seconds": {"fit_brdf_phong": 1.0}}
+    write_markdown(tmp_path / "report.md", report, "m00")
+    text = (tmp_path / "report.md").read_text()
+    notes = text[text.index("did not simply converge"):].splitlines()
+    for name, (status, reason) in statuses.items():
+        listed = [line for line in notes if line.startswith(f"- phong / {name}:")]
+        assert listed == ([] if status == "converged" else [f"- phong / {name}: **{status}**: {reason}"])

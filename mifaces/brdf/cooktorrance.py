@@ -3,7 +3,10 @@
     f(wi, wo) = ρ_d / π + ρ_s · D(h) F(wi·h) G(wi, wo) / (4 cos θi cos θo)
 
 Source: Cook & Torrance, "A reflectance model for computer graphics", ACM
-TOG 1(1), 1982 (eqs. 2-5). ``specular_reflectance`` ρ_s scales the lobe;
+TOG 1(1), 1982 (eqs. 2-5), in the form of Walter et al., "Microfacet models
+for refraction through rough surfaces", EGSR 2007 (eq. 20): 4 cos θi cos θo
+in the denominator where Cook & Torrance have π cos θi cos θo, their D
+lacking the 1/π that normalises Beckmann's. ``specular_reflectance`` ρ_s scales the lobe;
 D is Beckmann with RMS slope m = ``roughness``; F is the unpolarised
 dielectric Fresnel term with relative index ``eta`` (default 1.4, skin:
 Tuchin's tissue optics; a fit holds it at the published value of each face

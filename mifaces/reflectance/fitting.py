@@ -31,7 +31,7 @@ from .. import brdf as brdf_models
 from ..brdf.model import BRDFModel
 from ..progress import progress as progress_bar
 from ..arrays import device_array
-from ..status import AT_BOUND, CONVERGED, PRIOR
+from ..status import AT_BOUND, AT_START, CONVERGED, DEFAULTS, PRIOR
 from .levenberg_marquardt import levenberg_marquardt
 from .parameters import ParameterSpace, conservative_start, linear_start
 
@@ -250,7 +250,7 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     if len(sigma) < len(space):
         raise ValueError(f"{model.name} has {len(space)} free parameters but only {len(sigma)} samples were given")
     start = {**linear_start(model, light, view, reflectance, sigma, fixed, seed=seed), **(start or {})}
-    x = space.vector(start)
+    x = x_start = space.vector(start)
     schedule = schedule or SubsetSchedule()
     order = np.random.default_rng(seed).permutation(len(sigma))
     history, iterations, result = [], 0, None
@@ -272,6 +272,9 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     if bounded and status == CONVERGED:
         # the best fit lies outside the valid range: the samples do not support this model there
         status, reason = AT_BOUND, f"{reason}; at the bound of its range: {', '.join(bounded)}"
+    elif space.glossy_unchanged(x_start, x):
+        # the solver never moved the glossy part: its values are the start's, not a measurement
+        status, reason = AT_START, f"{reason}; the glossy parameters stayed at their start values"
     if len(model.lobe_scales()) > 1:
         params, loss, pruned = prune_lobes(model, space, problem, params, loss)
         if pruned:
@@ -309,10 +312,11 @@ def prune_lobes(model: BRDFModel, space: ParameterSpace, problem: _Problem, para
     return params, loss, pruned
 
 
-def prior_fit(model: BRDFModel, params: dict, samples: int, reason: str) -> RegionFit:
-    """A region's BRDF taken from elsewhere (a neighbour, the defaults)."""
+def prior_fit(model: BRDFModel, params: dict, samples: int, reason: str, status: str = PRIOR) -> RegionFit:
+    """A region's BRDF taken from elsewhere: a fitted neighbour (status
+    ``'prior'``) or the model's defaults (``status='defaults'``)."""
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=float("nan"),
-                     samples=samples, seconds=0.0, status=PRIOR, reason=reason, iterations=0)
+                     samples=samples, seconds=0.0, status=status, reason=reason, iterations=0)
 
 
 #: Why a fit whose lobe width ended at its sharp end is not trusted.
@@ -339,7 +343,11 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     a fit, with a warning. Regions without samples are not
     fitted either. ``progress`` shows a bar over the regions fitted.
     ``fixed_by_region`` (name -> parameters) holds parameters fixed in one
-    region on top of ``fixed``.
+    region on top of ``fixed``. A region that takes the model's defaults
+    because no region has a fit to lend (skin's own fit a spike, say) has
+    status ``'defaults'``, and a warning says so; a fit whose glossy
+    parameters stayed at their start values keeps status ``'at_start'``, with
+    a warning, and lends them to no region.
     """
     model = brdf_models.model(model) if isinstance(model, str) else model
     neighbours = NEIGHBOURS if neighbours is None else neighbours
@@ -361,7 +369,11 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
         fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask], **region_options)
     def donor_of(name):
         donors = list(neighbours.get(name, [])) + ["skin"]
-        return next((d for d in donors if d != name and d in fits and fits[d].status != AT_BOUND), None)
+        return next((d for d in donors if d != name and d in fits and fits[d].status not in (AT_BOUND, AT_START, DEFAULTS)),
+                    None)
+
+    for name in [n for n, fit in fits.items() if fit.status == AT_START]:
+        warnings.warn(f"region {name!r}: {fits[name].reason.split('; ')[-1]} (not measured)", stacklevel=2)
 
     # A small region (fewer than 10x the samples a fit needs) whose best fit lies at a
     # bound of the valid range is more likely fitting noise than showing a material
@@ -379,7 +391,7 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
         reason = (f"{counts[name]} samples, and its own fit ended {fits[name].reason.split('; ')[-1]}: "
                   f"the glossy part of {repr(donor) if donor else 'the model defaults'}")
         warnings.warn(f"region {name!r}: {reason}", stacklevel=2)
-        fits[name] = prior_fit(model, borrowed, counts[name], reason)
+        fits[name] = prior_fit(model, borrowed, counts[name], reason, PRIOR if donor else DEFAULTS)
     for label, name in region_names.items():
         if name in fits:
             continue
@@ -389,10 +401,10 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
         reason = f"{counts[name]} samples, fewer than the {needed} a {model.name} fit needs: {source}"
         if counts[name] > 0:
             warnings.warn(f"region {name!r}: {reason}", stacklevel=2)
-        fits[name] = prior_fit(model, params, counts[name], reason)
+        fits[name] = prior_fit(model, params, counts[name], reason, PRIOR if donor else DEFAULTS)
     return fits
 
 
 __all__ = ["ParameterSpace", "SubsetSchedule", "FULL_DATA", "RegionFit", "fit_region", "fit_regions",
            "conservative_start", "linear_start", "prune_lobes", "min_samples", "NEIGHBOURS", "CONVERGED",
-           "AT_BOUND"]
+           "AT_BOUND", "AT_START", "DEFAULTS"]

@@ -14,7 +14,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..brdf.model import BRDFModel, Parameter
+from ..brdf.model import DIFFUSE, BRDFModel, Parameter
 from ..arrays import device_array
 
 
@@ -116,6 +116,16 @@ class ParameterSpace:
             if hit:
                 out.append(f.name if f.channel is None else f"{f.name}[{f.channel}]")
         return out
+
+    def glossy_unchanged(self, start: np.ndarray, x: np.ndarray, rtol: float = 1e-6) -> bool:
+        """Whether ``x`` leaves every free glossy parameter (all but the
+        diffuse albedo) where ``start`` put it, to ``rtol`` in the
+        reparameterised scale: a fit that never moved them has not measured them."""
+        glossy = [i for i, f in enumerate(self.free) if f.name != DIFFUSE.name]
+        if not glossy:
+            return False
+        a, b = np.asarray(start, np.float64)[glossy], np.asarray(x, np.float64)[glossy]
+        return bool(np.all(np.abs(b - a) <= rtol * np.maximum(np.abs(a), 1.0)))
 
     def at_spike(self, x: np.ndarray, margin: float = 1e-3) -> bool:
         """Whether ``x`` puts the lobe-width parameter within ``margin`` (a
