@@ -39,6 +39,7 @@ from .render import FaceScene
 from .report_html import write_html
 from .report import ground_truth_errors, ranking, write_markdown, write_picture, write_validation_picture
 from .shape import fit_shape, shapes_in_world
+from .shape_errors import capture_shape_errors
 from .studio import simulate
 from .validation import Validator, relative_rmse
 
@@ -224,10 +225,24 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
     fits = fit_shape(capture, face, out=out / "shapes", iterations=shape_iterations, progress=progress)
     timings["fit_shape"] = time.perf_counter() - t
     report["shapes"] = {f.measurement: {"status": f.status, "seconds": f.seconds,
-                                        "feature_rms_px": f.loss.get("feature_rms_px")} for f in fits}
+                                        "feature_rms_px": f.loss.get("feature_rms_px"),
+                                        "shape_modes": len(f.coefficients)} for f in fits}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the failed fits are named below
         shapes = shapes_in_world(fits, capture)
+    fitted_modes = max((len(f.coefficients) for f in fits), default=0)
+    report["face_model"] = {"name": face.name, "model_shape_modes": face.shape_dim, "fit_shape_modes": fitted_modes}
+    truth = read_ground_truth(capture)
+    if truth is not None:
+        report["face_model"]["truth_shape_modes"] = int(np.count_nonzero(truth.coefficients.get("shape", ())))
+        report["face_model"]["truth_detail"] = bool(truth.description.get("detail", False))
+    if shapes and truth is not None:  # a simulated capture: how far off each fit lies
+        _, true_shapes = load_geometry(capture, "ground-truth")
+        errors = capture_shape_errors(face, shapes, true_shapes, capture.camera)
+        for name, entry in report["shapes"].items():
+            if name in errors:
+                entry["errors"] = errors[name]
+        report["shape_errors"] = errors.get("summary")
     if not shapes:
         detail = "; ".join(f"{f.measurement}: {f.status}" + (f" ({f.message})" if f.message else "")
                            for f in fits)

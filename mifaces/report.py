@@ -140,6 +140,7 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
             lines.append(f"| {model} | {region} | {fit['samples']} | {fit['status']} | {text} | "
                          f"{_fmt(fit['loss'])} | {err_text} |")
     lines += fit_notes(report)
+    lines += shapes_markdown(report)
     lines += ["", "| model | training RMSE (first photograph, relative) | albedo RMSE vs ground truth | fit time (s) |",
               "|---|---|---|---|"]
     for model, entry in report["models"].items():
@@ -152,6 +153,28 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
     lines += ["", "Times (s): " + ", ".join(f"{k} {v:.1f}" for k, v in report["seconds"].items()), ""]
     with atomic_write(path, "w") as f:
         f.write("\n".join(lines))
+
+
+def shapes_markdown(report: dict) -> list[str]:
+    """The report's lines on the fitted shapes: the identity modes the fit (and a simulated
+    truth) used, and per photograph the fit's status, feature-point error and, against a
+    simulated truth, its error in the world frame (``mifaces.shape_errors``)."""
+    face = report.get("face_model")
+    if not face or "shapes" not in report:
+        return []
+    lines = ["", f"Face model `{face['name']}`: the fit used the leading {face['fit_shape_modes']} of its "
+                 f"{face['model_shape_modes']} identity modes"
+             + (f"; the simulated truth drew on {face['truth_shape_modes']}"
+                + (" plus fine detail outside the span" if face.get("truth_detail") else "")
+                + ", so it lies outside the fitted span by construction" if "truth_shape_modes" in face else "")
+             + ".", "", "| photograph | status | feature RMS (px) | world error (mm) | after rigid alignment (mm) "
+                        "| depth (mm) |", "|---|---|---|---|---|---|"]
+    for name, entry in report["shapes"].items():
+        e = entry.get("errors") or {}
+        cells = [f"{e[k]:.2f}" if k in e else "" for k in ("world_mm", "aligned_mm", "depth_mm")]
+        rms = entry.get("feature_rms_px")
+        lines.append(f"| {name} | {entry['status']} | {'' if rms is None else f'{rms:.2f}'} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def fit_notes(report: dict) -> list[str]:

@@ -193,8 +193,9 @@ def test_builtin_landmarks_on_their_regions(builtin):
     eyes = p[regions == REGIONS["eyes"]]
     for i in (38, 39, 41, 42, 44, 45, 47, 48):  # eyelid margins: within a few mm of the eyeball
         assert np.min(np.linalg.norm(eyes - p[lm[i]], axis=1)) < 4.0, i
-    for i in (20, 25):
-        assert regions[lm[i]] == REGIONS["eyebrows"], i
+    brows = p[regions == REGIONS["eyebrows"]]
+    for i in (20, 25):  # on the brow's upper edge, where the detector puts them
+        assert np.min(np.linalg.norm(brows - p[lm[i]], axis=1)) < 3.0, i
     for i in (62, 63, 64, 66, 67, 68):  # the inner lip line (the outer one is the region's border)
         assert regions[lm[i]] == REGIONS["lips"], i
 

@@ -20,8 +20,8 @@ from ..status import CONVERGED, DIVERGED, NOT_CONVERGED
 from .fitter import Fitter
 from .io import as_capture, write_fit, write_index
 from .result import ShapeFit, ShapeFitError, ShapeSchedule, Weights
-from .targets import (eye_distance_px, feature_targets, light_direction, reference_measurement,
-                      start_light_angles)
+from .targets import (eye_distance_px, feature_targets, light_angles, light_direction, reference_measurement,
+                      rotation_centre, start_light_angles)
 
 #: Default convergence limit of the feature points: RMS distance from their targets as a fraction of
 #: the face's eye distance (outer corners) in the image, on top of :data:`FEATURE_NOISE`; with it,
@@ -33,6 +33,9 @@ FEATURE_NOISE = 1.0
 #: Feature points of measurements labelled with one pose that differ from the pose's fitted
 #: measurement's by more than this fraction of their spread (RMS) are not one pose: fitted apart.
 POSE_AGREEMENT = 0.25
+#: The second pass of a fit of one face to several poses (``fit_shape(one_identity=True)``): this
+#: fraction of the schedule's iterations, from each pose's first fit with the shared identity held.
+SECOND_PASS = 0.35
 
 
 def feature_limit(vertices_camera, model, focal_px: float, max_feature_error: float = MAX_FEATURE_ERROR,
@@ -223,7 +226,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
               iterations: float | ShapeSchedule | None = None, progress: bool = True, weights: Weights | None = None,
               use_diffuse: bool = True, fit_focal: bool = True, seed: int = 0,
               max_feature_error: float = MAX_FEATURE_ERROR, fixed=(), feature_noise: float = FEATURE_NOISE,
-              shape_modes: int | None = None) -> list[ShapeFit]:
+              shape_modes: int | None = None, one_identity: bool = True) -> list[ShapeFit]:
     """Fit the morphable model to every pose of a capture, independently (paper sec. 4.2).
 
     Measurements sharing a ``pose`` label (one pose of the subject photographed
@@ -269,6 +272,11 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
         Identity modes fitted, the leading ones (default: the model's
         :attr:`~mifaces.model.MorphableModel.fit_shape_modes`, 50 of the built-in's 100).
         ``shapes.json`` records the number.
+    one_identity : bool
+        One face for all photographs: after each pose is fitted on its own, the identity
+        coefficients of the converged fits are averaged (:func:`one_face`) and every pose is fitted
+        again, briefly (:data:`SECOND_PASS` of the schedule), from its first fit with that identity
+        held: its own pose, expression and lighting. Without it, each pose keeps its own identity.
 
     Returns
     -------
@@ -292,27 +300,75 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     todo = _measurements(capture, measurements, model)
     reference = reference_measurement(capture) if model.has_texture else None
     groups = sorted(pose_groups(capture, todo), key=lambda g: g[0].name != reference)
-    fits, initial_color = {}, None
-    bar = progress_bar(total=len(todo), desc="fit-shape", unit="image", enabled=bool(progress))
+    fits, leaders, initial_color = {}, {}, None
+    joint = one_identity and len(groups) > 1
+    bar = progress_bar(total=len(todo) + (len(groups) if joint else 0), desc="fit-shape", unit="image",
+                       enabled=bool(progress))
+    options = dict(weights=weights, use_diffuse=use_diffuse, fit_focal=fit_focal, seed=seed,
+                   max_feature_error=max_feature_error, progress=progress, distances=capture.distances,
+                   feature_noise=feature_noise)
     for leader, *others in groups:
         light = capture.light(leader.light) if leader.light else None
-        fit = fit_measurement(leader, capture.camera, model, light=light, schedule=schedule, weights=weights,
-                              use_diffuse=use_diffuse, fit_focal=fit_focal, initial_color=initial_color,
-                              seed=seed, max_feature_error=max_feature_error, progress=progress, fixed=fixed,
-                              distances=capture.distances, feature_noise=feature_noise)
+        fit = fit_measurement(leader, capture.camera, model, light=light, schedule=schedule,
+                              initial_color=initial_color, fixed=fixed, **options)
         if leader.name == reference and fit.converged:
             initial_color = fit.color
+        leaders[leader.name] = fit
+        bar.update(1 + len(others))
+        bar.set_postfix(last=leader.name, status=fit.status)
+    identity = one_face(list(leaders.values())) if joint else None
+    if identity is not None:  # every photograph again, its pose, expression and lighting on the one face
+        second = schedule.scaled_by(SECOND_PASS)
+        for leader, *_ in groups:
+            first = leaders[leader.name]
+            light = capture.light(leader.light) if leader.light else None
+            fit = fit_measurement(leader, capture.camera, model, light=light, schedule=second,
+                                  initial_color=initial_color, fixed=tuple(fixed) + ("shape",),
+                                  initial=dict(_start_from(first, model), shape=identity), **options)
+            leaders[leader.name] = replace(fit, seconds=fit.seconds + first.seconds,
+                                           message=(fit.message + "; " if fit.message else "")
+                                           + f"identity shared by {len(groups)} poses")
+            bar.update(1)
+            bar.set_postfix(last=leader.name, status=fit.status)
+    for leader, *others in groups:
+        fit = leaders[leader.name]
         for fit_m in [fit] + [shared_fit(fit, m, capture) for m in others]:
             fits[fit_m.measurement] = fit_m
             if out is not None:
                 write_fit(out, fit_m, model)
-        bar.update(1 + len(others))
-        bar.set_postfix(last=leader.name, status=fit.status)
     bar.close()
     result = [fits[m.name] for m in todo]
     if out is not None:
         write_index(out, capture, model, result, reference, model_source=source)
     return result
+
+
+def one_face(fits: list[ShapeFit]) -> np.ndarray | None:
+    """The identity of the face all ``fits`` show: the mean of the converged fits' shape
+    coefficients (each photograph's fit is an estimate of the same face), None without two
+    converged fits."""
+    done = [f.coefficients for f in fits if f.converged]
+    return np.mean(done, axis=0) if len(done) >= 2 else None
+
+
+def _start_from(fit: ShapeFit, model) -> dict:
+    """Start values (:func:`fit_measurement`'s ``initial``) that continue ``fit``: its pose,
+    expression, albedo or colour, lighting."""
+    start = {"rotation": np.radians(fit.yaw_pitch_roll),
+             "translation": fit.translation + fit.rotation @ rotation_centre(model)}
+    if len(fit.expression):
+        start["expression"] = fit.expression
+    if fit.albedo is not None and not model.has_texture:
+        start["albedo"] = np.asarray(fit.albedo, np.float64).ravel()
+    if fit.color is not None:
+        start["color"] = fit.color
+    for image, light in (fit.light or {}).items():
+        for name in ("color", "ambient", "specular", "contrast", "gain", "offset"):
+            if name in light:
+                start[f"{image}.{'light_color' if name == 'color' else name}"] = light[name]
+        if "direction" in light:
+            start[f"{image}.light_angles"] = light_angles(light["direction"])
+    return start
 
 
 def pose_groups(capture, measurements) -> list[list]:

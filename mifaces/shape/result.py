@@ -37,9 +37,12 @@ class ShapeSchedule:
     @classmethod
     def scaled(cls, factor: float) -> ShapeSchedule:
         """The default schedule with every iteration count multiplied by ``factor``."""
-        d = cls()
-        return cls(tuple((max(1, int(round(i * factor))), s, b) for i, s, b in d.levels),
-                   max(1, int(round(d.pose_iterations * factor))))
+        return cls().scaled_by(factor)
+
+    def scaled_by(self, factor: float) -> ShapeSchedule:
+        """This schedule with every iteration count multiplied by ``factor``."""
+        return type(self)(tuple((max(1, int(round(i * factor))), s, b) for i, s, b in self.levels),
+                          max(1, int(round(self.pose_iterations * factor))))
 
 
 @dataclass(frozen=True)
