@@ -1,0 +1,736 @@
+"""Writes ``docs/results.md`` from the committed results in ``validation/results/*.json``.
+
+Every number in ``docs/results.md`` is read from a JSON here; nothing is typed by
+hand. One section per result file, in file-name order: what was measured (the
+first paragraph of the script's docstring), the command (the JSON's
+``command`` field where it holds a ``python validation/...`` command, else the
+``Run:``/usage line of the script's docstring), whether the data are SIMULATED
+or real, a table of the key numbers, and the picture
+``validation/results/<name>.png`` where one exists. A file of a layout this
+script does not know gets one line listing its top-level keys; a key missing
+from a known layout shows as "—".
+
+Run:  python validation/results_doc.py [--results DIR] [--out FILE] [--check]
+
+``--check`` writes nothing and exits 1 when FILE differs from what would be
+written (for CI and ``tests/test_results_doc.py``). Standard library only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import json
+import math
+import os
+import re
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+DASH = "—"
+_MISSING = object()
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def get(data, *path, default=_MISSING):
+    """``data[path[0]][path[1]]...``, or ``default`` (None) where any step is missing."""
+    for key in path:
+        try:
+            data = data[key]
+        except (KeyError, IndexError, TypeError):
+            return None if default is _MISSING else default
+    return data
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def num(x, digits: int = 3) -> str:
+    """A number with ``digits`` significant digits (plain notation in a sensible range)."""
+    if isinstance(x, bool):
+        return "yes" if x else "no"
+    if isinstance(x, int):
+        return str(x)
+    if not _finite(x):
+        return DASH if x is None or not isinstance(x, float) else str(x)
+    if x == 0:
+        return "0"
+    if abs(x) >= 10 ** digits:
+        return f"{x:.0f}"
+    if abs(x) < 1e-3:
+        return f"{x:.{max(digits - 1, 0)}e}"
+    decimals = max(digits - 1 - int(math.floor(math.log10(abs(x)))), 0)
+    return f"{x:.{decimals}f}"
+
+
+def fixed(x, decimals: int = 1) -> str:
+    return f"{x:.{decimals}f}" if _finite(x) else DASH
+
+
+def pct(x, decimals: int = 1) -> str:
+    """A fraction as a percentage."""
+    return f"{100 * x:.{decimals}f} %" if _finite(x) else DASH
+
+
+def text(x) -> str:
+    if x is None:
+        return DASH
+    if isinstance(x, bool):
+        return "yes" if x else "no"
+    if isinstance(x, float) and _finite(x) and 1e-3 <= abs(x) < 1e4:
+        return f"{x:.4g}"
+    if isinstance(x, (int, float)):
+        return num(x)
+    if isinstance(x, (list, tuple)):
+        return ", ".join(text(v) for v in x) if x else DASH
+    if isinstance(x, dict):
+        return ", ".join(f"{k}={text(v)}" for k, v in x.items()) if x else DASH
+    return str(x).replace("|", "\\|").replace("\n", " ")
+
+
+def mean(x):
+    """The mean of a list of numbers (an RGB triple), or the number itself."""
+    if isinstance(x, list):
+        values = [v for v in x if _finite(v)]
+        return sum(values) / len(values) if values else None
+    return x if _finite(x) else None
+
+
+def table(header: list[str], rows: list[list[str]]) -> list[str]:
+    if not rows:
+        return ["(no rows)", ""]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for row in rows:
+        cells = [DASH if c in (None, "") else str(c) for c in row]
+        cells += [DASH] * (len(header) - len(cells))
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines + [""]
+
+
+def items(x):
+    """(key, value) pairs of a dict, or nothing."""
+    return list(x.items()) if isinstance(x, dict) else []
+
+
+def rows_of(x):
+    """The dicts of a list, or nothing."""
+    return [r for r in x if isinstance(r, dict)] if isinstance(x, list) else []
+
+
+def data_label(data, default: str) -> str:
+    """SIMULATED or real, from the file's own ``label``/``data``/``simulated`` where it says."""
+    if isinstance(data, dict):
+        label = data.get("label")
+        if isinstance(label, str) and label:
+            return label
+        if data.get("simulated") is True:
+            return "SIMULATED"
+        described = data.get("data")
+        if isinstance(described, str):
+            if "SIMULATED" in described.upper():
+                return "SIMULATED"
+            if "real" in described.lower() or "diligent" in described.lower():
+                return f"real data ({described})"
+    return default
+
+
+# --------------------------------------------------------------------------- scripts and commands
+
+
+def script_for(stem: str, scripts: dict[str, str]) -> str | None:
+    """The validation script that writes result ``stem``: the longest script name it starts with."""
+    best = None
+    for name in scripts:
+        if stem == name or stem.startswith(name + "_"):
+            if best is None or len(name) > len(best):
+                best = name
+    return best
+
+
+def read_docstrings(folder: Path) -> dict[str, str]:
+    docs = {}
+    for path in sorted(folder.glob("*.py")):
+        try:
+            doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+        except (SyntaxError, UnicodeDecodeError, OSError):
+            doc = ""
+        docs[path.stem] = doc
+    return docs
+
+
+def summary(doc: str) -> str:
+    first = doc.strip().split("\n\n")[0] if doc.strip() else ""
+    return " ".join(first.split())
+
+
+def docstring_command(name: str, doc: str) -> str | None:
+    """The ``Run:`` line of a docstring, or its first line that runs the script."""
+    lines = doc.splitlines()
+    for i, line in enumerate(lines):
+        match = re.match(r"\s*Run:\s*(python .*)", line)
+        if match:
+            command = match.group(1).strip()
+            # a Run: line may continue on the next, indented line
+            while i + 1 < len(lines) and lines[i + 1].startswith("      ") and lines[i + 1].strip().startswith("["):
+                i += 1
+                command += " " + lines[i].strip()
+            return command
+    for line in lines:
+        stripped = line.strip()
+        if stripped.startswith(f"python validation/{name}.py"):
+            return stripped.split("  #")[0].strip()
+    return None
+
+
+def pareto_command(data) -> str | None:
+    """The command that makes ``pareto.json``'s grid (the file records the grid, not the command)."""
+    grid = data.get("grid") if isinstance(data, dict) else None
+    if not isinstance(grid, dict) or grid == data.get("full_grid"):
+        return None
+    parts = ["python validation/pareto.py"]
+    for flag, key in (("--measurements", "measurements"), ("--resolutions", "resolutions"), ("--spp", "spp")):
+        if isinstance(grid.get(key), list):
+            parts.append(flag + " " + " ".join(str(v) for v in grid[key]))
+    geometry = get(data, "options", "geometry")
+    if isinstance(geometry, str):
+        parts.append(f"--geometry {geometry}")
+    return " ".join(parts)
+
+
+def command_line(data, name: str | None, doc: str) -> str:
+    recorded = data.get("command") if isinstance(data, dict) else None
+    source = "as recorded in the file"
+    if recorded is None and name == "pareto":
+        recorded, source = pareto_command(data), "from the grid the file records"
+    script_cmd = docstring_command(name, doc) if name else None
+    if isinstance(recorded, str) and recorded.startswith("python "):
+        return f"`{recorded}` ({source})"
+    if script_cmd:
+        extra = f"; it times `{recorded}`" if isinstance(recorded, str) and recorded else ""
+        return f"`{script_cmd}`{extra}"
+    if isinstance(recorded, str) and recorded:
+        return f"`{recorded}`"
+    return DASH
+
+
+# --------------------------------------------------------------------------- sections
+
+
+def sec_bench_brdf_fit(d):
+    lines = [f"{text(d.get('samples'))} reflectance samples, {text(d.get('threads'))} threads, "
+             f"1-minute load average {text(d.get('load_average_1min'))}. `loss / best`: the loss over the best "
+             "any method reached; `× scipy`: speed-up over scipy's LM; `over limit`: wall time over the "
+             "physical limit (full-data passes × one pass's time).", ""]
+    rows = [[text(r.get("model")), text(r.get("method")), fixed(r.get("seconds"), 2), num(r.get("loss_over_best"), 8),
+             fixed(r.get("speedup_vs_scipy"), 1), text(r.get("passes")), text(r.get("full_data_passes")),
+             fixed(r.get("seconds_over_limit"), 1), text(r.get("status"))] for r in rows_of(d.get("rows"))]
+    return lines + table(["model", "method", "seconds", "loss / best", "× scipy", "passes", "full-data passes",
+                          "over limit", "status"], rows)
+
+
+def sec_bench_bsdf(d):
+    setup = d.get("render_setup") or {}
+    lines = [f"Variant {text(d.get('variant'))}; renders at {text(setup.get('res'))}², {text(setup.get('spp'))} spp, "
+             f"best of {text(setup.get('repeats'))}. `ratio`: the plugin's time over `roughplastic`'s.", ""]
+    lines += table(["plugin", "seconds", "roughplastic seconds", "ratio"],
+                   [[text(r.get("plugin")), fixed(r.get("seconds"), 3), fixed(r.get("roughplastic_seconds"), 3),
+                     fixed(r.get("ratio"), 2)] for r in rows_of(d.get("render"))])
+    lines += table(["model", "samples", "Dr.Jit eval/s", "NumPy eval/s", "× NumPy (eval)", "× NumPy (eval + grad)"],
+                   [[text(r.get("model")), text(r.get("samples")), num(r.get("drjit_fwd_per_s")),
+                     num(r.get("numpy_fwd_per_s")), fixed(r.get("ratio_fwd"), 1), fixed(r.get("ratio_fwdbwd"), 1)]
+                    for r in rows_of(d.get("array_api"))])
+    return lines
+
+
+def sec_bench_face_render(d):
+    lines = [f"Scene: {text(d.get('scene'))}; {text(d.get('resolution'))}², {text(d.get('spp'))} spp, "
+             f"{text(d.get('repeats'))} repeats, {text(d.get('threads'))} threads, Mitsuba {text(d.get('mitsuba'))}, "
+             f"1-minute load average {text(d.get('load_average_1min'))}.", ""]
+    lines += table(["BSDF", "load (s)", "render (s)"],
+                   [[k, fixed(get(v, "load_s"), 2), fixed(get(v, "render_s"), 2)] for k, v in items(d.get("bsdfs"))])
+    lines += table(["Cook–Torrance plugin over", "render", "load and render"],
+                   [[k, fixed(get(v, "render"), 2), fixed(get(v, "load_and_render"), 2)]
+                    for k, v in items(d.get("ratios"))])
+    return lines
+
+
+def sec_bench_pipeline(d):
+    runs = items(d.get("runs"))
+    machine = d.get("machine") or {}
+    lines = [f"{text(d.get('note'))}", "",
+             f"Machine: {text(machine.get('cores'))} cores, {text(machine.get('platform'))}, Python "
+             f"{text(machine.get('python'))}; 1-minute load average at the end {fixed(d.get('load_average_1min_at_end'), 1)}.",
+             ""]
+    names = [name for name, _ in runs]
+    lines += table(["", *names], [
+        ["wall time (s)", *[fixed(get(r, "wall_s"), 1) for _, r in runs]],
+        ["peak memory (MiB)", *[fixed(get(r, "peak_rss_mib"), 0) for _, r in runs]],
+        ["skin Cook–Torrance ρs error", *[pct(get(r, "skin_cooktorrance_error", "specular_reflectance"), 2)
+                                         for _, r in runs]],
+        ["skin Cook–Torrance roughness error", *[pct(get(r, "skin_cooktorrance_error", "roughness"), 2)
+                                                for _, r in runs]],
+        ["shapes converged", *[text(sum(1 for s in (get(r, "shapes") or {}).values()
+                                        if get(s, "status") == "converged")) + " / "
+                               + text(len(get(r, "shapes") or {})) for _, r in runs]],
+    ])
+    stages = []
+    for _, run in runs:
+        for stage in get(run, "stages_s") or {}:
+            if stage not in stages:
+                stages.append(stage)
+    lines += table(["stage (s)", *names], [[stage, *[fixed(get(r, "stages_s", stage), 1) for _, r in runs]]
+                                           for stage in stages])
+    return lines
+
+
+def sec_bench_shape_kernels(d):
+    lines = ["Per labelled run (`--label`) and measurement: launches per iteration, compiled kernels, compile "
+             "time, the kernels' share of the timed fit's wall time, and the fit's errors against the truth.", ""]
+    rows = []
+    for label, run in items(d):
+        for m in rows_of(get(run, "measurements")):
+            rows.append([label, text(get(run, "iterations_factor")), text(m.get("measurement")),
+                         text(m.get("iterations")), fixed(m.get("seconds"), 2), fixed(m.get("launches_per_iteration"), 1),
+                         text(m.get("compiled")), fixed(m.get("compile_s"), 2), pct(m.get("execution_share"), 0),
+                         fixed(m.get("feature_rms_px"), 2), fixed(m.get("vertex_rms_aligned_mm"), 2),
+                         fixed(m.get("normal_deg"), 2)])
+    return lines + table(["label", "schedule factor", "measurement", "iterations", "seconds", "launches / iteration",
+                          "compiled", "compile (s)", "execution share", "landmarks (px)", "vertices aligned (mm)",
+                          "normals (°)"], rows)
+
+
+def sec_bench_simulate(d):
+    lines = []
+    rows = []
+    for key, run in items(d):
+        if isinstance(run, dict) and "seconds_total" in run:
+            rows.append([key, text(run.get("measurements")), text(run.get("lights")), fixed(run.get("seconds_total"), 1),
+                         fixed(run.get("seconds_per_measurement"), 2), fixed(run.get("seconds_load_and_calibrate"), 2)])
+    lines += table(["run", "measurements", "lights", "total (s)", "per measurement (s)", "load and calibrate (s)"], rows)
+    cal = d.get("light_calibration_error_percent") or {}
+    lines += [f"Light calibration from the steel spheres, error in % of the light's distance over "
+              f"{text(cal.get('lights'))} lights: mean {fixed(cal.get('mean'), 3)} %, max {fixed(cal.get('max'), 3)} %.",
+              ""]
+    return lines
+
+
+def sec_brdf_energy(d):
+    lines = ["Largest hemispherical albedo of the glossy part (ρs = 1) over the angles and widths swept, and where.",
+             ""]
+    rows = [[text(v.get("model")), text(v.get("options")) if v.get("options") else "default",
+             fixed(v.get("max_albedo"), 3), fixed(v.get("at_theta_deg"), 1), text(v.get("at_width")),
+             text(v.get("at_exponent"))] for v in rows_of(d.get("variants"))]
+    return lines + table(["model", "options", "max albedo", "at θi (°)", "at width", "at exponent"], rows)
+
+
+def sec_brdf_fit_stiff(d):
+    rows = [[text(r.get("case")), text(r.get("model")), text(r.get("samples")), text(r.get("status")),
+             text(r.get("finite")), pct(r.get("max_relative_error"), 2), fixed(r.get("seconds"), 2)]
+            for r in rows_of(d)]
+    return ["`max error`: the largest relative error of a fitted parameter against the truth.", ""] + table(
+        ["case", "model", "samples", "status", "finite", "max error", "seconds"], rows)
+
+
+def sec_brdf_recovery(d):
+    lines = [f"Texture {text(d.get('resolution'))}², photographs {text(d.get('image'))}², {text(d.get('spp'))} spp, "
+             f"variant {text(d.get('variant'))}, ground-truth shapes.", "",
+             "**Same family** (each model fitted to a face rendered with that model): per region the relative "
+             "RMSE of the glossy part over the hemisphere, skin's parameter errors, albedo RMSE.", ""]
+    same = rows_of(d.get("same_family"))
+    regions = []
+    for r in same:
+        for region in get(r, "regions") or {}:
+            if region not in regions:
+                regions.append(region)
+    rows = []
+    for r in same:
+        skin_errors = get(r, "regions", "skin", "relative_error") or {}
+        rows.append([text(r.get("model")),
+                     *[pct(get(r, "regions", region, "glossy_relative_rmse")) for region in regions],
+                     ", ".join(f"{k} {pct(v)}" for k, v in skin_errors.items()) or DASH,
+                     fixed(get(r, "albedo", "rmse_sampled"), 4), fixed(get(r, "fit_seconds", "total"), 1)])
+    lines += table(["model", *[f"{region} glossy" for region in regions], "skin parameters", "albedo RMSE",
+                    "fit (s)"], rows)
+    lines += ["**Cross family** (every model fitted to a Cook–Torrance face): skin's BRDF error relative to the "
+              "glossy part's RMS, overall and at grazing angles, and the relative RMSE on held-out photographs "
+              "against the noise floor.", ""]
+    rows = [[text(r.get("model")), pct(r.get("brdf_rmse_over_specular_rms")), num(r.get("brdf_rmse_grazing")),
+             pct(r.get("heldout_image_relative_rmse")), pct(r.get("heldout_noise_floor")), fixed(r.get("fit_seconds"), 1)]
+            for r in rows_of(d.get("cross_family"))]
+    return lines + table(["model", "BRDF RMSE / glossy RMS", "BRDF RMSE grazing", "held-out image RMSE",
+                          "noise floor", "fit (s)"], rows)
+
+
+def sec_export(d):
+    capture = d.get("capture") or {}
+    lines = [f"{text(d.get('what'))}.", "",
+             f"Truth {text(d.get('truth'))}, geometry {text(d.get('geometry'))}, {text(capture.get('measurements'))} "
+             f"measurements at {text(capture.get('resolution'))}², texture {text(d.get('texture'))}², hemisphere grid "
+             f"{text(d.get('hemisphere_grid'))}; machine: {text(d.get('machine'))}.", ""]
+    models = items(d.get("models"))
+    regions = []
+    for _, m in models:
+        for region in get(m, "regions") or {}:
+            if region not in regions:
+                regions.append(region)
+    lines += table(["model", *[f"{region} RMSE" for region in regions], "skin glossy RMSE", ".glb (MB)", "export (s)"],
+                   [[name, *[pct(get(m, "regions", region, "rmse")) for region in regions],
+                     pct(get(m, "rmse_specular_skin")),
+                     fixed(get(m, "glb_bytes") / 1e6, 2) if _finite(get(m, "glb_bytes")) else DASH,
+                     fixed(get(m, "export_seconds"), 2)] for name, m in models])
+    return lines
+
+
+def sec_model_span(d):
+    lines = [f"Model {text(d.get('model'))} ({text(d.get('model_modes'))} modes) fitted to {text(d.get('faces'))} "
+             f"random faces of {text(d.get('reference'))} on {text(d.get('landmarks'))} landmarks; modes chosen on the "
+             f"training faces: {text(d.get('chosen_on_train'))}; the shape fit's default: "
+             f"{text(d.get('fit_shape_modes'))} modes. Test faces:", ""]
+    rows = [[k, fixed(get(v, "mean_residual_mm"), 2), fixed(get(v, "inner_mean_residual_mm"), 2),
+             fixed(get(v, "worst_face_residual_mm"), 2), fixed(get(v, "mean_max_abs_coefficient_sd"), 2),
+             fixed(get(v, "max_abs_coefficient_sd"), 2)] for k, v in items(d.get("test"))]
+    return lines + table(["modes", "mean residual (mm)", "inner points (mm)", "worst face (mm)",
+                          "mean largest coefficient (sd)", "largest coefficient (sd)"], rows)
+
+
+def sec_mutations(d):
+    mutations = rows_of(d.get("mutations"))
+    caught = sum(1 for m in mutations if m.get("caught") is True)
+    missed = d.get("missed")
+    lines = [f"Tests run: {text(d.get('tests'))}. {caught} of {len(mutations)} mutations caught; missed: "
+             f"{text(missed) if missed else 'none'}.", ""]
+    return lines + table(["id", "file", "mutation", "caught"],
+                         [[text(m.get("id")), f"`{text(m.get('file'))}`", text(m.get("mutation")), text(m.get("caught"))]
+                          for m in mutations])
+
+
+def sec_normals_faces(d):
+    lines = [f"Capture resolution {text(d.get('resolution'))}² texture; skin's fitted parameters against the truth "
+             "per run (true or fitted shapes, with or without per-texel normals or albedo offsets).", ""]
+    rows = [[name, pct(get(r, "specular_reflectance_rel")), pct(get(r, "roughness_rel")),
+             fixed(get(r, "skin_normal_error_deg"), 2), fixed(get(r, "normal_refinement", "mean_tilt_deg"), 2),
+             text(get(r, "rounds")), fixed(get(r, "seconds"), 1)] for name, r in items(d.get("runs"))]
+    return lines + table(["run", "skin ρs error", "skin roughness error", "normal error (°)", "mean tilt (°)", "rounds",
+                          "seconds"], rows)
+
+
+def sec_pareto(d):
+    model = d.get("model") if isinstance(d.get("model"), str) else None
+    default = d.get("default") or {}
+    grid = d.get("grid") or {}
+    options = d.get("options") or {}
+    lines = [f"Grid: measurements {text(grid.get('measurements'))} × resolution {text(grid.get('resolutions'))} × "
+             f"spp {text(grid.get('spp'))}; geometry {text(options.get('geometry'))}, texture "
+             f"{text(options.get('texture'))}², model {text(model)}. The defaults: {text(default.get('measurements'))} / "
+             f"{text(default.get('resolution'))} / {text(default.get('spp'))}.", ""]
+    rows = []
+    for p in rows_of(d.get("points")):
+        m = get(p, "models", model) if model else None
+        key = f"{text(p.get('measurements'))} / {text(p.get('resolution'))} / {text(p.get('spp'))}"
+        if all(p.get(k) == default.get(k) for k in ("measurements", "resolution", "spp")) and default:
+            key += " (defaults)"
+        rows.append([key, fixed(p.get("wall_s"), 0), pct(get(m, "brdf_skin"), 2), fixed(get(m, "albedo_rmse"), 4),
+                     pct(get(m, "heldout_rmse")), pct(get(m, "environment_rmse"))])
+    lines += table(["measurements / px / spp", "wall (s)", "skin BRDF RMSE", "albedo RMSE", "held-out RMSE",
+                    "environment RMSE"], rows)
+    lines += table(["error", "front (measurements / px / spp)", "defaults on it"],
+                   [[name, "; ".join(" / ".join(text(v) for v in point) for point in (get(f, "front") or []))
+                     or DASH, text(get(f, "default_on_front"))] for name, f in items(d.get("fronts"))])
+    return lines
+
+
+def sec_real_diligent(d):
+    lines = [f"Split: {text(d.get('split'))}. Chosen model {text(d.get('chosen_model'))}, {text(d.get('rounds'))} "
+             "rounds. Normals: angular error against the ground truth.", ""]
+    rows = []
+    for key, label in (("normals_all", "all lights"), ("normals_half", "training half")):
+        for method, r in items(d.get(key)):
+            rows.append([label, method, fixed(get(r, "mean"), 2), fixed(get(r, "median"), 2),
+                         pct(get(r, "within_5deg"))])
+    lines += table(["lights", "method", "mean (°)", "median (°)", "within 5°"], rows)
+    lines += ["Held-out half of the lights: relative RMSE of the predicted photographs.", ""]
+    lines += table(["predictor", "relative RMSE"], [[k, fixed(get(v, "relative_rmse"), 4)]
+                                                    for k, v in items(d.get("heldout"))])
+    return lines
+
+
+def _yale_table(overall, subjects):
+    """Rows per predictor: all / small / large shadows, then each subject's all."""
+    names = [text(s.get("subject", key)) if isinstance(s, dict) else key for key, s in subjects]
+    rows = []
+    for predictor, r in items(get(overall, "relative_rmse")):
+        rows.append([predictor, fixed(get(r, "all"), 3), fixed(get(r, "small_shadows"), 3),
+                     fixed(get(r, "large_shadows"), 3),
+                     *[fixed(get(s, "relative_rmse", predictor, "all") if get(s, "relative_rmse") is not None
+                             else get(s, predictor, "all"), 3) for _, s in subjects]])
+    return table(["predictor", "all held-out", "small shadows", "large shadows", *names], rows)
+
+
+def sec_real_yaleb(d):
+    if isinstance(d.get("runs"), dict):  # --normals: runs without and with
+        lines = [f"Training lights {text(d.get('train_lights'))}, models {text(d.get('models'))}, texture "
+                 f"{text(d.get('texture_resolution'))}². Relative RMSE over the face pixels, without and with per-texel "
+                 "normals.", ""]
+        for name, run in items(d.get("runs")):
+            lines += [f"*{name} per-texel normals* (best model {text(get(run, 'overall', 'best_model'))}):", ""]
+            lines += _yale_table(get(run, "overall"), items(get(run, "subjects")))
+        return lines
+    subjects = [(str(i), s) for i, s in enumerate(rows_of(d.get("subjects")))]
+    overall = d.get("overall") or {}
+    lines = [f"Training lights {text(d.get('train_lights'))}, models {text(d.get('models'))}, texture "
+             f"{text(d.get('texture_resolution'))}², {text(d.get('spp'))} spp; large shadows: lights more than "
+             f"{text(d.get('shadow_angle_deg'))}° from the camera axis. Pooled relative RMSE over the face pixels of the held-out lights; "
+             f"best model {text(overall.get('best_model'))}, {fixed(overall.get('best_vs_photometric_stereo'), 2)}× "
+             "photometric stereo's error.", ""]
+    lines += _yale_table(overall, subjects)
+    ratios = items(overall.get("refined_vs_unrefined"))
+    if ratios:
+        lines += ["Refined over unrefined error:", ""]
+        lines += table(["model", "all", "small shadows", "large shadows"],
+                       [[k, fixed(get(v, "all"), 3), fixed(get(v, "small_shadows"), 3),
+                         fixed(get(v, "large_shadows"), 3)] for k, v in ratios])
+    return lines
+
+
+def sec_refine(d):
+    capture = d.get("capture") or {}
+    schedule = d.get("schedule") or {}
+    lines = [f"{text(d.get('what'))}.", "",
+             f"Capture: {text(capture.get('measurements'))} measurements at {text(capture.get('image'))}², texture "
+             f"{text(capture.get('texture_resolution'))}²; {text(schedule.get('iterations'))} iterations at "
+             f"{text(schedule.get('spp'))} spp.", ""]
+    before = get(d, "errors", "texture_space", "regions") or {}
+    after = get(d, "errors", "refined", "regions") or {}
+    regions = list(before) + [r for r in after if r not in before]
+    lines += table(["region", "ρs error, texture space", "ρs error, refined", "roughness error, texture space",
+                    "roughness error, refined"],
+                   [[region, pct(get(before, region, "specular_reflectance")),
+                     pct(get(after, region, "specular_reflectance")), pct(get(before, region, "roughness")),
+                     pct(get(after, region, "roughness"))] for region in regions])
+    held = d.get("held_out_light_relative_rmse") or {}
+    lines += table(["", "texture space", "refined"], [
+        ["albedo RMSE", fixed(get(d, "errors", "texture_space", "albedo_rmse_sampled"), 4),
+         fixed(get(d, "errors", "refined", "albedo_rmse_sampled"), 4)],
+        ["held-out light relative RMSE", pct(held.get("texture-space")), pct(held.get("refined"))],
+        ["image loss", num(get(d, "image_loss", "before")), num(get(d, "image_loss", "after"))],
+        ["seconds", fixed(get(d, "cost", "texture_space_fit_seconds"), 1),
+         fixed(get(d, "cost", "refine_seconds", "total"), 1)],
+    ])
+    met = items(d.get("targets_met"))
+    if met:
+        lines += ["Targets met: " + "; ".join(f"{k}: {text(v)}" for k, v in met) + ".", ""]
+    return lines
+
+
+def sec_shape_estimation(d):
+    lines = ["Mean over each capture's measurements (the truth's vertices that face the camera); `aligned`: after "
+             "a rigid alignment; `nn`: against the nearest true vertex.", ""]
+    rows = []
+    for capture, c in items(d.get("captures")):
+        for method, s in items(get(c, "summary")):
+            rows.append([f"{capture} ({text(get(c, 'model'))})", method, fixed(get(s, "landmark_px"), 2),
+                         fixed(get(s, "normal_deg"), 2), fixed(get(s, "normal_aligned_nn_deg"), 2),
+                         fixed(get(s, "vertex_rms_aligned_mm"), 2), fixed(get(s, "seconds"), 2),
+                         text(get(s, "converged"))])
+    lines += table(["capture (model)", "method", "landmarks (px)", "normals (°)", "normals aligned nn (°)",
+                    "vertices aligned (mm)", "seconds", "converged"], rows)
+    lines += ["BRDF fit (texture space) on the true and on the fitted shapes: relative errors of each region's "
+              "parameters, albedo RMSE.", ""]
+    rows = []
+    for capture, b in items(d.get("brdf")):
+        for shapes, r in items(b):
+            for region, e in items(get(r, "regions")):
+                rows.append([capture, shapes, region, pct(get(e, "specular_reflectance_rel")),
+                             pct(get(e, "roughness_rel")), fixed(get(r, "albedo_rmse"), 4)])
+    lines += table(["capture", "shapes", "region", "ρs error", "roughness error", "albedo RMSE"], rows)
+    sweep = rows_of(d.get("sweep"))
+    if sweep:
+        lines += ["Schedule sweep (one measurement):", ""]
+        lines += table(["resolution", "schedule factor", "iterations", "seconds", "landmarks (px)", "normals (°)",
+                        "vertices aligned (mm)"],
+                       [[text(s.get("resolution")), text(s.get("factor")), text(s.get("iterations")),
+                         fixed(s.get("seconds"), 2), fixed(s.get("landmark_px"), 2), fixed(s.get("normal_deg"), 2),
+                         fixed(s.get("vertex_rms_aligned_mm"), 2)] for s in sweep])
+    targets = items(d.get("targets"))
+    if targets:
+        lines += ["Targets: " + "; ".join(f"{k}: {text(v)}" for k, v in targets) + ".", ""]
+    return lines
+
+
+def sec_truths(d):
+    lines = [f"Machine: {text(d.get('machine'))}. Per truth and fitted model the report's validation: relative RMSE "
+             "under the held-out lights and the environments (fitted shapes, and the fitted reflectance on the true "
+             "shape), skin's BRDF error over the hemisphere, albedo RMSE. `shape floor`: the true reflectance on the "
+             "fitted shapes.", ""]
+    rows = []
+    for name, t in items(d.get("truths")):
+        floor = get(t, "shape_floor") or {}
+        rows.append([name, "shape floor", pct(floor.get("heldout_rmse")), pct(floor.get("environment_rmse")), DASH,
+                     DASH, DASH, DASH])
+        for model, m in items(get(t, "models")):
+            v = get(m, "validation") or {}
+            rows.append([name, model, pct(v.get("heldout_rmse")), pct(v.get("environment_rmse")),
+                         pct(v.get("heldout_rmse_true_shape")), pct(v.get("environment_rmse_true_shape")),
+                         pct(get(v, "brdf_rmse", "skin")), fixed(v.get("albedo_rmse"), 4)])
+    return lines + table(["truth", "model", "held-out", "environments", "held-out, true shape",
+                          "environments, true shape", "skin BRDF", "albedo RMSE"], rows)
+
+
+def sec_unknown(d):
+    if isinstance(d, dict):
+        return [f"Layout not known to `validation/results_doc.py`; top-level keys: "
+                f"{', '.join(f'`{k}`' for k in d) or DASH}.", ""]
+    return [f"Layout not known to `validation/results_doc.py`: a {type(d).__name__}"
+            + (f" of {len(d)} entries" if isinstance(d, list) else "") + ".", ""]
+
+
+# result-file name (exact, or followed by _suffix) -> (title, label where the file says none, section)
+LAYOUTS = {
+    "bench_brdf_fit": ("The BRDF fit against scipy", "SIMULATED (synthetic reflectance samples)", sec_bench_brdf_fit),
+    "bench_bsdf": ("BSDF plugins and the BRDF array API: speed", "timing (synthetic scene)", sec_bench_bsdf),
+    "bench_face_render": ("The face photograph: plugin against built-in BSDFs", "timing (SIMULATED face)",
+                          sec_bench_face_render),
+    "bench_pipeline": ("The main job: time and memory", "SIMULATED (the built-in default capture)",
+                       sec_bench_pipeline),
+    "bench_shape_kernels": ("Shape fit: kernel launches and execution time", "SIMULATED", sec_bench_shape_kernels),
+    "bench_simulate": ("The simulator: time and light calibration", "SIMULATED", sec_bench_simulate),
+    "brdf_energy": ("Energy of the BRDF models", "analytic (Monte Carlo over the hemisphere)", sec_brdf_energy),
+    "brdf_fit_stiff": ("Stiff and extreme BRDF fits", "SIMULATED (synthetic samples)", sec_brdf_fit_stiff),
+    "brdf_recovery": ("BRDF recovery", "SIMULATED", sec_brdf_recovery),
+    "export": ("Export: glTF's material against each fitted BRDF", "SIMULATED", sec_export),
+    "model_span": ("The built-in model's span", "model samples (Surrey Face Model faces)", sec_model_span),
+    "mutations": ("Mutations of the BRDF formulas", "no data: a check of the test suite", sec_mutations),
+    "normals_faces": ("Per-texel normals on faces", "SIMULATED", sec_normals_faces),
+    "pareto": ("Error against run time of the whole pipeline", "SIMULATED", sec_pareto),
+    "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
+    "real_yaleb": ("Held-out relighting on the Yale face database", "real photographs", sec_real_yaleb),
+    "refine": ("Refinement by differentiable rendering", "SIMULATED", sec_refine),
+    "shape_estimation": ("Shape estimation", "SIMULATED", sec_shape_estimation),
+    "truths": ("`mifaces measure` on truths the fit cannot copy", "SIMULATED", sec_truths),
+}
+
+
+def layout_for(stem: str):
+    best = None
+    for name in LAYOUTS:
+        if stem == name or stem.startswith(name + "_"):
+            if best is None or len(name) > len(best):
+                best = name
+    return best
+
+
+def anchor(title: str) -> str:
+    """GitHub's heading anchor."""
+    slug = re.sub(r"[^\w\- ]", "", title.strip().lower())
+    return slug.replace(" ", "-")
+
+
+def render(results: Path, out: Path) -> str:
+    scripts_dir = results.parent
+    docstrings = read_docstrings(scripts_dir)
+    try:
+        shown = os.path.relpath(results, out.parent)
+    except ValueError:
+        shown = str(results)
+    shown = Path(shown).as_posix()
+    try:
+        results_name = results.resolve().relative_to(ROOT).as_posix()
+    except ValueError:
+        results_name = results.name
+    lines = ["# Results", "",
+             f"<!-- Generated by `python validation/results_doc.py` from `{results_name}/*.json`. "
+             "Do not edit by hand: edit the script or re-run the validation, then regenerate. -->", "",
+             f"*Generated by `validation/results_doc.py` from the committed JSON files in `{results_name}/`; "
+             "every number below is read from them. `python validation/results_doc.py --check` fails when this "
+             "file is out of date. What each validation script measures: "
+             "[validation/README.md](../validation/README.md).*", "",
+             "Labels: **SIMULATED** — rendered captures whose ground truth is known; **real photographs** — public "
+             "data sets (Extended Yale B, DiLiGenT); timings are on the machine each file names.", ""]
+    sections = []
+    for path in sorted(results.glob("*.json")):
+        stem = path.stem
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as error:
+            sections.append((f"`{stem}.json`", [f"Not readable as JSON: {type(error).__name__}.", ""]))
+            continue
+        layout = layout_for(stem)
+        script = script_for(stem, docstrings)
+        doc = docstrings.get(script, "") if script else ""
+        if layout:
+            title, default_label, section = LAYOUTS[layout]
+            title = f"{title}: `{stem}.json`"
+        else:
+            title, default_label, section = f"`{stem}.json`", "not labelled", sec_unknown
+        body = []
+        what = summary(doc)
+        if what:
+            body.append(f"**What**: {what}")
+            body.append("")
+        body.append(f"**Command**: {command_line(data, script, doc)}. **Data**: {data_label(data, default_label)}.")
+        body.append("")
+        try:
+            body += section(data)
+        except Exception as error:  # a layout changed beyond what get() absorbs: say so, never crash
+            body += [f"(The table could not be built: {type(error).__name__}; the file's layout changed.)", ""]
+            body += sec_unknown(data)
+        picture = path.with_suffix(".png")
+        if picture.exists():
+            body += [f"![{stem}]({shown}/{picture.name})", ""]
+        elif isinstance(data, dict) and isinstance(data.get("figure"), str):
+            figure = data["figure"]
+            body += [f"Picture: [`{figure}`](../{figure})", ""]
+        sections.append((title, body))
+    lines += ["## Contents", ""]
+    lines += [f"- [{title}](#{anchor(title)})" for title, _ in sections]
+    lines.append("")
+    for title, body in sections:
+        lines += [f"## {title}", ""] + body
+    while lines and lines[-1] == "":
+        lines.pop()
+    return "\n".join(lines) + "\n"
+
+
+def write_atomic(path: Path, content: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
+            f.write(content)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--results", type=Path, default=ROOT / "validation" / "results",
+                        help="folder of result JSON files (default: validation/results)")
+    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "results.md",
+                        help="the Markdown file to write (default: docs/results.md)")
+    parser.add_argument("--check", action="store_true",
+                        help="write nothing; exit 1 if OUT differs from what would be written")
+    args = parser.parse_args(argv)
+    content = render(args.results, args.out)
+    if args.check:
+        try:
+            current = args.out.read_text(encoding="utf-8")
+        except OSError:
+            current = None
+        if current != content:
+            print(f"{args.out} is out of date: run python validation/results_doc.py", file=sys.stderr)
+            return 1
+        return 0
+    write_atomic(args.out, content)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
