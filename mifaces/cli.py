@@ -240,6 +240,14 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")
         errors = f"  (vs ground truth: {', '.join(f'{k} {100 * v:.1f}%' for k, v in truth.items())})" if truth else ""
         click.echo(f"{model:13s} skin: {', '.join(f'{k}={_short(v)}' for k, v in skin.items())}{errors}")
+    face = report.get("face_model") or {}
+    if "truth_shape_modes" in face:
+        errors = report.get("shape_errors") or {}
+        click.echo(f"face: fitted on the leading {face['fit_shape_modes']} of {face['model_shape_modes']} identity "
+                   f"modes; the simulated truth drew on {face['truth_shape_modes']}, so it lies outside the fitted "
+                   "span: the errors above include the shape's" + (
+                       f" (fitted faces {errors['mean_world_mm']:.1f} mm from the truth on average, "
+                       f"{errors['mean_aligned_mm']:.1f} mm after a rigid alignment)" if errors else ""))
     for key, order in report.get("ranking", {}).items():
         click.echo(f"ranked by {RANKED[key]} (novel pose, relative image RMSE): " + " < ".join(
             f"{m} {100 * report['models'][m]['validation'][key]:.1f}%" for m in order))

@@ -13,7 +13,7 @@ from mifaces.brdf.lafortune import energy_bound
 from mifaces.reflectance.fitting import (FULL_DATA, SPIKE, ParameterSpace, SubsetSchedule, conservative_start,
                                          fit_region, fit_regions, min_samples)
 from mifaces.reflectance.levenberg_marquardt import CONVERGED, levenberg_marquardt
-from mifaces.status import AT_BOUND, AT_START, DEFAULTS
+from mifaces.status import AT_BOUND, AT_START, DEFAULTS, PRIOR
 
 TRUTH = {
     "phong": ({}, {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [0.12, 0.1, 0.09],
@@ -383,7 +383,8 @@ def test_a_real_fit_whose_lobe_runs_to_the_sharp_end_is_flagged(jit_variant):
 def test_a_fit_that_never_sees_its_lobe_ends_at_start(jit_variant):
     """Light and view the same direction, 50-80° from the normal: the Phong lobe around the mirror direction
     is 0 at every sample, with zero derivatives, so the solver cannot move it (as in a region no highlight
-    reaches). The fit measures the albedo but says at_start, lends its lobe to no region and warns."""
+    reaches). The fit measures the albedo but says at_start; in a set of regions its glossy part is not
+    rendered as measured: it takes the neighbour's (or the defaults, flagged), lends nothing, and warns."""
     model = brdf.model("phong")
     rng = np.random.default_rng(3)
     n = 400
@@ -395,8 +396,25 @@ def test_a_fit_that_never_sees_its_lobe_ends_at_start(jit_variant):
     region = np.repeat([1, 2], [n - 5, 5])
     with pytest.warns(UserWarning, match="start values"):
         fits = fit_regions(model, light, light, r, sigma, region, {1: "skin", 2: "lips"}, schedule=FULL_DATA)
-    assert fits["skin"].status == AT_START
+    assert fits["skin"].status == DEFAULTS and "start values" in fits["skin"].reason  # no region to borrow from
     assert fits["lips"].status == DEFAULTS
+    model_defaults = model.defaults()
+    for name in ("skin", "lips"):
+        for key, value in model_defaults.items():
+            if key != "diffuse_reflectance":
+                np.testing.assert_allclose(fits[name].params[key], value)
+    np.testing.assert_allclose(fits["skin"].params["diffuse_reflectance"], [0.4, 0.3, 0.2], rtol=1e-3)
+    # with a measured neighbour, an at_start region takes that neighbour's lobe, flagged prior
+    _, truth = TRUTH["phong"]
+    good = synthetic_samples(model, truth, 3000)
+    labels = np.repeat([1, 2], [3000, n])
+    both = [np.concatenate([a, b]) for a, b in zip(good, (light, light, r, sigma))]
+    with pytest.warns(UserWarning, match="start values"):
+        fits = fit_regions(model, *both, labels, {1: "skin", 2: "lips"}, schedule=FULL_DATA)
+    assert fits["skin"].status == CONVERGED
+    assert fits["lips"].status == PRIOR and "start values" in fits["lips"].reason
+    assert fits["lips"].params["exponent"] == fits["skin"].params["exponent"]
+    np.testing.assert_allclose(fits["lips"].params["diffuse_reflectance"], [0.4, 0.3, 0.2], rtol=1e-3)
 
 
 def test_a_fit_that_moves_its_lobe_is_not_at_start(jit_variant):

@@ -6,10 +6,11 @@ Usage::
 
 Writes, atomically, into the folder given:
 
-- ``model_faces.png``: built-in mean, three random built-in faces (shape and
-  albedo drawn from the prior), the Surrey Face Model mean (grey, it has no
-  colour model), rendered with Mitsuba's ``diffuse`` BSDF (per-vertex albedo)
-  under a point light and a weak constant fill;
+- ``model_faces.png``: built-in mean, three random built-in faces (shape drawn
+  from the prior; the built-in ICT model has no colour model, so each wears
+  the simulator's painted skin, :func:`mifaces.studio.skin.paint_skin`), the
+  Surrey Face Model mean (grey, it has no colour model either), rendered with
+  Mitsuba's ``diffuse`` BSDF under a point light and a weak constant fill;
 - ``model_builtin_mean.png``: the built-in mean face, larger, three-quarter view;
 - ``model_regions.png``: the region maps of the built-in model and the SFM in
   texture space, with the region vocabulary as legend.
@@ -56,7 +57,12 @@ def render_face(vertices, triangles, uv, albedo, frame, width=320, height=400, s
 
     if albedo is None:
         albedo = np.full_like(vertices, 0.45)
-    mesh = mitsuba_mesh(vertices, triangles, uv, albedo=albedo)
+    if albedo.shape != np.shape(vertices):  # an albedo map in texture space
+        bsdf = {"type": "diffuse", "reflectance": {"type": "bitmap", "bitmap": mi.Bitmap(albedo.astype(np.float32)),
+                                                   "raw": True}}
+        mesh = mitsuba_mesh(vertices, triangles, uv, bsdf=bsdf)
+    else:
+        mesh = mitsuba_mesh(vertices, triangles, uv, albedo=albedo)
     target, distance = frame
     az = np.radians(azimuth)
     eye = target + distance * np.array([np.sin(az), 0.08, np.cos(az)])
@@ -77,7 +83,7 @@ def render_face(vertices, triangles, uv, albedo, frame, width=320, height=400, s
     return np.array(mi.render(scene, spp=spp))[:, :, :3]
 
 
-def face_frame(model, distance_factor=4.2):
+def face_frame(model, distance_factor=5.5):
     """Camera target and distance that frame the face (from its landmarks or its extent)."""
     v = model.shape_mean
     if len(model.landmarks) >= 10:
@@ -108,19 +114,24 @@ def main(argv=None) -> int:
     if sfm is None:
         print(f"Surrey Face Model not found at {args.sfm}; rendering the built-in model only", file=sys.stderr)
 
+    from mifaces.studio.skin import paint_skin
+
+    def skin(seed):
+        return builtin.texture() if builtin.has_texture else paint_skin(builtin, np.random.default_rng(seed), 1024)
+
     frame = face_frame(builtin)
-    tiles = [render_face(builtin.shape(), builtin.triangles, builtin.uv, builtin.texture(), frame, spp=args.spp,
+    tiles = [render_face(builtin.shape(), builtin.triangles, builtin.uv, skin(0), frame, spp=args.spp,
                          azimuth=20.0)]
     for seed in (1, 2, 3):
-        vertices, albedo = builtin.random_face(seed)
-        tiles.append(render_face(vertices, builtin.triangles, builtin.uv, albedo, frame, spp=args.spp,
+        vertices = builtin.shape(builtin.random_coefficients(seed)["shape"])
+        tiles.append(render_face(vertices, builtin.triangles, builtin.uv, skin(seed), frame, spp=args.spp,
                                  azimuth=20.0))
     if sfm is not None:
         tiles.append(render_face(sfm.shape(), sfm.triangles, sfm.uv, None, face_frame(sfm, 3.4), spp=args.spp,
                                  azimuth=20.0))
     write_png(args.out / "model_faces.png", np.concatenate(tiles, axis=1))
 
-    big = render_face(builtin.shape(), builtin.triangles, builtin.uv, builtin.texture(), frame, width=480,
+    big = render_face(builtin.shape(), builtin.triangles, builtin.uv, skin(0), frame, width=480,
                       height=600, spp=args.spp, azimuth=35.0)
     write_png(args.out / "model_builtin_mean.png", big)
 
@@ -132,7 +143,7 @@ def main(argv=None) -> int:
 
     from mifaces.files import save_figure
 
-    maps = [("built-in (cylindrical h, phi)", builtin.region_map)]
+    maps = [("built-in (ICT head, atlas)", builtin.region_map)]
     if sfm is not None:
         maps.append(("Surrey Face Model (from its landmarks)", sfm.region_map))
     fig, axes = plt.subplots(1, len(maps), figsize=(4.2 * len(maps) + 1.6, 4.4), dpi=100)

@@ -19,6 +19,7 @@ span decades (roughness, α, exponents).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
@@ -321,6 +322,27 @@ def prior_fit(model: BRDFModel, params: dict, samples: int, reason: str, status:
 
 #: Why a fit whose lobe width ended at its sharp end is not trusted.
 SPIKE = "the lobe became a spike at the sharp end of its width range"
+#: A fitted glossy lobe whose peak reflectance (π f at the mirror direction, the brightest incidence
+#: of a grid) exceeds this many times the region's brightest sample is a spike no photograph showed
+#: (a narrow, strong lobe fitted to a few samples' noise; under a light the photographs did not cover
+#: it would blow up): it is handled as one (:data:`SPIKE`).
+PEAK_FACTOR = 5.0
+#: Incidence angles (degrees) at which :func:`glossy_peak` evaluates the lobe at its mirror direction.
+PEAK_ANGLES = (0.0, 20.0, 40.0, 60.0, 75.0)
+
+
+def glossy_peak(model: BRDFModel, params: dict) -> float:
+    """The largest π f_s(wi, mirror(wi)) of the glossy part over :data:`PEAK_ANGLES`, all
+    channels: the brightest highlight the fitted lobe predicts, in the units of reflectance samples."""
+    theta = np.radians(np.asarray(PEAK_ANGLES))
+    wi = np.stack([np.sin(theta), np.zeros_like(theta), np.cos(theta)])
+    wo = wi * np.array([[-1.0], [-1.0], [1.0]])
+    values = {k: (mi.Color3f(*(float(c) for c in np.broadcast_to(np.asarray(v, np.float64), 3))) if np.ndim(v)
+                  else mi.Float(float(v)))
+              for k, v in params.items()}
+    f = np.array(model.eval(mi.Vector3f(wi.astype(np.float32)), mi.Vector3f(wo.astype(np.float32)), values,
+                            diffuse=False))
+    return float(np.pi * np.nanmax(f)) if f.size else 0.0
 
 #: Where a region without enough samples borrows its BRDF from, in order
 #: (``skin`` is always the last resort).
@@ -346,8 +368,9 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     region on top of ``fixed``. A region that takes the model's defaults
     because no region has a fit to lend (skin's own fit a spike, say) has
     status ``'defaults'``, and a warning says so; a fit whose glossy
-    parameters stayed at their start values keeps status ``'at_start'``, with
-    a warning, and lends them to no region.
+    parameters stayed at their start values measured nothing of them: it takes
+    its neighbour's glossy part (status ``'prior'``, the reason says so) and
+    lends nothing.
     """
     model = brdf_models.model(model) if isinstance(model, str) else model
     neighbours = NEIGHBOURS if neighbours is None else neighbours
@@ -367,13 +390,29 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
         if fixed_by_region and name in fixed_by_region:
             held[name] = region_options["fixed"] = {**held[name], **fixed_by_region[name]}
         fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask], **region_options)
+        peak = glossy_peak(model, fits[name].params)
+        seen = float(np.max(reflectance[mask])) if mask.any() else 0.0
+        if fits[name].status == CONVERGED and peak > PEAK_FACTOR * max(seen, 1e-6):
+            # a lobe brighter than anything the photographs showed: fitted to a few samples' noise
+            fits[name] = dataclasses.replace(fits[name], status=AT_BOUND, reason=(
+                f"{fits[name].reason}; {SPIKE}: its peak (pi f = {peak:.3g}) is more than {PEAK_FACTOR:g} times "
+                f"the brightest sample ({seen:.3g})"))
     def donor_of(name):
         donors = list(neighbours.get(name, [])) + ["skin"]
         return next((d for d in donors if d != name and d in fits and fits[d].status not in (AT_BOUND, AT_START, DEFAULTS)),
                     None)
 
+    # A fit whose glossy part never left its start values measured nothing of it: rendering those
+    # (a Phong exponent of 1800, say) would invent a highlight. It takes a neighbour's glossy part,
+    # keeping its own albedo, flagged 'prior' (the model's defaults, 'defaults', without a neighbour).
     for name in [n for n, fit in fits.items() if fit.status == AT_START]:
-        warnings.warn(f"region {name!r}: {fits[name].reason.split('; ')[-1]} (not measured)", stacklevel=2)
+        donor = donor_of(name)
+        glossy = fits[donor].params if donor else {**model.defaults(), **model.fixed_defaults()}
+        borrowed = {**glossy, **held[name], "diffuse_reflectance": fits[name].params["diffuse_reflectance"]}
+        reason = (f"{counts[name]} samples, and {fits[name].reason.split('; ')[-1]} (not measured): the glossy "
+                  f"part of {repr(donor) if donor else 'the model defaults'}")
+        warnings.warn(f"region {name!r}: {reason}", stacklevel=2)
+        fits[name] = prior_fit(model, borrowed, counts[name], reason, PRIOR if donor else DEFAULTS)
 
     # A small region (fewer than 10x the samples a fit needs) whose best fit lies at a
     # bound of the valid range is more likely fitting noise than showing a material

@@ -87,7 +87,9 @@ class ShapeFit:
     measurement : str
     status : str
         ``'converged'`` (feature points end within the limit of
-        :func:`~mifaces.shape.fit.feature_limit`); ``'diverged'`` (non-finite
+        :func:`~mifaces.shape.fit.feature_limit`, and the photometric residual
+        ``loss['image_rms']`` within :data:`~mifaces.shape.fit.MAX_IMAGE_RMS`
+        where the photographs were used); ``'diverged'`` (non-finite
         loss, or feature points ending farther from their targets than they
         started, or more than 4x the limit); ``'not_converged'`` (feature
         points still above the limit but closer than at the start: more
