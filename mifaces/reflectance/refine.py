@@ -192,7 +192,8 @@ def mask_weight(mask: np.ndarray) -> mi.TensorXf:
 
 def photograph_view(capture, m, face: FaceScene, brdf: dict, albedo: np.ndarray, region_map: np.ndarray,
                     scale: np.ndarray, lamp_radius: float | None, downsample: int, spp: int, integrator: dict, *,
-                    normals: np.ndarray | None = None, specular: np.ndarray | None = None) -> PhotographView:
+                    normals: np.ndarray | None = None, specular: np.ndarray | None = None,
+                    sample_border: bool = False) -> PhotographView:
     """The render of measurement ``m`` of ``capture`` set against its photograph.
 
     Parameters
@@ -217,6 +218,9 @@ def photograph_view(capture, m, face: FaceScene, brdf: dict, albedo: np.ndarray,
         The Mitsuba integrator (``prb``, ``direct_projective``, ...).
     normals, specular : arrays, optional
         Per-texel normal and specular maps (:meth:`FaceScene.scene`).
+    sample_border : bool
+        The film's ``sample_border``: samples beyond the crop, for a projective
+        integrator's gradients of geometry crossing the film's edge.
 
     Returns
     -------
@@ -243,7 +247,7 @@ def photograph_view(capture, m, face: FaceScene, brdf: dict, albedo: np.ndarray,
     sensor["film"] = dict(sensor["film"], width=camera.width // k, height=camera.height // k,
                           crop_offset_x=int(c0), crop_offset_y=int(r0), crop_width=int(c1 - c0),
                           crop_height=int(r1 - r0), rfilter={"type": "gaussian", "stddev": 0.5 / k}
-                          if k == 1 else {"type": "box"})
+                          if k == 1 else {"type": "box"}, sample_border=bool(sample_border))
     description["sensor"] = sensor
     description["integrator"] = integrator
     if lamp is not None:

@@ -68,8 +68,10 @@ class ShapeRefineSchedule:
     iterations : int
         Adam steps; each renders every photograph forward and backward.
     learning_rate : float
-        Adam's step in LargeSteps' latent variable u (mm: about the largest
-        change of a smooth displacement per step).
+        The step of UniformAdam (Nicolet et al. 2021, sec. 5: one step size
+        for all vertices, the largest second moment's) in LargeSteps' latent
+        variable u = (I + λL) d, mm: the largest change of u per step (a
+        bump a few edges wide has u several times its height).
     smoothing : float
         λ of LargeSteps' ``I + λL``: larger, smoother steps (the paper's
         advice: grow it with the mesh's resolution).
@@ -100,8 +102,8 @@ class ShapeRefineSchedule:
     default (0), see ``docs/refine_shape.md``.
     """
 
-    iterations: int = 40
-    learning_rate: float = 0.3
+    iterations: int = 32
+    learning_rate: float = 2.0
     smoothing: float = 20.0
     spp: int = 8
     spp_silhouette: int = 4
@@ -255,7 +257,7 @@ class ShapeProblem:
             view = photograph_view(capture, m, face, appearance["brdf"], appearance["albedo"],
                                    face_model.region_map, scale, lamp_radius, schedule.downsample, schedule.spp,
                                    schedule.integrator(), normals=appearance["normals"],
-                                   specular=appearance["specular"])
+                                   specular=appearance["specular"], sample_border=True)
             self.light_kinds.add(view.light_kind)
             held = _holdout(view.mask, schedule, rng)
             keys = {key: mi.UInt32(np.ascontiguousarray(part.index, np.uint32)) for key, part in face.meshes.items()}
