@@ -103,13 +103,13 @@ class ShapeRefineSchedule:
     """
 
     iterations: int = 32
-    learning_rate: float = 2.0
+    learning_rate: float = 4.0
     smoothing: float = 20.0
     spp: int = 8
     spp_silhouette: int = 4
     spp_shadow: int = 0
     downsample: int = 1
-    decay: float = 0.2
+    decay: float = 0.5
     epsilon: float = 0.02
     evaluation_spp: int = 32
     holdout: float = 0.2
