@@ -140,7 +140,7 @@ def test_keeps_model_fit_when_held_out_loss_rises(bumped, face_model):
     capture, truth, _, _ = bumped
     true = {t.name: t.vertices for t in truth.measurements}
     # steps far too large from the true shape: the held-out loss can only rise
-    schedule = ShapeRefineSchedule(iterations=2, learning_rate=200.0, evaluation_spp=8)
+    schedule = ShapeRefineSchedule(iterations=2, learning_rate=200.0, evaluation_spp=8)  # 50x the default
     result = refine_shape(capture, true, face_model, TrueEstimate(truth), schedule, seed=1, progress=False)
     assert not result.accepted
     assert "did not fall" in result.reason
