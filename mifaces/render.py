@@ -137,13 +137,16 @@ def region_bsdf(truth: dict, region: str, texture, *, maps: Mapping | None = Non
 @dataclass(frozen=True)
 class RegionMesh:
     """The triangles of a face in one material region (world frame, mm), with
-    the shading normals of the whole face so that seams stay invisible."""
+    the shading normals of the whole face so that seams stay invisible.
+    ``index`` holds each of its vertices' index in the whole face (the model's
+    vertex order), for writers of per-vertex data such as a refined shape."""
 
     region: str
     vertices: np.ndarray
     triangles: np.ndarray
     uv: np.ndarray
     normals: np.ndarray
+    index: np.ndarray | None = None
 
     def mesh(self, bsdf, interior=None) -> mi.Mesh:
         """A ``mi.Mesh`` of this region with BSDF ``bsdf`` (a dict or a loaded BSDF)
@@ -168,7 +171,7 @@ def region_meshes(model, vertices: np.ndarray, normals: np.ndarray | None = None
         tri = model.triangles[labels == label]
         used, inverse = np.unique(tri, return_inverse=True)
         meshes[f"face_{name}_{int(label)}"] = RegionMesh(name, vertices[used], inverse.reshape(-1, 3), model.uv[used],
-                                                         normals[used])
+                                                         normals[used], used)
     return meshes
 
 

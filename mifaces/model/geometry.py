@@ -61,6 +61,18 @@ def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.where(length > 0, n / np.maximum(length, 1e-30), 0.0).astype(np.float32)
 
 
+def welded_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Unit vertex normals (V, 3) float64 of ``vertices`` with a mesh's seam
+    copies (vertices at identical positions, split at texture seams) welded:
+    every copy gets the normal of the whole neighbourhood, so that offsets
+    along them keep the copies together."""
+    v = np.asarray(vertices, np.float64)
+    _, first, inverse = np.unique(v, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    normals = vertex_normals(v[first], inverse[np.asarray(triangles)]).astype(np.float64)
+    return normals[inverse]
+
+
 def tangent_frames(vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-vertex orthonormal shading frames aligned with the texture parameterization.

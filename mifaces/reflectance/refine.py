@@ -151,6 +151,113 @@ def _light(capture, measurement, lamp_radius: float | None) -> tuple[dict, dict 
                     "emitter": {"type": "area", "radiance": {"type": "rgb", "value": radiance.tolist()}}}
 
 
+@dataclass(eq=False)
+class PhotographView:
+    """One measurement's photograph and its differentiable render, at the
+    render resolution, cropped to the face.
+
+    Attributes
+    ----------
+    scene : mi.Scene
+        The face (:meth:`FaceScene.scene`) under the measurement's light, with
+        the given integrator and a film cropped to ``mask``'s bounding box.
+    params : mi.SceneParameters
+    target : mi.TensorXf (H, W, 3)
+        The photograph in the renderer's units divided by its mean over the mask (μ_k).
+    mask : (H, W) bool
+        Pixels whose every photograph pixel the face covers (eroded by one
+        pixel at silhouettes), none saturated.
+    labels : (H, W) int
+        Region label at each pixel (:func:`coverage`, sampled at the render resolution).
+    scale : float
+        1/μ_k: multiplies a render to compare it with ``target``.
+    light_kind : str
+        ``'point'``, ``'directional'`` or ``'sphere'``.
+    """
+
+    scene: mi.Scene
+    params: mi.SceneParameters
+    target: mi.TensorXf
+    mask: np.ndarray
+    labels: np.ndarray
+    scale: float
+    light_kind: str
+
+
+def mask_weight(mask: np.ndarray) -> mi.TensorXf:
+    """The weight of :func:`image_loss`: 1/|M_k| on the (H, W) ``mask``'s pixels (each channel a third), 0 elsewhere."""
+    weight = np.repeat(mask[..., None], 3, axis=2) / (3.0 * max(int(mask.sum()), 1))
+    return mi.TensorXf(np.ascontiguousarray(weight, np.float32))
+
+
+def photograph_view(capture, m, face: FaceScene, brdf: dict, albedo: np.ndarray, region_map: np.ndarray,
+                    scale: np.ndarray, lamp_radius: float | None, downsample: int, spp: int, integrator: dict, *,
+                    normals: np.ndarray | None = None, specular: np.ndarray | None = None,
+                    sample_border: bool = False) -> PhotographView:
+    """The render of measurement ``m`` of ``capture`` set against its photograph.
+
+    Parameters
+    ----------
+    capture : Capture
+    m : Measurement
+    face : FaceScene
+        The face's meshes in ``m``'s pose (world frame, mm).
+    brdf, albedo : dict, (R, R, 3) array
+        The ``brdf.json`` layout and the albedo map (:meth:`FaceScene.scene`).
+    region_map : (R', R') uint8
+        Region labels in texture space (the pixels' labels).
+    scale : (3,) array
+        Photograph value -> renderer units (s_white/π, eq. 4).
+    lamp_radius : float or None
+        Radius (mm) of a spherical lamp in place of a point light.
+    downsample : int
+        Render at 1/``downsample`` of the camera's resolution against the
+        photograph averaged over blocks.
+    spp : int
+    integrator : dict
+        The Mitsuba integrator (``prb``, ``direct_projective``, ...).
+    normals, specular : arrays, optional
+        Per-texel normal and specular maps (:meth:`FaceScene.scene`).
+    sample_border : bool
+        The film's ``sample_border``: samples beyond the crop, for a projective
+        integrator's gradients of geometry crossing the film's edge.
+
+    Returns
+    -------
+    PhotographView
+    """
+    k = downsample
+    camera = capture.camera
+    kwargs, lamp = _light(capture, m, lamp_radius)
+    kind = "sphere" if lamp is not None else "directional" if "light_direction" in kwargs else "point"
+    description = face.scene(brdf, albedo, camera, normals=normals, specular=specular, **kwargs)
+    labels = coverage(mi.load_dict({"type": "scene", **{key: v for key, v in description.items()
+                                                      if key.startswith("face_")}}), camera, region_map)
+    covered = binary_erosion(labels > 0, iterations=1) & ~m.image.saturated
+    # the render's pixels: those whose every photograph pixel is covered
+    low_mask = _box_mean(covered.astype(np.float64), k) > 0.999
+    if not low_mask.any():
+        raise ValueError(f"measurement {m.name!r}: the face covers no unsaturated pixel")
+    rows, cols = np.nonzero(low_mask)
+    r0, r1, c0, c1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+    target = _box_mean(m.image.pixels * scale, k)[r0:r1, c0:c1]
+    mask = low_mask[r0:r1, c0:c1]
+    mean = float(target[mask].mean())
+    sensor = mitsuba_sensor(camera, spp)
+    sensor["film"] = dict(sensor["film"], width=camera.width // k, height=camera.height // k,
+                          crop_offset_x=int(c0), crop_offset_y=int(r0), crop_width=int(c1 - c0),
+                          crop_height=int(r1 - r0), rfilter={"type": "gaussian", "stddev": 0.5 / k}
+                          if k == 1 else {"type": "box"}, sample_border=bool(sample_border))
+    description["sensor"] = sensor
+    description["integrator"] = integrator
+    if lamp is not None:
+        description["light"] = lamp
+    scene = mi.load_dict(description)
+    low_labels = labels[: labels.shape[0] // k * k, : labels.shape[1] // k * k][::k, ::k][r0:r1, c0:c1]
+    return PhotographView(scene, mi.traverse(scene), mi.TensorXf(np.ascontiguousarray(target / mean, np.float32)),
+                          mask, low_labels, 1.0 / mean, kind)
+
+
 class RefineProblem:
     """The photographs of a capture as differentiable renders of a fitted face.
 
@@ -216,40 +323,13 @@ class RefineProblem:
             self.variables["albedo"] = self.albedo.start()
 
     def _photograph(self, capture, m, vertices, face_model, brdf, albedo, scale, lamp_radius) -> _Photograph:
-        k = self.schedule.downsample
-        camera = capture.camera
-        kwargs, lamp = _light(capture, m, lamp_radius)
-        self.light_kinds.add("sphere" if lamp is not None else
-                             "directional" if "light_direction" in kwargs else "point")
-        description = FaceScene(face_model, vertices).scene(brdf, albedo, camera, **kwargs)
-        labels = coverage(mi.load_dict({"type": "scene", **{key: v for key, v in description.items()
-                                                          if key.startswith("face_")}}),
-                          camera, self.estimate.region_map)
-        covered = binary_erosion(labels > 0, iterations=1) & ~m.image.saturated
-        # the render's pixels: those whose every photograph pixel is covered
-        low_mask = _box_mean(covered.astype(np.float64), k) > 0.999
-        if not low_mask.any():
-            raise ValueError(f"measurement {m.name!r}: the face covers no unsaturated pixel")
-        rows, cols = np.nonzero(low_mask)
-        r0, r1, c0, c1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
-        target = _box_mean(m.image.pixels * scale, k)[r0:r1, c0:c1]
-        mask = low_mask[r0:r1, c0:c1]
-        mean = float(target[mask].mean())
-        weight = np.repeat(mask[..., None], 3, axis=2) / (3.0 * mask.sum())
-        sensor = mitsuba_sensor(camera, self.schedule.spp)
-        sensor["film"] = dict(sensor["film"], width=camera.width // k, height=camera.height // k,
-                              crop_offset_x=int(c0), crop_offset_y=int(r0), crop_width=int(c1 - c0),
-                              crop_height=int(r1 - r0), rfilter={"type": "gaussian", "stddev": 0.5 / k}
-                              if k == 1 else {"type": "box"})
-        description["sensor"] = sensor
-        description["integrator"] = {"type": "prb", "max_depth": int(self.schedule.max_depth), "hide_emitters": True}
-        if lamp is not None:
-            description["light"] = lamp
-        scene = mi.load_dict(description)
-        params = mi.traverse(scene)
+        view = photograph_view(capture, m, FaceScene(face_model, vertices), brdf, albedo, self.estimate.region_map,
+                               scale, lamp_radius, self.schedule.downsample, self.schedule.spp,
+                               {"type": "prb", "max_depth": int(self.schedule.max_depth), "hide_emitters": True})
+        self.light_kinds.add(view.light_kind)
         free = {p.name for p in self.model.specular_parameters()}
         keys, albedo_keys = {}, []
-        for key in params.keys():
+        for key in view.params.keys():
             parts = key.split(".")
             if parts[0].startswith("face_") and len(parts) > 2 and parts[1] == "bsdf":
                 region = parts[0][len("face_"):].rsplit("_", 1)[0]
@@ -257,15 +337,13 @@ class RefineProblem:
                     keys[key] = (region, parts[2])
                 elif parts[2:] == ["diffuse_reflectance", "data"]:
                     albedo_keys.append(key)
-        low_labels = labels[: labels.shape[0] // k * k, : labels.shape[1] // k * k][::k, ::k][r0:r1, c0:c1]
         names = {label: name for name, label in REGIONS.items()}
         pixels = {}
-        for label, n in zip(*np.unique(low_labels[mask], return_counts=True)):
+        for label, n in zip(*np.unique(view.labels[view.mask], return_counts=True)):
             region = names.get(int(label), "skin")
             pixels[region] = pixels.get(region, 0) + int(n)
-        return _Photograph(m.name, scene, params, mi.TensorXf(np.ascontiguousarray(target / mean, np.float32)),
-                           mi.TensorXf(np.ascontiguousarray(weight, np.float32)), 1.0 / mean, keys, albedo_keys,
-                           pixels)
+        return _Photograph(m.name, view.scene, view.params, view.target, mask_weight(view.mask), view.scale, keys,
+                           albedo_keys, pixels)
 
     # -- the parameters as Dr.Jit values of the unconstrained variables --------
     def values(self, variables: dict) -> dict:
@@ -449,4 +527,5 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
     return problem.estimate_of(result, refinement)
 
 
-__all__ = ["LAMP_RADIUS_KEY", "RefineSchedule", "RefineProblem", "image_loss", "coverage", "refine_estimate"]
+__all__ = ["LAMP_RADIUS_KEY", "RefineSchedule", "RefineProblem", "PhotographView", "image_loss", "coverage",
+           "mask_weight", "photograph_view", "refine_estimate"]

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model.geometry import welded_normals
 from ..model.landmarks import FEATURE_POINTS
 
 #: Sizes of the detail (mm).
@@ -86,3 +87,26 @@ def span_residual(face_model, vertices: np.ndarray) -> float:
     0 for a face the model can express exactly."""
     projected = face_model.shape(face_model.project(vertices))
     return float(np.sqrt(np.mean(np.sum((np.asarray(vertices, np.float64) - projected) ** 2, axis=1))))
+
+
+def cheek_bump(face_model, neutral: np.ndarray, amplitude_mm: float = 3.5, sigma_mm: float = 8.0,
+               side: str = "right") -> np.ndarray:
+    """A Gaussian bump on one cheek, along the welded normals: offsets (V, 3)
+    float64, mm, model frame, ``amplitude_mm · exp(-d² / 2σ²)`` with ``d`` the
+    3D distance from the cheek's centre (the front-most vertex below the outer
+    eye corner, halfway down to the mouth corner's height, a third of the way
+    in towards the mouth corner). Outside the span of a morphable model's few
+    dozen components: a test of shape refinement beyond the model
+    (:mod:`mifaces.reflectance.refine_shape`)."""
+    if side not in ("right", "left"):
+        raise ValueError(f"side must be 'right' or 'left', got {side!r}")
+    v = np.asarray(neutral, np.float64)
+    eye = v[face_model.ibug_landmarks[FEATURE_POINTS[f"{side}_eye_outer"]]]
+    mouth = v[face_model.ibug_landmarks[FEATURE_POINTS[f"mouth_{side}"]]]
+    target = eye[:2] + np.array([(mouth[0] - eye[0]) / 3.0, (mouth[1] - eye[1]) / 2.0])
+    near = np.linalg.norm(v[:, :2] - target, axis=1) < 3.0
+    if not near.any():
+        raise ValueError("the face has no vertex at its cheek's centre")
+    centre = v[np.flatnonzero(near)[np.argmax(v[near, 2])]]
+    height = amplitude_mm * np.exp(-np.sum((v - centre) ** 2, axis=1) / (2 * sigma_mm ** 2))
+    return height[:, None] * welded_normals(v, face_model.triangles)
