@@ -25,12 +25,14 @@ from .gallery import render_gallery
 from .importers.diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
 from .importers.yaleb import SPLIT, import_subject
 from .landmarks import NoFaceError, detect_landmarks
+from .model import load_model
 from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
 from .reflectance import fit_brdf as fit_brdf_model, render_fitted
 from .reflectance.io import KIND as BRDF_KIND
+from .reflectance.refine_shape import refine_fits
 from .report import RANKED
 from .shape import fit_shape as fit_shapes
-from .shape.io import INDEX as SHAPES_INDEX
+from .shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
 from .status import CONVERGED
 from .studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
 
@@ -153,8 +155,11 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
 @click.option("--no-diffuse", is_flag=True, help="Ignore the companion diffuse-light pictures.")
 @click.option("--fixed-focal", is_flag=True, help="Keep the calibrated focal length.")
 @click.option("--force", is_flag=True, help="Write over the fits in --out (those not fitted again are kept).")
+@click.option("--refine-shape/--no-refine-shape", default=False, show_default=True,
+              help="Refine the fitted faces beyond the model by differentiable rendering, lit by a quick Phong fit "
+                   "(minutes; kept only where it lowers the loss on held-out pixels).")
 def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[str, ...], iterations: float | None,
-              no_diffuse: bool, fixed_focal: bool, force: bool) -> None:
+              no_diffuse: bool, fixed_focal: bool, force: bool, refine_shape: bool) -> None:
     """Fit the face model to every photograph of CAPTURE (paper sec. 4.2)."""
     check_writable(out_dir)
     if (Path(out_dir) / SHAPES_INDEX).exists() and not force:
@@ -162,6 +167,14 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
                                    "write over them")
     fits = fit_shapes(capture, face_model, measurements=list(measurements) or None, out=out_dir, iterations=iterations,
                progress=True, use_diffuse=not no_diffuse, fit_focal=not fixed_focal)
+    if refine_shape:
+        loaded, model = load_capture(capture), load_model(face_model).truncated(load_model(face_model).fit_shape_modes)
+        fits, refinement = refine_fits(loaded, fits, model)
+        click.echo(f"shape refinement: {'kept' if refinement.accepted else 'not kept'}: {refinement.reason}")
+        if refinement.accepted:
+            for f in fits:
+                write_fit(out_dir, f, model)
+            write_index(out_dir, loaded, model, fits, model_source=face_model)
     for f in fits:
         click.echo(f"  {f.measurement}: {f.status:13s} landmarks {f.loss.get('feature_rms_px', float('nan')):.2f} px, "
                    f"{f.seconds:.1f} s")
@@ -229,12 +242,15 @@ def _short(value) -> str:
               help="Estimate a normal per texel alternating with each fit.")
 @click.option("--specular-maps/--no-specular-maps", default=default(measure_capture, "specular_maps"),
               show_default=True, help="Estimate the specular reflectance per texel (specular.exr; renders read it).")
+@click.option("--refine-shape/--no-refine-shape", default=default(measure_capture, "refine_shape"), show_default=True,
+              help="Refine the fitted faces beyond the model by differentiable rendering (minutes; kept only where "
+                   "it lowers the loss on held-out pixels).")
 def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int,
-            refine: bool, normals: bool, specular_maps: bool) -> None:
+            refine: bool, normals: bool, specular_maps: bool, refine_shape: bool) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
     check_writable(out_dir)
     report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution,
-                             refine=refine, normals=normals, specular_maps=specular_maps)
+                             refine=refine, normals=normals, specular_maps=specular_maps, refine_shape=refine_shape)
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")

@@ -35,6 +35,7 @@ from .files import write_json
 from .geometry import load_geometry
 from .model import load_model
 from .reflectance import capture_samples, fit_brdf, write_estimate
+from .reflectance.refine_shape import refine_shape as refine_shapes_by_rendering
 from .render import FaceScene
 from .report_html import write_html
 from .report import ground_truth_errors, ranking, write_markdown, write_picture, write_validation_picture
@@ -99,7 +100,8 @@ def novel_point_light(capture, centre: np.ndarray) -> np.ndarray:
 
 def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resolution: int = 512,
             shape_iterations: float | None = None, spp: int = 64, face_model="builtin", progress: bool = True,
-            refine: bool = False, normals: bool = False, specular_maps: bool = False) -> dict:
+            refine: bool = False, normals: bool = False, specular_maps: bool = False,
+            refine_shape: bool = False) -> dict:
     """Measure the reflectance of the face in ``capture``, writing everything to ``out``.
 
     The stages hand their results to each other in memory: the face model is
@@ -143,6 +145,14 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     specular_maps : bool
         Estimate the specular reflectance per texel, shrunk towards each
         region's (``fit_brdf(..., specular_maps=True)``); the renders show it.
+    refine_shape : bool
+        Refine the fitted faces beyond the model's span by differentiable
+        rendering (:func:`mifaces.reflectance.refine_shape.refine_shape`): a
+        first fit of the first model in ``models`` on the model-fitted shapes
+        lights the faces, one displacement along the normals is fitted against
+        every photograph, and it is kept only if it lowers the loss on pixels it
+        did not fit; the samples are then taken on the refined faces. Off by
+        default: it costs minutes (``docs/refine_shape.md``).
 
     Returns
     -------
@@ -169,6 +179,9 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     t = time.perf_counter()
     samples = capture_samples(capture, shapes, face, resolution, progress=progress)
     timings["reflectance_samples"] = time.perf_counter() - t
+    if refine_shape:
+        shapes, samples = _refine_shapes(capture, face, shapes, samples, models[0], resolution, report, timings,
+                                         progress)
     first = next(m for m in capture.measurements if m.name in shapes)
     novel = novel_light(capture, np.asarray(shapes[first.name]).mean(axis=0))
     scene = FaceScene(face, shapes[first.name])  # the first photograph's face, built once for every model
@@ -249,6 +262,33 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
         raise NoUsableShapeError(f"no shape fit converged, so there is no face geometry to measure reflectance on: "
                                  f"{detail}. The fits are in {out / 'shapes'}.")
     return face, shapes
+
+
+def _refine_shapes(capture: Capture, face, shapes: dict, samples, model: str, resolution: int, report: dict,
+                   timings: dict, progress: bool):
+    """The faces refined by differentiable rendering (kept only where the held-out loss falls) and
+    their samples; ``report['shape_refinement']`` says what happened, and on a simulated capture
+    ``report['shape_errors_refined']`` how far the refined faces lie from the truth."""
+    t = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the first fit's warnings are the final fits' too
+        first = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
+                         progress=False)
+    result = refine_shapes_by_rendering(capture, shapes, face, first, progress=progress)
+    report["shape_refinement"] = {"accepted": result.accepted, "reason": result.reason, "model": model,
+                                  "seconds": time.perf_counter() - t,
+                                  **{k: v for k, v in result.record.items() if k not in ("loss_per_iteration",)}}
+    timings["refine_shape"] = time.perf_counter() - t
+    if not result.accepted:
+        return shapes, samples
+    if read_ground_truth(capture) is not None:
+        _, true_shapes = load_geometry(capture, "ground-truth")
+        report["shape_errors_refined"] = capture_shape_errors(face, result.shapes, true_shapes,
+                                                              capture.camera).get("summary")
+    t = time.perf_counter()
+    samples = capture_samples(capture, result.shapes, face, resolution, progress=progress)
+    timings["reflectance_samples"] += time.perf_counter() - t
+    return result.shapes, samples
 
 
 def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, scene: FaceScene, first,

@@ -72,7 +72,9 @@ from .capture import Camera, read_ground_truth
 from .environment import SKY_SUN_ANGLES, camera_frame, sky_emitter, studio_environment
 from .geometry import load_geometry
 from .model.regions import REGIONS
+from .model.mesh import mitsuba_mesh
 from .render import ALBEDO, FaceScene, mitsuba_sensor, region_bsdf, rgb
+from .shape_errors import front_of_face
 from .studio import subsurface as translucent
 from .studio.photograph import albedo_texture
 from .studio.simulate import true_face_shapes
@@ -244,6 +246,26 @@ def coverage(scene: FaceScene, camera, spp: int = 4) -> np.ndarray:
     return depth[..., 0] > 0
 
 
+def face_coverage(face_model, vertices: np.ndarray, camera, spp: int = 4) -> np.ndarray:
+    """Pixels of ``camera``'s image where the front of the face (:func:`mifaces.shape_errors.front_of_face`
+    on the model's mean shape: the vertices that look forward, from the chin up, outside the hair)
+    is the surface seen: (H, W) bool. The back of the head, the ears, the neck and the scalp are left
+    out: no photograph of a capture sees them well, so their albedo is not measured, and an error
+    there says nothing about the reflectance."""
+    front = front_of_face(face_model)
+    triangles = np.asarray(face_model.triangles)
+    on_face = triangles[np.all(front[triangles], axis=1)]
+
+    def depth(tris):
+        description = {"type": "scene", "integrator": {"type": "aov", "aovs": "depth:depth"},
+                       "sensor": mitsuba_sensor(camera, spp),
+                       "face": mitsuba_mesh(np.asarray(vertices, np.float32), tris, bsdf={"type": "diffuse"})}
+        return np.array(mi.render(mi.load_dict(description), spp=spp), np.float32)[..., 0]
+
+    whole, face = depth(triangles), depth(on_face)
+    return (face > 0) & (np.abs(face - whole) <= 1e-3 * np.maximum(whole, 1.0))
+
+
 def relative_rmse(image: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
     """sqrt(mean (image − truth)²) / mean truth over the pixels of ``mask`` and the channels."""
     error = np.asarray(image, np.float64)[mask] - np.asarray(truth, np.float64)[mask]
@@ -291,7 +313,8 @@ class Validator:
     truth : dict
         Name -> the true face's image (H, W, 3).
     mask, truth_mask : (H, W) bool
-        The pixels compared: where either face is seen; where the true face is.
+        The pixels compared: where the front of either face is seen; where the true face's is
+        (:func:`face_coverage`).
     summary : dict
         What was compared, for the report (pose, lights, environments, shape floor, sizes, seconds).
     """
@@ -322,8 +345,8 @@ class Validator:
             environments = {"studio": studio_environment(), "sky": sky_emitter(self.camera)}
         self.environments = tuple(environments)
         self.conditions.update({name: {"envmap": value} for name, value in environments.items()})
-        self.truth_mask = coverage(self.truth_scene, self.camera)
-        self.mask = self.truth_mask | coverage(self.fit_scene, self.camera)
+        self.truth_mask = face_coverage(truth_model, turned(true_vertices, rotation, centre), self.camera)
+        self.mask = self.truth_mask | face_coverage(face_model, turned(fit_vertices, rotation, centre), self.camera)
         truth = self.ground_truth.brdf
         true_shapes = self._true_face(truth_model, self.truth_scene, turned(true_vertices, rotation, centre))
         self.truth = {name: self._render_truth(true_shapes, light) for name, light in self.conditions.items()}

@@ -330,11 +330,44 @@ def test_a_spike_takes_its_neighbours_glossy_part_whatever_the_region_size(monke
     labels = np.repeat([1, 6, 4], [5000, 3000, 2000])
     n = len(labels)
     with pytest.warns(UserWarning, match="spike"):
-        fits = fitting.fit_regions(model, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.ones(n), labels,
-                                   {1: "skin", 6: "beard", 4: "eyebrows"})
+        fits = fitting.fit_regions(model, np.zeros((n, 3)), np.zeros((n, 3)), np.full((n, 3), 0.5), np.ones(n),
+                                   labels, {1: "skin", 6: "beard", 4: "eyebrows"})
     assert fits["beard"].status == "prior" and fits["beard"].params["alpha"] == 0.3
     assert fits["beard"].params["specular_reflectance"] == [0.05] * 3
     assert fits["eyebrows"].status == fitting.AT_BOUND and fits["eyebrows"].params["alpha"] == 1.0
+
+
+def test_a_lobe_brighter_than_every_sample_is_a_spike(jit_variant):
+    """A small region's fit to a few noisy samples that ends in a narrow, strong lobe (its peak far
+    above the brightest sample: it would blow up under a light the photographs did not cover) is a
+    spike: the region takes its neighbour's glossy part (as the nostrils of a real Yale subject)."""
+    from mifaces.reflectance.fitting import PEAK_FACTOR, glossy_peak
+
+    model = brdf.model("ward")
+    broad = {"diffuse_reflectance": [0.4, 0.3, 0.2], "specular_reflectance": [0.05] * 3, "alpha": 0.3}
+    narrow = dict(broad, specular_reflectance=[0.999] * 3, alpha=0.014)
+    import mifaces.reflectance.fitting as fitting
+
+    real = fitting.fit_region
+
+    def fit(model_, light, view, reflectance, sigma, **options):
+        result = real(model_, light, view, reflectance, sigma, **options)
+        if len(sigma) == 89:  # the small region "converges" on a spike
+            return fitting.RegionFit("ward", {}, narrow, result.loss, 89, 0.0, CONVERGED, "converged", 3)
+        return result
+
+    light, view, r, sigma = synthetic_samples(model, broad, 3000 + 89)
+    seen = float(r[-89:].max())
+    assert glossy_peak(model, broad) < PEAK_FACTOR * seen < glossy_peak(model, narrow)
+    labels = np.repeat([1, 5], [3000, 89])
+    import unittest.mock
+
+    with unittest.mock.patch.object(fitting, "fit_region", fit), pytest.warns(UserWarning, match="spike"):
+        fits = fitting.fit_regions(model, light, view, r, sigma, labels, {1: "skin", 5: "nostrils"},
+                                   schedule=FULL_DATA)
+    assert fits["skin"].status == CONVERGED
+    assert fits["nostrils"].status == PRIOR and "brightest sample" in fits["nostrils"].reason
+    assert fits["nostrils"].params["alpha"] == pytest.approx(fits["skin"].params["alpha"])
 
 
 # --------------------------------------------------------------------------
@@ -363,7 +396,8 @@ def spike_samples(n=600, seed=0):
 def test_a_real_fit_whose_lobe_runs_to_the_sharp_end_is_flagged(jit_variant):
     """fit_region on samples only a spike fits: the exponent runs to its sharp end (1e5), the fit says
     at_bound and why; in fit_regions skin (which no region can lend a lobe to) takes the model's defaults
-    with status 'defaults', and so does a small region that would have borrowed skin's: never silent."""
+    with status 'defaults' (no glossy part: its lobe's scale zero), and so does a small region that would
+    have borrowed skin's: never silent."""
     model = brdf.model("phong")
     light, view, r, sigma = spike_samples()
     fit = fit_region(model, light, view, r, sigma, schedule=FULL_DATA)
@@ -374,10 +408,12 @@ def test_a_real_fit_whose_lobe_runs_to_the_sharp_end_is_flagged(jit_variant):
     with pytest.warns(UserWarning, match="spike"):
         fits = fit_regions(model, light, view, r, sigma, region, {1: "skin", 2: "lips"}, schedule=FULL_DATA)
     skin = fits["skin"]
-    assert skin.status == DEFAULTS and SPIKE.split(" at ")[0] in skin.reason and "model defaults" in skin.reason
+    assert skin.status == DEFAULTS and SPIKE.split(" at ")[0] in skin.reason and "no glossy part" in skin.reason
+    # no highlight is invented: the lobe's scale is zero (the width is the model's default)
     assert skin.params["exponent"] == model.parameter("exponent").default
+    np.testing.assert_array_equal(skin.params["specular_reflectance"], 0.0)
     np.testing.assert_allclose(skin.params["diffuse_reflectance"], [0.4, 0.3, 0.2], atol=0.02)  # its own albedo
-    assert fits["lips"].status == DEFAULTS and "model's defaults" in fits["lips"].reason
+    assert fits["lips"].status == DEFAULTS and "no glossy part" in fits["lips"].reason
 
 
 def test_a_fit_that_never_sees_its_lobe_ends_at_start(jit_variant):
@@ -398,11 +434,9 @@ def test_a_fit_that_never_sees_its_lobe_ends_at_start(jit_variant):
         fits = fit_regions(model, light, light, r, sigma, region, {1: "skin", 2: "lips"}, schedule=FULL_DATA)
     assert fits["skin"].status == DEFAULTS and "start values" in fits["skin"].reason  # no region to borrow from
     assert fits["lips"].status == DEFAULTS
-    model_defaults = model.defaults()
-    for name in ("skin", "lips"):
-        for key, value in model_defaults.items():
-            if key != "diffuse_reflectance":
-                np.testing.assert_allclose(fits[name].params[key], value)
+    for name in ("skin", "lips"):  # no glossy part, rather than an invented one
+        np.testing.assert_array_equal(fits[name].params["specular_reflectance"], 0.0)
+        assert fits[name].params["exponent"] == model.parameter("exponent").default
     np.testing.assert_allclose(fits["skin"].params["diffuse_reflectance"], [0.4, 0.3, 0.2], rtol=1e-3)
     # with a measured neighbour, an at_start region takes that neighbour's lobe, flagged prior
     _, truth = TRUTH["phong"]

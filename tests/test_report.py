@@ -38,7 +38,7 @@ def validator(capture):
 def estimate(capture):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return fit_brdf(capture, "cooktorrance", resolution=32, progress=False)
+        return fit_brdf(capture, "cooktorrance", resolution=64, progress=False)
 
 
 def with_params(estimate, change):

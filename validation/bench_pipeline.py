@@ -7,7 +7,7 @@ filled by the cold run). Records the wall time of the command, the time of
 each stage from its ``report.json``, and the peak resident memory. Writes
 ``validation/results/bench_pipeline.json`` and ``bench_pipeline.png``.
 
-    python validation/bench_pipeline.py [--warm 2] [--args "--geometry fitted"]
+    python validation/bench_pipeline.py [--warm 2] [--args "--geometry fitted"] [--picture docs/images/measure_report.png]
 
 With ``--no-cold``, one or more warm runs only, with the caller's own caches
 (``HOME`` and ``MIFACES_CACHE`` as they are, filled by earlier runs), written
@@ -52,6 +52,7 @@ def run(out: Path, home: Path, cache: Path, extra: list[str]) -> dict:
     return {"wall_s": round(wall, 1), "stages_s": {k: round(v, 1) for k, v in report["seconds"].items()},
             "peak_rss_mib": round(max(peak, before) / 1024, 1),
             "skin_cooktorrance_error": (skin.get("regions") or {}).get("skin"),
+            "face_model": report.get("face_model"), "shape_errors": report.get("shape_errors"),
             "shapes": report.get("shapes")}
 
 
@@ -87,6 +88,8 @@ def main(argv=None) -> int:
     parser.add_argument("--no-cold", dest="cold", action="store_false",
                         help="warm runs only, with the caller's caches as they are")
     parser.add_argument("--name", default="bench_pipeline", help="stem of the result files")
+    parser.add_argument("--picture", type=Path, default=None,
+                        help="copy the last run's report.png here (the README's picture)")
     args = parser.parse_args(argv)
     extra = shlex.split(args.args)
     results = {}
@@ -102,6 +105,10 @@ def main(argv=None) -> int:
             print(f"{name} run ...", flush=True)
             results[name] = run(tmp / f"out{i}", home, cache, extra)
             print(f"  {results[name]['wall_s']} s: {results[name]['stages_s']}", flush=True)
+        if args.picture is not None:
+            import shutil
+
+            shutil.copyfile(tmp / f"out{args.warm}" / "report.png", args.picture)
     document = {"command": f"mifaces measure {' '.join(extra)}".strip(),
                 "machine": {"cores": os.cpu_count(), "platform": platform.platform(),
                             "python": platform.python_version()},

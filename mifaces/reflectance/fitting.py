@@ -331,6 +331,19 @@ PEAK_FACTOR = 5.0
 PEAK_ANGLES = (0.0, 20.0, 40.0, 60.0, 75.0)
 
 
+def no_lobe(model: BRDFModel) -> dict:
+    """The model's default parameters with every glossy lobe's scales at zero: what a region renders
+    when nothing measured its glossy part and no region can lend one (status ``'defaults'``): no
+    highlight rather than an invented one."""
+    params = {**model.defaults(), **model.fixed_defaults()}
+    for scales in model.lobe_scales().values():
+        for name in scales:
+            if name in params:
+                params[name] = (np.zeros_like(np.asarray(params[name], np.float64)).tolist()
+                                if np.ndim(params[name]) else 0.0)
+    return params
+
+
 def glossy_peak(model: BRDFModel, params: dict) -> float:
     """The largest π f_s(wi, mirror(wi)) of the glossy part over :data:`PEAK_ANGLES`, all
     channels: the brightest highlight the fitted lobe predicts, in the units of reflectance samples."""
@@ -398,8 +411,11 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
                 f"{fits[name].reason}; {SPIKE}: its peak (pi f = {peak:.3g}) is more than {PEAK_FACTOR:g} times "
                 f"the brightest sample ({seen:.3g})"))
     def donor_of(name):
+        # a neighbour's fit that is rendered as it stands can be lent: a converged one, or a large
+        # region's fit at a bound that it keeps (never a spike, start values or defaults)
         donors = list(neighbours.get(name, [])) + ["skin"]
-        return next((d for d in donors if d != name and d in fits and fits[d].status not in (AT_BOUND, AT_START, DEFAULTS)),
+        return next((d for d in donors if d != name and d in fits and fits[d].status not in (AT_START, DEFAULTS)
+                     and not (fits[d].status == AT_BOUND and (SPIKE in fits[d].reason or counts[d] < 10 * needed))),
                     None)
 
     # A fit whose glossy part never left its start values measured nothing of it: rendering those
@@ -407,10 +423,10 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     # keeping its own albedo, flagged 'prior' (the model's defaults, 'defaults', without a neighbour).
     for name in [n for n, fit in fits.items() if fit.status == AT_START]:
         donor = donor_of(name)
-        glossy = fits[donor].params if donor else {**model.defaults(), **model.fixed_defaults()}
+        glossy = fits[donor].params if donor else no_lobe(model)
         borrowed = {**glossy, **held[name], "diffuse_reflectance": fits[name].params["diffuse_reflectance"]}
         reason = (f"{counts[name]} samples, and {fits[name].reason.split('; ')[-1]} (not measured): the glossy "
-                  f"part of {repr(donor) if donor else 'the model defaults'}")
+                  f"part of {repr(donor) if donor else 'no region: no glossy part'}")
         warnings.warn(f"region {name!r}: {reason}", stacklevel=2)
         fits[name] = prior_fit(model, borrowed, counts[name], reason, PRIOR if donor else DEFAULTS)
 
@@ -425,18 +441,18 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
         if not spike and (donor is None or counts[name] >= 10 * needed):
             warnings.warn(f"region {name!r}: the fit ended {fits[name].reason.split('; ')[-1]}", stacklevel=2)
             continue
-        glossy = fits[donor].params if donor else {**model.defaults(), **model.fixed_defaults()}
+        glossy = fits[donor].params if donor else no_lobe(model)
         borrowed = {**glossy, **held[name], "diffuse_reflectance": fits[name].params["diffuse_reflectance"]}
         reason = (f"{counts[name]} samples, and its own fit ended {fits[name].reason.split('; ')[-1]}: "
-                  f"the glossy part of {repr(donor) if donor else 'the model defaults'}")
+                  f"the glossy part of {repr(donor) if donor else 'no region: no glossy part'}")
         warnings.warn(f"region {name!r}: {reason}", stacklevel=2)
         fits[name] = prior_fit(model, borrowed, counts[name], reason, PRIOR if donor else DEFAULTS)
     for label, name in region_names.items():
         if name in fits:
             continue
         donor = donor_of(name)
-        params = fits[donor].params if donor else {**model.defaults(), **model.fixed_defaults()}
-        source = f"the fit of {donor!r}" if donor else "the model's defaults"
+        params = fits[donor].params if donor else no_lobe(model)
+        source = f"the fit of {donor!r}" if donor else "no region to borrow from: no glossy part"
         reason = f"{counts[name]} samples, fewer than the {needed} a {model.name} fit needs: {source}"
         if counts[name] > 0:
             warnings.warn(f"region {name!r}: {reason}", stacklevel=2)

@@ -47,7 +47,8 @@ same seed (common random numbers).
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+import warnings
+from dataclasses import asdict, dataclass, field, replace
 
 import drjit as dr
 import mitsuba as mi
@@ -56,6 +57,9 @@ import numpy as np
 from ..progress import progress as progress_bar
 from ..render import FaceScene
 from ..model.geometry import welded_normals
+from ..shape import shapes_in_world
+from .estimate import fit_brdf
+from .samples import capture_samples
 from .refine import LAMP_RADIUS_KEY, _kernel_history, _kernels, image_loss, mask_weight, photograph_view
 
 
@@ -408,3 +412,36 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
 
 
 __all__ = ["ShapeRefineSchedule", "ShapeRefinement", "ShapeProblem", "refine_shape"]
+
+
+#: The BRDF model that lights the faces when shapes are refined without a fitted reflectance
+#: (``mifaces fit-shape --refine-shape``): the cheapest of the four to fit.
+FIT_SHAPE_BRDF = "phong"
+
+
+def refine_fits(capture, fits: list, face_model, resolution: int = 256, brdf: str = FIT_SHAPE_BRDF,
+                schedule: ShapeRefineSchedule | None = None, progress: bool = True) -> tuple[list, ShapeRefinement]:
+    """Shape fits (:func:`mifaces.shape.fit.fit_shape`) refined by :func:`refine_shape`, for
+    ``mifaces fit-shape --refine-shape``: a quick per-region fit of ``brdf`` on the fitted faces
+    (texture resolution ``resolution``) lights them; the converged fits get the refined vertices where
+    the refinement was accepted (else they come back unchanged). Returns the fits and the refinement."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        shapes = shapes_in_world(fits, capture)
+        samples = capture_samples(capture, shapes, face_model, resolution, progress=False)
+        estimate = fit_brdf(capture, brdf, shapes, face_model=face_model, resolution=resolution, samples=samples,
+                            progress=False)
+    result = refine_shape(capture, shapes, face_model, estimate, schedule, progress=progress)
+    if not result.accepted:
+        return list(fits), result
+    camera = capture.camera
+    out = []
+    for fit in fits:
+        world = result.shapes.get(fit.measurement)
+        if world is None or not fit.converged:
+            out.append(fit)
+            continue
+        out.append(replace(fit, vertices_world=np.asarray(world, np.float32),
+                           vertices_camera=camera.to_camera(np.asarray(world, np.float64)).astype(np.float32),
+                           message=(fit.message + "; " if fit.message else "") + "refined by differentiable rendering"))
+    return out, result
