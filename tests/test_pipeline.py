@@ -162,3 +162,28 @@ def test_measure_names_the_failed_shape_fits(capture_dir, tmp_path, monkeypatch)
     monkeypatch.setattr(pipeline, "capture_samples", never)
     with pytest.raises(pipeline.NoUsableShapeError, match=r"m00: not_converged \(feature points end 2.6 px"):
         pipeline.measure(tmp_path / "m", capture_dir, models=("ward",), progress=False)
+
+
+def test_measure_refines_the_shapes_when_asked(capture_dir, tmp_path, monkeypatch):
+    """measure(refine_shape=True): a first fit lights the faces, the refinement runs against the
+    photographs and the report says whether it was kept and why (a short schedule here)."""
+    import mifaces
+    import mifaces.pipeline as pipeline
+    from mifaces.reflectance.refine_shape import ShapeRefineSchedule, refine_shape
+
+    mifaces.set_variant("llvm_ad_rgb")
+    calls = []
+
+    def short(capture, shapes, face, estimate, schedule=None, **kw):
+        calls.append(estimate.model)
+        return refine_shape(capture, shapes, face, estimate, ShapeRefineSchedule(iterations=2, downsample=4), **kw)
+
+    monkeypatch.setattr(pipeline, "refine_shapes_by_rendering", short)
+    report = pipeline.measure(tmp_path / "m", capture_dir, models=("phong",), geometry="ground-truth", resolution=64,
+                              spp=2, progress=False, refine_shape=True)
+    assert calls == ["phong"]
+    refinement = report["shape_refinement"]
+    assert isinstance(refinement["accepted"], bool) and refinement["reason"] and refinement["model"] == "phong"
+    assert report["seconds"]["refine_shape"] > 0
+    if refinement["accepted"]:
+        assert "shape_errors_refined" in report
