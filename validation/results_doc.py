@@ -624,6 +624,11 @@ def layout_for(stem: str):
     return best
 
 
+#: The list of result files made before a change of the setup they depend on (the face model, say) and
+#: not rerun since, with why: each gets a warning at the top of its section.
+STALE = "stale.json"
+
+
 def anchor(title: str) -> str:
     """GitHub's heading anchor."""
     slug = re.sub(r"[^\w\- ]", "", title.strip().lower())
@@ -652,8 +657,17 @@ def render(results: Path, out: Path) -> str:
              "Labels: **SIMULATED** — rendered captures whose ground truth is known; **real photographs** — public "
              "data sets (Extended Yale B, DiLiGenT); timings are on the machine each file names.", ""]
     sections = []
+    stale = {}
+    stale_file = results / STALE
+    if stale_file.is_file():
+        try:
+            stale = json.loads(stale_file.read_text(encoding="utf-8")).get("files", {})
+        except (OSError, ValueError):
+            stale = {}
     for path in sorted(results.glob("*.json")):
         stem = path.stem
+        if path.name == STALE:
+            continue
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError) as error:
@@ -668,6 +682,8 @@ def render(results: Path, out: Path) -> str:
         else:
             title, default_label, section = f"`{stem}.json`", "not labelled", sec_unknown
         body = []
+        if path.name in stale:
+            body += [f"**Not rerun since the setup changed**: {stale[path.name]}", ""]
         what = summary(doc)
         if what:
             body.append(f"**What**: {what}")
