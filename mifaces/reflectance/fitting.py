@@ -34,6 +34,8 @@ from ..arrays import device_array
 from ..status import AT_BOUND, CONVERGED, PRIOR
 from .levenberg_marquardt import levenberg_marquardt
 from .parameters import ParameterSpace, conservative_start, linear_start
+from .uncertainty import (BOOTSTRAP_DRAWS, METHODS, PRUNED, Covariance, covariance, held_entries,
+                          parameter_intervals, prior_intervals)
 
 
 @dataclass
@@ -77,6 +79,9 @@ class RegionFit:
     #: (seconds, loss, samples): after each accepted step, the loss on the
     #: stage's subset scaled to the full set, and the subset's size
     history: list = field(default_factory=list)
+    #: parameter -> ``{"std", "interval95"}`` or ``{"status"}``
+    #: (:func:`mifaces.reflectance.uncertainty.parameter_intervals`); empty if not estimated
+    uncertainty: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
         d = asdict(self)
@@ -132,6 +137,19 @@ class _Problem:
         jtj[rows, cols] = values[1:1 + len(rows)]
         jtj[cols, rows] = values[1:1 + len(rows)]
         return jtj, values[1 + len(rows):], float(values[0])
+
+    def scores(self, x) -> np.ndarray:
+        """Each sample's score J_iᵀ ρ_i at ``x`` (its residuals' gradient, summed over the colour
+        channels), (N, P) float64: one kernel, frozen per parameter space as :meth:`system`'s is;
+        for the sandwich covariance (:mod:`mifaces.reflectance.uncertainty`), once per fit."""
+        key = ("scores",) + _signature(self.space)
+        if key not in _FROZEN:
+            space = self.space
+            _FROZEN[key] = dr.freeze(lambda arrays, u: _scores(space, arrays, u), warn_after=1000,
+                                     state_fn=lambda arrays, u: (dr.width(arrays["w"]),))
+        arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w}
+        out = _FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x])
+        return np.stack([np.asarray(s, np.float64) for s in out], axis=1)
 
     def residuals_and_jacobian(self, x):
         """The residuals (M,) and their Jacobian (M, P), float32, on the host (for solvers that
@@ -189,6 +207,22 @@ def _sums(space: ParameterSpace, arrays: dict, u: list, jacobian: bool):
     return acc
 
 
+def _scores(space: ParameterSpace, arrays: dict, u: list) -> list:
+    """Per sample and free variable a, Σ_c (∂ρ_c/∂u_a) ρ_c of the residuals ``(r - π f)/σ``
+    (as :func:`_sums`, but not summed over the samples): P arrays, one kernel."""
+    dr.enable_grad(u)
+    res = (arrays["r"] - dr.pi * space.model.eval(arrays["wi"], arrays["wo"], space.drjit_params(u))) * arrays["w"]
+    r = dr.detach(res)
+    out = []
+    for uk in u:
+        dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
+        d = dr.grad(res)
+        out.append(d[0] * r[0] + d[1] * r[1] + d[2] * r[2])
+        dr.clear_grad(res)
+    dr.eval(out)
+    return out
+
+
 def validate_samples(light, view, reflectance, sigma) -> None:
     """Shapes agree and nothing is NaN; raises ValueError naming the array."""
     n = len(sigma)
@@ -209,7 +243,8 @@ def min_samples(model: BRDFModel, fixed: dict | None = None) -> int:
 
 def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start: dict | None = None,
                fixed: dict | None = None, bounds: dict | None = None, schedule: SubsetSchedule | None = None,
-               seed: int = 0, ftol: float = 1e-7, trace: list | None = None) -> RegionFit:
+               seed: int = 0, ftol: float = 1e-7, trace: list | None = None, cluster=None,
+               uncertainty: str | None = METHODS[0]) -> RegionFit:
     """Fit ``model`` to one region's samples by hierarchical Levenberg-Marquardt.
 
     Parameters
@@ -234,17 +269,29 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     trace : list, optional
         If given, receives (seconds, parameter values) after every accepted
         step, for reports that evaluate the full-data loss along the way.
+    cluster : ndarray (N,), optional
+        Cluster of each sample for the sandwich and bootstrap covariance (e.g.
+        :func:`~mifaces.reflectance.uncertainty.tile_clusters`); default: each
+        sample its own.
+    uncertainty : str or None
+        How :attr:`RegionFit.uncertainty` is estimated at the optimum, one of
+        :data:`~mifaces.reflectance.uncertainty.METHODS`; None leaves it out.
 
     Returns
     -------
     RegionFit
-        Parameters, the loss E of eq. 8 on all samples, status and history.
+        Parameters, the loss E of eq. 8 on all samples, status, history and
+        the parameters' uncertainty.
     """
     t0 = time.perf_counter()
     model = brdf_models.model(model) if isinstance(model, str) else model
     light, view = np.asarray(light, np.float32), np.asarray(view, np.float32)
     reflectance, sigma = np.asarray(reflectance, np.float32), np.asarray(sigma, np.float32)
     validate_samples(light, view, reflectance, sigma)
+    if uncertainty is not None and uncertainty not in METHODS:
+        raise ValueError(f"uncertainty must be one of {METHODS} or None, got {uncertainty!r}")
+    if cluster is not None and np.shape(cluster) != np.shape(sigma):
+        raise ValueError(f"cluster must have shape {np.shape(sigma)}, got {np.shape(cluster)}")
     fixed = model.fixed_defaults() if fixed is None else fixed
     space = ParameterSpace(model, fixed, bounds)
     if len(sigma) < len(space):
@@ -272,6 +319,7 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     if bounded and status == CONVERGED:
         # the best fit lies outside the valid range: the samples do not support this model there
         status, reason = AT_BOUND, f"{reason}; at the bound of its range: {', '.join(bounded)}"
+    pruned = []
     if len(model.lobe_scales()) > 1:
         params, loss, pruned = prune_lobes(model, space, problem, params, loss)
         if pruned:
@@ -280,9 +328,63 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     first = model.lobe_scales().get(1, ())
     if any(np.any(np.asarray(params.get(s, 0.0)) != 0) for s in first) and space.at_spike(x):
         status, reason = AT_BOUND, f"{reason}; {SPIKE}"
+    intervals = {}
+    if uncertainty is not None:
+        data = (light, view, reflectance, sigma)
+        intervals = region_uncertainty(space, problem, params, pruned, cluster, uncertainty, data, seed)
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=loss,
                      samples=len(sigma), seconds=time.perf_counter() - t0, status=status,
-                     reason=reason, iterations=iterations, history=history)
+                     reason=reason, iterations=iterations, history=history, uncertainty=intervals)
+
+
+def region_uncertainty(space: ParameterSpace, problem: _Problem, params: dict, pruned: list, cluster,
+                       method: str, data: tuple, seed: int = 0) -> dict:
+    """The parameters' uncertainty at the optimum ``params`` of ``problem`` (all
+    the region's samples), by ``method``
+    (:mod:`mifaces.reflectance.uncertainty`): JᵀJ from the fit's own kernel and
+    the samples' scores from one more, once; the bootstrap refits instead.
+    ``pruned`` lobes' scales and exponents get the status ``pruned``; ``data``
+    is the region's (light, view, reflectance, sigma), for the bootstrap."""
+    x = space.vector(params)
+    held = held_entries(space, x)
+    model, statuses = space.model, {}
+    names = {s for j in pruned for s in model.lobe_scales()[j]}
+    names |= {space.coupled[s] for s in names if s in space.coupled}
+    for k, f in enumerate(space.free):
+        if f.name in names:
+            held[k], statuses[k] = True, PRUNED
+    if method == "bootstrap":
+        cov = bootstrap_covariance(space, x, held, cluster, data, seed=seed)
+    else:
+        jtj, _, loss = problem.system(x)
+        cov = covariance(x, jtj, loss, problem.scores(x), cluster, held, method)
+    return parameter_intervals(space, cov, statuses)
+
+
+def bootstrap_covariance(space: ParameterSpace, x, held, cluster, data: tuple, draws: int = BOOTSTRAP_DRAWS,
+                         iterations: int = 10, seed: int = 0) -> Covariance:
+    """Cov(x̂) from ``draws`` refits on clusters drawn with replacement (a
+    cluster drawn m times weighs m times: σ/√m), each started at ``x`` with at
+    most ``iterations`` LM steps; ``held`` entries are left out."""
+    light, view, reflectance, sigma = data
+    cluster = np.arange(len(sigma)) if cluster is None else np.asarray(cluster)
+    _, index = np.unique(cluster, return_inverse=True)
+    g = int(index.max()) + 1
+    rng = np.random.default_rng(seed)
+    xs = []
+    for _ in range(draws):
+        m = np.bincount(rng.integers(0, g, g), minlength=g)[index]
+        keep = m > 0
+        problem = _Problem(space.model, space, light[keep], view[keep], reflectance[keep],
+                           sigma[keep] / np.sqrt(m[keep]))
+        xs.append(levenberg_marquardt(None, None, x, system=problem.system, max_iterations=iterations,
+                                      ftol=1e-6).x)
+    free = ~np.asarray(held, bool)
+    cov = np.zeros((len(x), len(x)))
+    if free.any():
+        cov[np.ix_(free, free)] = np.atleast_2d(np.cov(np.array(xs)[:, free], rowvar=False))
+    return Covariance(x=np.asarray(x, np.float64), covariance=cov, held=np.asarray(held, bool), dof=float(g - 1),
+                      method="bootstrap")
 
 
 def prune_lobes(model: BRDFModel, space: ParameterSpace, problem: _Problem, params: dict, loss: float,
@@ -312,7 +414,8 @@ def prune_lobes(model: BRDFModel, space: ParameterSpace, problem: _Problem, para
 def prior_fit(model: BRDFModel, params: dict, samples: int, reason: str) -> RegionFit:
     """A region's BRDF taken from elsewhere (a neighbour, the defaults)."""
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=float("nan"),
-                     samples=samples, seconds=0.0, status=PRIOR, reason=reason, iterations=0)
+                     samples=samples, seconds=0.0, status=PRIOR, reason=reason, iterations=0,
+                     uncertainty=prior_intervals(params))
 
 
 #: Why a fit whose lobe width ended at its sharp end is not trusted.
@@ -326,7 +429,7 @@ NEIGHBOURS = {"lips": ["skin"], "nostrils": ["skin"], "beard": ["skin"], "eyes":
 
 def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region, region_names: dict,
                 neighbours: dict | None = None, progress: bool = False, fixed_by_region: dict | None = None,
-                **options) -> dict[str, RegionFit]:
+                cluster=None, **options) -> dict[str, RegionFit]:
     """Fit ``model`` separately in every region (paper sec. 4.4, 5.2).
 
     ``region`` gives each sample's label, ``region_names`` label -> name.
@@ -339,7 +442,8 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     a fit, with a warning. Regions without samples are not
     fitted either. ``progress`` shows a bar over the regions fitted.
     ``fixed_by_region`` (name -> parameters) holds parameters fixed in one
-    region on top of ``fixed``.
+    region on top of ``fixed``. ``cluster`` (N,) is each sample's cluster
+    for the uncertainty (:func:`fit_region`).
     """
     model = brdf_models.model(model) if isinstance(model, str) else model
     neighbours = NEIGHBOURS if neighbours is None else neighbours
@@ -358,7 +462,8 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
         held[name] = model.fixed_defaults() if fixed is None else fixed
         if fixed_by_region and name in fixed_by_region:
             held[name] = region_options["fixed"] = {**held[name], **fixed_by_region[name]}
-        fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask], **region_options)
+        fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask],
+                                cluster=None if cluster is None else np.asarray(cluster)[mask], **region_options)
     def donor_of(name):
         donors = list(neighbours.get(name, [])) + ["skin"]
         return next((d for d in donors if d != name and d in fits and fits[d].status != AT_BOUND), None)
