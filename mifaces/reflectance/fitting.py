@@ -34,7 +34,7 @@ from ..arrays import device_array
 from ..status import AT_BOUND, CONVERGED, PRIOR
 from .levenberg_marquardt import levenberg_marquardt
 from .parameters import ParameterSpace, conservative_start, linear_start
-from .uncertainty import (BOOTSTRAP_DRAWS, METHODS, PRUNED, Covariance, covariance, held_entries,
+from .uncertainty import (BOOTSTRAP_DRAWS, METHODS, NOT_IDENTIFIED, PRUNED, Covariance, covariance, held_entries,
                           parameter_intervals, prior_intervals)
 
 
@@ -138,18 +138,20 @@ class _Problem:
         jtj[cols, rows] = values[1:1 + len(rows)]
         return jtj, values[1 + len(rows):], float(values[0])
 
-    def scores(self, x) -> np.ndarray:
-        """Each sample's score J_iᵀ ρ_i at ``x`` (its residuals' gradient, summed over the colour
-        channels), (N, P) float64: one kernel, frozen per parameter space as :meth:`system`'s is;
-        for the sandwich covariance (:mod:`mifaces.reflectance.uncertainty`), once per fit."""
-        key = ("scores",) + _signature(self.space)
+    def terms(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """Each sample's weighted residuals ρ_i (N, 3) and their Jacobian J_i (N, 3, P) at ``x``,
+        float64 on the host: one kernel, frozen per parameter space as :meth:`system`'s is;
+        for the covariance (:mod:`mifaces.reflectance.uncertainty`), once per fit."""
+        key = ("terms",) + _signature(self.space)
         if key not in _FROZEN:
             space = self.space
-            _FROZEN[key] = dr.freeze(lambda arrays, u: _scores(space, arrays, u), warn_after=1000,
+            _FROZEN[key] = dr.freeze(lambda arrays, u: _terms(space, arrays, u), warn_after=1000,
                                      state_fn=lambda arrays, u: (dr.width(arrays["w"]),))
         arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w}
-        out = _FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x])
-        return np.stack([np.asarray(s, np.float64) for s in out], axis=1)
+        out = [np.asarray(a, np.float64) for a in _FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x])]
+        residuals = np.stack(out[:3], axis=1)
+        jacobian = np.stack(out[3:], axis=1).reshape(len(residuals), len(x), 3).transpose(0, 2, 1)
+        return residuals, jacobian
 
     def residuals_and_jacobian(self, x):
         """The residuals (M,) and their Jacobian (M, P), float32, on the host (for solvers that
@@ -207,17 +209,16 @@ def _sums(space: ParameterSpace, arrays: dict, u: list, jacobian: bool):
     return acc
 
 
-def _scores(space: ParameterSpace, arrays: dict, u: list) -> list:
-    """Per sample and free variable a, Σ_c (∂ρ_c/∂u_a) ρ_c of the residuals ``(r - π f)/σ``
-    (as :func:`_sums`, but not summed over the samples): P arrays, one kernel."""
+def _terms(space: ParameterSpace, arrays: dict, u: list) -> list:
+    """The residuals ``(r - π f)/σ`` of ``arrays`` per channel, then per free variable a the
+    channels of ∂ρ/∂u_a (forward-mode tangents, as in :func:`_sums`, not summed): 3 + 3P arrays,
+    one kernel."""
     dr.enable_grad(u)
     res = (arrays["r"] - dr.pi * space.model.eval(arrays["wi"], arrays["wo"], space.drjit_params(u))) * arrays["w"]
-    r = dr.detach(res)
-    out = []
+    out = list(dr.detach(res))
     for uk in u:
         dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
-        d = dr.grad(res)
-        out.append(d[0] * r[0] + d[1] * r[1] + d[2] * r[2])
+        out += list(dr.grad(res))
         dr.clear_grad(res)
     dr.eval(out)
     return out
@@ -353,12 +354,31 @@ def region_uncertainty(space: ParameterSpace, problem: _Problem, params: dict, p
     for k, f in enumerate(space.free):
         if f.name in names:
             held[k], statuses[k] = True, PRUNED
+    # a lobe whose every scale sits at 0 has no width to measure
+    t = 0.5 * (1.0 + np.tanh(0.5 * x))
+    for j, scales in model.lobe_scales().items():
+        entries = [k for k, f in enumerate(space.free) if f.name in scales]
+        width = _lobe_width(space, j, scales)
+        if entries and all(held[k] and t[k] < 0.5 for k in entries) and width is not None:
+            for k, f in enumerate(space.free):
+                if f.name == width and not held[k]:
+                    held[k], statuses[k] = True, NOT_IDENTIFIED
     if method == "bootstrap":
         cov = bootstrap_covariance(space, x, held, cluster, data, seed=seed)
     else:
         jtj, _, loss = problem.system(x)
-        cov = covariance(x, jtj, loss, problem.scores(x), cluster, held, method)
+        cov = covariance(x, jtj, loss, *problem.terms(x), cluster, held, method)
     return parameter_intervals(space, cov, statuses)
+
+
+def _lobe_width(space: ParameterSpace, lobe: int, scales: tuple) -> str | None:
+    """The parameter that sets lobe ``lobe``'s width: its scales' exponent (Lafortune), or the
+    model's :attr:`~mifaces.brdf.model.BRDFModel.WIDTH_GRID` parameter for the first lobe."""
+    for name in scales:
+        if name in space.coupled:
+            return space.coupled[name]
+    grid = space.model.WIDTH_GRID
+    return grid[0] if lobe == 1 and grid is not None else None
 
 
 def bootstrap_covariance(space: ParameterSpace, x, held, cluster, data: tuple, draws: int = BOOTSTRAP_DRAWS,

@@ -55,11 +55,13 @@ import scipy.stats
 from .parameters import ParameterSpace
 
 #: The estimates of the covariance, the default first.
-METHODS = ("sandwich", "laplace", "bootstrap")
+METHODS = ("sandwich", "jackknife", "laplace", "bootstrap")
 #: The intervals' coverage.
 LEVEL = 0.95
-#: Side, in texels at texture resolution 128, of the sandwich's clusters (scaled with the resolution).
-TILE_AT_128 = 4
+#: Side, in texels at texture resolution 128, of the sandwich's clusters (scaled with the resolution):
+#: chosen on tuning captures the coverage tables leave out (validation/results/uncertainty_tuning.json:
+#: single texels cover 54-59 %, tiles of 4 85-90 %, of 8 and 16 89-93 %).
+TILE_AT_128 = 8
 #: Draws of the bootstrap.
 BOOTSTRAP_DRAWS = 50
 #: Statuses of parameters without an interval.
@@ -127,9 +129,9 @@ def _inverse(h: np.ndarray) -> np.ndarray:
     return inv / np.outer(d, d)
 
 
-def covariance(x, jtj, loss: float, scores: np.ndarray, cluster: np.ndarray | None, held,
-               method: str = METHODS[0]) -> Covariance:
-    """Cov(x̂) by ``laplace`` or ``sandwich`` (module docstring).
+def covariance(x, jtj, loss: float, residuals: np.ndarray, jacobian: np.ndarray, cluster: np.ndarray | None,
+               held, method: str = METHODS[0]) -> Covariance:
+    """Cov(x̂) by ``jackknife``, ``sandwich`` or ``laplace`` (module docstring).
 
     Parameters
     ----------
@@ -139,53 +141,86 @@ def covariance(x, jtj, loss: float, scores: np.ndarray, cluster: np.ndarray | No
         JᵀJ at ``x`` (summed over samples and channels).
     loss : float
         E = ½ Σ |ρ|² at ``x``.
-    scores : ndarray (N, P)
-        Each sample's J_iᵀ ρ_i (summed over its channels).
+    residuals : ndarray (N, 3)
+        Each sample's weighted residuals ρ_i.
+    jacobian : ndarray (N, 3, P)
+        Their derivatives with respect to x.
     cluster : ndarray (N,) or None
         Cluster of each sample (any integers); None: each sample its own.
     held : ndarray (P,) of bool
         Entries held fixed (their rows and columns are left out).
     method : str
-        ``laplace`` or ``sandwich``.
+        ``jackknife``, ``sandwich`` or ``laplace``.
     """
-    x, jtj, scores = np.asarray(x, np.float64), np.asarray(jtj, np.float64), np.asarray(scores, np.float64)
+    x, jtj = np.asarray(x, np.float64), np.asarray(jtj, np.float64)
+    residuals, jacobian = np.asarray(residuals, np.float64), np.asarray(jacobian, np.float64)
     held = np.asarray(held, bool)
-    n, p = scores.shape
-    if jtj.shape != (p, p) or x.shape != (p,) or held.shape != (p,):
-        raise ValueError(f"x {x.shape}, jtj {jtj.shape}, held {held.shape} and scores {scores.shape} disagree")
+    n, p = len(residuals), len(x)
+    if jtj.shape != (p, p) or held.shape != (p,) or residuals.shape != (n, 3) or jacobian.shape != (n, 3, p):
+        raise ValueError(f"x {x.shape}, jtj {jtj.shape}, held {held.shape}, residuals {residuals.shape} and "
+                         f"jacobian {jacobian.shape} disagree")
+    if method not in METHODS or method == "bootstrap":
+        raise ValueError(f"method must be one of {[m for m in METHODS if m != 'bootstrap']} here, got {method!r}")
     free = ~held
     k = int(free.sum())
     cov = np.zeros((p, p))
+    index = np.arange(n) if cluster is None else np.unique(np.asarray(cluster), return_inverse=True)[1]
+    g = int(index.max()) + 1 if n else 0
     if method == "laplace":
         dof = float(3 * n - k)
-        s2 = 2.0 * float(loss) / max(dof, 1.0)
-        if k:
-            cov[np.ix_(free, free)] = s2 * _inverse(jtj[np.ix_(free, free)])
-    elif method == "sandwich":
-        if cluster is None:
-            groups, g = scores[:, free], n
-        else:
-            _, index = np.unique(np.asarray(cluster), return_inverse=True)
-            g = int(index.max()) + 1 if n else 0
-            groups = np.zeros((g, k))
-            np.add.at(groups, index, scores[:, free])
-        dof = float(g - 1)
-        if k and g > 1:
-            inv = _inverse(jtj[np.ix_(free, free)])
-            finite = np.all(np.isfinite(inv), axis=1)
-            meat = groups.T @ groups
-            c = g / (g - 1) * (n - 1) / max(n - k, 1)
-            block = np.full((k, k), np.inf)
-            block[np.ix_(finite, finite)] = c * inv[np.ix_(finite, finite)] @ meat[np.ix_(finite, finite)] @ \
-                inv[np.ix_(finite, finite)]
-            block[~finite, :] = block[:, ~finite] = 0.0
-            block[~finite, ~finite] = np.inf
-            cov[np.ix_(free, free)] = block
-        elif k:
-            cov[np.ix_(free, free)] = np.diag(np.full(k, np.inf))
+        block = 2.0 * float(loss) / max(dof, 1.0) * _inverse(jtj[np.ix_(free, free)]) if k else None
     else:
-        raise ValueError(f"method must be one of {METHODS[:2]} here, got {method!r}")
+        dof = float(g - 1)
+        jac = jacobian[:, :, free]
+        scores = np.einsum("ncp,nc->np", jac, residuals)
+        u = np.stack([np.bincount(index, weights=scores[:, a], minlength=g) for a in range(k)], axis=1)
+        if k == 0:
+            block = None
+        elif g < 2:
+            block = np.diag(np.full(k, np.inf))
+        elif method == "sandwich":
+            inv = _inverse(jtj[np.ix_(free, free)])
+            c = g / (g - 1) * (n - 1) / max(n - k, 1)
+            block = _sandwich(inv, u.T @ u, c)
+        else:
+            block = _jackknife(jtj[np.ix_(free, free)], jac, index, u)
+    if block is not None:
+        cov[np.ix_(free, free)] = block
     return Covariance(x=x, covariance=cov, held=held, dof=dof, method=method)
+
+
+def _sandwich(inv: np.ndarray, meat: np.ndarray, c: float) -> np.ndarray:
+    """c H⁻¹ B H⁻¹, infinite in the directions H⁻¹ is."""
+    finite = np.all(np.isfinite(inv), axis=1)
+    block = np.diag(np.where(finite, 0.0, np.inf))
+    f = np.ix_(finite, finite)
+    block[f] = c * inv[f] @ meat[f] @ inv[f]
+    return block
+
+
+def _jackknife(h: np.ndarray, jac: np.ndarray, index: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """(G-1)/G Σ_g d_g d_gᵀ with d_g = (H - H_g)⁻¹ u_g, the one-step change of x̂ when
+    cluster g is left out (H_g = Σ_{i ∈ g} J_iᵀJ_i): the cluster jackknife (CR3,
+    MacKinnon & White 1985; Cameron & Miller 2015, sec. VI.B), which unlike the plain
+    sandwich does not shrink when a few clusters carry a parameter (a highlight seen
+    in a few texels). A parameter that one cluster alone constrains is infinite."""
+    g, k = u.shape
+    hg = np.zeros((g, k, k))
+    for a in range(k):
+        for b in range(a, k):
+            hg[:, a, b] = hg[:, b, a] = np.bincount(index, weights=np.einsum("nc,nc->n", jac[:, :, a], jac[:, :, b]),
+                                                    minlength=g)
+    d = np.sqrt(np.maximum(np.diag(h), 1e-300))
+    left = (h[None] - hg) / np.outer(d, d)  # scaled to a unit diagonal of H
+    try:
+        steps = np.linalg.solve(left, (u / d)[:, :, None])[:, :, 0] / d
+    except np.linalg.LinAlgError:
+        steps = np.stack([np.linalg.lstsq(m, v / d, rcond=None)[0] / d for m, v in zip(left, u)])
+    cond = np.linalg.cond(left)
+    steps[~np.isfinite(cond) | (cond > 1e12)] = np.inf
+    block = (g - 1) / g * steps.T @ steps
+    block[~np.isfinite(block)] = np.inf
+    return block
 
 
 def parameter_intervals(space: ParameterSpace, cov: Covariance, statuses: dict | None = None,
