@@ -15,7 +15,7 @@ import pytest
 from mifaces import brdf as brdf_models
 from mifaces.reflectance.diffuse import refine_diffuse
 from mifaces.reflectance.fitting import FULL_DATA, fit_region, prior_fit
-from mifaces.reflectance.uncertainty import TILE_AT_128, covariance, tile_clusters
+from mifaces.reflectance.uncertainty import TILE_AT_128, cluster_index, covariance, tile_clusters
 
 TRUTH = {"diffuse_reflectance": [0.5, 0.35, 0.25], "specular_reflectance": [0.8, 0.8, 0.8], "roughness": 0.5,
          "eta": 1.4}
@@ -139,16 +139,42 @@ def test_intervals_stay_inside_the_range():
 
 def test_covariance_rejects_bad_input():
     with pytest.raises(ValueError, match="method"):
-        covariance(np.zeros(2), np.eye(2), 1.0, np.zeros((5, 3)), np.zeros((5, 3, 2)), None, np.zeros(2, bool),
-                   "bayes")
+        covariance(np.zeros(2), np.eye(2), 1.0, 5, np.zeros((5, 2)), None, np.zeros(2, bool), "bayes")
     with pytest.raises(ValueError, match="disagree"):
-        covariance(np.zeros(3), np.eye(2), 1.0, np.zeros((5, 3)), np.zeros((5, 3, 2)), None, np.zeros(2, bool))
+        covariance(np.zeros(3), np.eye(2), 1.0, 5, np.zeros((5, 2)), None, np.zeros(2, bool))
+    with pytest.raises(ValueError, match="hessians"):
+        covariance(np.zeros(2), np.eye(2), 1.0, 5, np.zeros((5, 2)), None, np.zeros(2, bool), "jackknife")
+    with pytest.raises(ValueError, match="non-negative"):
+        cluster_index(np.array([0, -1]))
     with pytest.raises(ValueError, match="uncertainty"):
         fit_region("cooktorrance", np.ones((20, 3)) / 3 ** 0.5, np.ones((20, 3)) / 3 ** 0.5, np.ones((20, 3)),
                    np.ones(20), uncertainty="bayes")
     with pytest.raises(ValueError, match="cluster"):
         fit_region("cooktorrance", np.ones((20, 3)) / 3 ** 0.5, np.ones((20, 3)) / 3 ** 0.5, np.ones((20, 3)),
                    np.ones(20), cluster=np.zeros(3))
+
+
+def test_cluster_sums_match_the_per_sample_jacobian():
+    """The kernel's per-cluster u_g and H_g equal sums of the host-side residuals and Jacobian."""
+    from mifaces.reflectance.fitting import _Problem
+    from mifaces.reflectance.parameters import ParameterSpace
+
+    rng = np.random.default_rng(7)
+    n = 300
+    light, view = directions(rng, n), directions(rng, n)
+    r = reflectance(TRUTH, light, view) + 0.02 * rng.normal(size=(n, 3))
+    space = ParameterSpace(brdf_models.model("cooktorrance"), FIXED)
+    problem = _Problem(space.model, space, light.astype(np.float32), view.astype(np.float32), r.astype(np.float32),
+                       np.full(n, 0.5, np.float32))
+    x = space.vector(TRUTH) + 0.1
+    index, groups = cluster_index(rng.integers(0, 40, n) * 3)
+    u, hg = problem.cluster_sums(x, index, groups)
+    res, jac = problem.residuals_and_jacobian(x)
+    res, jac = res.reshape(3, n).T.astype(np.float64), jac.reshape(3, n, -1).transpose(1, 0, 2).astype(np.float64)
+    for g in (0, groups // 2, groups - 1):
+        members = index == g
+        np.testing.assert_allclose(u[g], np.einsum("ncp,nc->p", jac[members], res[members]), rtol=1e-4, atol=1e-6)
+        np.testing.assert_allclose(hg[g], np.einsum("ncp,ncq->pq", jac[members], jac[members]), rtol=1e-4, atol=1e-6)
 
 
 def test_tile_clusters():

@@ -34,8 +34,8 @@ from ..arrays import device_array
 from ..status import AT_BOUND, CONVERGED, PRIOR
 from .levenberg_marquardt import levenberg_marquardt
 from .parameters import ParameterSpace, conservative_start, linear_start
-from .uncertainty import (BOOTSTRAP_DRAWS, METHODS, NOT_IDENTIFIED, PRUNED, Covariance, covariance, held_entries,
-                          parameter_intervals, prior_intervals)
+from .uncertainty import (BOOTSTRAP_DRAWS, METHODS, NOT_IDENTIFIED, PRUNED, Covariance, cluster_index, covariance,
+                          held_entries, parameter_intervals, prior_intervals)
 
 
 @dataclass
@@ -138,20 +138,28 @@ class _Problem:
         jtj[cols, rows] = values[1:1 + len(rows)]
         return jtj, values[1 + len(rows):], float(values[0])
 
-    def terms(self, x) -> tuple[np.ndarray, np.ndarray]:
-        """Each sample's weighted residuals ρ_i (N, 3) and their Jacobian J_i (N, 3, P) at ``x``,
-        float64 on the host: one kernel, frozen per parameter space as :meth:`system`'s is;
-        for the covariance (:mod:`mifaces.reflectance.uncertainty`), once per fit."""
-        key = ("terms",) + _signature(self.space)
+    def cluster_sums(self, x, cluster: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per cluster g, the score u_g = Σ_{i ∈ g} J_iᵀ ρ_i (G, P) and H_g = Σ_{i ∈ g} J_iᵀ J_i
+        (G, P, P), summed over the colour channels, at ``x``; ``cluster`` (N,) numbers the clusters
+        0 … ``groups`` - 1. One kernel (frozen per parameter space as :meth:`system`'s is), whose
+        sums stay on the Dr.Jit side: for the covariance (:mod:`mifaces.reflectance.uncertainty`),
+        once per fit."""
+        key = ("clusters",) + _signature(self.space)
         if key not in _FROZEN:
             space = self.space
-            _FROZEN[key] = dr.freeze(lambda arrays, u: _terms(space, arrays, u), warn_after=1000,
-                                     state_fn=lambda arrays, u: (dr.width(arrays["w"]),))
-        arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w}
-        out = [np.asarray(a, np.float64) for a in _FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x])]
-        residuals = np.stack(out[:3], axis=1)
-        jacobian = np.stack(out[3:], axis=1).reshape(len(residuals), len(x), 3).transpose(0, 2, 1)
-        return residuals, jacobian
+            _FROZEN[key] = dr.freeze(lambda arrays, u, g: _cluster_sums(space, arrays, u, g), warn_after=1000,
+                                     state_fn=lambda arrays, u, g: (dr.width(arrays["w"]), g))
+        arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w,
+                  "c": device_array(np.uint32, np.asarray(cluster, np.uint32))}
+        p = len(x)
+        k = p + p * (p + 1) // 2
+        sums = np.asarray(_FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x], int(groups)),
+                          np.float64).reshape(groups, k)
+        hg = np.zeros((groups, p, p))
+        rows, cols = np.triu_indices(p)
+        hg[:, rows, cols] = sums[:, p:]
+        hg[:, cols, rows] = sums[:, p:]
+        return sums[:, :p], hg
 
     def residuals_and_jacobian(self, x):
         """The residuals (M,) and their Jacobian (M, P), float32, on the host (for solvers that
@@ -209,19 +217,28 @@ def _sums(space: ParameterSpace, arrays: dict, u: list, jacobian: bool):
     return acc
 
 
-def _terms(space: ParameterSpace, arrays: dict, u: list) -> list:
-    """The residuals ``(r - π f)/σ`` of ``arrays`` per channel, then per free variable a the
-    channels of ∂ρ/∂u_a (forward-mode tangents, as in :func:`_sums`, not summed): 3 + 3P arrays,
-    one kernel."""
+def _cluster_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
+    """``[u_g (P entries), H_g (upper triangle, row-major)]`` per cluster ``arrays["c"]`` as one
+    float64 array of ``groups`` rows: the residuals ``(r - π f)/σ`` and their forward-mode
+    tangents (as in :func:`_sums`), scatter-added per cluster. One kernel."""
     dr.enable_grad(u)
     res = (arrays["r"] - dr.pi * space.model.eval(arrays["wi"], arrays["wo"], space.drjit_params(u))) * arrays["w"]
-    out = list(dr.detach(res))
+    p = len(u)
+    r = [mi.Float64(c) for c in dr.detach(res)]
+    d = []
     for uk in u:
         dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
-        out += list(dr.grad(res))
+        d.append([mi.Float64(c) for c in dr.grad(res)])
         dr.clear_grad(res)
-    dr.eval(out)
-    return out
+    terms = [d[a][0] * r[0] + d[a][1] * r[1] + d[a][2] * r[2] for a in range(p)]
+    terms += [d[a][0] * d[b][0] + d[a][1] * d[b][1] + d[a][2] * d[b][2] for a in range(p) for b in range(a, p)]
+    k = len(terms)
+    acc = dr.zeros(mi.Float64, groups * k)
+    base = arrays["c"] * k
+    for j, value in enumerate(terms):
+        dr.scatter_add(acc, value, base + j, mode=dr.ReduceMode.Direct)  # atomics: no per-thread copies of acc
+    dr.eval(acc)
+    return acc
 
 
 def validate_samples(light, view, reflectance, sigma) -> None:
@@ -367,7 +384,9 @@ def region_uncertainty(space: ParameterSpace, problem: _Problem, params: dict, p
         cov = bootstrap_covariance(space, x, held, cluster, data, seed=seed)
     else:
         jtj, _, loss = problem.system(x)
-        cov = covariance(x, jtj, loss, *problem.terms(x), cluster, held, method)
+        index, groups = cluster_index(np.arange(problem.n) if cluster is None else cluster)
+        u, hg = problem.cluster_sums(x, index, groups) if method != "laplace" else (None, None)
+        cov = covariance(x, jtj, loss, problem.n, u, hg, held, method)
     return parameter_intervals(space, cov, statuses)
 
 
@@ -388,8 +407,7 @@ def bootstrap_covariance(space: ParameterSpace, x, held, cluster, data: tuple, d
     most ``iterations`` LM steps; ``held`` entries are left out."""
     light, view, reflectance, sigma = data
     cluster = np.arange(len(sigma)) if cluster is None else np.asarray(cluster)
-    _, index = np.unique(cluster, return_inverse=True)
-    g = int(index.max()) + 1
+    index, g = cluster_index(cluster)
     rng = np.random.default_rng(seed)
     xs = []
     for _ in range(draws):

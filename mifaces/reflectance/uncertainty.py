@@ -129,9 +129,21 @@ def _inverse(h: np.ndarray) -> np.ndarray:
     return inv / np.outer(d, d)
 
 
-def covariance(x, jtj, loss: float, residuals: np.ndarray, jacobian: np.ndarray, cluster: np.ndarray | None,
-               held, method: str = METHODS[0]) -> Covariance:
-    """Cov(x̂) by ``jackknife``, ``sandwich`` or ``laplace`` (module docstring).
+def cluster_index(cluster) -> tuple[np.ndarray, int]:
+    """Clusters (non-negative integers, N) renumbered 0 … G - 1 in order, and G."""
+    cluster = np.asarray(cluster, np.int64)
+    if cluster.size == 0:
+        return cluster, 0
+    if cluster.min() < 0:
+        raise ValueError("cluster numbers must be non-negative")
+    used = np.bincount(cluster) > 0
+    lookup = np.cumsum(used) - 1
+    return lookup[cluster], int(used.sum())
+
+
+def covariance(x, jtj, loss: float, samples: int, scores: np.ndarray | None, hessians: np.ndarray | None, held,
+               method: str = METHODS[0]) -> Covariance:
+    """Cov(x̂) by ``sandwich``, ``jackknife`` or ``laplace`` (module docstring).
 
     Parameters
     ----------
@@ -141,49 +153,51 @@ def covariance(x, jtj, loss: float, residuals: np.ndarray, jacobian: np.ndarray,
         JᵀJ at ``x`` (summed over samples and channels).
     loss : float
         E = ½ Σ |ρ|² at ``x``.
-    residuals : ndarray (N, 3)
-        Each sample's weighted residuals ρ_i.
-    jacobian : ndarray (N, 3, P)
-        Their derivatives with respect to x.
-    cluster : ndarray (N,) or None
-        Cluster of each sample (any integers); None: each sample its own.
+    samples : int
+        N, the samples behind the sums.
+    scores : ndarray (G, P) or None
+        Per cluster, u_g = Σ_{i ∈ g} J_iᵀ ρ_i (not needed by ``laplace``).
+    hessians : ndarray (G, P, P) or None
+        Per cluster, H_g = Σ_{i ∈ g} J_iᵀ J_i (needed by ``jackknife`` only).
     held : ndarray (P,) of bool
         Entries held fixed (their rows and columns are left out).
     method : str
-        ``jackknife``, ``sandwich`` or ``laplace``.
+        ``sandwich``, ``jackknife`` or ``laplace``.
     """
     x, jtj = np.asarray(x, np.float64), np.asarray(jtj, np.float64)
-    residuals, jacobian = np.asarray(residuals, np.float64), np.asarray(jacobian, np.float64)
     held = np.asarray(held, bool)
-    n, p = len(residuals), len(x)
-    if jtj.shape != (p, p) or held.shape != (p,) or residuals.shape != (n, 3) or jacobian.shape != (n, 3, p):
-        raise ValueError(f"x {x.shape}, jtj {jtj.shape}, held {held.shape}, residuals {residuals.shape} and "
-                         f"jacobian {jacobian.shape} disagree")
+    n, p = int(samples), len(x)
     if method not in METHODS or method == "bootstrap":
         raise ValueError(f"method must be one of {[m for m in METHODS if m != 'bootstrap']} here, got {method!r}")
+    needs = {"sandwich": ("scores",), "jackknife": ("scores", "hessians"), "laplace": ()}[method]
+    given = {"scores": scores, "hessians": hessians}
+    for name in needs:
+        if given[name] is None:
+            raise ValueError(f"the {method} covariance needs the clusters' {name}")
+    g = 0 if scores is None else len(scores)
+    if (jtj.shape != (p, p) or held.shape != (p,) or (scores is not None and np.shape(scores) != (g, p))
+            or (hessians is not None and np.shape(hessians) != (g, p, p))):
+        raise ValueError(f"x {x.shape}, jtj {jtj.shape}, held {held.shape}, scores {np.shape(scores)} and "
+                         f"hessians {np.shape(hessians)} disagree")
     free = ~held
     k = int(free.sum())
     cov = np.zeros((p, p))
-    index = np.arange(n) if cluster is None else np.unique(np.asarray(cluster), return_inverse=True)[1]
-    g = int(index.max()) + 1 if n else 0
+    block = None
     if method == "laplace":
         dof = float(3 * n - k)
-        block = 2.0 * float(loss) / max(dof, 1.0) * _inverse(jtj[np.ix_(free, free)]) if k else None
+        if k:
+            block = 2.0 * float(loss) / max(dof, 1.0) * _inverse(jtj[np.ix_(free, free)])
     else:
         dof = float(g - 1)
-        jac = jacobian[:, :, free]
-        scores = np.einsum("ncp,nc->np", jac, residuals)
-        u = np.stack([np.bincount(index, weights=scores[:, a], minlength=g) for a in range(k)], axis=1)
-        if k == 0:
-            block = None
-        elif g < 2:
+        u = np.asarray(scores, np.float64)[:, free]
+        if k and g < 2:
             block = np.diag(np.full(k, np.inf))
-        elif method == "sandwich":
-            inv = _inverse(jtj[np.ix_(free, free)])
+        elif k and method == "sandwich":
             c = g / (g - 1) * (n - 1) / max(n - k, 1)
-            block = _sandwich(inv, u.T @ u, c)
-        else:
-            block = _jackknife(jtj[np.ix_(free, free)], jac, index, u)
+            block = _sandwich(_inverse(jtj[np.ix_(free, free)]), u.T @ u, c)
+        elif k:
+            hg = np.asarray(hessians, np.float64)[:, free][:, :, free]
+            block = _jackknife(jtj[np.ix_(free, free)], hg, u)
     if block is not None:
         cov[np.ix_(free, free)] = block
     return Covariance(x=x, covariance=cov, held=held, dof=dof, method=method)
@@ -198,18 +212,12 @@ def _sandwich(inv: np.ndarray, meat: np.ndarray, c: float) -> np.ndarray:
     return block
 
 
-def _jackknife(h: np.ndarray, jac: np.ndarray, index: np.ndarray, u: np.ndarray) -> np.ndarray:
+def _jackknife(h: np.ndarray, hg: np.ndarray, u: np.ndarray) -> np.ndarray:
     """(G-1)/G Σ_g d_g d_gᵀ with d_g = (H - H_g)⁻¹ u_g, the one-step change of x̂ when
-    cluster g is left out (H_g = Σ_{i ∈ g} J_iᵀJ_i): the cluster jackknife (CR3,
-    MacKinnon & White 1985; Cameron & Miller 2015, sec. VI.B), which unlike the plain
-    sandwich does not shrink when a few clusters carry a parameter (a highlight seen
-    in a few texels). A parameter that one cluster alone constrains is infinite."""
+    cluster g is left out: the cluster jackknife (CR3, MacKinnon & White 1985; Cameron &
+    Miller 2015, sec. VI.B), meant not to shrink when a few clusters carry a parameter.
+    A parameter that one cluster alone constrains is infinite."""
     g, k = u.shape
-    hg = np.zeros((g, k, k))
-    for a in range(k):
-        for b in range(a, k):
-            hg[:, a, b] = hg[:, b, a] = np.bincount(index, weights=np.einsum("nc,nc->n", jac[:, :, a], jac[:, :, b]),
-                                                    minlength=g)
     d = np.sqrt(np.maximum(np.diag(h), 1e-300))
     left = (h[None] - hg) / np.outer(d, d)  # scaled to a unit diagonal of H
     try:
