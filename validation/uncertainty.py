@@ -15,11 +15,13 @@
    single texels, the Laplace approximation, the bootstrap). The tile size was
    chosen on the tuning seeds (:data:`TUNING_SEEDS`), which the coverage
    tables leave out.
-4. **Cost.** The fit's time with and without the default estimate.
+4. **Cost** (``--cost N``). The region fits' time with and without the
+   default estimate, on N Cook-Torrance captures, texture 128² and 256².
 
-Run:  python validation/uncertainty.py [--seeds 20] [--other-seeds 20] [--out-seeds 6] [--tune]
-Writes validation/results/uncertainty.json and uncertainty.png (and, with
-``--tune``, uncertainty_tuning.json). Simulated captures go to a temporary folder.
+Run:  python validation/uncertainty.py [--seeds 20] [--other-seeds 20] [--out-seeds 6] [--tune] [--cost N]
+Writes validation/results/uncertainty.json and uncertainty.png (with
+``--tune``, uncertainty_tuning.json; with ``--cost``, uncertainty_cost.json).
+Simulated captures go to a temporary folder.
 """
 
 from __future__ import annotations
@@ -91,13 +93,13 @@ def _simulate(folder: Path, seed: int, spp: int = SPP, clean: bool = False, **op
     return capture, face, shapes, capture_samples(capture, shapes, face, TEXTURE, progress=False)
 
 
-def _fit(capture, face, shapes, samples, model, method, tile=None):
+def _fit(capture, face, shapes, samples, model, method, tile=None, texture=TEXTURE):
     default = unc.TILE_AT_128
     unc.TILE_AT_128 = default if tile is None else tile
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return fit_brdf(capture, model, shapes, face_model=face, resolution=TEXTURE, samples=samples,
+            return fit_brdf(capture, model, shapes, face_model=face, resolution=texture, samples=samples,
                             progress=False, uncertainty=method)
     finally:
         unc.TILE_AT_128 = default
@@ -138,8 +140,8 @@ def _truth_of(capture, model) -> dict:
         if truth["model"] == model else {}
 
 
-def same_family(model: str, seeds, tmp: Path, variants=VARIANTS) -> tuple[list, list]:
-    records, timing = [], []
+def same_family(model: str, seeds, tmp: Path, variants=VARIANTS) -> list:
+    records = []
     for seed in seeds:
         t = time.perf_counter()
         params = skin_truth(seed) if model == "cooktorrance" else None
@@ -148,19 +150,35 @@ def same_family(model: str, seeds, tmp: Path, variants=VARIANTS) -> tuple[list, 
         for variant, (method, tile) in variants.items():
             estimate = _fit(capture, face, shapes, samples, model, method, tile)
             records += _checks(estimate, truth, variant, {"truth_model": model, "model": model, "seed": seed})
-        timing.append(_cost(capture, face, shapes, samples, model))
         print(f"{model} seed {seed}: {time.perf_counter() - t:.1f} s", flush=True)
-    return records, timing
+    return records
 
 
-def _cost(capture, face, shapes, samples, model, repeats: int = 3) -> dict:
-    """The region fits' time (``seconds['fit']``) without and with the default estimate, best of ``repeats``."""
-    times = {}
-    for method in (None, unc.METHODS[0]) * repeats:
-        seconds = _fit(capture, face, shapes, samples, model, method).seconds["fit"]
-        times[str(method)] = min(times.get(str(method), np.inf), seconds)
-    return {"model": model, "without": times["None"], "with": times[unc.METHODS[0]],
-            "samples": int(len(samples))}
+def cost(seeds, tmp: Path, textures=(128, 256), repeats: int = 5) -> dict:
+    """The region fits' time (``seconds['fit']``) without and with the default estimate, per model,
+    capture and texture resolution: the best of ``repeats`` interleaved runs, after one run of each
+    (the first in the process, which compiles the kernels, is recorded apart)."""
+    rows, first = [], {}
+    for seed in seeds:
+        capture = _simulate(tmp / f"cost_{seed}", seed)[:3]
+        for texture in textures:
+            samples = capture_samples(*capture, texture, progress=False)
+            for model in MODELS:
+                times = {}
+                for i, method in enumerate((None, unc.METHODS[0]) * (repeats + 1)):
+                    seconds = _fit(*capture, samples, model, method, texture=texture).seconds["fit"]
+                    if i < 2:
+                        first.setdefault(f"{model}_{method}", seconds)
+                        continue
+                    times[str(method)] = min(times.get(str(method), np.inf), seconds)
+                rows.append({"seed": seed, "texture": texture, "model": model, "samples": int(len(samples)),
+                             "without": times["None"], "with": times[unc.METHODS[0]]})
+                print(rows[-1], flush=True)
+    ratio = np.array([r["with"] / r["without"] - 1 for r in rows])
+    by_texture = {t: float(np.median([r["with"] / r["without"] - 1 for r in rows if r["texture"] == t]))
+                  for t in textures}
+    return {"method": unc.METHODS[0], "overhead_median": float(np.median(ratio)),
+            "overhead_median_by_texture": by_texture, "first_call_seconds": first, "fits": rows}
 
 
 def out_of_family(name: str, seeds, tmp: Path, variants=VARIANTS) -> list:
@@ -269,17 +287,22 @@ def main() -> None:
     parser.add_argument("--other-seeds", type=int, default=20, help="seeds of the Ward and Lafortune truths")
     parser.add_argument("--out-seeds", type=int, default=6, help="seeds of each out-of-family truth")
     parser.add_argument("--tune", action="store_true", help="only the tuning seeds (tile size)")
+    parser.add_argument("--cost", type=int, default=0, metavar="N",
+                        help="only the cost: fit times with and without the default estimate on N captures")
     args = parser.parse_args()
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
+        if args.cost:
+            write_json(RESULTS / "uncertainty_cost.json", cost(range(args.cost), tmp))
+            return
         if args.tune:
             variants = ({f"sandwich_tile{t}": ("sandwich", t) for t in (1, 4, 8, 16)}
                         | {f"jackknife_tile{t}": ("jackknife", t) for t in (1, 4, 8, 16)}
                         | {"laplace": ("laplace", None), "bootstrap": ("bootstrap", None)})
             records = []
             for model in ("cooktorrance", "phong"):
-                records += same_family(model, TUNING_SEEDS, tmp, variants)[0]
+                records += same_family(model, TUNING_SEEDS, tmp, variants)
             table = {v: {m: coverage(records, variant=v, model=m) for m in ("cooktorrance", "phong")}
                      for v in variants}
             write_json(RESULTS / "uncertainty_tuning.json", {"seeds": list(TUNING_SEEDS), "coverage": table})
@@ -288,19 +311,17 @@ def main() -> None:
         result = {"image": IMAGE, "measurements": MEASUREMENTS, "spp": SPP, "texture": TEXTURE,
                   "reference_spp": REFERENCE_SPP, "tile_at_128": unc.TILE_AT_128, "skin_ranges": SKIN_RANGES,
                   "variants": {k: list(v) for k, v in VARIANTS.items()}, "seeds": {}}
-        records, timing = [], []
+        records = []
 
         def save():
-            result.update(coverage=summary(records), skin_check=skin_check(records), cost=_cost_summary(timing),
-                          records=records, seconds=time.perf_counter() - t0)
+            result.update(coverage=summary(records), skin_check=skin_check(records), records=records,
+                          seconds=time.perf_counter() - t0)
             write_json(RESULTS / "uncertainty.json", result)
 
         for model in MODELS:
             n = args.seeds if model in ("cooktorrance", "phong") else args.other_seeds
             result["seeds"][model] = n
-            new, cost = same_family(model, range(n), tmp)
-            records += new
-            timing += cost
+            records += same_family(model, range(n), tmp)
             save()
         for name in OUT_OF_FAMILY:
             result["seeds"][name] = args.out_seeds
@@ -309,16 +330,6 @@ def main() -> None:
     figure(result, RESULTS / "uncertainty.png")
     print(json.dumps({t: {m: {v: (e["pooled"]["coverage"], e["small"]["coverage"]) for v, e in d.items()}
                           for m, d in table.items()} for t, table in result["coverage"].items()}, indent=1))
-
-
-def _cost_summary(timing: list) -> dict:
-    if not timing:
-        return {}
-    without = np.array([t["without"] for t in timing])
-    with_ = np.array([t["with"] for t in timing])
-    return {"fits": len(timing), "fit_seconds_without": float(np.median(without)),
-            "fit_seconds_with": float(np.median(with_)),
-            "overhead_median": float(np.median(with_ / without - 1)), "per_fit": timing}
 
 
 if __name__ == "__main__":
