@@ -232,12 +232,12 @@ def summary(records: list) -> dict:
 
 
 def skin_check(records: list) -> list:
-    """Per Cook-Torrance seed (default estimate): the drawn skin truth and whether every fitted
+    """Per Cook-Torrance seed (the default estimate): the drawn skin truth and whether every fitted
     skin parameter's interval holds it."""
     out = []
     for seed in sorted({r["seed"] for r in records if r["truth_model"] == "cooktorrance"}):
         rows = [r for r in records if r["truth_model"] == "cooktorrance" and r["seed"] == seed
-                and r["region"] == "skin" and r["variant"] == "sandwich"]
+                and r["region"] == "skin" and r["variant"] == unc.METHODS[0]]
         out.append({"seed": seed, "truth": skin_truth(seed)["regions"]["skin"],
                     "all_covered": all(r["covered"] for r in rows),
                     "parameters": [{k: r[k] for k in ("parameter", "channel", "truth", "fitted", "lo", "hi",
@@ -287,10 +287,19 @@ def main() -> None:
     parser.add_argument("--other-seeds", type=int, default=20, help="seeds of the Ward and Lafortune truths")
     parser.add_argument("--out-seeds", type=int, default=6, help="seeds of each out-of-family truth")
     parser.add_argument("--tune", action="store_true", help="only the tuning seeds (tile size)")
+    parser.add_argument("--summarize", action="store_true",
+                        help="only the tables and the figure again, from the records uncertainty.json holds")
     parser.add_argument("--cost", type=int, default=0, metavar="N",
                         help="only the cost: fit times with and without the default estimate on N captures")
     args = parser.parse_args()
     t0 = time.perf_counter()
+    if args.summarize:
+        result = json.loads((RESULTS / "uncertainty.json").read_text())
+        result.update(default=unc.METHODS[0], coverage=summary(result["records"]),
+                      skin_check=skin_check(result["records"]))
+        write_json(RESULTS / "uncertainty.json", result)
+        figure(result, RESULTS / "uncertainty.png")
+        return
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         if args.cost:
@@ -308,7 +317,8 @@ def main() -> None:
             write_json(RESULTS / "uncertainty_tuning.json", {"seeds": list(TUNING_SEEDS), "coverage": table})
             print(json.dumps(table, indent=1))
             return
-        result = {"image": IMAGE, "measurements": MEASUREMENTS, "spp": SPP, "texture": TEXTURE,
+        result = {"default": unc.METHODS[0], "image": IMAGE, "measurements": MEASUREMENTS, "spp": SPP,
+                  "texture": TEXTURE,
                   "reference_spp": REFERENCE_SPP, "tile_at_128": unc.TILE_AT_128, "skin_ranges": SKIN_RANGES,
                   "variants": {k: list(v) for k, v in VARIANTS.items()}, "seeds": {}}
         records = []

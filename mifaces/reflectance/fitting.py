@@ -35,7 +35,7 @@ from ..status import AT_BOUND, CONVERGED, PRIOR
 from .levenberg_marquardt import levenberg_marquardt
 from .parameters import ParameterSpace, conservative_start, linear_start
 from .uncertainty import (BOOTSTRAP_DRAWS, METHODS, NOT_IDENTIFIED, PRUNED, Covariance, cluster_index, covariance,
-                          held_entries, parameter_intervals, prior_intervals)
+                          held_entries, independent_clusters, parameter_intervals, prior_intervals)
 
 
 @dataclass
@@ -289,8 +289,8 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         step, for reports that evaluate the full-data loss along the way.
     cluster : ndarray (N,), optional
         Cluster of each sample for the sandwich and bootstrap covariance (e.g.
-        :func:`~mifaces.reflectance.uncertainty.tile_clusters`); default: each
-        sample its own.
+        :func:`~mifaces.reflectance.uncertainty.tile_clusters`); default: the
+        samples independent (:func:`~mifaces.reflectance.uncertainty.independent_clusters`).
     uncertainty : str or None
         How :attr:`RegionFit.uncertainty` is estimated at the optimum, one of
         :data:`~mifaces.reflectance.uncertainty.METHODS`; None leaves it out.
@@ -384,7 +384,7 @@ def region_uncertainty(space: ParameterSpace, problem: _Problem, params: dict, p
         cov = bootstrap_covariance(space, x, held, cluster, data, seed=seed)
     else:
         jtj, _, loss = problem.system(x)
-        index, groups = cluster_index(np.arange(problem.n) if cluster is None else cluster)
+        index, groups = cluster_index(independent_clusters(problem.n) if cluster is None else cluster)
         u, hg = problem.cluster_sums(x, index, groups) if method != "laplace" else (None, None)
         cov = covariance(x, jtj, loss, problem.n, u, hg, held, method)
     return parameter_intervals(space, cov, statuses)
@@ -406,7 +406,7 @@ def bootstrap_covariance(space: ParameterSpace, x, held, cluster, data: tuple, d
     cluster drawn m times weighs m times: σ/√m), each started at ``x`` with at
     most ``iterations`` LM steps; ``held`` entries are left out."""
     light, view, reflectance, sigma = data
-    cluster = np.arange(len(sigma)) if cluster is None else np.asarray(cluster)
+    cluster = independent_clusters(len(sigma)) if cluster is None else np.asarray(cluster)
     index, g = cluster_index(cluster)
     rng = np.random.default_rng(seed)
     xs = []

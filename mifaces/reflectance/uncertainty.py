@@ -4,34 +4,44 @@ and 95 % intervals that stay inside each parameter's range.
 The fit minimises E(x) = ½ Σ_i |ρ_i(x)|² over the unconstrained vector x of
 :class:`~mifaces.reflectance.parameters.ParameterSpace` (ρ_i the weighted RGB
 residual (r_i - π f)/σ_i of sample i). With H = JᵀJ (the Gauss-Newton
-Hessian the LM step already forms) two estimates of Cov(x̂) are offered:
+Hessian the LM step already forms) Cov(x̂) is estimated by one of:
 
+``jackknife`` (the default)
+    The cluster jackknife (CR3; MacKinnon & White 1985, Cameron & Miller 2015,
+    sec. VI.B): Cov = (G-1)/G Σ_g d_g d_gᵀ, d_g = (H - H_g)⁻¹ u_g the one-step
+    change of x̂ when cluster g is left out, with u_g = Σ_{i ∈ g} J_iᵀ ρ_i the
+    cluster's score and H_g = Σ_{i ∈ g} J_iᵀ J_i its share of H. The clusters
+    are texel tiles (:data:`TILE_AT_128` texels a side at texture resolution
+    128): the samples of one texel share its albedo's departure from the
+    region's (a texel-level effect the region fit does not model), and
+    neighbouring texels of one photograph share the pixel they were resampled
+    from and much of their albedo; those correlations stay inside a tile. Unlike
+    the plain sandwich it does not shrink when a few tiles carry a parameter (the
+    highlight of a lamp is seen on a few patches of the face).
+``sandwich``
+    The cluster-robust sandwich (CR1; Liang & Zeger 1986; Cameron & Miller
+    2015, eq. 11) over the same tiles: Cov = c H⁻¹ (Σ_g u_g u_gᵀ) H⁻¹ with
+    c = G/(G-1) · (N-1)/(N-P).
 ``laplace``
     The Laplace approximation Cov = s² H⁻¹ with s² = 2 E / (3N - P): every
-    colour channel of every sample an independent draw of equal weighted
-    noise (Bates & Watts 1988, sec. 2.3).
-``sandwich`` (the default)
-    The cluster-robust ("sandwich") estimate Cov = c H⁻¹ B H⁻¹,
-    B = Σ_g u_g u_gᵀ, u_g = Σ_{i ∈ g} J_iᵀ ρ_i the score of cluster g
-    (Liang & Zeger 1986; Cameron & Miller 2015, eq. 11), with the small-sample
-    factor c = G/(G-1) · (N-1)/(N-P) for G clusters. The clusters are texel
-    tiles (:data:`TILE` texels a side): the samples of one texel share its
-    albedo's departure from the region's (a texel-level effect the region fit
-    does not model), and neighbouring texels of one photograph share the pixel
-    they were resampled from; both correlations stay inside a tile. It also
-    holds when the model is not the truth's family (it estimates the spread
-    around the best fit of the model, not around a truth it cannot express).
+    colour channel of every sample an independent draw of equal weighted noise
+    (Bates & Watts 1988, sec. 2.3). Far too narrow on faces (docs/uncertainty.md).
 ``bootstrap``
-    Refits on tiles drawn with replacement (:data:`BOOTSTRAP_DRAWS` draws,
-    each a weighted refit from the optimum, few LM steps): no linearisation,
+    Refits on tiles drawn with replacement (:data:`BOOTSTRAP_DRAWS` draws, each
+    a weighted refit from the optimum, at most 10 LM steps): no linearisation,
     but a refit per draw.
+
+The sums u_g and H_g come from one Dr.Jit kernel at the optimum
+(:meth:`mifaces.reflectance.fitting._Problem.cluster_sums`), H and E from the
+fit's own; all are model-agnostic: they also hold when the model is not the
+truth's family (they estimate the spread around the model's best fit).
 
 Intervals are symmetric in x, the fit's own coordinates (the logit of a
 parameter's position within its range, on a log scale for parameters
 spanning decades), and mapped back, so they never leave the range and are
 asymmetric in the parameter's units; ``std`` is the delta-method standard
 deviation in the parameter's units. Quantiles are Student's t with G - 1
-(sandwich, bootstrap) or 3N - P (Laplace) degrees of freedom. A Lafortune
+(jackknife, sandwich, bootstrap) or 3N - P (Laplace) degrees of freedom. A Lafortune
 coefficient, which the fit scales by its lobe's energy bound, gets the
 delta-method interval ± t·std in its own units, clipped to that bound.
 
@@ -55,13 +65,16 @@ import scipy.stats
 from .parameters import ParameterSpace
 
 #: The estimates of the covariance, the default first.
-METHODS = ("sandwich", "jackknife", "laplace", "bootstrap")
+METHODS = ("jackknife", "sandwich", "laplace", "bootstrap")
 #: The intervals' coverage.
 LEVEL = 0.95
-#: Side, in texels at texture resolution 128, of the sandwich's clusters (scaled with the resolution):
-#: chosen on tuning captures the coverage tables leave out (validation/results/uncertainty_tuning.json:
-#: single texels cover 54-59 %, tiles of 4 85-90 %, of 8 and 16 89-93 %).
+#: Side, in texels at texture resolution 128, of the clusters (scaled with the resolution). With the
+#: method, chosen on tuning captures the coverage tables leave out (validation/results/
+#: uncertainty_tuning.json: the jackknife over single texels covers 54-59 %, over tiles of 4 86-92 %,
+#: of 8 95 %, of 16 96-98 %; the sandwich over tiles of 8 89-93 %).
 TILE_AT_128 = 8
+#: Most clusters when the samples come without any (each sample its own, grouped beyond this number).
+MAX_CLUSTERS = 4096
 #: Draws of the bootstrap.
 BOOTSTRAP_DRAWS = 50
 #: Statuses of parameters without an interval.
@@ -127,6 +140,14 @@ def _inverse(h: np.ndarray) -> np.ndarray:
         inv[loose, :] = inv[:, loose] = 0.0
         inv[loose, loose] = np.inf
     return inv / np.outer(d, d)
+
+
+def independent_clusters(samples: int) -> np.ndarray:
+    """Clusters for samples taken as independent: each its own, or, beyond
+    :data:`MAX_CLUSTERS`, that many blocks of consecutive samples (any partition of
+    independent samples gives a valid cluster-robust estimate; fewer clusters keep the
+    jackknife's per-cluster sums small)."""
+    return np.arange(samples) * min(samples, MAX_CLUSTERS) // max(samples, 1)
 
 
 def cluster_index(cluster) -> tuple[np.ndarray, int]:
@@ -336,5 +357,6 @@ def prior_intervals(params: dict) -> dict:
     return {name: {"status": PRIOR} for name in params}
 
 
-__all__ = ["METHODS", "LEVEL", "TILE_AT_128", "BOOTSTRAP_DRAWS", "Covariance", "covariance", "parameter_intervals",
-           "held_entries", "prior_intervals", "tile_clusters"]
+__all__ = ["METHODS", "LEVEL", "TILE_AT_128", "MAX_CLUSTERS", "BOOTSTRAP_DRAWS", "Covariance", "covariance",
+           "cluster_index", "independent_clusters", "parameter_intervals", "held_entries", "prior_intervals",
+           "tile_clusters"]
