@@ -169,7 +169,8 @@ def test_covariance_rejects_bad_input():
 
 
 def test_cluster_sums_match_the_per_sample_jacobian():
-    """The kernel's per-cluster u_g and H_g equal sums of the host-side residuals and Jacobian."""
+    """The kernel's per-cluster u_g and H_g equal sums of the host-side residuals and Jacobian; they
+    add up to the fit's own JᵀJ, and its loss is the fit's."""
     from mifaces.reflectance.fitting import _Problem
     from mifaces.reflectance.parameters import ParameterSpace
 
@@ -182,7 +183,10 @@ def test_cluster_sums_match_the_per_sample_jacobian():
                        np.full(n, 0.5, np.float32))
     x = space.vector(TRUTH) + 0.1
     index, groups = cluster_index(rng.integers(0, 40, n) * 3)
-    u, hg = problem.cluster_sums(x, index, groups)
+    u, hg, loss = problem.cluster_sums(x, index, groups)
+    jtj, _, fit_loss = problem.system(x)
+    np.testing.assert_allclose(hg.sum(axis=0), jtj, rtol=1e-5)
+    assert loss == pytest.approx(fit_loss, rel=1e-6)
     res, jac = problem.residuals_and_jacobian(x)
     res, jac = res.reshape(3, n).T.astype(np.float64), jac.reshape(3, n, -1).transpose(1, 0, 2).astype(np.float64)
     for g in (0, groups // 2, groups - 1):

@@ -162,7 +162,7 @@ def cost(seeds, tmp: Path, textures=(128, 256), repeats: int = 5) -> dict:
     for seed in seeds:
         capture = _simulate(tmp / f"cost_{seed}", seed)[:3]
         for texture in textures:
-            samples = capture_samples(*capture, texture, progress=False)
+            samples = capture_samples(capture[0], capture[2], capture[1], texture, progress=False)
             for model in MODELS:
                 times = {}
                 for i, method in enumerate((None, unc.METHODS[0]) * (repeats + 1)):
@@ -245,38 +245,61 @@ def skin_check(records: list) -> list:
     return out
 
 
+def markdown(result: dict) -> str:
+    """The coverage tables of docs/uncertainty.md: per truth and model, every estimate's pooled coverage,
+    and the default's on small regions, the others, skin, the glossy parameters and the diffuse albedo."""
+    def pct(entry):
+        return "n/a" if entry["coverage"] is None else f"{100 * entry['coverage']:.0f} % ({entry['intervals']})"
+
+    default = result["default"]
+    lines = ["| truth | model | seeds | " + " | ".join(VARIANTS) + f" | {default}: small regions | others | skin | "
+             "glossy | diffuse |", "|---" * (len(VARIANTS) + 8) + "|"]
+    for truth, models in result["coverage"].items():
+        for model, entry in models.items():
+            d = entry[default]
+            glossy = coverage([r for r in result["records"] if r["parameter"] != "diffuse_reflectance"],
+                              truth_model=truth, model=model, variant=default)
+            diffuse = d["parameters"].get("diffuse_reflectance", {"coverage": None, "intervals": 0})
+            lines.append(f"| {truth} | {model} | {result['seeds'][truth]} | "
+                         + " | ".join(pct(entry[v]["pooled"]) for v in VARIANTS)
+                         + f" | {pct(d['small'])} | {pct(d['large'])} | {pct(d['regions']['skin'])} | {pct(glossy)} | "
+                         + f"{pct(diffuse)} |")
+    return "\n".join(lines)
+
+
 def figure(result: dict, path: Path) -> None:
-    """Coverage per model and variant, pooled and small regions, same family and out of family."""
+    """Coverage per model and estimate (bars pooled, dashes small regions): the same-family truths in
+    one panel, each out-of-family truth in its own."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     table = result["coverage"]
-    truths = list(table)
-    fig, axes = plt.subplots(1, len(truths), figsize=(4.2 * len(truths), 3.6), squeeze=False, sharey=True)
-    for ax, truth in zip(axes[0], truths):
-        models = list(table[truth])
-        width = 0.8 / len(VARIANTS)
+    panels = [("same family (truth = fitted model)", {m: table[m][m] for m in MODELS if m in table})]
+    panels += [(f"truth {t} (out of family)", table[t]) for t in OUT_OF_FAMILY if t in table]
+    fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), squeeze=False, sharey=True)
+    width = 0.8 / len(VARIANTS)
+    for ax, (title, models) in zip(axes.ravel(), panels):
         for i, variant in enumerate(VARIANTS):
-            for j, model in enumerate(models):
-                entry = table[truth][model].get(variant)
-                if entry is None:
-                    continue
-                ax.bar(j + i * width, entry["pooled"]["coverage"], width, color=f"C{i}",
+            for j, entry in enumerate(models.values()):
+                ax.bar(j + i * width, entry[variant]["pooled"]["coverage"], width, color=f"C{i}",
                        label=variant if j == 0 else None)
-                small = entry["small"]["coverage"]
+                small = entry[variant]["small"]["coverage"]
                 if small is not None:
-                    ax.plot(j + i * width, small, "k_", markersize=8)
+                    ax.plot(j + i * width, small, "k_", markersize=7)
         ax.axhspan(0.85, 0.99, color="0.9", zorder=0)
         ax.axhline(0.95, color="k", lw=0.8)
-        ax.set_xticks(np.arange(len(models)) + 0.4 - width / 2, models, fontsize=7)
-        ax.set_title(f"truth {truth}", fontsize=9)
+        ax.set_xticks(np.arange(len(models)) + 0.4 - width / 2, list(models), fontsize=8)
+        ax.set_title(title, fontsize=9)
         ax.set_ylim(0, 1.02)
-    axes[0][0].set_ylabel("coverage of 95 % intervals (bars pooled, - small regions)")
-    axes[0][0].legend(fontsize=7, loc="lower left")
-    fig.suptitle("SIMULATED captures: how often the 95 % interval holds the true value "
-                 "(band: 85-99 %)", fontsize=9)
+    for ax in axes.ravel()[len(panels):]:
+        ax.axis("off")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("coverage of the 95 % intervals")
+    axes[0][0].legend(fontsize=7, loc="lower left", ncol=2)
+    fig.suptitle("SIMULATED captures: how often the 95 % interval holds the true value (bars: pooled, "
+                 "dashes: lips and eyebrows; band 85-99 %)", fontsize=9)
     fig.tight_layout()
     save_figure(fig, path, dpi=90)
 
@@ -299,6 +322,7 @@ def main() -> None:
                       skin_check=skin_check(result["records"]))
         write_json(RESULTS / "uncertainty.json", result)
         figure(result, RESULTS / "uncertainty.png")
+        print(markdown(result))
         return
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)

@@ -138,12 +138,12 @@ class _Problem:
         jtj[cols, rows] = values[1:1 + len(rows)]
         return jtj, values[1 + len(rows):], float(values[0])
 
-    def cluster_sums(self, x, cluster: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray]:
+    def cluster_sums(self, x, cluster: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray, float]:
         """Per cluster g, the score u_g = Σ_{i ∈ g} J_iᵀ ρ_i (G, P) and H_g = Σ_{i ∈ g} J_iᵀ J_i
-        (G, P, P), summed over the colour channels, at ``x``; ``cluster`` (N,) numbers the clusters
-        0 … ``groups`` - 1. One kernel (frozen per parameter space as :meth:`system`'s is), whose
-        sums stay on the Dr.Jit side: for the covariance (:mod:`mifaces.reflectance.uncertainty`),
-        once per fit."""
+        (G, P, P), summed over the colour channels, and the loss ½ Σ |ρ|², at ``x``; ``cluster``
+        (N,) numbers the clusters 0 … ``groups`` - 1 (JᵀJ = Σ_g H_g). One kernel (frozen per
+        parameter space as :meth:`system`'s is), whose sums stay on the Dr.Jit side: for the
+        covariance (:mod:`mifaces.reflectance.uncertainty`), once per fit."""
         key = ("clusters",) + _signature(self.space)
         if key not in _FROZEN:
             space = self.space
@@ -152,14 +152,14 @@ class _Problem:
         arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w,
                   "c": device_array(np.uint32, np.asarray(cluster, np.uint32))}
         p = len(x)
-        k = p + p * (p + 1) // 2
+        k = 1 + p + p * (p + 1) // 2
         sums = np.asarray(_FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x], int(groups)),
                           np.float64).reshape(groups, k)
         hg = np.zeros((groups, p, p))
         rows, cols = np.triu_indices(p)
-        hg[:, rows, cols] = sums[:, p:]
-        hg[:, cols, rows] = sums[:, p:]
-        return sums[:, :p], hg
+        hg[:, rows, cols] = sums[:, 1 + p:]
+        hg[:, cols, rows] = sums[:, 1 + p:]
+        return sums[:, 1:1 + p], hg, 0.5 * float(sums[:, 0].sum())
 
     def residuals_and_jacobian(self, x):
         """The residuals (M,) and their Jacobian (M, P), float32, on the host (for solvers that
@@ -218,7 +218,7 @@ def _sums(space: ParameterSpace, arrays: dict, u: list, jacobian: bool):
 
 
 def _cluster_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
-    """``[u_g (P entries), H_g (upper triangle, row-major)]`` per cluster ``arrays["c"]`` as one
+    """``[Σ |ρ|², u_g (P entries), H_g (upper triangle, row-major)]`` per cluster ``arrays["c"]`` as one
     float64 array of ``groups`` rows: the residuals ``(r - π f)/σ`` and their forward-mode
     tangents (as in :func:`_sums`), scatter-added per cluster. One kernel."""
     dr.enable_grad(u)
@@ -230,7 +230,8 @@ def _cluster_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
         dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
         d.append([mi.Float64(c) for c in dr.grad(res)])
         dr.clear_grad(res)
-    terms = [d[a][0] * r[0] + d[a][1] * r[1] + d[a][2] * r[2] for a in range(p)]
+    terms = [r[0] * r[0] + r[1] * r[1] + r[2] * r[2]]
+    terms += [d[a][0] * r[0] + d[a][1] * r[1] + d[a][2] * r[2] for a in range(p)]
     terms += [d[a][0] * d[b][0] + d[a][1] * d[b][1] + d[a][2] * d[b][2] for a in range(p) for b in range(a, p)]
     k = len(terms)
     acc = dr.zeros(mi.Float64, groups * k)
@@ -359,8 +360,8 @@ def region_uncertainty(space: ParameterSpace, problem: _Problem, params: dict, p
                        method: str, data: tuple, seed: int = 0) -> dict:
     """The parameters' uncertainty at the optimum ``params`` of ``problem`` (all
     the region's samples), by ``method``
-    (:mod:`mifaces.reflectance.uncertainty`): JᵀJ from the fit's own kernel and
-    the samples' scores from one more, once; the bootstrap refits instead.
+    (:mod:`mifaces.reflectance.uncertainty`): the clusters' sums (and JᵀJ, E) from
+    one kernel pass at the optimum; the bootstrap refits instead.
     ``pruned`` lobes' scales and exponents get the status ``pruned``; ``data``
     is the region's (light, view, reflectance, sigma), for the bootstrap."""
     x = space.vector(params)
@@ -383,10 +384,9 @@ def region_uncertainty(space: ParameterSpace, problem: _Problem, params: dict, p
     if method == "bootstrap":
         cov = bootstrap_covariance(space, x, held, cluster, data, seed=seed)
     else:
-        jtj, _, loss = problem.system(x)
         index, groups = cluster_index(independent_clusters(problem.n) if cluster is None else cluster)
-        u, hg = problem.cluster_sums(x, index, groups) if method != "laplace" else (None, None)
-        cov = covariance(x, jtj, loss, problem.n, u, hg, held, method)
+        u, hg, loss = problem.cluster_sums(x, index, groups)  # one pass: JᵀJ = Σ_g H_g
+        cov = covariance(x, hg.sum(axis=0), loss, problem.n, u, hg, held, method)
     return parameter_intervals(space, cov, statuses)
 
 

@@ -313,29 +313,29 @@ def _interval(space: ParameterSpace, x, k: int, f, half_x: float, std: float, q:
         value = values[f.name][f.channel] if f.channel is not None else values[f.name]
         bound = float(space.model.coefficient_bound(float(values[space.coupled[f.name]]), np.log, np.exp))
         return max(value - q * std, -bound), min(value + q * std, bound)
-    ends = []
-    for sign in (-1.0, 1.0):
-        shifted = np.array(x, np.float64)
-        shifted[k] = x[k] + sign * half_x
-        v = space.values(shifted)[f.name]
-        ends.append(float(v[f.channel] if f.channel is not None else v))
-    return ends[0], ends[1]
+    return space.entry_value(f, x[k] - half_x), space.entry_value(f, x[k] + half_x)
 
 
 def _value_jacobian(space: ParameterSpace, x, h: float = 1e-6) -> np.ndarray:
-    """d value / d x: row k is the derivative of free entry k's parameter value
-    (its channel) with respect to every entry of x (central differences)."""
+    """d value / d x: row k is the derivative of free entry k's parameter value (its channel)
+    with respect to every entry of x, by central differences: of the entry's own map for the
+    parameters that depend on their entry alone, of all values for energy-coupled ones."""
     x = np.asarray(x, np.float64)
     p = len(x)
-
-    def flat(v):
-        return np.array([float(v[f.name][f.channel] if f.channel is not None else v[f.name]) for f in space.free])
-
     jac = np.zeros((p, p))
-    for j in range(p):
-        step = np.zeros(p)
-        step[j] = h
-        jac[:, j] = (flat(space.values(x + step)) - flat(space.values(x - step))) / (2 * h)
+    for k, f in enumerate(space.free):
+        if f.name not in space.coupled:
+            jac[k, k] = (space.entry_value(f, x[k] + h) - space.entry_value(f, x[k] - h)) / (2 * h)
+    coupled = [k for k, f in enumerate(space.free) if f.name in space.coupled]
+    if coupled:
+        def flat(v):
+            return np.array([float(v[space.free[k].name][space.free[k].channel] if space.free[k].channel is not None
+                                   else v[space.free[k].name]) for k in coupled])
+
+        for j in range(p):
+            step = np.zeros(p)
+            step[j] = h
+            jac[coupled, j] = (flat(space.values(x + step)) - flat(space.values(x - step))) / (2 * h)
     return jac
 
 
