@@ -16,7 +16,8 @@
    chosen on the tuning seeds (:data:`TUNING_SEEDS`), which the coverage
    tables leave out.
 4. **Cost** (``--cost N``). The region fits' time with and without the
-   default estimate, on N Cook-Torrance captures, texture 128² and 256².
+   default estimate, on N Cook-Torrance captures, texture 128², 256² and 512²
+   (fit_brdf's default).
 
 Run:  python validation/uncertainty.py [--seeds 20] [--other-seeds 20] [--out-seeds 6] [--tune] [--cost N]
 Writes validation/results/uncertainty.json and uncertainty.png (with
@@ -154,7 +155,7 @@ def same_family(model: str, seeds, tmp: Path, variants=VARIANTS) -> list:
     return records
 
 
-def cost(seeds, tmp: Path, textures=(128, 256), repeats: int = 5) -> dict:
+def cost(seeds, tmp: Path, textures=(128, 256, 512), repeats: int = 5) -> dict:
     """The region fits' time (``seconds['fit']``) without and with the default estimate, per model,
     capture and texture resolution: the best of ``repeats`` interleaved runs, after one run of each
     (the first in the process, which compiles the kernels, is recorded apart)."""

@@ -217,6 +217,10 @@ def _sums(space: ParameterSpace, arrays: dict, u: list, jacobian: bool):
     return acc
 
 
+#: Largest per-cluster sum array (float64 entries) summed with a per-thread copy (``dr.ReduceMode.Expand``).
+EXPAND_LIMIT = 1 << 16
+
+
 def _cluster_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
     """``[Σ |ρ|², u_g (P entries), H_g (upper triangle, row-major)]`` per cluster ``arrays["c"]`` as one
     float64 array of ``groups`` rows: the residuals ``(r - π f)/σ`` and their forward-mode
@@ -236,8 +240,10 @@ def _cluster_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
     k = len(terms)
     acc = dr.zeros(mi.Float64, groups * k)
     base = arrays["c"] * k
+    # neighbouring samples share a tile: per-thread copies of a small acc, else atomics reduced per packet
+    mode = dr.ReduceMode.Expand if groups * k <= EXPAND_LIMIT else dr.ReduceMode.Local
     for j, value in enumerate(terms):
-        dr.scatter_add(acc, value, base + j, mode=dr.ReduceMode.Direct)  # atomics: no per-thread copies of acc
+        dr.scatter_add(acc, value, base + j, mode=mode)
     dr.eval(acc)
     return acc
 
