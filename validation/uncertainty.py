@@ -20,7 +20,8 @@
    (fit_brdf's default).
 
 Run:  python validation/uncertainty.py [--seeds 20] [--other-seeds 20] [--out-seeds 6] [--tune] [--cost N]
-Writes validation/results/uncertainty.json and uncertainty.png (with
+Writes validation/results/uncertainty.json (the tables), uncertainty_records.json
+(every interval checked) and uncertainty.png (with
 ``--tune``, uncertainty_tuning.json; with ``--cost``, uncertainty_cost.json).
 Simulated captures go to a temporary folder.
 """
@@ -39,7 +40,7 @@ import mifaces  # first: libLLVM  # isort: skip
 import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.files import save_figure, write_json
+from mifaces.files import atomic_write, save_figure, write_json
 from mifaces.geometry import load_geometry
 from mifaces.reflectance import capture_samples, fit_brdf
 from mifaces.reflectance import uncertainty as unc
@@ -61,6 +62,9 @@ VARIANTS = {"jackknife": ("jackknife", None), "sandwich": ("sandwich", None), "s
 MODELS = ("cooktorrance", "phong", "ward", "lafortune")
 OUT_OF_FAMILY = {"roughplastic": dict(brdf="roughplastic"), "principled": dict(brdf="principled"),
                  "varying": dict(brdf="cooktorrance", varying=True)}
+#: The fields of a record (one interval checked), in the order of the rows of uncertainty_records.json.
+FIELDS = ("truth_model", "model", "seed", "variant", "region", "parameter", "channel", "samples", "truth", "fitted",
+          "lo", "hi", "status", "covered")
 #: Regions reported as small.
 SMALL = ("lips", "eyebrows")
 
@@ -246,7 +250,7 @@ def skin_check(records: list) -> list:
     return out
 
 
-def markdown(result: dict) -> str:
+def markdown(result: dict, records: list) -> str:
     """The coverage tables of docs/uncertainty.md: per truth and model, every estimate's pooled coverage,
     and the default's on small regions, the others, skin, the glossy parameters and the diffuse albedo."""
     def pct(entry):
@@ -258,7 +262,7 @@ def markdown(result: dict) -> str:
     for truth, models in result["coverage"].items():
         for model, entry in models.items():
             d = entry[default]
-            glossy = coverage([r for r in result["records"] if r["parameter"] != "diffuse_reflectance"],
+            glossy = coverage([r for r in records if r["parameter"] != "diffuse_reflectance"],
                               truth_model=truth, model=model, variant=default)
             diffuse = d["parameters"].get("diffuse_reflectance", {"coverage": None, "intervals": 0})
             lines.append(f"| {truth} | {model} | {result['seeds'][truth]} | "
@@ -305,6 +309,18 @@ def figure(result: dict, path: Path) -> None:
     save_figure(fig, path, dpi=90)
 
 
+def write_records(records: list) -> None:
+    """The records, one compact row each (:data:`FIELDS`, values to 5 digits), to uncertainty_records.json."""
+    with atomic_write(RESULTS / "uncertainty_records.json", "w") as f:
+        rows = [[float(f"{r[k]:.5g}") if isinstance(r[k], float) else r[k] for k in FIELDS] for r in records]
+        json.dump({"fields": FIELDS, "rows": rows}, f, separators=(",", ":"))
+
+
+def read_records() -> list:
+    data = json.loads((RESULTS / "uncertainty_records.json").read_text())
+    return [dict(zip(data["fields"], row)) for row in data["rows"]]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, default=20, help="seeds of the Cook-Torrance and Phong truths")
@@ -319,11 +335,11 @@ def main() -> None:
     t0 = time.perf_counter()
     if args.summarize:
         result = json.loads((RESULTS / "uncertainty.json").read_text())
-        result.update(default=unc.METHODS[0], coverage=summary(result["records"]),
-                      skin_check=skin_check(result["records"]))
+        records = read_records()
+        result.update(default=unc.METHODS[0], coverage=summary(records), skin_check=skin_check(records))
         write_json(RESULTS / "uncertainty.json", result)
         figure(result, RESULTS / "uncertainty.png")
-        print(markdown(result))
+        print(markdown(result, records))
         return
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -349,9 +365,9 @@ def main() -> None:
         records = []
 
         def save():
-            result.update(coverage=summary(records), skin_check=skin_check(records), records=records,
-                          seconds=time.perf_counter() - t0)
+            result.update(coverage=summary(records), skin_check=skin_check(records), seconds=time.perf_counter() - t0)
             write_json(RESULTS / "uncertainty.json", result)
+            write_records(records)
 
         for model in MODELS:
             n = args.seeds if model in ("cooktorrance", "phong") else args.other_seeds

@@ -45,7 +45,7 @@ from .io import FILES, write_estimate
 from .refine import RefineSchedule, refine_estimate
 from .samples import ReflectanceSamples, capture_samples
 from .specular_maps import SpecularMap, refine_specular
-from .uncertainty import LEVEL, METHODS, tile_clusters
+from .uncertainty import METHODS, tile_clusters
 from .texel_normals import MIN_OBSERVATIONS, encode, mitsuba_tangent_normals, refine_texel_normals
 
 #: Fit statistics stored per region under ``brdf.json``'s ``"fit"``.
