@@ -30,6 +30,7 @@ from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
 from .reflectance import fit_brdf as fit_brdf_model, render_fitted
 from .reflectance.io import KIND as BRDF_KIND
 from .reflectance.refine_shape import refine_fits
+from .reflectance.uncertainty import METHODS as UNCERTAINTY_METHODS
 from .report import RANKED
 from .shape import fit_shape as fit_shapes
 from .shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
@@ -204,12 +205,17 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
               help="Estimate a normal per texel alternating with the fit (writes normals.exr, used by scene.xml).")
 @click.option("--specular-maps/--no-specular-maps", default=default(fit_brdf_model, "specular_maps"),
               show_default=True, help="Estimate the specular reflectance per texel (writes specular.exr).")
+@click.option("--uncertainty", default=default(fit_brdf_model, "uncertainty"), show_default=True,
+              type=click.Choice(UNCERTAINTY_METHODS + ("none",)),
+              help="How the parameters' 95 % intervals are estimated (docs/uncertainty.md); 'none' leaves them out.")
 def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolution: int, lobes: int,
-             face_model: str | None, force: bool, refine: bool, normals: bool, specular_maps: bool) -> None:
+             face_model: str | None, force: bool, refine: bool, normals: bool, specular_maps: bool,
+             uncertainty: str) -> None:
     """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
     check_result_target(out_dir, BRDF_KIND, force)
     estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, resolution=resolution, lobes=lobes,
-                   out=out_dir, force=force, refine=refine, normals=normals, specular_maps=specular_maps)
+                   out=out_dir, force=force, refine=refine, normals=normals, specular_maps=specular_maps,
+                   uncertainty=None if uncertainty == "none" else uncertainty)
     click.echo(f"fitted {estimate.model} to {estimate.samples} samples of {len(estimate.measurements)} "
                f"photographs in {estimate.seconds['total']:.1f} s")
     for name, fit_ in estimate.fits.items():

@@ -9,7 +9,9 @@ writes a report: ``report.md`` and ``report.json`` with every region's
 parameters, losses, sample counts and times, each model's relative RMSE on
 the first photograph (``training_rmse``: a photograph the fit saw), and
 ``report.png``, per model the first photograph, the fitted face rendered in
-its place, their difference, and the fitted face under a novel light.
+its place, their difference, and the fitted face under a novel light;
+``report_uncertainty.png``, every region's parameters with their 95 %
+intervals (``models.<model>.uncertainty``, docs/uncertainty.md).
 
 For a simulated capture (with ground truth) the report also separates the
 models by what the fit never saw (:mod:`mifaces.validation`):
@@ -37,8 +39,9 @@ from .model import load_model
 from .reflectance import capture_samples, fit_brdf, write_estimate
 from .reflectance.refine_shape import refine_shape as refine_shapes_by_rendering
 from .render import FaceScene
+from .report import (ground_truth_errors, ranking, write_markdown, write_picture, write_uncertainty_picture,
+                     write_validation_picture)
 from .report_html import write_html
-from .report import ground_truth_errors, ranking, write_markdown, write_picture, write_validation_picture
 from .shape import fit_shape, shapes_in_world
 from .shape_errors import capture_shape_errors
 from .studio import simulate
@@ -210,6 +213,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     if validator is not None:
         write_validation_picture(out / "report.png", validator.truth, validation_images, report)
     write_picture(out / ("report.png" if validator is None else "report_training.png"), panels, first.name)
+    write_uncertainty_picture(out / "report_uncertainty.png", report)
     write_markdown(out / "report.md", report, first.name)
     best = report.get("ranking", {}).get("heldout_rmse", list(models))[0]
     glb = export_face(out / "brdf" / best, out / FACE_GLB, measurement=first.name if geometry == "fitted" else None,

@@ -128,13 +128,16 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
     lines = ["# mifaces measurement report", "",
              f"Capture `{report['capture']}`: {report['measurements']} photographs, geometry {report['geometry']}, "
              f"texture {report['resolution']}².", "", "![report](report.png)", "",
+             "Parameters as value ± half-width of the 95 % interval (asymmetric intervals: the larger half; "
+             "see docs/uncertainty.md and ![uncertainty](report_uncertainty.png)).", "",
              "| model | region | samples | status | parameters | loss | error vs ground truth |",
              "|---|---|---|---|---|---|---|"]
     for model, entry in report["models"].items():
         truth = entry.get("ground_truth") or {}
         for region, params in entry["regions"].items():
             fit = entry["fit"][region]
-            text = ", ".join(f"{k} {_fmt(v)}" for k, v in params.items())
+            text = ", ".join(f"{k} {_with_interval(v, (entry.get('uncertainty') or {}).get(region, {}).get(k))}"
+                             for k, v in params.items())
             err = (truth.get("regions") or {}).get(region)
             err_text = ", ".join(f"{k} {100 * v:.1f}%" for k, v in err.items()) if err else ""
             lines.append(f"| {model} | {region} | {fit['samples']} | {fit['status']} | {text} | "
@@ -231,6 +234,71 @@ def validation_markdown(report: dict) -> list[str]:
         lines.append(f"- Ranked by {label}: {text}{margin}.")
     lines += ["", "![training photograph](report_training.png)"]
     return lines
+
+
+def half_width(value, entry: dict | None):
+    """The larger half of a parameter's 95 % interval around ``value`` (a float, or a list per
+    channel), or its status (``fixed``, ``at_bound``, …), or None without an estimate."""
+    if not entry:
+        return None
+    if "interval95" not in entry:
+        return entry.get("status")
+    lo, hi = entry["interval95"]
+    if isinstance(value, (list, tuple)):
+        return [None if a is None else max(v - a, b - v) for v, a, b in zip(value, lo, hi)]
+    return max(value - lo, hi - value)
+
+
+def _with_interval(value, entry: dict | None) -> str:
+    """``value ± half-width`` (per channel for RGB), or the value and its status."""
+    half = half_width(value, entry)
+    if half is None:
+        return _fmt(value)
+    if isinstance(half, str):
+        return f"{_fmt(value)} ({half.replace('_', ' ')})"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(f"{v:.3g}" + ("" if h is None else f" ± {h:.2g}") for v, h in zip(value, half)) + "]"
+    return f"{value:.4g} ± {half:.2g}"
+
+
+def write_uncertainty_picture(path: Path, report: dict) -> None:
+    """``report_uncertainty.png``: per model a panel per glossy parameter, the fitted value of each
+    region with its 95 % interval as an error bar (channel 0 of RGB parameters), regions with a status
+    instead (borrowed, at a bound) marked x without a bar."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    models = list(report["models"])
+    names = {m: list(next(iter(report["models"][m]["regions"].values()), {})) for m in models}
+    width = max((len(v) for v in names.values()), default=1)
+    fig, axes = plt.subplots(len(models), max(width, 1), figsize=(3.2 * max(width, 1), 2.6 * len(models)),
+                             squeeze=False)
+    for row, model in zip(axes, models):
+        entry = report["models"][model]
+        for ax, name in zip(row, names[model]):
+            regions = list(entry["regions"])
+            for i, region in enumerate(regions):
+                value = entry["regions"][region][name]
+                value = value[0] if isinstance(value, list) else value
+                u = (entry.get("uncertainty") or {}).get(region, {}).get(name, {})
+                if "interval95" in u:
+                    lo, hi = (v[0] if isinstance(v, list) else v for v in u["interval95"])
+                    if lo is not None:
+                        ax.errorbar(i, value, yerr=[[value - lo], [hi - value]], fmt="o", color="C0", capsize=3)
+                        continue
+                ax.plot(i, value, "x", color="C3")
+                ax.annotate(str(u.get("status", "")).replace("_", " "), (i, value), fontsize=6, rotation=90)
+            ax.set_xticks(range(len(regions)), regions, rotation=60, fontsize=7)
+            ax.set_title(f"{model}: {name}", fontsize=8)
+            if name in ("roughness", "alpha", "exponent"):
+                ax.set_yscale("log")
+        for ax in row[len(names[model]):]:
+            ax.axis("off")
+    fig.suptitle("Fitted parameters per region with 95 % intervals (x: no interval, status given)", fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=90)
 
 
 def _fmt(value) -> str:

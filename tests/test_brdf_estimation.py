@@ -152,6 +152,15 @@ def test_cli_fit_brdf(capture_dir, tmp_path):
     assert "fitted ward to" in result.output and "skin" in result.output
     data = json.loads((out / "brdf.json").read_text())
     assert data["model"] == "ward" and data["resolution"] == 48
+    assert "std" in data["uncertainty"]["skin"]["diffuse_reflectance"]  # the default: intervals
+    assert (out / "albedo_std.exr").is_file()
+    quiet = tmp_path / "quiet"
+    result = CliRunner().invoke(main, ["--variant", "llvm_ad_rgb", "fit-brdf", str(capture_dir), "--model", "ward",
+                                       "--out", str(quiet), "--resolution", "48", "--uncertainty", "none"])
+    assert result.exit_code == 0, result.output
+    quiet_data = json.loads((quiet / "brdf.json").read_text())
+    fitted = [name for name, fit in quiet_data["fit"].items() if fit["status"] != "prior"]
+    assert "skin" in fitted and all(quiet_data["uncertainty"][name] == {} for name in fitted)
 
 
 def test_render_under_an_environment_map(capture_dir, estimate):

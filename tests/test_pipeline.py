@@ -23,7 +23,7 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
     report = measure(tmp_path / "m", capture_dir, models=("cooktorrance", "phong"), geometry="ground-truth",
                      resolution=128, spp=4, progress=False)
     for name in ("report.json", "report.md", "report.png", "report_training.png", "brdf/cooktorrance/brdf.json",
-                 "brdf/phong/scene.xml"):
+                 "brdf/phong/scene.xml", "report_uncertainty.png", "brdf/cooktorrance/albedo_std.exr"):
         assert (tmp_path / "m" / name).is_file(), name
     saved = json.loads((tmp_path / "m" / "report.json").read_text())
     assert saved == json.loads(json.dumps(report))  # the file is the report returned
@@ -44,6 +44,21 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
         order = saved["ranking"][key]
         assert sorted(order) == ["cooktorrance", "phong"]
         assert saved["models"][order[0]]["validation"][key] <= saved["models"][order[1]]["validation"][key]
+    # every fitted parameter's uncertainty, in report.json and brdf.json alike
+    skin_fit = saved["models"]["cooktorrance"]["regions"]["skin"]
+    skin_unc = saved["models"]["cooktorrance"]["uncertainty"]["skin"]
+    lo, hi = skin_unc["diffuse_reflectance"]["interval95"]
+    albedo = saved["models"]["cooktorrance"]["fit"]["skin"]["diffuse_reflectance"]
+    assert all(a < v < b for a, v, b in zip(lo, albedo, hi)) and min(skin_unc["diffuse_reflectance"]["std"]) > 0
+    # this 2-photograph fit ends with the roughness at its upper bound: flagged, no interval made up
+    assert skin_fit["roughness"] == pytest.approx(1.0, rel=1e-3)
+    assert skin_unc["roughness"] == {"status": "at_bound"}
+    assert skin_unc["eta"] == {"status": "fixed"}
+    written = json.loads((tmp_path / "m" / "brdf" / "cooktorrance" / "brdf.json").read_text())
+    assert written["uncertainty"] == saved["models"]["cooktorrance"]["uncertainty"]
+    markdown = (tmp_path / "m" / "report.md").read_text()
+    assert "specular_reflectance [" in markdown and " ± " in markdown
+    assert "roughness 1 (at bound)" in markdown and "eta 1.38 (fixed)" in markdown
     skin = saved["models"]["cooktorrance"]["ground_truth"]["regions"]["skin"]
     assert skin["roughness"] < 0.3  # a 2-photograph, 128² fit: in the right range, not exact
     assert saved["models"]["phong"]["ground_truth"]["regions"] == {}  # another family: no parameter errors
@@ -51,7 +66,6 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
     stages = report["seconds"]
     assert set(stages) >= {"reflectance_samples", "fit_brdf_cooktorrance", "fit_brdf_phong", "total"}
     assert stages["total"] >= sum(v for k, v in stages.items() if k != "total") * 0.99
-    markdown = (tmp_path / "m" / "report.md").read_text()
     assert "| cooktorrance | skin |" in markdown and "| phong | skin |" in markdown
     assert "- Ranked by held-out lights:" in markdown and "- Ranked by environments:" in markdown
     picture = skimage.io.imread(tmp_path / "m" / "report_training.png")

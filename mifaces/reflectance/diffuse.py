@@ -22,6 +22,18 @@ with s₀² estimated from the scatter of the samples within texels and τ² fro
 the scatter of the texel means beyond that noise (empirical Bayes, per region
 and channel). Well-sampled texels keep their own value (Σ w ≫ λ); with
 noise-free samples s₀ = 0 and the closed form above is unchanged.
+
+**Posterior standard deviation** (:attr:`DiffuseMap.std`). Under the same
+model the texel's posterior variance is
+
+    s₀² / (Σ_s w_s + λ)
+
+(the prior's precision 1/τ² plus the samples' Σ w_s / s₀²); without
+shrinkage, s₀² / Σ_s w_s. A texel without samples has its region's spread τ;
+a region whose noise cannot be estimated (fewer than two texels with two
+samples) has NaN; texels outside the face 0. It leaves out the uncertainty of
+the region's glossy part and of ρ_R, which are shared by all texels of a
+region (:attr:`mifaces.reflectance.fitting.RegionFit.uncertainty`).
 """
 
 from __future__ import annotations
@@ -47,11 +59,15 @@ class DiffuseMap:
         Σ 1/σ² of the samples behind each texel (0: filled from the region).
     samples : ndarray (R, R)
         Number of samples per texel.
+    std : ndarray (R, R, 3) or None
+        Posterior standard deviation of ρ_d per texel (module docstring);
+        None where it is not known (an albedo refined by rendering).
     """
 
     albedo: np.ndarray
     weight: np.ndarray
     samples: np.ndarray
+    std: np.ndarray | None = None
 
 
 def specular_reflectance_factor(model, params_by_region: dict[int, dict], light, view, region) -> np.ndarray:
@@ -89,7 +105,14 @@ def shrinkage_weights(residual, w, texel, region, mean, total, counts, labels) -
     ``residual`` (N, 3) are the samples' x_s, ``mean`` (T, 3) the texels'
     weighted means, ``total`` (T,) their Σ w, ``counts`` (T,) their sample
     counts; all texel arrays are flat over the texture."""
-    lam = {}
+    return {label: lam for label, (lam, _, _) in noise_and_spread(residual, w, texel, region, mean, total, counts,
+                                                                   labels).items()}
+
+
+def noise_and_spread(residual, w, texel, region, mean, total, counts, labels) -> dict:
+    """Per region label, (λ, s₀², τ²) per channel (module docstring; arguments as
+    :func:`shrinkage_weights`); s₀² and τ² NaN where they cannot be estimated (λ = 0)."""
+    out = {}
     deviation = residual - mean[texel]
     for label in labels:
         in_region = region == label
@@ -97,13 +120,13 @@ def shrinkage_weights(residual, w, texel, region, mean, total, counts, labels) -
         dof = int(np.sum(counts[texels] - 1))
         multi = texels[counts[texels] >= 2]
         if dof < 2 or len(multi) < 2:
-            lam[label] = np.zeros(3)  # nothing to estimate the noise from: no shrinkage
+            out[label] = (np.zeros(3), np.full(3, np.nan), np.full(3, np.nan))  # no noise estimate: no shrinkage
             continue
         s0 = np.sum(w[in_region, None] * np.square(deviation[in_region]), axis=0) / dof
         between = np.var(mean[multi], axis=0) - s0 * np.mean(1.0 / total[multi])
         tau = np.maximum(between, 1e-6 * np.maximum(np.mean(mean[multi], axis=0) ** 2, 1e-12))
-        lam[label] = s0 / tau
-    return lam
+        out[label] = (s0 / tau, s0, tau)
+    return out
 
 
 def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflectance, sigma, texel, region,
@@ -150,17 +173,22 @@ def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflec
         albedo[:, c] = np.bincount(texel, weights=w * residual[:, c], minlength=size) / np.maximum(total, 1e-300)
     counts = np.bincount(texel, minlength=size)
     region = np.asarray(region)
-    if shrinkage and len(texel):
+    labels = region_map.ravel()
+    # NaN (not known) on the texels of the regions with a BRDF until estimated, 0 outside the face
+    variance = np.where(np.isin(labels, list(params_by_region))[:, None], np.nan, 0.0) * np.ones(3)
+    if len(texel):
         texel_region = np.zeros(size, dtype=region.dtype)
         texel_region[texel] = region  # a texel's samples share its region
-        lam = shrinkage_weights(residual, w, texel, region, albedo, total, counts, np.unique(region))
+        stats = noise_and_spread(residual, w, texel, region, albedo, total, counts, np.unique(region))
         seen = np.flatnonzero(total > 0)
-        for label, weight in lam.items():
+        for label, (weight, s0, tau) in stats.items():
+            weight = weight if shrinkage else np.zeros(3)
             t = seen[texel_region[seen] == label]
             prior = np.broadcast_to(np.asarray(params_by_region[label]["diffuse_reflectance"], np.float64), (3,))
             albedo[t] = (total[t, None] * albedo[t] + weight * prior) / (total[t, None] + weight)
+            variance[t] = s0 / (total[t, None] + weight)
+            variance[(total <= 0) & (labels == label)] = tau if shrinkage else np.nan
     empty = total <= 0
-    labels = region_map.ravel()
     for label in np.unique(labels[empty]):
         fill = empty & (labels == label)
         if label in params_by_region:
@@ -169,4 +197,5 @@ def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflec
             albedo[fill] = 0.0  # outside the face: no region, no BRDF
     r = region_map.shape[0]
     return DiffuseMap(albedo=np.clip(albedo, 0.0, None).reshape(r, r, 3).astype(np.float32),
-                      weight=total.reshape(r, r).astype(np.float32), samples=counts.reshape(r, r))
+                      weight=total.reshape(r, r).astype(np.float32), samples=counts.reshape(r, r),
+                      std=np.sqrt(variance).reshape(r, r, 3).astype(np.float32))

@@ -45,6 +45,7 @@ from .io import FILES, write_estimate
 from .refine import RefineSchedule, refine_estimate
 from .samples import ReflectanceSamples, capture_samples
 from .specular_maps import SpecularMap, refine_specular
+from .uncertainty import METHODS, tile_clusters
 from .texel_normals import MIN_OBSERVATIONS, encode, mitsuba_tangent_normals, refine_texel_normals
 
 #: Fit statistics stored per region under ``brdf.json``'s ``"fit"``.
@@ -126,6 +127,8 @@ class BRDFEstimate:
                 "samples": int(self.samples), "resolution": self.resolution,
                 "measurements": list(self.measurements), "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
                 "albedo": FILES["albedo"], "refinement": self.refinement,
+                "uncertainty": {name: fit.uncertainty for name, fit in self.fits.items()},
+                **({} if self.albedo.std is None else {"albedo_std": FILES["albedo_std"]}),
                 **({} if self.normals is None else {"normals": FILES["normals"],
                                                     "normal_refinement": self.normal_refinement}),
                 **({} if self.specular is None else {"specular": FILES["specular"], "specular_shrinkage": {
@@ -137,7 +140,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
              schedule: SubsetSchedule | None = None, samples: ReflectanceSamples | None = None, measurements=None,
              out=None, seed: int = 0, progress: bool = True, force: bool = False,
              refine: bool | RefineSchedule = False, normals: bool = False,
-             normal_options: dict | None = None, specular_maps: bool = False) -> BRDFEstimate:
+             normal_options: dict | None = None, specular_maps: bool = False,
+             uncertainty: str | None = METHODS[0]) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture.
 
     Parameters
@@ -184,6 +188,12 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         Estimate the specular reflectance per texel, shrunk towards each
         region's (:func:`mifaces.reflectance.specular_maps.refine_specular`;
         models with a ``specular_reflectance``). The region fits stay the summary.
+    uncertainty : str or None
+        How each region fit's parameter uncertainty is estimated
+        (:data:`mifaces.reflectance.uncertainty.METHODS`; the sandwich over
+        texel tiles by default, see ``docs/uncertainty.md``), or None. Not
+        estimated with ``normals`` (whose fits see texels through their normals
+        too) nor after ``refine``: those fits get empty ``uncertainty``.
 
     Returns
     -------
@@ -214,13 +224,17 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     # parameters with a published value per region (Cook-Torrance's η) are fixed at it unless given
     per_region = {name: {k: v for k, v in brdf.fixed_in_region(name).items() if fixed is None or k not in fixed}
                   for name in names.values()}
+    if uncertainty is not None and uncertainty not in METHODS:
+        raise ValueError(f"uncertainty must be one of {METHODS} or None, got {uncertainty!r}")
     fits = fit_regions(brdf, light, view, r, sigma, label, names, progress=progress, fixed=fixed,
-                       fixed_by_region=per_region, schedule=schedule, seed=seed)
+                       fixed_by_region=per_region, schedule=schedule, seed=seed,
+                       cluster=tile_clusters(texel, resolution), uncertainty=None if normals else uncertainty)
     texel_normals = None
     if normals:
         texel_normals = _refine_normals(brdf, fits, (light, view, r, sigma, texel, measurement, label), names,
                                         resolution, normal_options, progress,
-                                        dict(fixed=fixed, fixed_by_region=per_region, schedule=schedule, seed=seed))
+                                        dict(fixed=fixed, fixed_by_region=per_region, schedule=schedule, seed=seed,
+                                             uncertainty=None))
         if texel_normals is not None:
             light, view, r, sigma, keep = texel_normals.samples
             texel, label, fits = texel[keep], label[keep], texel_normals.fits

@@ -35,6 +35,8 @@ from ..arrays import device_array
 from ..status import AT_BOUND, AT_START, CONVERGED, DEFAULTS, PRIOR
 from .levenberg_marquardt import levenberg_marquardt
 from .parameters import ParameterSpace, conservative_start, linear_start
+from .uncertainty import (BOOTSTRAP_DRAWS, METHODS, NOT_IDENTIFIED, PRUNED, Covariance, cluster_index, covariance,
+                          held_entries, independent_clusters, parameter_intervals, prior_intervals)
 
 
 @dataclass
@@ -78,6 +80,9 @@ class RegionFit:
     #: (seconds, loss, samples): after each accepted step, the loss on the
     #: stage's subset scaled to the full set, and the subset's size
     history: list = field(default_factory=list)
+    #: parameter -> ``{"std", "interval95"}`` or ``{"status"}``
+    #: (:func:`mifaces.reflectance.uncertainty.parameter_intervals`); empty if not estimated
+    uncertainty: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
         d = asdict(self)
@@ -133,6 +138,29 @@ class _Problem:
         jtj[rows, cols] = values[1:1 + len(rows)]
         jtj[cols, rows] = values[1:1 + len(rows)]
         return jtj, values[1 + len(rows):], float(values[0])
+
+    def cluster_sums(self, x, cluster: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray, float]:
+        """Per cluster g, the score u_g = Σ_{i ∈ g} J_iᵀ ρ_i (G, P) and H_g = Σ_{i ∈ g} J_iᵀ J_i
+        (G, P, P), summed over the colour channels, and the loss ½ Σ |ρ|², at ``x``; ``cluster``
+        (N,) numbers the clusters 0 … ``groups`` - 1 (JᵀJ = Σ_g H_g). One kernel (frozen per
+        parameter space as :meth:`system`'s is), whose sums stay on the Dr.Jit side: for the
+        covariance (:mod:`mifaces.reflectance.uncertainty`), once per fit."""
+        key = ("clusters",) + _signature(self.space)
+        if key not in _FROZEN:
+            space = self.space
+            _FROZEN[key] = dr.freeze(lambda arrays, u, g: _cluster_sums(space, arrays, u, g), warn_after=1000,
+                                     state_fn=lambda arrays, u, g: (dr.width(arrays["w"]), g))
+        arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w,
+                  "c": device_array(np.uint32, np.asarray(cluster, np.uint32))}
+        p = len(x)
+        k = 1 + p + p * (p + 1) // 2
+        sums = np.asarray(_FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x], int(groups)),
+                          np.float64).reshape(groups, k)
+        hg = np.zeros((groups, p, p))
+        rows, cols = np.triu_indices(p)
+        hg[:, rows, cols] = sums[:, 1 + p:]
+        hg[:, cols, rows] = sums[:, 1 + p:]
+        return sums[:, 1:1 + p], hg, 0.5 * float(sums[:, 0].sum())
 
     def residuals_and_jacobian(self, x):
         """The residuals (M,) and their Jacobian (M, P), float32, on the host (for solvers that
@@ -190,6 +218,37 @@ def _sums(space: ParameterSpace, arrays: dict, u: list, jacobian: bool):
     return acc
 
 
+#: Largest per-cluster sum array (float64 entries) summed with a per-thread copy (``dr.ReduceMode.Expand``).
+EXPAND_LIMIT = 1 << 16
+
+
+def _cluster_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
+    """``[Σ |ρ|², u_g (P entries), H_g (upper triangle, row-major)]`` per cluster ``arrays["c"]`` as one
+    float64 array of ``groups`` rows: the residuals ``(r - π f)/σ`` and their forward-mode
+    tangents (as in :func:`_sums`), scatter-added per cluster. One kernel."""
+    dr.enable_grad(u)
+    res = (arrays["r"] - dr.pi * space.model.eval(arrays["wi"], arrays["wo"], space.drjit_params(u))) * arrays["w"]
+    p = len(u)
+    r = [mi.Float64(c) for c in dr.detach(res)]
+    d = []
+    for uk in u:
+        dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
+        d.append([mi.Float64(c) for c in dr.grad(res)])
+        dr.clear_grad(res)
+    terms = [r[0] * r[0] + r[1] * r[1] + r[2] * r[2]]
+    terms += [d[a][0] * r[0] + d[a][1] * r[1] + d[a][2] * r[2] for a in range(p)]
+    terms += [d[a][0] * d[b][0] + d[a][1] * d[b][1] + d[a][2] * d[b][2] for a in range(p) for b in range(a, p)]
+    k = len(terms)
+    acc = dr.zeros(mi.Float64, groups * k)
+    base = arrays["c"] * k
+    # neighbouring samples share a tile: per-thread copies of a small acc, else atomics reduced per packet
+    mode = dr.ReduceMode.Expand if groups * k <= EXPAND_LIMIT else dr.ReduceMode.Local
+    for j, value in enumerate(terms):
+        dr.scatter_add(acc, value, base + j, mode=mode)
+    dr.eval(acc)
+    return acc
+
+
 def validate_samples(light, view, reflectance, sigma) -> None:
     """Shapes agree and nothing is NaN; raises ValueError naming the array."""
     n = len(sigma)
@@ -210,7 +269,8 @@ def min_samples(model: BRDFModel, fixed: dict | None = None) -> int:
 
 def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start: dict | None = None,
                fixed: dict | None = None, bounds: dict | None = None, schedule: SubsetSchedule | None = None,
-               seed: int = 0, ftol: float = 1e-7, trace: list | None = None) -> RegionFit:
+               seed: int = 0, ftol: float = 1e-7, trace: list | None = None, cluster=None,
+               uncertainty: str | None = METHODS[0]) -> RegionFit:
     """Fit ``model`` to one region's samples by hierarchical Levenberg-Marquardt.
 
     Parameters
@@ -235,17 +295,29 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     trace : list, optional
         If given, receives (seconds, parameter values) after every accepted
         step, for reports that evaluate the full-data loss along the way.
+    cluster : ndarray (N,), optional
+        Cluster of each sample for the sandwich and bootstrap covariance (e.g.
+        :func:`~mifaces.reflectance.uncertainty.tile_clusters`); default: the
+        samples independent (:func:`~mifaces.reflectance.uncertainty.independent_clusters`).
+    uncertainty : str or None
+        How :attr:`RegionFit.uncertainty` is estimated at the optimum, one of
+        :data:`~mifaces.reflectance.uncertainty.METHODS`; None leaves it out.
 
     Returns
     -------
     RegionFit
-        Parameters, the loss E of eq. 8 on all samples, status and history.
+        Parameters, the loss E of eq. 8 on all samples, status, history and
+        the parameters' uncertainty.
     """
     t0 = time.perf_counter()
     model = brdf_models.model(model) if isinstance(model, str) else model
     light, view = np.asarray(light, np.float32), np.asarray(view, np.float32)
     reflectance, sigma = np.asarray(reflectance, np.float32), np.asarray(sigma, np.float32)
     validate_samples(light, view, reflectance, sigma)
+    if uncertainty is not None and uncertainty not in METHODS:
+        raise ValueError(f"uncertainty must be one of {METHODS} or None, got {uncertainty!r}")
+    if cluster is not None and np.shape(cluster) != np.shape(sigma):
+        raise ValueError(f"cluster must have shape {np.shape(sigma)}, got {np.shape(cluster)}")
     fixed = model.fixed_defaults() if fixed is None else fixed
     space = ParameterSpace(model, fixed, bounds)
     if len(sigma) < len(space):
@@ -276,6 +348,7 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     elif space.glossy_unchanged(x_start, x):
         # the solver never moved the glossy part: its values are the start's, not a measurement
         status, reason = AT_START, f"{reason}; the glossy parameters stayed at their start values"
+    pruned = []
     if len(model.lobe_scales()) > 1:
         params, loss, pruned = prune_lobes(model, space, problem, params, loss)
         if pruned:
@@ -284,9 +357,82 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     first = model.lobe_scales().get(1, ())
     if any(np.any(np.asarray(params.get(s, 0.0)) != 0) for s in first) and space.at_spike(x):
         status, reason = AT_BOUND, f"{reason}; {SPIKE}"
+    intervals = {}
+    if uncertainty is not None:
+        data = (light, view, reflectance, sigma)
+        intervals = region_uncertainty(space, problem, params, pruned, cluster, uncertainty, data, seed)
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=loss,
                      samples=len(sigma), seconds=time.perf_counter() - t0, status=status,
-                     reason=reason, iterations=iterations, history=history)
+                     reason=reason, iterations=iterations, history=history, uncertainty=intervals)
+
+
+def region_uncertainty(space: ParameterSpace, problem: _Problem, params: dict, pruned: list, cluster,
+                       method: str, data: tuple, seed: int = 0) -> dict:
+    """The parameters' uncertainty at the optimum ``params`` of ``problem`` (all
+    the region's samples), by ``method``
+    (:mod:`mifaces.reflectance.uncertainty`): the clusters' sums (and JᵀJ, E) from
+    one kernel pass at the optimum; the bootstrap refits instead.
+    ``pruned`` lobes' scales and exponents get the status ``pruned``; ``data``
+    is the region's (light, view, reflectance, sigma), for the bootstrap."""
+    x = space.vector(params)
+    held = held_entries(space, x)
+    model, statuses = space.model, {}
+    names = {s for j in pruned for s in model.lobe_scales()[j]}
+    names |= {space.coupled[s] for s in names if s in space.coupled}
+    for k, f in enumerate(space.free):
+        if f.name in names:
+            held[k], statuses[k] = True, PRUNED
+    # a lobe whose every scale sits at 0 has no width to measure
+    t = 0.5 * (1.0 + np.tanh(0.5 * x))
+    for j, scales in model.lobe_scales().items():
+        entries = [k for k, f in enumerate(space.free) if f.name in scales]
+        width = _lobe_width(space, j, scales)
+        if entries and all(held[k] and t[k] < 0.5 for k in entries) and width is not None:
+            for k, f in enumerate(space.free):
+                if f.name == width and not held[k]:
+                    held[k], statuses[k] = True, NOT_IDENTIFIED
+    if method == "bootstrap":
+        cov = bootstrap_covariance(space, x, held, cluster, data, seed=seed)
+    else:
+        index, groups = cluster_index(independent_clusters(problem.n) if cluster is None else cluster)
+        u, hg, loss = problem.cluster_sums(x, index, groups)  # one pass: JᵀJ = Σ_g H_g
+        cov = covariance(x, hg.sum(axis=0), loss, problem.n, u, hg, held, method)
+    return parameter_intervals(space, cov, statuses)
+
+
+def _lobe_width(space: ParameterSpace, lobe: int, scales: tuple) -> str | None:
+    """The parameter that sets lobe ``lobe``'s width: its scales' exponent (Lafortune), or the
+    model's :attr:`~mifaces.brdf.model.BRDFModel.WIDTH_GRID` parameter for the first lobe."""
+    for name in scales:
+        if name in space.coupled:
+            return space.coupled[name]
+    grid = space.model.WIDTH_GRID
+    return grid[0] if lobe == 1 and grid is not None else None
+
+
+def bootstrap_covariance(space: ParameterSpace, x, held, cluster, data: tuple, draws: int = BOOTSTRAP_DRAWS,
+                         iterations: int = 10, seed: int = 0) -> Covariance:
+    """Cov(x̂) from ``draws`` refits on clusters drawn with replacement (a
+    cluster drawn m times weighs m times: σ/√m), each started at ``x`` with at
+    most ``iterations`` LM steps; ``held`` entries are left out."""
+    light, view, reflectance, sigma = data
+    cluster = independent_clusters(len(sigma)) if cluster is None else np.asarray(cluster)
+    index, g = cluster_index(cluster)
+    rng = np.random.default_rng(seed)
+    xs = []
+    for _ in range(draws):
+        m = np.bincount(rng.integers(0, g, g), minlength=g)[index]
+        keep = m > 0
+        problem = _Problem(space.model, space, light[keep], view[keep], reflectance[keep],
+                           sigma[keep] / np.sqrt(m[keep]))
+        xs.append(levenberg_marquardt(None, None, x, system=problem.system, max_iterations=iterations,
+                                      ftol=1e-6).x)
+    free = ~np.asarray(held, bool)
+    cov = np.zeros((len(x), len(x)))
+    if free.any():
+        cov[np.ix_(free, free)] = np.atleast_2d(np.cov(np.array(xs)[:, free], rowvar=False))
+    return Covariance(x=np.asarray(x, np.float64), covariance=cov, held=np.asarray(held, bool), dof=float(g - 1),
+                      method="bootstrap")
 
 
 def prune_lobes(model: BRDFModel, space: ParameterSpace, problem: _Problem, params: dict, loss: float,
@@ -317,7 +463,8 @@ def prior_fit(model: BRDFModel, params: dict, samples: int, reason: str, status:
     """A region's BRDF taken from elsewhere: a fitted neighbour (status
     ``'prior'``) or the model's defaults (``status='defaults'``)."""
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=float("nan"),
-                     samples=samples, seconds=0.0, status=status, reason=reason, iterations=0)
+                     samples=samples, seconds=0.0, status=status, reason=reason, iterations=0,
+                     uncertainty=prior_intervals(params))
 
 
 #: Why a fit whose lobe width ended at its sharp end is not trusted.
@@ -365,7 +512,7 @@ NEIGHBOURS = {"lips": ["skin"], "nostrils": ["skin"], "beard": ["skin"], "eyes":
 
 def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region, region_names: dict,
                 neighbours: dict | None = None, progress: bool = False, fixed_by_region: dict | None = None,
-                **options) -> dict[str, RegionFit]:
+                cluster=None, **options) -> dict[str, RegionFit]:
     """Fit ``model`` separately in every region (paper sec. 4.4, 5.2).
 
     ``region`` gives each sample's label, ``region_names`` label -> name.
@@ -383,7 +530,8 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     status ``'defaults'``, and a warning says so; a fit whose glossy
     parameters stayed at their start values measured nothing of them: it takes
     its neighbour's glossy part (status ``'prior'``, the reason says so) and
-    lends nothing.
+    lends nothing. ``cluster`` (N,) is each sample's cluster for the
+    uncertainty (:func:`fit_region`).
     """
     model = brdf_models.model(model) if isinstance(model, str) else model
     neighbours = NEIGHBOURS if neighbours is None else neighbours
@@ -402,7 +550,8 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
         held[name] = model.fixed_defaults() if fixed is None else fixed
         if fixed_by_region and name in fixed_by_region:
             held[name] = region_options["fixed"] = {**held[name], **fixed_by_region[name]}
-        fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask], **region_options)
+        fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask],
+                                cluster=None if cluster is None else np.asarray(cluster)[mask], **region_options)
         peak = glossy_peak(model, fits[name].params)
         seen = float(np.max(reflectance[mask])) if mask.any() else 0.0
         if fits[name].status == CONVERGED and peak > PEAK_FACTOR * max(seen, 1e-6):

@@ -10,7 +10,10 @@ that renders the fitted face with the plugins as the camera saw it in the
 first measurement (meshes in ``meshes/``); with per-texel normals, the
 normal map ``normals.exr`` (Mitsuba's ``normalmap`` encoding, see
 :mod:`mifaces.reflectance.texel_normals`), which ``scene.xml`` wraps every
-region's BSDF in. The files are one result set
+region's BSDF in; ``albedo_std.exr``, the albedo's posterior standard
+deviation per texel (:attr:`mifaces.reflectance.diffuse.DiffuseMap.std`),
+when known. ``brdf.json``'s ``"uncertainty"`` holds each region's parameter
+intervals (:mod:`mifaces.reflectance.uncertainty`). The files are one result set
 (:func:`mifaces.files.result_set`): written together into a sibling folder
 and swapped in, so a killed run leaves the earlier set whole.
 :func:`load_estimate` reads ``brdf.json`` and the albedo map back and refuses
@@ -33,7 +36,7 @@ if TYPE_CHECKING:
 
 #: The fitted BRDF's files in an output folder.
 FILES = {"brdf": "brdf.json", "albedo": "albedo.exr", "preview": "albedo.png", "scene": "scene.xml",
-         "normals": "normals.exr", "specular": "specular.exr"}
+         "normals": "normals.exr", "specular": "specular.exr", "albedo_std": "albedo_std.exr"}
 #: Samples per pixel of ``scene.xml`` (``mi.load_file(path, spp=N)`` overrides it).
 SCENE_SPP = 64
 #: The key path of the sample count in a scene dict.
@@ -83,10 +86,13 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
             write_exr(folder / FILES["normals"], normals)
         if specular is not None:
             write_exr(folder / FILES["specular"], specular)
+        if estimate.albedo.std is not None:
+            write_exr(folder / FILES["albedo_std"], estimate.albedo.std)
         face.write_meshes(folder)
         with atomic_write(folder / FILES["scene"], "w") as f:
             f.write(scene_xml(scene, {"spp": SPP_PATH}, comment))
-    optional = {"normals": normals is not None, "specular": specular is not None}
+    optional = {"normals": normals is not None, "specular": specular is not None,
+                "albedo_std": estimate.albedo.std is not None}
     return {key: out / name for key, name in FILES.items() if optional.get(key, True)}
 
 

@@ -403,7 +403,7 @@ def fit_normals_and_brdf(model: BRDFModel | str, values, directions, weights, no
     for round_ in range(rounds + 1):
         t0 = time.perf_counter()
         fit = fit_region(model, *brdf_samples(values, directions, weights, normals, albedo, view, max_samples,
-                                              seed + round_), start=start)
+                                              seed + round_), start=start, uncertainty=None)
         if round_ == 0:  # the Lambertian normals under the first BRDF fit, their albedo in closed form
             data, albedo = Observations(model, fit.params, directions, view, len(normals), values,
                                         weights).losses(normals)

@@ -80,6 +80,11 @@ class ParameterSpace:
             return exp(log(f.lower) + (log(f.upper) - log(f.lower)) * s)
         return f.lower + (f.upper - f.lower) * s
 
+    def entry_value(self, f: _Free, x: float) -> float:
+        """The value of free entry ``f`` (its channel) at its unconstrained ``x``, before any
+        energy coupling (:meth:`values` applies that)."""
+        return float(self._forward(x, f, lambda t: 0.5 * (1.0 + np.tanh(0.5 * t)), np.log, np.exp))
+
     def values(self, x: np.ndarray) -> dict:
         """Parameter values (floats, or lists of three) for the vector ``x``."""
         out = {k: (list(map(float, v)) if np.ndim(v) else float(v)) for k, v in self.fixed.items()}

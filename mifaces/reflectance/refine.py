@@ -387,12 +387,13 @@ class RefineProblem:
             x = np.array([float(np.asarray(variables[f"{region}.{i}"])[0]) for i in range(len(space))])
             params = dict(fits[region].params)
             params.update({k: v for k, v in space.values(x).items() if k in params})
-            fits[region] = dataclasses.replace(fits[region], params=params)
+            # the region fit's intervals were around its own optimum, not the refined one
+            fits[region] = dataclasses.replace(fits[region], params=params, uncertainty={})
         albedo = self.estimate.albedo
         if self.albedo is not None:
             with dr.suspend_grad():
                 texture = np.asarray(self.albedo.albedo(variables["albedo"]), np.float32)
-            albedo = dataclasses.replace(albedo, albedo=texture)
+            albedo = dataclasses.replace(albedo, albedo=texture, std=None)
         return dataclasses.replace(self.estimate, fits=fits, albedo=albedo, refinement=refinement)
 
 

@@ -1,0 +1,387 @@
+"""Are the error bars honest? Coverage of the fits' 95 % intervals on simulated captures.
+
+1. **Same family.** For each model, simulated captures (one per seed) whose
+   ground truth is that model; the model fitted on the true geometry; per
+   region, parameter and channel, whether the 95 % interval contains the true
+   value. The Cook-Torrance truth's skin parameters are drawn per seed from a
+   seeded RNG within plausible ranges (:data:`SKIN_RANGES`), not chosen here.
+2. **Out of family.** Truths the models cannot express (``roughplastic``,
+   ``principled``, the spatially varying Cook-Torrance): the "true value" of
+   a model's parameter is its best fit to the same capture rendered without
+   sensor noise at :data:`REFERENCE_SPP` samples per pixel (same seed: same
+   face, lights and poses).
+3. **Methods.** Every fit's intervals by each estimate of
+   :mod:`mifaces.reflectance.uncertainty` (the sandwich over texel tiles, over
+   single texels, the Laplace approximation, the bootstrap). The tile size was
+   chosen on the tuning seeds (:data:`TUNING_SEEDS`), which the coverage
+   tables leave out.
+4. **Cost** (``--cost N``). The region fits' time with and without the
+   default estimate, on N Cook-Torrance captures, texture 128², 256² and 512²
+   (fit_brdf's default).
+
+Run:  python validation/uncertainty.py [--seeds 20] [--other-seeds 20] [--out-seeds 6] [--tune] [--cost N]
+Writes validation/results/uncertainty.json (the tables), uncertainty_records.json
+(every interval checked) and uncertainty.png (with
+``--tune``, uncertainty_tuning.json; with ``--cost``, uncertainty_cost.json).
+Simulated captures go to a temporary folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import mifaces  # first: libLLVM  # isort: skip
+
+import numpy as np
+
+from mifaces.capture import load_capture, read_ground_truth
+from mifaces.files import atomic_write, save_figure, write_json
+from mifaces.geometry import load_geometry
+from mifaces.reflectance import capture_samples, fit_brdf
+from mifaces.reflectance import uncertainty as unc
+from mifaces.status import PRIOR
+from mifaces.studio import photograph, simulate
+
+RESULTS = Path(__file__).resolve().parent / "results"
+#: Capture size: photographs (px), measurements, samples per pixel, texture resolution.
+IMAGE, MEASUREMENTS, SPP, TEXTURE = (256, 256), 6, 16, 128
+#: Samples per pixel of the noise-free reference of an out-of-family truth.
+REFERENCE_SPP = 128
+#: Plausible skin ranges the Cook-Torrance truth's skin is drawn from (uniform; grey lobe).
+SKIN_RANGES = {"specular_reflectance": (0.5, 1.5), "roughness": (0.2, 0.5)}
+#: Seeds the tile size was chosen on (not in the tables).
+TUNING_SEEDS = range(100, 105)
+#: Estimates compared: name -> (method, tile at resolution 128 or None).
+VARIANTS = {"jackknife": ("jackknife", None), "sandwich": ("sandwich", None), "sandwich_texel": ("sandwich", 1),
+            "laplace": ("laplace", None), "bootstrap": ("bootstrap", None)}
+MODELS = ("cooktorrance", "phong", "ward", "lafortune")
+OUT_OF_FAMILY = {"roughplastic": dict(brdf="roughplastic"), "principled": dict(brdf="principled"),
+                 "varying": dict(brdf="cooktorrance", varying=True)}
+#: The fields of a record (one interval checked), in the order of the rows of uncertainty_records.json.
+FIELDS = ("truth_model", "model", "seed", "variant", "region", "parameter", "channel", "samples", "truth", "fitted",
+          "lo", "hi", "status", "covered")
+#: Regions reported as small.
+SMALL = ("lips", "eyebrows")
+
+
+def skin_truth(seed: int) -> dict:
+    """The Cook-Torrance truth's skin of ``seed``: drawn from :data:`SKIN_RANGES`."""
+    rng = np.random.default_rng(10_000 + seed)
+    s = float(rng.uniform(*SKIN_RANGES["specular_reflectance"]))
+    m = float(rng.uniform(*SKIN_RANGES["roughness"]))
+    return {"model": "cooktorrance", "regions": {"skin": {"specular_reflectance": [round(s, 4)] * 3,
+                                                          "roughness": round(m, 4)}}}
+
+
+def noise_free(values, rng, **_):
+    """:func:`mifaces.studio.photograph.camera_noise` without the noise (same random draws)."""
+    rng.standard_normal(np.shape(values))
+    return np.clip(np.asarray(values, np.float64), 0.0, 1.0).astype(np.float32)
+
+
+def _simulate(folder: Path, seed: int, spp: int = SPP, clean: bool = False, **options):
+    original = photograph.camera_noise
+    if clean:
+        photograph.camera_noise = noise_free
+    try:
+        simulate(folder, resolution=IMAGE, measurements=MEASUREMENTS, spp=spp, seed=seed, progress=False,
+                 force=True, **options)
+    finally:
+        photograph.camera_noise = original
+    capture = load_capture(folder)
+    face, shapes = load_geometry(capture, "ground-truth")
+    return capture, face, shapes, capture_samples(capture, shapes, face, TEXTURE, progress=False)
+
+
+def _fit(capture, face, shapes, samples, model, method, tile=None, texture=TEXTURE):
+    default = unc.TILE_AT_128
+    unc.TILE_AT_128 = default if tile is None else tile
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return fit_brdf(capture, model, shapes, face_model=face, resolution=texture, samples=samples,
+                            progress=False, uncertainty=method)
+    finally:
+        unc.TILE_AT_128 = default
+
+
+def _checks(estimate, truth: dict, variant: str, meta: dict) -> list[dict]:
+    """One record per region, parameter and channel with a true value: interval, truth, covered."""
+    out = []
+    for region, fit in estimate.fits.items():
+        if fit.status == PRIOR or region not in truth:
+            continue
+        for name, value in truth[region].items():
+            entry = fit.uncertainty.get(name, {})
+            if entry.get("status") == unc.FIXED:
+                continue
+            channels = range(3) if np.ndim(value) else [None]
+            for c in channels:
+                true = float(value[c] if c is not None else value)
+                fitted = float(fit.params[name][c] if c is not None else fit.params[name])
+                status = entry.get("status")
+                status = status[c] if isinstance(status, list) else status
+                if "interval95" in entry and status in (None, unc.ESTIMATED):
+                    lo, hi = entry["interval95"]
+                    lo, hi = (lo[c], hi[c]) if c is not None else (lo, hi)
+                    covered = bool(lo <= true <= hi)
+                else:
+                    lo = hi = None
+                    covered = None
+                out.append({**meta, "variant": variant, "region": region, "parameter": name, "channel": c,
+                            "samples": fit.samples, "truth": true, "fitted": fitted, "lo": lo, "hi": hi,
+                            "status": status or unc.ESTIMATED, "covered": covered})
+    return out
+
+
+def _truth_of(capture, model) -> dict:
+    truth = read_ground_truth(capture).brdf
+    return {r: {k: v for k, v in p.items() if k != "eta"} for r, p in truth["regions"].items()} \
+        if truth["model"] == model else {}
+
+
+def same_family(model: str, seeds, tmp: Path, variants=VARIANTS) -> list:
+    records = []
+    for seed in seeds:
+        t = time.perf_counter()
+        params = skin_truth(seed) if model == "cooktorrance" else None
+        capture, face, shapes, samples = _simulate(tmp / f"{model}_{seed}", seed, brdf=model, brdf_params=params)
+        truth = _truth_of(capture, model)
+        for variant, (method, tile) in variants.items():
+            estimate = _fit(capture, face, shapes, samples, model, method, tile)
+            records += _checks(estimate, truth, variant, {"truth_model": model, "model": model, "seed": seed})
+        print(f"{model} seed {seed}: {time.perf_counter() - t:.1f} s", flush=True)
+    return records
+
+
+def cost(seeds, tmp: Path, textures=(128, 256, 512), repeats: int = 5) -> dict:
+    """The region fits' time (``seconds['fit']``) without and with the default estimate, per model,
+    capture and texture resolution: the best of ``repeats`` interleaved runs, after one run of each
+    (the first in the process, which compiles the kernels, is recorded apart)."""
+    rows, first = [], {}
+    for seed in seeds:
+        capture = _simulate(tmp / f"cost_{seed}", seed)[:3]
+        for texture in textures:
+            samples = capture_samples(capture[0], capture[2], capture[1], texture, progress=False)
+            for model in MODELS:
+                times = {}
+                for i, method in enumerate((None, unc.METHODS[0]) * (repeats + 1)):
+                    seconds = _fit(*capture, samples, model, method, texture=texture).seconds["fit"]
+                    if i < 2:
+                        first.setdefault(f"{model}_{method}", seconds)
+                        continue
+                    times[str(method)] = min(times.get(str(method), np.inf), seconds)
+                rows.append({"seed": seed, "texture": texture, "model": model, "samples": int(len(samples)),
+                             "without": times["None"], "with": times[unc.METHODS[0]]})
+                print(rows[-1], flush=True)
+    ratio = np.array([r["with"] / r["without"] - 1 for r in rows])
+    by_texture = {t: float(np.median([r["with"] / r["without"] - 1 for r in rows if r["texture"] == t]))
+                  for t in textures}
+    return {"method": unc.METHODS[0], "overhead_median": float(np.median(ratio)),
+            "overhead_median_by_texture": by_texture, "first_call_seconds": first, "fits": rows}
+
+
+def out_of_family(name: str, seeds, tmp: Path, variants=VARIANTS) -> list:
+    records = []
+    for seed in seeds:
+        t = time.perf_counter()
+        ref = _simulate(tmp / f"{name}_{seed}_ref", seed, spp=REFERENCE_SPP, clean=True, **OUT_OF_FAMILY[name])
+        noisy = _simulate(tmp / f"{name}_{seed}", seed, **OUT_OF_FAMILY[name])
+        for model in MODELS:
+            reference = _fit(*ref, model, None)
+            truth = {r: {k: v for k, v in f.params.items() if k != "eta"} for r, f in reference.fits.items()
+                     if f.status != PRIOR}
+            for variant, (method, tile) in variants.items():
+                estimate = _fit(*noisy, model, method, tile)
+                records += _checks(estimate, truth, variant, {"truth_model": name, "model": model, "seed": seed})
+        print(f"{name} seed {seed}: {time.perf_counter() - t:.1f} s", flush=True)
+    return records
+
+
+def coverage(records: list, **where) -> dict:
+    """Coverage of the records matching ``where`` (``regions`` a tuple of region names or None):
+    intervals checked, contained, the fraction, and parameters held at a bound."""
+    regions = where.pop("regions", None)
+    chosen = [r for r in records if all(r[k] == v for k, v in where.items())
+              and (regions is None or r["region"] in regions)]
+    checked = [r for r in chosen if r["covered"] is not None]
+    hits = sum(r["covered"] for r in checked)
+    return {"intervals": len(checked), "covered": hits,
+            "coverage": hits / len(checked) if checked else None,
+            "without_interval": len(chosen) - len(checked)}
+
+
+def summary(records: list) -> dict:
+    """Coverage per truth, model and variant: pooled, small regions, per region, per parameter."""
+    out = {}
+    for truth in sorted({r["truth_model"] for r in records}):
+        for model in MODELS:
+            for variant in VARIANTS:
+                base = dict(truth_model=truth, model=model, variant=variant)
+                pooled = coverage(records, **base)
+                if not pooled["intervals"]:
+                    continue
+                regions = sorted({r["region"] for r in records if r["truth_model"] == truth})
+                params = sorted({r["parameter"] for r in records if r["truth_model"] == truth and r["model"] == model})
+                out.setdefault(truth, {}).setdefault(model, {})[variant] = {
+                    "pooled": pooled, "small": coverage(records, **base, regions=SMALL),
+                    "large": coverage(records, **base, regions=tuple(r for r in regions if r not in SMALL)),
+                    "regions": {g: coverage(records, **base, regions=(g,)) for g in regions},
+                    "parameters": {p: coverage(records, **base, parameter=p) for p in params}}
+    return out
+
+
+def skin_check(records: list) -> list:
+    """Per Cook-Torrance seed (the default estimate): the drawn skin truth and whether every fitted
+    skin parameter's interval holds it."""
+    out = []
+    for seed in sorted({r["seed"] for r in records if r["truth_model"] == "cooktorrance"}):
+        rows = [r for r in records if r["truth_model"] == "cooktorrance" and r["seed"] == seed
+                and r["region"] == "skin" and r["variant"] == unc.METHODS[0]]
+        out.append({"seed": seed, "truth": skin_truth(seed)["regions"]["skin"],
+                    "all_covered": all(r["covered"] for r in rows),
+                    "parameters": [{k: r[k] for k in ("parameter", "channel", "truth", "fitted", "lo", "hi",
+                                                      "covered")} for r in rows]})
+    return out
+
+
+def markdown(result: dict, records: list) -> str:
+    """The coverage tables of docs/uncertainty.md: per truth and model, every estimate's pooled coverage,
+    and the default's on small regions, the others, skin, the glossy parameters and the diffuse albedo."""
+    def pct(entry):
+        return "n/a" if entry["coverage"] is None else f"{100 * entry['coverage']:.0f} % ({entry['intervals']})"
+
+    default = result["default"]
+    lines = ["| truth | model | seeds | " + " | ".join(VARIANTS) + f" | {default}: small regions | others | skin | "
+             "glossy | diffuse |", "|---" * (len(VARIANTS) + 8) + "|"]
+    for truth, models in result["coverage"].items():
+        for model, entry in models.items():
+            d = entry[default]
+            glossy = coverage([r for r in records if r["parameter"] != "diffuse_reflectance"],
+                              truth_model=truth, model=model, variant=default)
+            diffuse = d["parameters"].get("diffuse_reflectance", {"coverage": None, "intervals": 0})
+            lines.append(f"| {truth} | {model} | {result['seeds'][truth]} | "
+                         + " | ".join(pct(entry[v]["pooled"]) for v in VARIANTS)
+                         + f" | {pct(d['small'])} | {pct(d['large'])} | {pct(d['regions']['skin'])} | {pct(glossy)} | "
+                         + f"{pct(diffuse)} |")
+    return "\n".join(lines)
+
+
+def figure(result: dict, path: Path) -> None:
+    """Coverage per model and estimate (bars pooled, dashes small regions): the same-family truths in
+    one panel, each out-of-family truth in its own."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    table = result["coverage"]
+    panels = [("same family (truth = fitted model)", {m: table[m][m] for m in MODELS if m in table})]
+    panels += [(f"truth {t} (out of family)", table[t]) for t in OUT_OF_FAMILY if t in table]
+    fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), squeeze=False, sharey=True)
+    width = 0.8 / len(VARIANTS)
+    for ax, (title, models) in zip(axes.ravel(), panels):
+        for i, variant in enumerate(VARIANTS):
+            for j, entry in enumerate(models.values()):
+                ax.bar(j + i * width, entry[variant]["pooled"]["coverage"], width, color=f"C{i}",
+                       label=variant if j == 0 else None)
+                small = entry[variant]["small"]["coverage"]
+                if small is not None:
+                    ax.plot(j + i * width, small, "k_", markersize=7)
+        ax.axhspan(0.85, 0.99, color="0.9", zorder=0)
+        ax.axhline(0.95, color="k", lw=0.8)
+        ax.set_xticks(np.arange(len(models)) + 0.4 - width / 2, list(models), fontsize=8)
+        ax.set_title(title, fontsize=9)
+        ax.set_ylim(0, 1.02)
+    for ax in axes.ravel()[len(panels):]:
+        ax.axis("off")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("coverage of the 95 % intervals")
+    axes[0][0].legend(fontsize=7, loc="lower left", ncol=2)
+    fig.suptitle("SIMULATED captures: how often the 95 % interval holds the true value (bars: pooled, "
+                 "dashes: lips and eyebrows; band 85-99 %)", fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=90)
+
+
+def write_records(records: list) -> None:
+    """The records, one compact row each (:data:`FIELDS`, values to 5 digits), to uncertainty_records.json."""
+    with atomic_write(RESULTS / "uncertainty_records.json", "w") as f:
+        rows = [[float(f"{r[k]:.5g}") if isinstance(r[k], float) else r[k] for k in FIELDS] for r in records]
+        json.dump({"fields": FIELDS, "rows": rows}, f, separators=(",", ":"))
+
+
+def read_records() -> list:
+    data = json.loads((RESULTS / "uncertainty_records.json").read_text())
+    return [dict(zip(data["fields"], row)) for row in data["rows"]]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seeds", type=int, default=20, help="seeds of the Cook-Torrance and Phong truths")
+    parser.add_argument("--other-seeds", type=int, default=20, help="seeds of the Ward and Lafortune truths")
+    parser.add_argument("--out-seeds", type=int, default=6, help="seeds of each out-of-family truth")
+    parser.add_argument("--tune", action="store_true", help="only the tuning seeds (tile size)")
+    parser.add_argument("--summarize", action="store_true",
+                        help="only the tables and the figure again, from the records uncertainty.json holds")
+    parser.add_argument("--cost", type=int, default=0, metavar="N",
+                        help="only the cost: fit times with and without the default estimate on N captures")
+    args = parser.parse_args()
+    t0 = time.perf_counter()
+    if args.summarize:
+        result = json.loads((RESULTS / "uncertainty.json").read_text())
+        records = read_records()
+        result.update(default=unc.METHODS[0], coverage=summary(records), skin_check=skin_check(records))
+        write_json(RESULTS / "uncertainty.json", result)
+        figure(result, RESULTS / "uncertainty.png")
+        print(markdown(result, records))
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        if args.cost:
+            write_json(RESULTS / "uncertainty_cost.json", cost(range(args.cost), tmp))
+            return
+        if args.tune:
+            variants = ({f"sandwich_tile{t}": ("sandwich", t) for t in (1, 4, 8, 16)}
+                        | {f"jackknife_tile{t}": ("jackknife", t) for t in (1, 4, 8, 16)}
+                        | {"laplace": ("laplace", None), "bootstrap": ("bootstrap", None)})
+            records = []
+            for model in ("cooktorrance", "phong"):
+                records += same_family(model, TUNING_SEEDS, tmp, variants)
+            table = {v: {m: coverage(records, variant=v, model=m) for m in ("cooktorrance", "phong")}
+                     for v in variants}
+            write_json(RESULTS / "uncertainty_tuning.json", {"seeds": list(TUNING_SEEDS), "coverage": table})
+            print(json.dumps(table, indent=1))
+            return
+        result = {"default": unc.METHODS[0], "image": IMAGE, "measurements": MEASUREMENTS, "spp": SPP,
+                  "texture": TEXTURE,
+                  "reference_spp": REFERENCE_SPP, "tile_at_128": unc.TILE_AT_128, "skin_ranges": SKIN_RANGES,
+                  "variants": {k: list(v) for k, v in VARIANTS.items()}, "seeds": {}}
+        records = []
+
+        def save():
+            result.update(coverage=summary(records), skin_check=skin_check(records), seconds=time.perf_counter() - t0)
+            write_json(RESULTS / "uncertainty.json", result)
+            write_records(records)
+
+        for model in MODELS:
+            n = args.seeds if model in ("cooktorrance", "phong") else args.other_seeds
+            result["seeds"][model] = n
+            records += same_family(model, range(n), tmp)
+            save()
+        for name in OUT_OF_FAMILY:
+            result["seeds"][name] = args.out_seeds
+            records += out_of_family(name, range(args.out_seeds), tmp)
+            save()
+    figure(result, RESULTS / "uncertainty.png")
+    print(json.dumps({t: {m: {v: (e["pooled"]["coverage"], e["small"]["coverage"]) for v, e in d.items()}
+                          for m, d in table.items()} for t, table in result["coverage"].items()}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
