@@ -554,7 +554,8 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
                                 cluster=None if cluster is None else np.asarray(cluster)[mask], **region_options)
         peak = glossy_peak(model, fits[name].params)
         seen = float(np.max(reflectance[mask])) if mask.any() else 0.0
-        if fits[name].status == CONVERGED and peak > PEAK_FACTOR * max(seen, 1e-6):
+        if fits[name].status in (CONVERGED, AT_BOUND) and SPIKE not in fits[name].reason \
+                and peak > PEAK_FACTOR * max(seen, 1e-6):
             # a lobe brighter than anything the photographs showed: fitted to a few samples' noise
             fits[name] = dataclasses.replace(fits[name], status=AT_BOUND, reason=(
                 f"{fits[name].reason}; {SPIKE}: its peak (pi f = {peak:.3g}) is more than {PEAK_FACTOR:g} times "
