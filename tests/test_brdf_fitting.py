@@ -369,6 +369,23 @@ def test_a_lobe_brighter_than_every_sample_is_a_spike(jit_variant):
     assert fits["nostrils"].status == PRIOR and "brightest sample" in fits["nostrils"].reason
     assert fits["nostrils"].params["alpha"] == pytest.approx(fits["skin"].params["alpha"])
 
+    # the same for a large region whose fit ended at a bound (a Yale subject's eyebrows): it is a spike,
+    # lends nothing (the hair, unseen, takes skin's lobe, not the spike) and borrows skin's
+    def at_bound(model_, light, view, reflectance, sigma, **options):
+        result = real(model_, light, view, reflectance, sigma, **options)
+        if len(sigma) == 2000:
+            return fitting.RegionFit("ward", {}, narrow, result.loss, 2000, 0.0, AT_BOUND,
+                                     "converged; at the bound of its range: specular_reflectance[0]", 3)
+        return result
+
+    light, view, r, sigma = synthetic_samples(model, broad, 3000 + 2000, seed=1)
+    labels = np.repeat([1, 4], [3000, 2000])
+    with unittest.mock.patch.object(fitting, "fit_region", at_bound), pytest.warns(UserWarning, match="spike"):
+        fits = fitting.fit_regions(model, light, view, r, sigma, labels, {1: "skin", 4: "eyebrows", 7: "hair"},
+                                   schedule=FULL_DATA)
+    assert fits["eyebrows"].status == PRIOR and "brightest sample" in fits["eyebrows"].reason
+    assert fits["hair"].params["alpha"] == pytest.approx(fits["skin"].params["alpha"])
+
 
 # --------------------------------------------------------------------------
 # Fits that end at a bound, as a spike or at their start values say so (issue 27).

@@ -37,21 +37,13 @@ import numpy as np
 
 from mifaces.model import load_model
 from mifaces.model.builtin import FIT_SHAPE_MODES
+from mifaces.shape_errors import rigid_alignment
 
 HERE = Path(__file__).resolve().parent
 SFM = HERE.parent.parent / "shared" / "models" / "sfm_3448" / "sfm_shape_3448.npz"
 MODES = (10, 20, 30, 40, 50, 60, 80, 100)
 TEST_SEED, TRAIN_SEED = 2024, 7
 PRIOR_WEIGHT = 1.0
-
-
-def rigid(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation and translation taking ``source`` (n, 3) closest to ``target`` (Kabsch)."""
-    ms, mt = source.mean(axis=0), target.mean(axis=0)
-    u, _, vt = np.linalg.svd((source - ms).T @ (target - mt))
-    d = np.sign(np.linalg.det(vt.T @ u.T))
-    rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-    return rotation, mt - rotation @ ms
 
 
 def fit_landmarks(model, vertices: list[int], target: np.ndarray, modes: int, rounds: int = 20):
@@ -62,12 +54,12 @@ def fit_landmarks(model, vertices: list[int], target: np.ndarray, modes: int, ro
     a = np.zeros(modes)
     for _ in range(rounds):
         shape = mean + basis @ a
-        rotation, translation = rigid(shape, target)
+        rotation, translation = rigid_alignment(shape, target)
         local = (target - translation) @ rotation  # the target in the model's frame
         design = basis.reshape(-1, modes)
         a = np.linalg.solve(design.T @ design + PRIOR_WEIGHT * np.eye(modes), design.T @ (local - mean).ravel())
     shape = mean + basis @ a
-    rotation, translation = rigid(shape, target)
+    rotation, translation = rigid_alignment(shape, target)
     residual = np.linalg.norm(shape @ rotation.T + translation - target, axis=1)
     return a, residual
 

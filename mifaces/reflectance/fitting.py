@@ -571,14 +571,18 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     # A fit whose glossy part never left its start values measured nothing of it: rendering those
     # (a Phong exponent of 1800, say) would invent a highlight. It takes a neighbour's glossy part,
     # keeping its own albedo, flagged 'prior' (the model's defaults, 'defaults', without a neighbour).
-    for name in [n for n, fit in fits.items() if fit.status == AT_START]:
+    def borrow(name, why):
+        """Region ``name`` keeps its albedo and takes its donor's glossy part (or none), for ``why``."""
         donor = donor_of(name)
         glossy = fits[donor].params if donor else no_lobe(model)
         borrowed = {**glossy, **held[name], "diffuse_reflectance": fits[name].params["diffuse_reflectance"]}
-        reason = (f"{counts[name]} samples, and {fits[name].reason.split('; ')[-1]} (not measured): the glossy "
-                  f"part of {repr(donor) if donor else 'no region: no glossy part'}")
-        warnings.warn(f"region {name!r}: {reason}", stacklevel=2)
+        source = repr(donor) if donor else "no region: no glossy part"
+        reason = f"{counts[name]} samples, and {why}: the glossy part of {source}"
+        warnings.warn(f"region {name!r}: {reason}", stacklevel=3)
         fits[name] = prior_fit(model, borrowed, counts[name], reason, PRIOR if donor else DEFAULTS)
+
+    for name in [n for n, fit in fits.items() if fit.status == AT_START]:
+        borrow(name, f"{fits[name].reason.split('; ')[-1]} (not measured)")
 
     # A small region (fewer than 10x the samples a fit needs) whose best fit lies at a
     # bound of the valid range is more likely fitting noise than showing a material
@@ -591,12 +595,7 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
         if not spike and (donor is None or counts[name] >= 10 * needed):
             warnings.warn(f"region {name!r}: the fit ended {fits[name].reason.split('; ')[-1]}", stacklevel=2)
             continue
-        glossy = fits[donor].params if donor else no_lobe(model)
-        borrowed = {**glossy, **held[name], "diffuse_reflectance": fits[name].params["diffuse_reflectance"]}
-        reason = (f"{counts[name]} samples, and its own fit ended {fits[name].reason.split('; ')[-1]}: "
-                  f"the glossy part of {repr(donor) if donor else 'no region: no glossy part'}")
-        warnings.warn(f"region {name!r}: {reason}", stacklevel=2)
-        fits[name] = prior_fit(model, borrowed, counts[name], reason, PRIOR if donor else DEFAULTS)
+        borrow(name, f"its own fit ended {fits[name].reason.split('; ')[-1]}")
     for label, name in region_names.items():
         if name in fits:
             continue
