@@ -472,7 +472,9 @@ def test_10_fit_shape_into_an_existing_empty_folder(capture, tmp_path):
     result = _run("fit-shape", str(capture), "--out", str(out), "--measurements", "m00", "--iterations", "0.01")
     assert "Traceback" not in result.output and result.exit_code in (0, 1), result.output
     assert result.exit_code == 0 or "did not converge" in result.output, result.output
-    assert {"shapes.json", "m00.json", "m00.npy"} <= {p.name for p in out.iterdir()}
+    # a 1 % schedule may not converge (its shading unmatched): then no vertices, but the fit and the index
+    written = {"shapes.json", "m00.json"} | ({"m00.npy"} if result.exit_code == 0 else set())
+    assert written <= {p.name for p in out.iterdir()}
 
 
 def test_10_measure_into_an_existing_empty_folder(capture, tmp_path):

@@ -270,7 +270,8 @@ def test_shapes_in_world_equals_what_is_read_back(model, camera, posed, tmp_path
     turned = Camera(SIZE, SIZE, camera.fx, camera.fy, camera.cx, camera.cy, np.zeros(5),
                     rotation_matrix(20.0, -10.0, 5.0), np.array([30.0, -20.0, 50.0]))
     cap = capture(turned, [m, bad])
-    fits = fit_shape(cap, model, out=tmp_path, progress=False,
+    # a 20-step image stage cannot match the shading: the photometric limit is lifted (the pose is under test)
+    fits = fit_shape(cap, model, out=tmp_path, progress=False, max_image_rms=math.inf,
                      iterations=ShapeSchedule(levels=((20, 300, 2.0),), pose_iterations=60))
     assert [f.status for f in fits] == [CONVERGED, DIVERGED]
     with pytest.warns(UserWarning, match="scrambled"):
@@ -461,7 +462,8 @@ def test_one_pose_many_lights_is_one_fit(model, camera, posed, tmp_path, monkeyp
     _, _, _, m = posed
     ms = [Measurement(f"m{i}", f"L{i}", "frontal", m.image, m.diffuse, (), m.feature_points) for i in range(3)]
     cap = directional_capture(camera, ms, [(0.6, 0.0, -0.8), (0.05, 0.0, -1.0), (-0.5, -0.3, -0.8)])
-    fits = fit_shape(cap, model, out=tmp_path, progress=False,
+    # a 20-step image stage cannot match the shading: the photometric limit is lifted (the sharing is under test)
+    fits = fit_shape(cap, model, out=tmp_path, progress=False, max_image_rms=math.inf,
                      iterations=ShapeSchedule(levels=((20, 300, 2.0),), pose_iterations=60))
     assert calls == ["m1"]
     assert [f.measurement for f in fits] == ["m0", "m1", "m2"]

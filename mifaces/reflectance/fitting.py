@@ -474,8 +474,10 @@ SPIKE = "the lobe became a spike at the sharp end of its width range"
 #: (a narrow, strong lobe fitted to a few samples' noise; under a light the photographs did not cover
 #: it would blow up): it is handled as one (:data:`SPIKE`).
 PEAK_FACTOR = 5.0
-#: Incidence angles (degrees) at which :func:`glossy_peak` evaluates the lobe at its mirror direction.
-PEAK_ANGLES = (0.0, 20.0, 40.0, 60.0, 75.0)
+#: Incidence angles (degrees) at which :func:`glossy_peak` evaluates the lobe at its mirror direction:
+#: up to 40°, where photographs see highlights; towards grazing a true microfacet lobe rises far above
+#: any sample (1 / (4 cos cos) and Fresnel), which says nothing about noise.
+PEAK_ANGLES = (0.0, 20.0, 40.0)
 
 
 def no_lobe(model: BRDFModel) -> dict:

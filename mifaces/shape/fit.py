@@ -64,7 +64,8 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
                     fit_focal: bool = True, initial_color=None, seed: int = 0,
                     max_feature_error: float = MAX_FEATURE_ERROR, progress=True, lr=(0.1, 0.01),
                     visibility_interval: int = 50, initial: dict | None = None, fixed=(), distances=(),
-                    light=None, feature_noise: float = FEATURE_NOISE) -> ShapeFit:
+                    light=None, feature_noise: float = FEATURE_NOISE,
+                    max_image_rms: float = MAX_IMAGE_RMS) -> ShapeFit:
     """Fit the morphable model to one measurement (paper sec. 4.2), from the mean face.
 
     Parameters
@@ -99,6 +100,10 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
         ``max_feature_error`` times the face's eye distance in the image, plus the
         points' expected noise ``feature_noise`` in px) from their targets is not a
         success: ``'diverged'`` or ``'not_converged'`` (see :attr:`ShapeFit.status`).
+    max_image_rms : float
+        The convergence limit of the photometric residual ``loss['image_rms']``
+        (:data:`MAX_IMAGE_RMS`), where the photographs are used: a fit whose feature
+        points fit but whose rendering does not match is ``'not_converged'``.
     seed : int
         Seeds the choice of sample vertices.
     progress : bool or progress bar
@@ -166,23 +171,24 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
     if status is None:
         limit = (feature_limit(fit.vertices_camera, model, float(fit.focal_length[1]), max_feature_error,
                                feature_noise) if np.all(np.isfinite(theta)) else math.inf)
-        status, message = _status(theta, terms, history, limit)
+        status, message = _status(theta, terms, history, limit, max_image_rms)
     return replace(fit, status=status, message=message, seconds=time.perf_counter() - t0,
                    estimated=estimated_quantities(camera, distances, fit_focal))
 
 
-def _status(theta, terms: dict, history: list, limit_px: float) -> tuple[str, str]:
+def _status(theta, terms: dict, history: list, limit_px: float, max_image_rms: float = MAX_IMAGE_RMS
+            ) -> tuple[str, str]:
     """How a fit that ran all its iterations ended, and why, for a feature-point limit in px and the
     photometric limit :data:`MAX_IMAGE_RMS` (where the fit used the photographs)."""
     if not all(np.isfinite(v) for v in terms.values()) or not np.all(np.isfinite(theta)):
         return DIVERGED, "non-finite parameters or loss"
     image_rms = terms.get("image_rms")
-    if terms["feature_rms_px"] <= limit_px and (image_rms is None or image_rms <= MAX_IMAGE_RMS):
+    if terms["feature_rms_px"] <= limit_px and (image_rms is None or image_rms <= max_image_rms):
         return CONVERGED, ""
     if terms["feature_rms_px"] <= limit_px:  # the points fit, the face's shading does not
         return NOT_CONVERGED, (f"the feature points fit ({terms['feature_rms_px']:.1f} px RMS, limit {limit_px:.1f} px) "
                                f"but the rendered face does not match the photograph: image residual {image_rms:.3f} "
-                               f"RMS, limit {MAX_IMAGE_RMS} (of the photograph's 99th percentile)")
+                               f"RMS, limit {max_image_rms:g} (of the photograph's 99th percentile)")
     start = history[0]["feature_rms_px"] if history else math.inf
     # feature points that end farther than they started, or far off: the fit ran away;
     # still approaching them: it needs more iterations
@@ -238,7 +244,8 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
               iterations: float | ShapeSchedule | None = None, progress: bool = True, weights: Weights | None = None,
               use_diffuse: bool = True, fit_focal: bool = True, seed: int = 0,
               max_feature_error: float = MAX_FEATURE_ERROR, fixed=(), feature_noise: float = FEATURE_NOISE,
-              shape_modes: int | None = None, one_identity: bool = True) -> list[ShapeFit]:
+              shape_modes: int | None = None, one_identity: bool = True,
+              max_image_rms: float = MAX_IMAGE_RMS) -> list[ShapeFit]:
     """Fit the morphable model to every pose of a capture, independently (paper sec. 4.2).
 
     Measurements sharing a ``pose`` label (one pose of the subject photographed
@@ -278,6 +285,8 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     seed : int
     max_feature_error, feature_noise : float
         The convergence limit of the feature points (see :func:`feature_limit`).
+    max_image_rms : float
+        The convergence limit of the photometric residual (:func:`fit_measurement`).
     fixed : iterable of str
         Parameter blocks held at their start values (see :func:`fit_measurement`).
     shape_modes : int, optional
@@ -318,7 +327,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
                        enabled=bool(progress))
     options = dict(weights=weights, use_diffuse=use_diffuse, fit_focal=fit_focal, seed=seed,
                    max_feature_error=max_feature_error, progress=progress, distances=capture.distances,
-                   feature_noise=feature_noise)
+                   feature_noise=feature_noise, max_image_rms=max_image_rms)
     for leader, *others in groups:
         light = capture.light(leader.light) if leader.light else None
         fit = fit_measurement(leader, capture.camera, model, light=light, schedule=schedule,
