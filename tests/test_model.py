@@ -6,6 +6,8 @@ algebra, trimesh, Mitsuba's own loaders).
 
 from __future__ import annotations
 
+import json
+
 from pathlib import Path
 
 import mifaces  # noqa: F401  # isort: skip
@@ -282,7 +284,15 @@ def test_converter_reproduces_the_packaged_model(tmp_path):
     with np.load(out) as fresh, np.load(ict_convert.MODEL_FILE) as packaged:
         assert set(fresh.files) == set(packaged.files)
         for key in fresh.files:
-            np.testing.assert_array_equal(fresh[key], packaged[key], err_msg=key)
+            a, b = fresh[key], packaged[key]
+            if key in ("basis", "expressions"):  # int16: an SVD on other BLAS threads may move one step
+                assert a.shape == b.shape and np.abs(a.astype(np.int32) - b).max() <= 1, key
+            elif key == "metadata":
+                assert json.loads(str(a))["parts"] == json.loads(str(b))["parts"]
+            elif a.dtype.kind == "f":
+                np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9, err_msg=key)
+            else:
+                np.testing.assert_array_equal(a, b, err_msg=key)
 
 
 def test_painted_skin_looks_like_skin(builtin):
