@@ -170,13 +170,14 @@ def shapes_markdown(report: dict) -> list[str]:
              + (f"; the simulated truth drew on {face['truth_shape_modes']}"
                 + (" plus fine detail outside the span" if face.get("truth_detail") else "")
                 + ", so it lies outside the fitted span by construction" if "truth_shape_modes" in face else "")
-             + ".", "", "| photograph | status | feature RMS (px) | world error (mm) | after rigid alignment (mm) "
-                        "| depth (mm) |", "|---|---|---|---|---|---|"]
+             + ".", "", "| photograph | status | feature RMS (px) | photometric residual | world error (mm) "
+                        "| after rigid alignment (mm) | depth (mm) |", "|---|---|---|---|---|---|---|"]
     for name, entry in report["shapes"].items():
         e = entry.get("errors") or {}
         cells = [f"{e[k]:.2f}" if k in e else "" for k in ("world_mm", "aligned_mm", "depth_mm")]
-        rms = entry.get("feature_rms_px")
-        lines.append(f"| {name} | {entry['status']} | {'' if rms is None else f'{rms:.2f}'} | " + " | ".join(cells) + " |")
+        fit = [f"{entry[k]:.{d}f}" if entry.get(k) is not None else "" for k, d in (("feature_rms_px", 2),
+                                                                                   ("image_rms", 3))]
+        lines.append(f"| {name} | {entry['status']} | " + " | ".join(fit + cells) + " |")
     return lines
 
 

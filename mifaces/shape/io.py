@@ -88,7 +88,8 @@ def write_index(out, capture, model, fits: list[ShapeFit], reference=None, model
         stem = file_stem(fit.measurement)
         entry = {"status": fit.status, "vertices": f"{stem}.npy" if fit.converged else None,
                  "parameters": f"{stem}.json", "seconds": round(fit.seconds, 3),
-                 "feature_rms_px": fit.loss.get("feature_rms_px"), "message": fit.message,
+                 "feature_rms_px": fit.loss.get("feature_rms_px"), "image_rms": fit.loss.get("image_rms"),
+                 "message": fit.message,
                  "shared_with": fit.shared_with, "estimated": list(fit.estimated)}
         entry["sha256"] = {name: file_sha256(out / name) for name in (entry["vertices"], entry["parameters"])
                            if name is not None and (out / name).is_file()}
