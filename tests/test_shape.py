@@ -516,3 +516,20 @@ def test_yale_photographs_one_fit_that_converges(model):
     assert fit.estimated == ("scale", "focal_length")
     assert np.ptp(fit.light["point"]["gain"]) == 0.0
     assert 0.5 < fit.focal_length[0] / cap.camera.fx < 2.0
+
+
+def test_a_fit_continues_from_another(model, camera, posed):
+    """One identity's second pass starts each photograph from its first fit (fit._start_from): one more
+    landmark step from there keeps the lighting the first fit ended with, in the photograph's units
+    (gain and offset go back through the image's normalisation), and the pose."""
+    from mifaces.shape.fit import _start_from
+
+    _, _, _, m = posed
+    first = fit_measurement(m, camera, model, progress=False, fit_focal=False,
+                            schedule=ShapeSchedule(levels=((10, 300, 2.0),), pose_iterations=30))
+    again = fit_measurement(m, camera, model, progress=False, fit_focal=False, initial=_start_from(first, model, m),
+                            fixed=("shape", "expression", "albedo"), schedule=ShapeSchedule(levels=(), pose_iterations=1))
+    for key in ("gain", "offset", "ambient", "color"):
+        np.testing.assert_allclose(again.light["point"][key], first.light["point"][key], rtol=1e-4, atol=1e-6,
+                                   err_msg=key)
+    np.testing.assert_allclose(again.yaw_pitch_roll, first.yaw_pitch_roll, atol=0.5)

@@ -20,8 +20,8 @@ from ..status import CONVERGED, DIVERGED, NOT_CONVERGED
 from .fitter import Fitter
 from .io import as_capture, write_fit, write_index
 from .result import ShapeFit, ShapeFitError, ShapeSchedule, Weights
-from .targets import (eye_distance_px, feature_targets, light_angles, light_direction, reference_measurement,
-                      rotation_centre, start_light_angles)
+from .targets import (eye_distance_px, feature_targets, light_angles, light_direction, normalised,
+                      reference_measurement, rotation_centre, start_light_angles)
 
 #: Default convergence limit of the feature points: RMS distance from their targets as a fraction of
 #: the face's eye distance (outer corners) in the image, on top of :data:`FEATURE_NOISE`; with it,
@@ -34,7 +34,7 @@ FEATURE_NOISE = 1.0
 #: fitted rendering and the photograph over the face's samples, in units of the photograph's 99th
 #: percentile (``ShapeFit.loss['image_rms']``). A fit is converged only when the feature points and
 #: this both meet their limits: feature points alone can fit a face that is far off (issue 22). Good
-#: fits of simulated training captures (seeds 11 and 12, not reported on) end at 0.03-0.04.
+#: fits of simulated training captures (seeds 11 and 12, not reported on) end at 0.031-0.053.
 MAX_IMAGE_RMS = 0.1
 #: Feature points of measurements labelled with one pose that differ from the pose's fitted
 #: measurement's by more than this fraction of their spread (RMS) are not one pose: fitted apart.
@@ -345,7 +345,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
             light = capture.light(leader.light) if leader.light else None
             fit = fit_measurement(leader, capture.camera, model, light=light, schedule=second,
                                   initial_color=initial_color, fixed=tuple(fixed) + ("shape",),
-                                  initial=dict(_start_from(first, model), shape=identity), **options)
+                                  initial=dict(_start_from(first, model, leader), shape=identity), **options)
             leaders[leader.name] = replace(fit, seconds=fit.seconds + first.seconds,
                                            message=(fit.message + "; " if fit.message else "")
                                            + f"identity shared by {len(groups)} poses")
@@ -372,9 +372,11 @@ def one_face(fits: list[ShapeFit]) -> np.ndarray | None:
     return np.mean(done, axis=0) if len(done) >= 2 else None
 
 
-def _start_from(fit: ShapeFit, model) -> dict:
-    """Start values (:func:`fit_measurement`'s ``initial``) that continue ``fit``: its pose,
-    expression, albedo or colour, lighting."""
+def _start_from(fit: ShapeFit, model, measurement) -> dict:
+    """Start values (:func:`fit_measurement`'s ``initial``) that continue ``fit`` of ``measurement``:
+    its pose, expression, albedo or colour, lighting (gain and offset back in the normalised
+    photograph's units the fit works in: :func:`~mifaces.shape.targets.normalised`)."""
+    photographs = {"point": measurement.image, "diffuse": measurement.diffuse}
     start = {"rotation": np.radians(fit.yaw_pitch_roll),
              "translation": fit.translation + fit.rotation @ rotation_centre(model)}
     if len(fit.expression):
@@ -384,9 +386,11 @@ def _start_from(fit: ShapeFit, model) -> dict:
     if fit.color is not None:
         start["color"] = fit.color
     for image, light in (fit.light or {}).items():
+        scale = normalised(photographs[image].pixels)[1] if photographs.get(image) is not None else 1.0
         for name in ("color", "ambient", "specular", "contrast", "gain", "offset"):
             if name in light:
-                start[f"{image}.{'light_color' if name == 'color' else name}"] = light[name]
+                value = np.asarray(light[name], np.float64) / (scale if name in ("gain", "offset") else 1.0)
+                start[f"{image}.{'light_color' if name == 'color' else name}"] = value
         if "direction" in light:
             start[f"{image}.light_angles"] = light_angles(light["direction"])
     return start
