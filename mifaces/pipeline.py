@@ -37,7 +37,7 @@ from .files import write_json
 from .geometry import load_geometry
 from .model import load_model
 from .reflectance import capture_samples, fit_brdf, write_estimate
-from .reflectance.refine_shape import refine_shape as refine_shapes_by_rendering
+from .reflectance.refine_shape import refine_lit
 from .render import FaceScene
 from .report import (ground_truth_errors, ranking, write_markdown, write_picture, write_uncertainty_picture,
                      write_validation_picture)
@@ -252,7 +252,7 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
     report["face_model"] = {"name": face.name, "model_shape_modes": face.shape_dim, "fit_shape_modes": fitted_modes}
     truth = read_ground_truth(capture)
     if truth is not None:
-        report["face_model"]["truth_shape_modes"] = int(np.count_nonzero(truth.coefficients.get("shape", ())))
+        report["face_model"]["truth_shape_modes"] = len(truth.coefficients.get("shape", ()))
         report["face_model"]["truth_detail"] = bool(truth.description.get("detail", False))
     if shapes and truth is not None:  # a simulated capture: how far off each fit lies
         _, true_shapes = load_geometry(capture, "ground-truth")
@@ -275,11 +275,7 @@ def _refine_shapes(capture: Capture, face, shapes: dict, samples, model: str, re
     their samples; ``report['shape_refinement']`` says what happened, and on a simulated capture
     ``report['shape_errors_refined']`` how far the refined faces lie from the truth."""
     t = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the first fit's warnings are the final fits' too
-        first = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
-                         progress=False)
-    result = refine_shapes_by_rendering(capture, shapes, face, first, progress=progress)
+    result = refine_lit(capture, shapes, face, samples, model, resolution, progress=progress)
     report["shape_refinement"] = {"accepted": result.accepted, "reason": result.reason, "model": model,
                                   "seconds": time.perf_counter() - t,
                                   **{k: v for k, v in result.record.items() if k not in ("loss_per_iteration",)}}

@@ -187,16 +187,17 @@ def test_measure_refines_the_shapes_when_asked(capture_dir, tmp_path, monkeypatc
     photographs and the report says whether it was kept and why (a short schedule here)."""
     import mifaces
     import mifaces.pipeline as pipeline
-    from mifaces.reflectance.refine_shape import ShapeRefineSchedule, refine_shape
+    from mifaces.reflectance.refine_shape import ShapeRefineSchedule, refine_lit
 
     mifaces.set_variant("llvm_ad_rgb")
     calls = []
 
-    def short(capture, shapes, face, estimate, schedule=None, **kw):
-        calls.append(estimate.model)
-        return refine_shape(capture, shapes, face, estimate, ShapeRefineSchedule(iterations=2, downsample=4), **kw)
+    def short(capture, shapes, face, samples, model, resolution, schedule=None, **kw):
+        calls.append(model)
+        return refine_lit(capture, shapes, face, samples, model, resolution,
+                          ShapeRefineSchedule(iterations=2, downsample=4), **kw)
 
-    monkeypatch.setattr(pipeline, "refine_shapes_by_rendering", short)
+    monkeypatch.setattr(pipeline, "refine_lit", short)
     report = pipeline.measure(tmp_path / "m", capture_dir, models=("phong",), geometry="ground-truth", resolution=64,
                               spp=2, progress=False, refine_shape=True)
     assert calls == ["phong"]

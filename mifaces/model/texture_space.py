@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.ndimage as ndi
 
 
 @dataclass(frozen=True)
@@ -133,3 +134,19 @@ def rasterize(uv: np.ndarray, triangles: np.ndarray, shape: tuple[int, int], chu
         bary[texel] = w[inside]
     return TexelCoverage(triangle.reshape(height, width), bary.reshape(height, width, 3),
                          count.reshape(height, width).astype(np.int32))
+
+
+def bake(uv: np.ndarray, triangles: np.ndarray, values: np.ndarray, size: int,
+         coverage: TexelCoverage | None = None) -> np.ndarray:
+    """Per-vertex ``values`` (N, C) interpolated over the triangles into a ``size`` x ``size`` texture
+    (float64, (size, size, C)); texels no triangle covers take the nearest covered texel's value, so
+    that bilinear lookups at an island's border never see a gap. ``coverage``: the mesh's
+    :func:`rasterize` at that size, if at hand."""
+    coverage = rasterize(uv, triangles, (size, size)) if coverage is None else coverage
+    covered = coverage.covered
+    values = np.asarray(values, np.float64)
+    tri = np.asarray(triangles)[coverage.triangle[covered]]
+    image = np.zeros((size, size, values.shape[1]))
+    image[covered] = np.einsum("nk,nkc->nc", coverage.barycentric[covered], values[tri])
+    _, (rows, cols) = ndi.distance_transform_edt(~covered, return_indices=True)
+    return image[rows, cols]

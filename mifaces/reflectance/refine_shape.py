@@ -419,6 +419,18 @@ __all__ = ["ShapeRefineSchedule", "ShapeRefinement", "ShapeProblem", "refine_sha
 FIT_SHAPE_BRDF = "phong"
 
 
+def refine_lit(capture, shapes: dict, face_model, samples, brdf: str = FIT_SHAPE_BRDF, resolution: int = 256,
+               schedule: ShapeRefineSchedule | None = None, progress: bool = True) -> ShapeRefinement:
+    """:func:`refine_shape` of ``shapes``, lit by a per-region fit of ``brdf`` to ``samples`` (the
+    reflectance samples on those shapes, texture resolution ``resolution``): the refinement when no
+    fitted reflectance is at hand yet (``measure`` and ``fit-shape`` with ``--refine-shape``)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the quick fit's warnings are the final fits' too
+        estimate = fit_brdf(capture, brdf, shapes, face_model=face_model, resolution=resolution, samples=samples,
+                            progress=False)
+    return refine_shape(capture, shapes, face_model, estimate, schedule, progress=progress)
+
+
 def refine_fits(capture, fits: list, face_model, resolution: int = 256, brdf: str = FIT_SHAPE_BRDF,
                 schedule: ShapeRefineSchedule | None = None, progress: bool = True) -> tuple[list, ShapeRefinement]:
     """Shape fits (:func:`mifaces.shape.fit.fit_shape`) refined by :func:`refine_shape`, for
@@ -428,10 +440,8 @@ def refine_fits(capture, fits: list, face_model, resolution: int = 256, brdf: st
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         shapes = shapes_in_world(fits, capture)
-        samples = capture_samples(capture, shapes, face_model, resolution, progress=False)
-        estimate = fit_brdf(capture, brdf, shapes, face_model=face_model, resolution=resolution, samples=samples,
-                            progress=False)
-    result = refine_shape(capture, shapes, face_model, estimate, schedule, progress=progress)
+    samples = capture_samples(capture, shapes, face_model, resolution, progress=False)
+    result = refine_lit(capture, shapes, face_model, samples, brdf, resolution, schedule, progress=progress)
     if not result.accepted:
         return list(fits), result
     camera = capture.camera

@@ -23,7 +23,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from ..model.regions import REGIONS, texel_regions_of_mesh
-from ..model.texture_space import rasterize
+from ..model.texture_space import bake, rasterize
 
 #: Skin albedo at the light and the dark end of the drawn tone (linear RGB).
 SKIN_LIGHT = np.array([0.62, 0.44, 0.35])
@@ -72,12 +72,8 @@ def paint_skin(model, rng: np.random.Generator, size: int = 1024, male: bool | N
         Texels no triangle covers take the nearest covered texel's colour.
     """
     coverage = rasterize(model.uv, model.triangles, (size, size))
-    covered = coverage.covered
-    tri = model.triangles[coverage.triangle[covered]]
-    positions = np.zeros((size, size, 3))
-    positions[covered] = np.einsum("nk,nkc->nc", coverage.barycentric[covered], model.shape_mean[tri])
-    _, (ri, ci) = ndi.distance_transform_edt(~covered, return_indices=True)
-    positions = positions[ri, ci]
+    positions = bake(model.uv, model.triangles, model.shape_mean, size, coverage)
+    _, (ri, ci) = ndi.distance_transform_edt(~coverage.covered, return_indices=True)
     labels = texel_regions_of_mesh(model.region_map, model.uv, model.triangles, size, coverage)[ri, ci]
     lm = {i: np.asarray(p, np.float64) for i, p in model.landmark_positions().items()}
     male = bool(rng.random() < 0.5) if male is None else male

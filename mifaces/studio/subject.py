@@ -9,7 +9,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from ..model.geometry import head_centre, rotation_matrix
-from ..model.texture_space import rasterize
+from ..model.texture_space import bake
 from .scene import POSES
 from .skin import paint_skin
 
@@ -106,15 +106,7 @@ def albedo_map(model, color, rng: np.random.Generator, size: int = 1024, detail:
     spots. Texels no triangle covers take the nearest covered texel.
     """
     if model.has_texture:
-        per_vertex = model.texture(color)
-        cov = rasterize(model.uv, model.triangles, (size, size))
-        covered = cov.covered
-        tri = model.triangles[cov.triangle[covered]]
-        bary = cov.barycentric[covered]
-        image = np.zeros((size, size, 3), np.float64)
-        image[covered] = np.einsum("nk,nkc->nc", bary, per_vertex[tri])
-        _, (ri, ci) = ndi.distance_transform_edt(~covered, return_indices=True)
-        image = image[ri, ci]
+        image = bake(model.uv, model.triangles, model.texture(color), size)
     else:
         image = paint_skin(model, rng, size).astype(np.float64)
     fine = ndi.gaussian_filter(rng.standard_normal((size, size)), 0.8)
