@@ -39,6 +39,20 @@ PHONG_EXPONENT = 16.0
 ROWS = 1024
 #: Rec. 601 luminance weights of the colour-contrast operator (Blanz and Vetter 1999).
 LUMINANCE = (0.3, 0.59, 0.11)
+#: The photographs of one fit, by key: the measurement's photograph under its directed light, the
+#: other photographs of its pose under theirs (:func:`lit_key`), and its diffuse-light companion.
+POINT, DIFFUSE = "point", "diffuse"
+
+
+def lit_key(index: int) -> str:
+    """The key of the ``index``-th photograph (0: the measurement's own) lit by a directed light."""
+    return POINT if index == 0 else f"{POINT}_{index}"
+
+
+def directed(key: str) -> bool:
+    """Whether photograph ``key`` is lit by a directed light (with a cast shadow): all but the
+    diffuse-light companion."""
+    return key != DIFFUSE
 
 
 class Energy:
@@ -58,8 +72,9 @@ class Energy:
         Metric distances ``(vertex, vertex, mm)`` on the identity shape.
     centre : (3,) float
         The rotation centre (model space, mm).
-    light_distance : float
-        Distance (mm) of the point image's lamp from the face centre; inf for a directional light.
+    light_distance : dict
+        Per photograph lit by a directed light (:func:`directed`): the distance (mm) of its lamp
+        from the face centre; inf (or absent) for a directional light.
     adjacency : (N, D) int array, optional
         The model's vertex-triangle adjacency (:func:`~mifaces.shape.layout.adjacency`), if
         already at hand.
@@ -82,7 +97,7 @@ class Energy:
     """
 
     def __init__(self, model, camera, layout: Layout, weights: Weights, images: dict, feature_vertices,
-                 feature_pixels, distances, centre, light_distance: float = math.inf, freeze: bool = True,
+                 feature_pixels, distances, centre, light_distance: dict | None = None, freeze: bool = True,
                  adjacency=None):
         self.model, self.camera, self.layout, self.weights = model, camera, layout, weights
         self.images = images
@@ -91,7 +106,8 @@ class Energy:
         self.distances = distances
         self.distance_vertices = np.array([[a, b] for a, b, _ in distances], np.int64).reshape(-1, 2)
         self.centre = centre
-        self.light_distance = light_distance
+        self.light_distance = {key: float((light_distance or {}).get(key, math.inf))
+                               for key in self.image_names if directed(key)}
         self.scale_px = camera.height / 512.0  # px per "512-px pixel"
         self.adjacency = triangle_adjacency(model.triangles, model.vertex_count) if adjacency is None else adjacency
         # accumulator slots: per image (sum of w r, sum of w), then the other sums of E
@@ -104,7 +120,8 @@ class Energy:
         # per measurement, opaque: the kernels do not depend on them
         self.dr_inv_features = dr.opaque(mi.Float, 1.0 / len(feature_vertices))
         self.dr_inv_distances = dr.opaque(mi.Float, 1.0 / max(len(distances), 1))
-        self.dr_light_distance = dr.opaque(mi.Float, light_distance if math.isfinite(light_distance) else 0.0)
+        self.dr_light_distance = {key: dr.opaque(mi.Float, d if math.isfinite(d) else 0.0)
+                                  for key, d in self.light_distance.items()}
         self.dr_feature_u = device_array(np.float32, np.asarray(feature_pixels)[:, 0])
         self.dr_feature_v = device_array(np.float32, np.asarray(feature_pixels)[:, 1])
         if len(distances):  # (an empty array cannot enter a frozen function)
@@ -173,12 +190,15 @@ class Energy:
         self.dr_sample_vertex = device_array(np.uint32, samples)
         self.dr_inv_samples = dr.opaque(mi.Float, 1.0 / len(samples))
         ones = np.ones(len(samples), np.float32)
-        self.set_visibility(ones, ones)
+        self.set_visibility(ones)
 
-    def set_visibility(self, seen: np.ndarray, lit: np.ndarray):
-        """Per sample: seen by the camera (every image), lit by the point image's lamp (0 or 1)."""
+    def set_visibility(self, seen: np.ndarray, lit: dict | None = None):
+        """Per sample: seen by the camera (every image), and per photograph with a directed light
+        (:func:`directed`), lit by its lamp (0 or 1; 1 for every sample where ``lit`` lacks it)."""
         self.dr_visible = device_array(np.float32, seen)
-        self.dr_shadow = device_array(np.float32, lit)
+        ones = np.ones(len(seen), np.float32)
+        self.dr_shadow = {key: device_array(np.float32, (lit or {}).get(key, ones))
+                          for key in self.light_distance}
 
     def set_level(self, blur: float):
         """The photographs blurred by ``blur`` px at 512 px image height, on the Dr.Jit side."""
@@ -290,6 +310,15 @@ class Energy:
         values = np.asarray(out[0], np.float64)
         g = np.asarray(out[1], np.float64)[:size] if grad else None
         return self.terms(values, image_weight > 0), g
+
+    def image_sums(self, theta_np: np.ndarray) -> dict:
+        """Per photograph, E_I's sums at ``theta`` (traced once, not frozen: for a fit's end):
+        key -> (sum of weighted squared RGB residuals, sum of weights)."""
+        theta = device_array(np.float32, theta_np)
+        acc = dr.zeros(mi.Float, len(self.slots))
+        self._image_sums(acc, theta, self.positions(theta))
+        sums = np.asarray(acc, np.float64)
+        return {key: (sums[self.slots[f"{key}.num"]], sums[self.slots[f"{key}.den"]]) for key in self.image_names}
 
     def terms(self, values, use_image: bool) -> dict:
         """The terms (see :meth:`evaluate`) of the packed values of :meth:`energy`."""
@@ -438,13 +467,14 @@ class Energy:
         el, az = block("light_angles")
         ld = mi.Vector3f(dr.cos(el) * dr.sin(az), -dr.sin(el), -dr.cos(el) * dr.cos(az))
         lc = mi.Color3f(*block("light_color"))
-        if key == "point" and math.isfinite(self.light_distance):
+        if math.isfinite(self.light_distance.get(key, math.inf)):
             # the lamp at its calibrated distance in the fitted direction: per-point
             # direction and inverse-square falloff (relative to the face centre)
-            to_light = mi.Vector3f(*t) + self.dr_light_distance * ld - pcv
+            distance = self.dr_light_distance[key]
+            to_light = mi.Vector3f(*t) + distance * ld - pcv
             dist2 = dr.squared_norm(to_light)
             ld = to_light / dr.sqrt(dist2)
-            lc = lc * (dr.square(self.dr_light_distance) / dist2)
+            lc = lc * (dr.square(distance) / dist2)
         amb = mi.Color3f(*block("ambient"))
         ks = self._param(theta, L[f"{key}.specular"].start, width)
         contrast = self._param(theta, L[f"{key}.contrast"].start, width)
@@ -453,7 +483,7 @@ class Energy:
         grey = getattr(self, "greyscale", False)  # issue 12: set by fit.fit_measurement for grey photographs
         if grey:  # one light colour, ambient, gain and offset: channel 0 of each block, so none can tint
             lc, amb, gain, offset = (mi.Color3f(c.x) for c in (lc, amb, gain, offset))
-        shadow = self.dr_shadow if key == "point" else 1.0
+        shadow = self.dr_shadow.get(key, 1.0)
         ndl = dr.dot(nc, ld)
         refl = 2 * ndl * nc - ld
         spec = ks * dr.power(dr.maximum(dr.dot(refl, view), 0.0), PHONG_EXPONENT)

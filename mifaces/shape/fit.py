@@ -17,6 +17,7 @@ import numpy as np
 from ..model import MorphableModel, load_model
 from ..progress import progress as progress_bar
 from ..status import CONVERGED, DIVERGED, NOT_CONVERGED
+from .energy import DIFFUSE, POINT, lit_key
 from .fitter import Fitter
 from .io import as_capture, write_fit, write_index
 from .result import ShapeFit, ShapeFitError, ShapeSchedule, Weights
@@ -44,6 +45,11 @@ POSE_AGREEMENT = 0.25
 SECOND_PASS = 0.35
 
 
+#: The most photographs of one pose fitted jointly (the leader and its companions,
+#: :func:`fit_measurement`'s ``companions``): each adds its own light, and its share of E_I's cost.
+JOINT_PHOTOGRAPHS = 8
+
+
 def feature_limit(vertices_camera, model, focal_px: float, max_feature_error: float = MAX_FEATURE_ERROR,
                   feature_noise: float = FEATURE_NOISE) -> float:
     """The RMS feature-point error (px) within which a fit has converged:
@@ -65,7 +71,7 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
                     max_feature_error: float = MAX_FEATURE_ERROR, progress=True, lr=(0.1, 0.01),
                     visibility_interval: int = 50, initial: dict | None = None, fixed=(), distances=(),
                     light=None, feature_noise: float = FEATURE_NOISE,
-                    max_image_rms: float = MAX_IMAGE_RMS) -> ShapeFit:
+                    max_image_rms: float = MAX_IMAGE_RMS, companions=()) -> ShapeFit:
     """Fit the morphable model to one measurement (paper sec. 4.2), from the mean face.
 
     Parameters
@@ -103,7 +109,10 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
     max_image_rms : float
         The convergence limit of the photometric residual ``loss['image_rms']``
         (:data:`MAX_IMAGE_RMS`), where the photographs are used: a fit whose feature
-        points fit but whose rendering does not match is ``'not_converged'``.
+        points fit but whose rendering does not match is ``'not_converged'``. With
+        ``companions`` the limit applies to the measurement's own photographs
+        (``loss['image_rms_measurement']``); ``loss['image_rms.<key>']`` gives each
+        photograph's.
     seed : int
         Seeds the choice of sample vertices.
     progress : bool or progress bar
@@ -124,6 +133,11 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
         Metric distances between feature points (mm) that fix the face's scale
         (``Capture.distances``); a term of E_P with :attr:`Weights.distance_sigma`.
         Without them the scale comes from the prior (the mean face's size).
+    companions : sequence of (Measurement, Light or None)
+        Other photographs of the same pose under other directed lights, fitted jointly: one
+        geometry, each photograph with its own light, ambient, gain and offset (and cast
+        shadow), as image ``point_1``, ``point_2``, ... (:func:`~mifaces.shape.energy.lit_key`).
+        Their lights start from their calibration where the capture has one.
 
     Returns
     -------
@@ -137,24 +151,27 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
     if not getattr(camera, "calibrated", True):
         weights = replace(weights, focal=weights.focal_uncalibrated)
     targets = feature_targets(measurement, model)
-    used = {}
+    used, lights = {}, {}
     if use_point:
-        used["point"] = measurement.image
+        used[POINT], lights[POINT] = measurement.image, light
     if use_diffuse and measurement.diffuse is not None:
-        used["diffuse"] = measurement.diffuse
+        used[DIFFUSE] = measurement.diffuse
+    for index, (companion, companion_light) in enumerate(companions, start=1):
+        used[lit_key(index)], lights[lit_key(index)] = companion.image, companion_light
     images = {key: image.pixels for key, image in used.items()}
     for key, img in images.items():
         if img.shape[:2] != (camera.height, camera.width):
             raise ShapeFitError(f"measurement {measurement.name!r}: {key} image is {img.shape[1]}x{img.shape[0]}, "
                                 f"the camera {camera.width}x{camera.height}")
     initial = dict(initial or {})
-    if light is not None and light.directional:
-        if "point" in images and "point.light_angles" not in initial:
-            initial["point.light_angles"] = start_light_angles(light, camera, camera.position)
-    elif light is not None:
-        light_position = light.position
+    positions = {POINT: light_position} if light_position is not None else {}
+    for key, source in lights.items():
+        if source is not None and source.directional:
+            initial.setdefault(f"{key}.light_angles", start_light_angles(source, camera, camera.position))
+        elif source is not None:
+            positions[key] = source.position
     fitter = Fitter(model, camera, images, targets, weights, schedule, np.random.default_rng(seed),
-                    light_world=light_position, fit_focal=fit_focal, initial_color=initial_color,
+                    light_world=positions, fit_focal=fit_focal, initial_color=initial_color,
                     initial=initial, fixed=fixed, distances=distances)
     greyscale = bool(used) and all(getattr(image, "greyscale", False) for image in used.values())
     fitter.energy.greyscale = greyscale  # read by Energy._shade
@@ -167,6 +184,11 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
     finally:
         if own_bar:
             bar.close()
+    if companions and "image_rms" in terms and np.all(np.isfinite(theta)):
+        sums = fitter.energy.image_sums(theta)
+        terms.update({f"image_rms.{key}": _rms(*sums[key]) for key in sums})
+        own = [sums[key] for key in (POINT, DIFFUSE) if key in sums]
+        terms["image_rms_measurement"] = _rms(sum(n for n, _ in own), sum(d for _, d in own))
     fit = _result(fitter, theta, measurement.name, terms, history, iterations, greyscale)
     if status is None:
         limit = (feature_limit(fit.vertices_camera, model, float(fit.focal_length[1]), max_feature_error,
@@ -176,13 +198,19 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
                    estimated=estimated_quantities(camera, distances, fit_focal))
 
 
+def _rms(num: float, den: float) -> float:
+    """The RMS RGB residual of E_I's sums (as :meth:`~mifaces.shape.energy.Energy.terms`' ``image_rms``)."""
+    return math.sqrt(num / max(den, 1.0) / 3.0)
+
+
 def _status(theta, terms: dict, history: list, limit_px: float, max_image_rms: float = MAX_IMAGE_RMS
             ) -> tuple[str, str]:
     """How a fit that ran all its iterations ended, and why, for a feature-point limit in px and the
     photometric limit :data:`MAX_IMAGE_RMS` (where the fit used the photographs)."""
     if not all(np.isfinite(v) for v in terms.values()) or not np.all(np.isfinite(theta)):
         return DIVERGED, "non-finite parameters or loss"
-    image_rms = terms.get("image_rms")
+    # a joint fit is judged on the measurement's own photographs, those the limit was set on
+    image_rms = terms.get("image_rms_measurement", terms.get("image_rms"))
     if terms["feature_rms_px"] <= limit_px and (image_rms is None or image_rms <= max_image_rms):
         return CONVERGED, ""
     if terms["feature_rms_px"] <= limit_px:  # the points fit, the face's shading does not
@@ -331,7 +359,8 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     for leader, *others in groups:
         light = capture.light(leader.light) if leader.light else None
         fit = fit_measurement(leader, capture.camera, model, light=light, schedule=schedule,
-                              initial_color=initial_color, fixed=fixed, **options)
+                              initial_color=initial_color, fixed=fixed,
+                              companions=_companions(capture, others), **options)
         if leader.name == reference and fit.converged:
             initial_color = fit.color
         leaders[leader.name] = fit
@@ -340,12 +369,14 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     identity = one_face(list(leaders.values())) if joint else None
     if identity is not None:  # every photograph again, its pose, expression and lighting on the one face
         second = schedule.scaled_by(SECOND_PASS)
-        for leader, *_ in groups:
+        for leader, *others in groups:
             first = leaders[leader.name]
             light = capture.light(leader.light) if leader.light else None
+            companions = _companions(capture, others)
             fit = fit_measurement(leader, capture.camera, model, light=light, schedule=second,
                                   initial_color=initial_color, fixed=tuple(fixed) + ("shape",),
-                                  initial=dict(_start_from(first, model, leader), shape=identity), **options)
+                                  initial=dict(_start_from(first, model, leader, companions), shape=identity),
+                                  companions=companions, **options)
             leaders[leader.name] = replace(fit, seconds=fit.seconds + first.seconds,
                                            message=(fit.message + "; " if fit.message else "")
                                            + f"identity shared by {len(groups)} poses")
@@ -353,7 +384,8 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
             bar.set_postfix(last=leader.name, status=fit.status)
     for leader, *others in groups:
         fit = leaders[leader.name]
-        for fit_m in [fit] + [shared_fit(fit, m, capture) for m in others]:
+        for fit_m in [_own_lights(fit)] + [shared_fit(fit, m, capture, index)
+                                           for index, m in enumerate(others, start=1)]:
             fits[fit_m.measurement] = fit_m
             if out is not None:
                 write_fit(out, fit_m, model)
@@ -372,11 +404,12 @@ def one_face(fits: list[ShapeFit]) -> np.ndarray | None:
     return np.mean(done, axis=0) if len(done) >= 2 else None
 
 
-def _start_from(fit: ShapeFit, model, measurement) -> dict:
-    """Start values (:func:`fit_measurement`'s ``initial``) that continue ``fit`` of ``measurement``:
-    its pose, expression, albedo or colour, lighting (gain and offset back in the normalised
-    photograph's units the fit works in: :func:`~mifaces.shape.targets.normalised`)."""
-    photographs = {"point": measurement.image, "diffuse": measurement.diffuse}
+def _start_from(fit: ShapeFit, model, measurement, companions=()) -> dict:
+    """Start values (:func:`fit_measurement`'s ``initial``) that continue ``fit`` of ``measurement``
+    (and its ``companions``): its pose, expression, albedo or colour, lighting (gain and offset back
+    in the normalised photograph's units the fit works in: :func:`~mifaces.shape.targets.normalised`)."""
+    photographs = {POINT: measurement.image, DIFFUSE: measurement.diffuse}
+    photographs.update({lit_key(i): m.image for i, (m, _) in enumerate(companions, start=1)})
     start = {"rotation": np.radians(fit.yaw_pitch_roll),
              "translation": fit.translation + fit.rotation @ rotation_centre(model)}
     if len(fit.expression):
@@ -386,6 +419,8 @@ def _start_from(fit: ShapeFit, model, measurement) -> dict:
     if fit.color is not None:
         start["color"] = fit.color
     for image, light in (fit.light or {}).items():
+        if image not in photographs:
+            continue
         scale = normalised(photographs[image].pixels)[1] if photographs.get(image) is not None else 1.0
         for name in ("color", "ambient", "specular", "contrast", "gain", "offset"):
             if name in light:
@@ -437,19 +472,37 @@ def _points_agree(a: dict, b: dict) -> bool:
     return float(np.sqrt(np.mean(np.sum((pa - pb) ** 2, axis=1)))) <= POSE_AGREEMENT * spread
 
 
-def shared_fit(fit: ShapeFit, measurement, capture) -> ShapeFit:
-    """The fit of ``measurement`` that shares ``fit``'s geometry, pose and texture (same pose):
-    no lighting fitted (only the capture's light direction, in camera space, where known),
-    0 iterations, 0 seconds."""
+def _companions(capture, others) -> list:
+    """The photographs of a pose fitted with its leader (:data:`JOINT_PHOTOGRAPHS` at most, in the
+    capture's order), each with its light where the capture has one."""
+    return [(m, capture.light(m.light) if m.light else None) for m in others[:JOINT_PHOTOGRAPHS - 1]]
+
+
+def _own_lights(fit: ShapeFit) -> ShapeFit:
+    """``fit`` with only its own photographs' lights (a joint fit also holds its companions')."""
+    own = {key: light for key, light in (fit.light or {}).items() if key in (POINT, DIFFUSE)}
+    return replace(fit, light=own)
+
+
+def shared_fit(fit: ShapeFit, measurement, capture, index: int | None = None) -> ShapeFit:
+    """The fit of ``measurement`` that shares ``fit``'s geometry, pose and texture (same pose),
+    0 iterations, 0 seconds. Its light is the one fitted for it where ``measurement`` was the
+    joint fit's ``index``-th companion; otherwise only the capture's light direction, in
+    camera space, where known."""
     light = {}
-    source = capture.light(measurement.light) if measurement.light else None
-    head = fit.vertices_world.mean(axis=0)
-    angles = start_light_angles(source, capture.camera, head) if np.all(np.isfinite(head)) else None
-    if angles is not None:
-        light["point"] = {"direction": light_direction(*angles)}
+    fitted = (fit.light or {}).get(lit_key(index)) if index else None
+    if fitted is not None:
+        light[POINT] = fitted
+    else:
+        source = capture.light(measurement.light) if measurement.light else None
+        head = fit.vertices_world.mean(axis=0)
+        angles = start_light_angles(source, capture.camera, head) if np.all(np.isfinite(head)) else None
+        if angles is not None:
+            light[POINT] = {"direction": light_direction(*angles)}
+    joint = f"fitted jointly with {fit.measurement!r}" if fitted is not None else f"geometry of {fit.measurement!r}"
     return replace(fit, measurement=measurement.name, light=light, iterations=0, seconds=0.0, history=[],
                    shared_with=fit.measurement,
-                   message=f"geometry of {fit.measurement!r} (same pose)" + (f"; {fit.message}" if fit.message else ""))
+                   message=f"{joint} (same pose)" + (f"; {fit.message}" if fit.message else ""))
 
 
 def _measurements(capture, names, model) -> list:

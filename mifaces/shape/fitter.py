@@ -20,7 +20,7 @@ from ..model.geometry import rotation_matrix
 from ..model.mesh import mitsuba_mesh
 from ..status import DIVERGED
 from .adam import COLUMNS, DeviceAdam
-from .energy import Energy
+from .energy import POINT, Energy, directed
 from .layout import Layout, adjacency
 from .result import ShapeSchedule, Weights
 from .targets import (FRONTAL, light_direction, metric_distances, normalised, rotation_centre, start_light,
@@ -115,13 +115,17 @@ class Fitter:
         self.initial_color = initial_color
         self.start_translation = start_translation(model, camera, self.feature_vertices, self.feature_pixels,
                                                    self.centre)
-        #: the point light's start angles and its distance (mm) from the face centre: infinite
-        #: (a directional light) unless the capture's calibration gives the light's position
-        self.light_angles, self.light_distance = (0.0, 0.0), math.inf
-        if "point" in self.images and light_world is not None:
-            el, az, self.light_distance = start_light(camera, self.start_translation,
-                                                      np.asarray(light_world, np.float64))
-            self.light_angles = (el, az)
+        #: per photograph with a directed light (:func:`~mifaces.shape.energy.directed`): its start
+        #: angles and its lamp's distance (mm) from the face centre, infinite (a directional light)
+        #: unless the capture's calibration gives the lamp's position
+        if light_world is not None and not isinstance(light_world, dict):
+            light_world = {POINT: light_world}
+        self.light_angles, self.light_distance = {}, {}
+        for key in filter(directed, self.image_names):
+            position = (light_world or {}).get(key)
+            el, az, distance = (0.0, 0.0, math.inf) if position is None else start_light(
+                camera, self.start_translation, np.asarray(position, np.float64))
+            self.light_angles[key], self.light_distance[key] = (el, az), distance
         self.energy = Energy(model, camera, self.layout, weights, self.images, self.feature_vertices,
                              self.feature_pixels, metric_distances(distances, model), self.centre,
                              self.light_distance, adjacency=self.arrays.adjacency)
@@ -134,10 +138,11 @@ class Fitter:
         theta = np.zeros(L.size)
         theta[L["translation"]] = self.start_translation
         for image in self.image_names:
-            theta[L[f"{image}.light_angles"]] = self.light_angles if image == "point" else (0.0, 0.0)
-            theta[L[f"{image}.light_color"]] = 0.8 if image == "point" else 0.0
-            theta[L[f"{image}.ambient"]] = 0.1 if image == "point" else 1.0
-            theta[L[f"{image}.specular"]] = 0.05 if image == "point" else 0.0
+            lit = directed(image)
+            theta[L[f"{image}.light_angles"]] = self.light_angles.get(image, (0.0, 0.0))
+            theta[L[f"{image}.light_color"]] = 0.8 if lit else 0.0
+            theta[L[f"{image}.ambient"]] = 0.1 if lit else 1.0
+            theta[L[f"{image}.specular"]] = 0.05 if lit else 0.0
             theta[L[f"{image}.contrast"]] = 1.0
             theta[L[f"{image}.gain"]] = 1.0
         if m.has_texture and self.initial_color is not None:
@@ -186,14 +191,14 @@ class Fitter:
         d = -p / dist[:, None]  # towards the camera
         origin = p + eps * n
 
-        # rays towards the camera, then (for a point image) towards the lamp: one ray_test
+        # rays towards the camera, then towards each directed light's lamp: one ray_test
         origins, directions, lengths = [origin], [d], [np.maximum(dist - 2 * eps, eps)]
-        if "point" in self.image_names:
-            el, az = theta[L["point.light_angles"]]
+        for key, distance in self.light_distance.items():
+            el, az = theta[L[f"{key}.light_angles"]]
             ld = np.broadcast_to(light_direction(el, az), p.shape)
             maxt = np.full(len(p), 1e5)
-            if math.isfinite(self.light_distance):
-                to_light = theta[L["translation"]] + self.light_distance * ld - origin
+            if math.isfinite(distance):
+                to_light = theta[L["translation"]] + distance * ld - origin
                 maxt = np.linalg.norm(to_light, axis=1)
                 ld = to_light / maxt[:, None]
             origins.append(origin), directions.append(ld), lengths.append(maxt)
@@ -201,9 +206,9 @@ class Fitter:
         ray = mi.Ray3f(mi.Point3f(*[mi.Float(o[:, k]) for k in range(3)]),
                        mi.Vector3f(*[mi.Float(direction[:, k]) for k in range(3)]))
         ray.maxt = mi.Float(np.concatenate(lengths).astype(np.float32))
-        occluded = np.asarray(scene.ray_test(ray), bool)
-        seen = ~occluded[:len(p)] & (np.sum(n * d, axis=1) > 0)
-        lit = ~occluded[len(p):] if len(occluded) > len(p) else np.ones(len(p), bool)
+        occluded = np.asarray(scene.ray_test(ray), bool).reshape(-1, len(p))
+        seen = ~occluded[0] & (np.sum(n * d, axis=1) > 0)
+        lit = {key: ~occluded[1 + i] for i, key in enumerate(self.light_distance)}
         self.energy.set_visibility(seen, lit)
         dr.eval()
 
