@@ -204,6 +204,12 @@ def validation_markdown(report: dict) -> list[str]:
                   f"{100 * floor['heldout_rmse']:.1f}%, environments {100 * floor['environment_rmse']:.1f}%"
                   + ("; the fitted reflectance on the true shape shows the reflectance's own error." if
                      floor["heldout_rmse"] > 0 else "."))
+    noise = summary.get("noise_floor")
+    if noise is not None:
+        floor_text += (f" Noise floor (the true face against itself rendered with other random numbers: errors "
+                       f"near it are Monte Carlo noise, not the fit): held-out {100 * noise['heldout_rmse']:.1f}%, "
+                       f"environments {100 * noise['environment_rmse']:.1f}%. The errors below compare images "
+                       f"rendered with the same random numbers, so most of that noise cancels in them.")
     lines = ["", "## Validation against the ground truth (simulated capture)", "",
              f"Truth: `{summary['truth_model']}`. The true face (true shape, BSDF and albedo) and each fitted face "
              f"(fitted shape, BRDF and albedo) are rendered in a novel pose (yaw {summary['novel_pose'][0]:g}°, "

@@ -101,6 +101,8 @@ SPP = 16
 LIGHT_CANDIDATES = tuple((a, e) for a in (-45.0, -22.5, 0.0, 22.5, 45.0) for e in (-15.0, 5.0, 25.0, 40.0))
 #: Seed of every validation render (common random numbers, module docstring).
 SEED = 101
+#: Seed of the second render of the truth that measures the renders' Monte Carlo noise (``noise_floor``).
+NOISE_SEED = 202
 #: Suffix of the image errors of the fitted reflectance on the true shape.
 TRUE_SHAPE = "_true_shape"
 
@@ -350,6 +352,9 @@ class Validator:
         truth = self.ground_truth.brdf
         true_shapes = self._true_face(truth_model, self.truth_scene, turned(true_vertices, rotation, centre))
         self.truth = {name: self._render_truth(true_shapes, light) for name, light in self.conditions.items()}
+        # the Monte Carlo noise of these renders: the truth against itself rendered with another seed
+        noise = {name: relative_rmse(self._render_truth(true_shapes, light, NOISE_SEED), self.truth[name],
+                                     self.truth_mask) for name, light in self.conditions.items()}
         floor = self._shape_floor(truth_model, face_model, true_vertices, fit_vertices, rotation, centre)
         # where the shapes differ but share a texture space, the fitted reflectance is also judged on the true shape
         self._true_shape = None if floor is None else any(v > 0 for v in floor.values())
@@ -363,6 +368,7 @@ class Validator:
             "render": {"width": self.camera.width, "height": self.camera.height, "spp": self.spp,
                        "mask_pixels": int(self.mask.sum())},
             "shape_floor": None if floor is None else {**self._pooled(floor), "per_condition": floor},
+            "noise_floor": {**self._pooled(noise), "per_condition": noise},
             "seconds": time.perf_counter() - t}
 
     def _true_face(self, face_model, scene: FaceScene, vertices: np.ndarray) -> dict:
@@ -378,7 +384,7 @@ class Validator:
     def _subsurface(self) -> bool:
         return "subsurface" in self.ground_truth.description
 
-    def _render_truth(self, shapes: dict, light: dict) -> np.ndarray:
+    def _render_truth(self, shapes: dict, light: dict, seed: int = SEED) -> np.ndarray:
         """An image of the true face ``shapes`` (:meth:`_true_face`) under condition ``light``: the
         validation's camera and emitters, the simulator's integrator for a translucent truth."""
         scene = self.truth_scene.description(self.ground_truth.brdf, self.camera, spp=self.spp, **light)
@@ -387,7 +393,7 @@ class Validator:
         scene.update(shapes)
         if self._subsurface:
             scene["integrator"] = translucent.INTEGRATOR
-        return np.array(mi.render(mi.load_dict(scene), spp=self.spp, seed=SEED), dtype=np.float32)[..., :3]
+        return np.array(mi.render(mi.load_dict(scene), spp=self.spp, seed=seed), dtype=np.float32)[..., :3]
 
     def _shape_floor(self, truth_model, face_model, true_vertices, fit_vertices, rotation, centre) -> dict | None:
         """Per condition, the error of the true reflectance on the fitted

@@ -84,6 +84,18 @@ def test_validation_keys_present_and_finite(validator, estimate):
     assert entry["heldout_rmse_true_shape"] == entry["heldout_rmse"]
 
 
+def test_noise_floor_is_the_renders_monte_carlo_noise(validator, capture):
+    """The noise floor (the truth against itself with other random numbers) is positive under every
+    condition and falls as the samples per pixel grow (about 1/sqrt(spp))."""
+    face, shapes = load_geometry(capture, "ground-truth")
+    first = capture.measurements[0].name
+    noise = validator.summary["noise_floor"]
+    assert all(v > 0 for v in noise["per_condition"].values())
+    finer = Validator(capture, face, shapes[first], first, size=40, spp=16).summary["noise_floor"]
+    assert finer["heldout_rmse"] < 0.75 * noise["heldout_rmse"]
+    assert finer["environment_rmse"] < 0.75 * noise["environment_rmse"]
+
+
 def test_wrong_parameters_score_worse_than_true_ones(validator, estimate, capture):
     """The fit given the true glossy parameters scores better than the fit given wrong ones, in BRDF and image error."""
     truth = read_ground_truth(capture).brdf["regions"]

@@ -81,7 +81,8 @@ def point(work: Path, measurements: int, resolution: int, spp: int, args) -> dic
     return {"measurements": measurements, "resolution": resolution, "spp": spp,
             "wall_s": simulate_s + seconds["total"] - validation_s, "simulate_s": simulate_s,
             "measure_s": seconds["total"] - validation_s, "validation_s": validation_s,
-            "shape_floor": report["validation"]["shape_floor"], "models": models}
+            "shape_floor": report["validation"]["shape_floor"],
+            "noise_floor": report["validation"].get("noise_floor"), "models": models}
 
 
 def pareto_front(times: np.ndarray, errors: np.ndarray) -> np.ndarray:

@@ -566,11 +566,16 @@ def sec_truths(d):
     lines = [f"Machine: {text(d.get('machine'))}. Per truth and fitted model the report's validation: relative RMSE "
              "under the held-out lights and the environments (fitted shapes, and the fitted reflectance on the true "
              "shape), skin's BRDF error over the hemisphere, albedo RMSE. `shape floor`: the true reflectance on the "
-             "fitted shapes.", ""]
+             "fitted shapes. `noise floor`: the true face against itself rendered with other random numbers (the "
+             "renders' Monte Carlo noise; the errors compare images rendered with the same random numbers, where "
+             "most of it cancels); a dash where the run predates it.", ""]
     rows = []
     for name, t in items(d.get("truths")):
         floor = get(t, "shape_floor") or {}
         rows.append([name, "shape floor", pct(floor.get("heldout_rmse")), pct(floor.get("environment_rmse")), DASH,
+                     DASH, DASH, DASH])
+        noise = get(t, "noise_floor") or {}
+        rows.append([name, "noise floor", pct(noise.get("heldout_rmse")), pct(noise.get("environment_rmse")), DASH,
                      DASH, DASH, DASH])
         for model, m in items(get(t, "models")):
             v = get(m, "validation") or {}

@@ -86,6 +86,7 @@ def run_truth(name: str, work: Path, size: int, spp: int) -> dict:
             "truth_albedo_skin_mean": _skin_albedo(truth), "simulate_options": options,
             "simulate_seconds": simulated, "measure_seconds": report["seconds"], "models": models,
             "ranking": report["ranking"], "shape_floor": report["validation"]["shape_floor"],
+            "noise_floor": report["validation"].get("noise_floor"),
             "shapes": report.get("shapes")}
 
 
