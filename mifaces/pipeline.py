@@ -37,12 +37,14 @@ from .files import write_json
 from .geometry import load_geometry
 from .model import load_model
 from .reflectance import capture_samples, fit_brdf, write_estimate
-from .reflectance.refine_shape import refine_lit
+from .reflectance.refine_shape import refine_lit, refined_fits
 from .render import FaceScene
 from .report import (ground_truth_errors, ranking, write_markdown, write_picture, write_uncertainty_picture,
                      write_validation_picture)
 from .report_html import write_html
 from .shape import fit_shape, shapes_in_world
+from .shape.fit import model_source
+from .shape.io import write_fit, write_index
 from .shape_errors import capture_shape_errors
 from .studio import simulate
 from .validation import Validator, relative_rmse
@@ -53,6 +55,8 @@ MODELS = NAMES
 FACE_GLB = "face.glb"
 #: Where the face geometry comes from.
 GEOMETRIES = ("fitted", "ground-truth")
+#: Folders of the result: the fitted faces, and those refined by ``refine_shape`` (same layout).
+SHAPES, REFINED_SHAPES = "shapes", "shapes_refined"
 
 
 class NoUsableShapeError(ValueError):
@@ -178,13 +182,13 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     capture = _capture(out, capture, timings, progress)
     report = {"capture": str(capture.path), "measurements": len(capture.measurements), "geometry": geometry,
               "resolution": resolution, "models": {}}
-    face, shapes = _geometry(out, capture, geometry, face_model, shape_iterations, report, timings, progress)
+    face, shapes, fits = _geometry(out, capture, geometry, face_model, shape_iterations, report, timings, progress)
     t = time.perf_counter()
     samples = capture_samples(capture, shapes, face, resolution, progress=progress)
     timings["reflectance_samples"] = time.perf_counter() - t
     if refine_shape:
-        shapes, samples = _refine_shapes(capture, face, shapes, samples, models[0], resolution, report, timings,
-                                         progress)
+        shapes, samples = _refine_shapes(out, capture, face, shapes, fits, samples, models[0], resolution, report,
+                                         timings, progress)
     first = next(m for m in capture.measurements if m.name in shapes)
     novel = novel_light(capture, np.asarray(shapes[first.name]).mean(axis=0))
     scene = FaceScene(face, shapes[first.name])  # the first photograph's face, built once for every model
@@ -233,13 +237,13 @@ def _capture(out: Path, capture, timings: dict, progress: bool) -> Capture:
 
 def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iterations, report: dict,
               timings: dict, progress: bool):
-    """The face model and per-measurement world vertices: fitted (and written to
-    ``out/shapes`` for the user) or the simulator's ground truth."""
+    """The face model, per-measurement world vertices and the shape fits: fitted (and written to
+    ``out/shapes`` for the user) or the simulator's ground truth (no fits: None)."""
     if geometry == "ground-truth":
-        return load_geometry(capture, "ground-truth")
+        return (*load_geometry(capture, "ground-truth"), None)
     face = load_model(face_model)  # a loaded model is taken as it is
     t = time.perf_counter()
-    fits = fit_shape(capture, face, out=out / "shapes", iterations=shape_iterations, progress=progress)
+    fits = fit_shape(capture, face, out=out / SHAPES, iterations=shape_iterations, progress=progress)
     timings["fit_shape"] = time.perf_counter() - t
     report["shapes"] = {f.measurement: {"status": f.status, "seconds": f.seconds,
                                         "feature_rms_px": f.loss.get("feature_rms_px"),
@@ -265,15 +269,17 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
         detail = "; ".join(f"{f.measurement}: {f.status}" + (f" ({f.message})" if f.message else "")
                            for f in fits)
         raise NoUsableShapeError(f"no shape fit converged, so there is no face geometry to measure reflectance on: "
-                                 f"{detail}. The fits are in {out / 'shapes'}.")
-    return face, shapes
+                                 f"{detail}. The fits are in {out / SHAPES}.")
+    return face, shapes, fits
 
 
-def _refine_shapes(capture: Capture, face, shapes: dict, samples, model: str, resolution: int, report: dict,
-                   timings: dict, progress: bool):
+def _refine_shapes(out: Path, capture: Capture, face, shapes: dict, fits, samples, model: str, resolution: int,
+                   report: dict, timings: dict, progress: bool):
     """The faces refined by differentiable rendering (kept only where the held-out loss falls) and
     their samples; ``report['shape_refinement']`` says what happened, and on a simulated capture
-    ``report['shape_errors_refined']`` how far the refined faces lie from the truth."""
+    ``report['shape_errors_refined']`` how far the refined faces lie from the truth. Refined fitted
+    faces are written to ``out/shapes_refined`` (:data:`REFINED_SHAPES`, the layout of
+    ``out/shapes``), the geometry the BRDFs are then fitted on."""
     t = time.perf_counter()
     result = refine_lit(capture, shapes, face, samples, model, resolution, progress=progress)
     report["shape_refinement"] = {"accepted": result.accepted, "reason": result.reason, "model": model,
@@ -286,6 +292,12 @@ def _refine_shapes(capture: Capture, face, shapes: dict, samples, model: str, re
         _, true_shapes = load_geometry(capture, "ground-truth")
         report["shape_errors_refined"] = capture_shape_errors(face, result.shapes, true_shapes,
                                                               capture.camera).get("summary")
+    if fits is not None:
+        refined = refined_fits(fits, result, capture.camera)
+        for fit in refined:
+            write_fit(out / REFINED_SHAPES, fit, face)
+        write_index(out / REFINED_SHAPES, capture, face, refined, model_source=model_source(face))
+        report["shape_refinement"]["shapes"] = REFINED_SHAPES
     t = time.perf_counter()
     samples = capture_samples(capture, result.shapes, face, resolution, progress=progress)
     timings["reflectance_samples"] += time.perf_counter() - t

@@ -206,3 +206,41 @@ def test_measure_refines_the_shapes_when_asked(capture_dir, tmp_path, monkeypatc
     assert report["seconds"]["refine_shape"] > 0
     if refinement["accepted"]:
         assert "shape_errors_refined" in report
+
+
+def test_measure_writes_the_refined_shapes_it_fits_on(capture_dir, tmp_path, monkeypatch):
+    """measure(refine_shape=True) on fitted shapes: an accepted refinement's faces are written to
+    RES/shapes_refined (the layout of RES/shapes, loadable as --geometry), the model fit stays in
+    RES/shapes; a refinement not accepted writes none."""
+    import mifaces
+    import mifaces.pipeline as pipeline
+    from mifaces.capture import load_capture
+    from mifaces.geometry import load_geometry
+    from mifaces.reflectance.refine_shape import ShapeRefinement
+
+    mifaces.set_variant("llvm_ad_rgb")
+    lift = np.array([0.0, 0.5, 0.0])
+
+    def lifted(capture, shapes, face, samples, model, resolution, **kw):
+        return ShapeRefinement({k: np.asarray(v, np.float32) + lift for k, v in shapes.items()},
+                               np.zeros(face.vertex_count, np.float32), True, "the held-out loss fell (test)")
+
+    monkeypatch.setattr(pipeline, "refine_lit", lifted)
+    out = tmp_path / "m"
+    report = pipeline.measure(out, capture_dir, models=("phong",), resolution=48, spp=2, progress=False,
+                              refine_shape=True, shape_iterations=0.25)
+    assert report["shape_refinement"]["shapes"] == pipeline.REFINED_SHAPES
+    capture = load_capture(capture_dir, detect=False)
+    _, fitted = load_geometry(capture, out / pipeline.SHAPES)
+    _, refined = load_geometry(capture, out / pipeline.REFINED_SHAPES)
+    assert set(refined) == set(fitted) and fitted
+    for name in fitted:
+        np.testing.assert_allclose(refined[name] - fitted[name], np.broadcast_to(lift, fitted[name].shape), atol=1e-3)
+
+    def refused(capture, shapes, face, samples, model, resolution, **kw):
+        return ShapeRefinement(dict(shapes), np.zeros(face.vertex_count, np.float32), False, "no gain (test)")
+
+    monkeypatch.setattr(pipeline, "refine_lit", refused)
+    again = pipeline.measure(tmp_path / "n", capture_dir, models=("phong",), resolution=48, spp=2, progress=False,
+                             refine_shape=True, shape_iterations=0.25)
+    assert not again["shape_refinement"]["accepted"] and not (tmp_path / "n" / pipeline.REFINED_SHAPES).exists()

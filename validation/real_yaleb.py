@@ -34,7 +34,13 @@ Writes ``DIR/<subject>/capture`` (with ``split.json``), ``DIR/<subject>/measure`
 Real photographs: these figures are not simulated.
 
     python validation/real_yaleb.py --data ../shared/data/yaleb --out out/real_yaleb [--subjects yaleB01] [--train 8]
-        [--refine] [--normals]
+        [--refine] [--refine-shape] [--normals]
+
+With ``--refine-shape``, the fitted faces are refined by differentiable rendering against the
+training photographs (``mifaces measure --refine-shape``) before the BRDFs are fitted, and the
+held-out lights are rendered on the refined faces (``measure/shapes_refined``, where the refinement
+was kept): results in ``real_yaleb[_trainN]_refine_shape.{json,png}``, whose figure shows the
+refined geometry's cast shadows beside the photographs.
 
 With ``--normals``, each subject is measured twice, without and with per-texel
 normals (``mifaces measure --normals``), and the held-out errors of both are
@@ -60,7 +66,7 @@ from mifaces.capture import load_capture
 from mifaces.files import save_figure, write_exr, write_json, write_png
 from mifaces.geometry import load_geometry
 from mifaces.importers.yaleb import default_split, import_subject, read_subject
-from mifaces.pipeline import measure
+from mifaces.pipeline import REFINED_SHAPES, SHAPES, measure
 from mifaces.reflectance import fit_brdf, load_estimate
 from mifaces.render import FaceScene
 
@@ -119,7 +125,7 @@ def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> 
 
 
 def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shadow_angle: float,
-                resolution: int, normals: bool = False, refine: bool = False) -> dict:
+                resolution: int, normals: bool = False, refine: bool = False, refine_shape: bool = False) -> dict:
     """Import, measure and relight one subject; its errors and timings."""
     t0 = time.perf_counter()
     name = subject_dir.name
@@ -128,10 +134,11 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     train_images, heldout = default_split(list(images.values()), train)
     t_measure = time.perf_counter()
     report = measure(out / "measure", capture_dir, models=models, resolution=resolution, progress=True,
-                     normals=normals)
+                     normals=normals, refine_shape=refine_shape)
     seconds = {"import": t_measure - t0, "measure": time.perf_counter() - t_measure}
     capture = load_capture(capture_dir, detect=False)
-    face, shapes = load_geometry(capture, out / "measure" / "shapes")
+    refined_shapes = out / "measure" / REFINED_SHAPES
+    face, shapes = load_geometry(capture, refined_shapes if refined_shapes.is_dir() else out / "measure" / SHAPES)
     first = next(m.name for m in capture.measurements if m.name in shapes)
     scene = FaceScene(face, shapes[first])
     mask = face_mask(scene, capture.camera)
@@ -191,7 +198,8 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
             "fitted_yaw_pitch_roll_deg": poses,
             "training_rmse": {m: report["models"][m].get("training_rmse") for m in models},
             "face_pixels": int(mask.sum()), "relative_rmse": errors.relative_rmse(), "per_light": per_light,
-            "shapes": report.get("shapes"), "refinement": refined or None, "seconds": seconds, "errors": errors}
+            "shapes": report.get("shapes"), "refinement": refined or None,
+            "shape_refinement": report.get("shape_refinement"), "seconds": seconds, "errors": errors}
 
 
 def summary(results: list[dict], models) -> dict:
@@ -261,8 +269,11 @@ def figure(results: list[dict], out: Path, data_dir: Path, run_dir: Path, best: 
         ax.set_ylabel("elevation (deg)")
         ax.set_title(f"held-out relative RMSE per light: {key}", fontsize=9)
         fig.colorbar(points, ax=ax)
-    fig.suptitle("Real photographs (Extended Yale B): held-out lights, predicted from 8 training photographs",
-                 fontsize=10)
+    refinement = r.get("shape_refinement") or {}
+    geometry = ("; faces refined by differentiable rendering" if refinement.get("accepted") else
+                f"; shape refinement not kept: {refinement['reason']}" if refinement else "")
+    fig.suptitle(f"Real photographs (Extended Yale B, {r['subject']}): held-out lights, predicted from "
+                 f"{len(r['train'])} training photographs{geometry}", fontsize=10)
     fig.tight_layout()
     save_figure(fig, out, dpi=80)
 
@@ -330,6 +341,8 @@ def main(argv=None) -> int:
                         help="measure without and with per-texel normals; write real_yaleb_normals.{json,png}")
     parser.add_argument("--refine", action="store_true",
                         help="also refine each fit by differentiable rendering and score it beside the unrefined")
+    parser.add_argument("--refine-shape", action="store_true",
+                        help="refine the fitted faces by differentiable rendering (measure --refine-shape)")
     args = parser.parse_args(argv)
     if not args.data.is_dir():
         print(f"no Yale data at {args.data}: nothing to validate", file=sys.stderr)
@@ -342,16 +355,18 @@ def main(argv=None) -> int:
     for subject in subjects:
         print(f"== {subject}", flush=True)
         results.append(subject_run(args.data / subject, args.out / subject, args.train, models, args.spp,
-                                   args.shadow_angle, args.resolution, refine=args.refine))
+                                   args.shadow_angle, args.resolution, refine=args.refine,
+                                   refine_shape=args.refine_shape))
         print({k: round(v["all"], 4) for k, v in results[-1]["relative_rmse"].items()}, flush=True)
     overall = summary(results, models)
     document = {"data": "Extended Yale Face Database B (cropped), real photographs", "train_lights": args.train,
                 "models": list(models), "spp": args.spp, "texture_resolution": args.resolution,
-                "shadow_angle_deg": args.shadow_angle, "refine": args.refine,
+                "shadow_angle_deg": args.shadow_angle, "refine": args.refine, "refine_shape": args.refine_shape,
                 "command": "python validation/real_yaleb.py " + " ".join(argv if argv is not None else sys.argv[1:]),
                 "overall": overall,
                 "subjects": [{k: v for k, v in r.items() if k != "errors"} for r in results]}
-    suffix = ("" if args.train == 8 else f"_train{args.train}") + ("_refine" if args.refine else "")
+    suffix = (("" if args.train == 8 else f"_train{args.train}") + ("_refine" if args.refine else "")
+              + ("_refine_shape" if args.refine_shape else ""))
     write_json(args.results / f"real_yaleb{suffix}.json", document)
     figure(results, args.results / f"real_yaleb{suffix}.png", args.data, args.out, overall["best_model"])
     print(f"best model {overall['best_model']}: {overall['relative_rmse'][overall['best_model']]['all']:.4f} "

@@ -442,9 +442,14 @@ def refine_fits(capture, fits: list, face_model, resolution: int = 256, brdf: st
         shapes = shapes_in_world(fits, capture)
     samples = capture_samples(capture, shapes, face_model, resolution, progress=False)
     result = refine_lit(capture, shapes, face_model, samples, brdf, resolution, schedule, progress=progress)
+    return refined_fits(fits, result, capture.camera), result
+
+
+def refined_fits(fits: list, result: ShapeRefinement, camera) -> list:
+    """``fits`` with the refined vertices of ``result`` where it was accepted (converged fits only;
+    the others, and all of them for a refinement not accepted, come back unchanged)."""
     if not result.accepted:
-        return list(fits), result
-    camera = capture.camera
+        return list(fits)
     out = []
     for fit in fits:
         world = result.shapes.get(fit.measurement)
@@ -454,4 +459,4 @@ def refine_fits(capture, fits: list, face_model, resolution: int = 256, brdf: st
         out.append(replace(fit, vertices_world=np.asarray(world, np.float32),
                            vertices_camera=camera.to_camera(np.asarray(world, np.float64)).astype(np.float32),
                            message=(fit.message + "; " if fit.message else "") + "refined by differentiable rendering"))
-    return out, result
+    return out

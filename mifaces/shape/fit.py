@@ -260,7 +260,7 @@ def _result(fitter, theta, name, terms, history, iterations, greyscale=False) ->
         iterations=iterations, seconds=0.0, history=history)
 
 
-def _model_source(model) -> str:
+def model_source(model) -> str:
     """What :func:`mifaces.load_model` loads ``model`` (a name, a path or a loaded model) from."""
     if not isinstance(model, MorphableModel):
         return str(model)
@@ -339,7 +339,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
         (checked for all measurements before any fitting).
     """
     capture = as_capture(capture)
-    source = _model_source(model)
+    source = model_source(model)
     model = load_model(model)
     model = model.truncated(model.fit_shape_modes if shape_modes is None else shape_modes)
     if isinstance(iterations, ShapeSchedule):
