@@ -121,14 +121,24 @@ def fitted(small_capture):
     return capture, face, shapes, estimate
 
 
+def _off(estimate, factor: float = 0.4):
+    """``estimate`` with every region's lobe scale multiplied by ``factor``: a start the refinement can improve."""
+    fits = {name: dataclasses.replace(fit, params={**fit.params, "specular_reflectance": [
+        factor * x for x in fit.params["specular_reflectance"]]}) for name, fit in estimate.fits.items()}
+    return dataclasses.replace(estimate, fits=fits)
+
+
 def test_refinement_reuses_its_kernels_and_records_itself(fitted):
     capture, face, shapes, estimate = fitted
+    estimate = _off(estimate)
     schedule = RefineSchedule(iterations=6, spp=2, evaluation_spp=4, held_regions=(), average=0.0)
     refined = refine_estimate(estimate, capture, shapes, face, schedule, progress=False)
     record = refined.refinement
     assert record["photographs"] == ["m00", "m01"]
     assert "skin" in record["regions"] and record["lamp_radius_mm"] is None and record["lights"] == ["point"]
     assert np.isfinite(record["loss_before"]) and np.isfinite(record["loss_after"])
+    # from lobes 60 % too weak the held-out pixels' loss falls: the refined estimate is kept
+    assert record["accepted"] and record["heldout_loss_after"] < record["heldout_loss_before"], record["reason"]
     # after two passes over the photographs the kernels come from the cache: nothing compiled per step
     assert [h[4] for h in record["history"][4:]] == [0, 0]
     assert refined.to_json()["refinement"]["schedule"]["spp"] == 2
@@ -137,6 +147,33 @@ def test_refinement_reuses_its_kernels_and_records_itself(fitted):
     assert changed == record["regions"]
     assert refined.albedo.albedo.shape == estimate.albedo.albedo.shape
     assert not np.array_equal(refined.albedo.albedo, estimate.albedo.albedo)
+
+
+def test_a_refinement_that_does_not_lower_the_held_out_loss_is_not_returned(fitted):
+    """Steps far too large throw the parameters off: the held-out pixels' loss rises, and the
+    texture-space fit comes back unchanged, with the reason in its record."""
+    capture, face, shapes, estimate = fitted
+    schedule = RefineSchedule(iterations=4, spp=2, evaluation_spp=4, held_regions=(), average=0.0,
+                              learning_rate=3.0, albedo_learning_rate=None)
+    refined = refine_estimate(estimate, capture, shapes, face, schedule, progress=False)
+    record = refined.refinement
+    assert not record["accepted"] and "did not fall" in record["reason"]
+    assert record["heldout_loss_after"] >= record["heldout_loss_before"]
+    assert all(refined.fits[r].params == estimate.fits[r].params for r in estimate.fits)
+    assert refined.albedo is estimate.albedo
+
+
+def test_held_out_pixels_are_blocks_of_the_mask():
+    """A fifth of the mask's 4x4 blocks, at random, whole blocks only, inside the mask."""
+    from mifaces.reflectance.refine_schedule import holdout_pixels
+
+    mask = np.zeros((64, 64), bool)
+    mask[4:60, 8:56] = True
+    held = holdout_pixels(mask, 0.2, 4, np.random.default_rng(0))
+    assert not np.any(held & ~mask)
+    assert 0.1 < held.sum() / mask.sum() < 0.3
+    blocks = held.reshape(16, 4, 16, 4)
+    assert np.all(blocks.all(axis=(1, 3)) == blocks.any(axis=(1, 3)))  # a block is held whole or not at all
 
 
 def test_held_regions_keep_their_texture_space_fit(fitted):

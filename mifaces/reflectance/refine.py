@@ -39,6 +39,11 @@ that radius and the same radiant intensity. No environment, no other
 geometry. The scenes are built once; each step writes the parameters
 (opaque, so the kernels compiled on the first pass over the photographs are
 reused) and renders.
+
+The refined estimate is returned only if it lowers the loss on pixels the
+refinement did not fit: blocks of each photograph's face pixels held out of E
+(:attr:`RefineSchedule.holdout`), rendered before and after with the same
+seed; otherwise the texture-space fit comes back, and ``refinement`` says why.
 """
 
 from __future__ import annotations
@@ -59,7 +64,7 @@ from ..progress import progress as progress_bar
 from ..render import FaceScene, mitsuba_sensor
 from .albedo_correction import AlbedoCorrection
 from .parameters import ParameterSpace
-from .refine_schedule import IterateAverage, RefineSchedule
+from .refine_schedule import IterateAverage, RefineSchedule, holdout_pixels
 
 if TYPE_CHECKING:
     from .estimate import BRDFEstimate
@@ -100,7 +105,9 @@ class _Photograph:
     scene: mi.Scene
     params: mi.SceneParameters
     target: mi.TensorXf
+    #: the fitted pixels' weight, and the held-out pixels' (:func:`image_loss`)
     weight: mi.TensorXf
+    heldout_weight: mi.TensorXf
     #: 1 / the photograph's mean over the mask (μ_k)
     scale: float
     #: scene parameter key -> (region, parameter name)
@@ -274,6 +281,8 @@ class RefineProblem:
         Radius (mm) of a spherical lamp in place of each point light.
     measurements : sequence of str, optional
         The photographs to use (default: those of the estimate).
+    seed : int
+        Chooses the held-out pixels (:attr:`RefineSchedule.holdout`).
 
     Attributes
     ----------
@@ -286,8 +295,9 @@ class RefineProblem:
     """
 
     def __init__(self, estimate: BRDFEstimate, capture, shapes, face_model, schedule: RefineSchedule,
-                 lamp_radius: float | None = None, measurements=None):
+                 lamp_radius: float | None = None, measurements=None, seed: int = 0):
         self.estimate, self.schedule = estimate, schedule
+        self.rng = np.random.default_rng([seed, 27])
         self.model = brdf_models.model(estimate.model, **estimate.options)
         brdf, albedo = estimate.to_json(), estimate.albedo.albedo
         names = list(measurements or estimate.measurements)
@@ -342,8 +352,9 @@ class RefineProblem:
         for label, n in zip(*np.unique(view.labels[view.mask], return_counts=True)):
             region = names.get(int(label), "skin")
             pixels[region] = pixels.get(region, 0) + int(n)
-        return _Photograph(m.name, view.scene, view.params, view.target, mask_weight(view.mask), view.scale, keys,
-                           albedo_keys, pixels)
+        held = holdout_pixels(view.mask, self.schedule.holdout, self.schedule.holdout_block, self.rng)
+        return _Photograph(m.name, view.scene, view.params, view.target, mask_weight(view.mask & ~held),
+                           mask_weight(held), view.scale, keys, albedo_keys, pixels)
 
     # -- the parameters as Dr.Jit values of the unconstrained variables --------
     def values(self, variables: dict) -> dict:
@@ -366,18 +377,25 @@ class RefineProblem:
                 photo.params[key] = texture
         photo.params.update()
 
-    def loss(self, photo: _Photograph, variables: dict, spp: int, seed: int):
-        """E_k of ``photo`` (:func:`image_loss`) rendered with ``spp`` samples:
-        a differentiable mi.Float."""
+    def loss(self, photo: _Photograph, variables: dict, spp: int, seed: int, weight: mi.TensorXf | None = None):
+        """E_k of ``photo`` (:func:`image_loss`) rendered with ``spp`` samples over ``weight`` (default:
+        the fitted pixels'): a differentiable mi.Float."""
         self.set(photo, variables)
         image = mi.render(photo.scene, photo.params, spp=spp, seed=seed, seed_grad=seed + 1)
-        return image_loss(image * photo.scale, photo.target, photo.weight, self.schedule.epsilon)
+        return image_loss(image * photo.scale, photo.target, photo.weight if weight is None else weight,
+                          self.schedule.epsilon)
 
-    def total_loss(self, variables: dict, spp: int, seed: int = 1 << 20) -> float:
-        """Mean E_k over the photographs (no gradients)."""
+    def total_loss(self, variables: dict, spp: int, seed: int = 1 << 20) -> dict:
+        """Mean E_k over the photographs on the fitted and on the held-out pixels (no gradients;
+        each photograph rendered once, with the same seed for a given ``seed``)."""
+        fit, held = [], []
         with dr.suspend_grad():
-            return float(np.mean([self.loss(p, variables, spp, seed + 2 * i)[0]
-                                  for i, p in enumerate(self.photographs)]))
+            for i, p in enumerate(self.photographs):
+                self.set(p, variables)
+                image = mi.render(p.scene, p.params, spp=spp, seed=seed + 2 * i) * p.scale
+                fit.append(image_loss(image, p.target, p.weight, self.schedule.epsilon)[0])
+                held.append(image_loss(image, p.target, p.heldout_weight, self.schedule.epsilon)[0])
+        return {"fit": float(np.mean(fit)), "heldout": float(np.mean(held))}
 
     def estimate_of(self, variables: dict, refinement: dict) -> BRDFEstimate:
         """The estimate with each refined region's parameters (and the albedo)
@@ -470,15 +488,18 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
     BRDFEstimate
         With the refined glossy parameters per region seen by enough pixels
         (and the albedo with ``schedule.albedo_learning_rate``), the average
-        of the last iterates (``schedule.average``), and
-        ``refinement``: the schedule, the loss before and after, the loss per
-        iteration, the regions refined, times and kernel launches.
+        of the last iterates (``schedule.average``), if that lowers the loss
+        on the held-out pixels (:attr:`RefineSchedule.holdout`); otherwise
+        ``estimate`` unchanged. Either way ``refinement``: ``accepted`` and
+        ``reason``, the schedule, the loss on the fitted and on the held-out
+        pixels before and after, the loss per iteration, the regions refined,
+        times and kernel launches.
     """
     schedule = schedule or RefineSchedule()
     if lamp_radius is None:
         lamp_radius = capture.metadata.get(LAMP_RADIUS_KEY)
     t0 = time.perf_counter()
-    problem = RefineProblem(estimate, capture, shapes, face_model, schedule, lamp_radius, measurements)
+    problem = RefineProblem(estimate, capture, shapes, face_model, schedule, lamp_radius, measurements, seed)
     opt = _optimizer(problem, schedule)
     t_build = time.perf_counter()
     with dr.suspend_grad():
@@ -504,6 +525,9 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
     t_iterate = time.perf_counter()
     result = average.mean(opt)
     after = problem.total_loss(result, schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
+    accepted = after["heldout"] < before["heldout"]
+    reason = (f"held-out loss {before['heldout']:.5g} -> {after['heldout']:.5g}: "
+              + ("fell, the refined estimate is kept" if accepted else "did not fall, the texture-space fit is kept"))
     t_end = time.perf_counter()
     first = len(problem.photographs)  # the first pass over the photographs compiles the kernels
     refinement = {
@@ -512,7 +536,10 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
         "lamp_radius_mm": float(lamp_radius) if lamp_radius else None, "lights": sorted(problem.light_kinds),
         "photographs": [p.name for p in problem.photographs],
         "regions": sorted(problem.spaces), "region_pixels": problem.pixels,
-        "loss_before": before, "loss_after": after, "iterates_averaged": average.count,
+        "accepted": bool(accepted), "reason": reason,
+        "loss_before": before["fit"], "loss_after": after["fit"],
+        "heldout_loss_before": before["heldout"], "heldout_loss_after": after["heldout"],
+        "iterates_averaged": average.count,
         "history_keys": ["seconds", "photograph", "loss", "launches", "compiled", "compile_seconds"],
         "history": history,
         "launches_per_iteration": float(np.mean([h[3] for h in history])),
@@ -525,6 +552,8 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
                     if len(history) > first else None,
                     "loss_after": t_end - t_iterate, "total": t_end - t0},
     }
+    if not accepted:
+        return dataclasses.replace(estimate, refinement=refinement)
     return problem.estimate_of(result, refinement)
 
 

@@ -13,6 +13,16 @@ import numpy as np
 
 #: Largest factor by which ``RefineSchedule.pixel_reference`` raises a small region's learning rate.
 MAX_RATE_SCALE = 2.0
+#: A refinement by differentiable rendering (of the BRDFs or of the shape) is judged on pixels it
+#: did not fit: this fraction of the blocks of each photograph's face pixels, blocks of this side
+#: (render pixels), drawn at random.
+HOLDOUT, HOLDOUT_BLOCK = 0.2, 4
+
+
+def holdout_pixels(mask: np.ndarray, fraction: float, block: int, rng: np.random.Generator) -> np.ndarray:
+    """A random ``fraction`` of the ``block``² blocks over ``mask``: the held-out pixels (H, W) bool."""
+    blocks = rng.random(((mask.shape[0] + block - 1) // block, (mask.shape[1] + block - 1) // block)) < fraction
+    return np.kron(blocks, np.ones((block, block), bool))[: mask.shape[0], : mask.shape[1]] & mask
 
 
 @dataclass(frozen=True)
@@ -65,6 +75,11 @@ class RefineSchedule:
     held_regions : tuple of str
         Regions whose glossy parameters keep their texture-space fit (the
         albedo correction still covers them).
+    holdout, holdout_block : float, int
+        The fraction of blocks (of that side, render pixels) of each
+        photograph's face pixels left out of the fit: the refined estimate is
+        returned only if its loss on them is lower than the texture-space
+        fit's (:data:`HOLDOUT`, :data:`HOLDOUT_BLOCK`).
 
     The defaults come from the error-against-time measurements of
     ``validation/refine.py`` (``validation/results/refine.json``) and the
@@ -88,9 +103,15 @@ class RefineSchedule:
     average: float = 0.25
     pixel_reference: int | None = 20_000
     held_regions: tuple[str, ...] = ("skin", "beard")
+    holdout: float = HOLDOUT
+    holdout_block: int = HOLDOUT_BLOCK
 
     def __post_init__(self):
         object.__setattr__(self, "held_regions", tuple(self.held_regions))
+        if not 0.0 < self.holdout < 1.0:
+            raise ValueError(f"RefineSchedule.holdout must be in (0, 1), got {self.holdout!r}")
+        if int(self.holdout_block) < 1:
+            raise ValueError(f"RefineSchedule.holdout_block must be >= 1, got {self.holdout_block!r}")
         for name in ("iterations", "spp", "downsample", "evaluation_spp", "albedo_cell"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"RefineSchedule.{name} must be >= 1, got {getattr(self, name)!r}")

@@ -61,6 +61,7 @@ from ..shape import shapes_in_world
 from .estimate import fit_brdf
 from .samples import capture_samples
 from .refine import LAMP_RADIUS_KEY, _kernel_history, _kernels, image_loss, mask_weight, photograph_view
+from .refine_schedule import HOLDOUT, HOLDOUT_BLOCK, holdout_pixels
 
 
 @dataclass(frozen=True)
@@ -116,8 +117,8 @@ class ShapeRefineSchedule:
     decay: float = 0.5
     epsilon: float = 0.02
     evaluation_spp: int = 32
-    holdout: float = 0.2
-    holdout_block: int = 4
+    holdout: float = HOLDOUT
+    holdout_block: int = HOLDOUT_BLOCK
 
     def __post_init__(self):
         for name in ("iterations", "spp", "downsample", "evaluation_spp", "holdout_block"):
@@ -199,13 +200,6 @@ class _View:
     heldout_weight: mi.TensorXf
 
 
-def _holdout(mask: np.ndarray, schedule: ShapeRefineSchedule, rng: np.random.Generator) -> np.ndarray:
-    """A random ``schedule.holdout`` of ``schedule.holdout_block``² blocks over ``mask``: the held-out pixels."""
-    b = schedule.holdout_block
-    blocks = rng.random(((mask.shape[0] + b - 1) // b, (mask.shape[1] + b - 1) // b)) < schedule.holdout
-    return np.kron(blocks, np.ones((b, b), bool))[: mask.shape[0], : mask.shape[1]] & mask
-
-
 def _appearance(estimate) -> dict:
     """The fitted BRDF as :func:`~mifaces.reflectance.refine.photograph_view` takes it."""
     return {"brdf": estimate.to_json(), "albedo": estimate.albedo.albedo, "normals": estimate.normal_texture(),
@@ -263,7 +257,7 @@ class ShapeProblem:
                                    schedule.integrator(), normals=appearance["normals"],
                                    specular=appearance["specular"], sample_border=True)
             self.light_kinds.add(view.light_kind)
-            held = _holdout(view.mask, schedule, rng)
+            held = holdout_pixels(view.mask, schedule.holdout, schedule.holdout_block, rng)
             keys = {key: mi.UInt32(np.ascontiguousarray(part.index, np.uint32)) for key, part in face.meshes.items()}
             normals = welded_normals(vertices, face_model.triangles)
             self.views.append(_View(m.name, view, mi.Point3f(np.ascontiguousarray(vertices.T)),
