@@ -118,8 +118,13 @@ def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> 
                             out=out / model, force=True, progress=True)
         record = estimate.refinement
         records[model] = {"loss_before": record["loss_before"], "loss_after": record["loss_after"],
+                          "heldout_loss_before": record["heldout_loss_before"],
+                          "heldout_loss_after": record["heldout_loss_after"],
+                          "accepted": record["accepted"], "reason": record["reason"],
                           "regions": record["regions"], "seconds": round(record["seconds"]["total"], 1)}
-        print(f"  {model} refined: image loss {record['loss_before']:.4f} -> {record['loss_after']:.4f} "
+        print(f"  {model} refined ({'kept' if record['accepted'] else 'not kept'}): image loss "
+              f"{record['loss_before']:.4f} -> {record['loss_after']:.4f}, held-out pixels "
+              f"{record['heldout_loss_before']:.4f} -> {record['heldout_loss_after']:.4f} "
               f"({record['seconds']['total']:.0f} s)", flush=True)
     return records
 
