@@ -586,6 +586,21 @@ def sec_truths(d):
                           "environments, true shape", "skin BRDF", "albedo RMSE"], rows)
 
 
+def sec_albedo_rounds(d):
+    lines = [f"Images {text(get(d, 'image'))}, {text(get(d, 'measurements'))} photographs, texture "
+             f"{text(get(d, 'texture'))}², intervals by {text(get(d, 'interval_method'))}. Per truth, seed and "
+             "number of alternations: skin's fitted parameters (truth in brackets) and the share of all regions' "
+             "95 % intervals that hold the truth.", ""]
+    rows = []
+    for row in rows_of(get(d, "rows")):
+        skin = ", ".join(f"{s.get('parameter')}{'' if s.get('channel') is None else '[' + str(s.get('channel')) + ']'}"
+                         f" {fixed(s.get('fitted'), 3)} ({fixed(s.get('truth'), 3)})"
+                         for s in rows_of(get(row, "skin")))
+        rows.append([text(get(row, "model")), text(get(row, "seed")), text(get(row, "albedo_rounds")),
+                     pct(get(row, "coverage"), 0), text(get(row, "intervals")), skin])
+    return lines + table(["truth and model", "seed", "alternations", "coverage", "intervals", "skin"], rows)
+
+
 def sec_unknown(d):
     if isinstance(d, dict):
         return [f"Layout not known to `validation/results_doc.py`; top-level keys: "
@@ -596,6 +611,7 @@ def sec_unknown(d):
 
 # result-file name (exact, or followed by _suffix) -> (title, label where the file says none, section)
 LAYOUTS = {
+    "albedo_rounds": ("The region fit alternated with the texel albedo", "SIMULATED", sec_albedo_rounds),
     "bench_brdf_fit": ("The BRDF fit against scipy", "SIMULATED (synthetic reflectance samples)", sec_bench_brdf_fit),
     "bench_bsdf": ("BSDF plugins and the BRDF array API: speed", "timing (synthetic scene)", sec_bench_bsdf),
     "bench_face_render": ("The face photograph: plugin against built-in BSDFs", "timing (SIMULATED face)",

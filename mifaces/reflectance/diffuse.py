@@ -129,6 +129,21 @@ def noise_and_spread(residual, w, texel, region, mean, total, counts, labels) ->
     return out
 
 
+def albedo_offsets(albedo, texel, label, where=None) -> np.ndarray:
+    """ρ_p - ρ̄ per sample (N, 3): its texel's albedo (``albedo``, flat (R², 3)) less its region's mean
+    over the samples' texels (weighted by samples), for the samples ``where`` is True (default all);
+    0 for the others. Subtracted from the reflectance, it lets a region fit's one albedo ρ̄ stand
+    for all its texels, so the albedo's texture is not read as noise (or as gloss) of the glossy part."""
+    texel, label = np.asarray(texel), np.asarray(label)
+    offsets = np.zeros((len(texel), 3))
+    on = np.ones(len(texel), bool) if where is None else np.asarray(where, bool)
+    for lab in np.unique(label[on]):
+        chosen = on & (label == lab)
+        values = albedo[texel[chosen]]
+        offsets[chosen] = values - values.mean(axis=0)
+    return offsets.astype(np.float32)
+
+
 def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflectance, sigma, texel, region,
                    region_map: np.ndarray, shrinkage: bool = True) -> DiffuseMap:
     """Refit ρ_d per texel with each region's glossy part fixed (sec. 5.3).

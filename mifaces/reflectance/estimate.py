@@ -39,7 +39,7 @@ from ..capture import Capture, load_capture
 from ..geometry import load_geometry
 from ..model.regions import REGIONS, regions_present, texel_regions_of_mesh
 from ..render import FaceScene
-from .diffuse import DiffuseMap, refine_diffuse
+from .diffuse import DiffuseMap, albedo_offsets, refine_diffuse
 from .fitting import RegionFit, SubsetSchedule, fit_regions
 from .io import FILES, write_estimate
 from .refine import RefineSchedule, refine_estimate
@@ -141,7 +141,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
              out=None, seed: int = 0, progress: bool = True, force: bool = False,
              refine: bool | RefineSchedule = False, normals: bool = False,
              normal_options: dict | None = None, specular_maps: bool = False,
-             uncertainty: str | None = METHODS[0]) -> BRDFEstimate:
+             uncertainty: str | None = METHODS[0], albedo_rounds: int = 0) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture.
 
     Parameters
@@ -194,6 +194,12 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         texel tiles by default, see ``docs/uncertainty.md``), or None. Not
         estimated with ``normals`` (whose fits see texels through their normals
         too) nor after ``refine``: those fits get empty ``uncertainty``.
+    albedo_rounds : int
+        Alternations of the region fit with the per-texel albedo: each refits the
+        regions on the reflectance less each sample's albedo offset from its
+        region's mean (:func:`mifaces.reflectance.diffuse.albedo_offsets`), the
+        albedo map refitted with the last round's glossy parts. 0: the paper's
+        one region fit. (With ``normals``, whose rounds do the same, ignored.)
 
     Returns
     -------
@@ -226,9 +232,19 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
                   for name in names.values()}
     if uncertainty is not None and uncertainty not in METHODS:
         raise ValueError(f"uncertainty must be one of {METHODS} or None, got {uncertainty!r}")
-    fits = fit_regions(brdf, light, view, r, sigma, label, names, progress=progress, fixed=fixed,
-                       fixed_by_region=per_region, schedule=schedule, seed=seed,
-                       cluster=tile_clusters(texel, resolution), uncertainty=None if normals else uncertainty)
+    rounds = 0 if normals else int(albedo_rounds)
+    region_fit = dict(progress=progress, fixed=fixed, fixed_by_region=per_region, schedule=schedule, seed=seed,
+                      cluster=tile_clusters(texel, resolution))
+    fits = fit_regions(brdf, light, view, r, sigma, label, names, **region_fit,
+                       uncertainty=None if normals or rounds else uncertainty)
+    for round_ in range(rounds):
+        by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
+        texel_albedo = refine_diffuse(brdf, by_label, light, view, r, sigma, texel, label, region_map).albedo
+        offsets = albedo_offsets(texel_albedo.reshape(-1, 3), texel, label)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the first fit has warned already
+            fits = fit_regions(brdf, light, view, r - offsets, sigma, label, names, **region_fit,
+                               uncertainty=uncertainty if round_ == rounds - 1 else None)
     texel_normals = None
     if normals:
         texel_normals = _refine_normals(brdf, fits, (light, view, r, sigma, texel, measurement, label), names,

@@ -59,6 +59,7 @@ import numpy as np
 import scipy.ndimage
 
 from ..model.texture_space import rasterize
+from .diffuse import albedo_offsets
 from .normals import NormalFit, refine_normals
 from .samples import MIN_COSINE, texel_geometry
 
@@ -251,7 +252,7 @@ def refine_texel_normals(model, fit, fits: dict, light, view, reflectance, sigma
         rotated = rotate_samples(light, view, reflectance, sigma, normals[texel])
         kept_texel, kept_label = texel[rotated[4]], label[rotated[4]]
         use = _fitted_samples(refined, kept_texel, kept_label)
-        offsets = _albedo_offsets(albedo, refined, kept_texel, kept_label)
+        offsets = albedo_offsets(albedo, kept_texel, kept_label, where=refined[kept_texel])
         fits = fit(rotated[0][use], rotated[1][use], (rotated[2] - offsets)[use], rotated[3][use], kept_label[use])
         tilt = np.degrees(np.arccos(np.clip(normals[refined, 2], -1.0, 1.0)))
         history.append({"round": round_, "loss": loss, "seconds": time.perf_counter() - t0,
@@ -286,19 +287,6 @@ def _fitted_samples(refined, texel, label) -> np.ndarray:
     on = refined[texel]
     with_normals = np.unique(label[on])
     return on | ~np.isin(label, with_normals)
-
-
-def _albedo_offsets(albedo, refined, texel, label) -> np.ndarray:
-    """ρ_p - ρ̄ per sample (N, 3): its texel's albedo less its region's mean (over the refined texels,
-    weighted by samples); 0 for texels not refined. Subtracted from r, it lets the region fit's one
-    albedo ρ̄ stand for all texels, so the albedo's texture is not read as noise of the glossy part."""
-    offsets = np.zeros((len(texel), 3))
-    on = refined[texel]
-    for lab in np.unique(label[on]):
-        chosen = on & (label == lab)
-        mean = albedo[texel[chosen]].mean(axis=0)
-        offsets[chosen] = albedo[texel[chosen]] - mean
-    return offsets.astype(np.float32)
 
 
 def smooth_normals(normals, mask, sigma: float) -> np.ndarray:
