@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +36,8 @@ from .capture import Capture, load_capture, read_ground_truth
 from .export import export_face
 from .files import write_json
 from .geometry import load_geometry
+from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, balance_intensities, check_estimable, estimate_lights,
+                       lights_document, write_lights, write_lights_picture)
 from .model import load_model
 from .reflectance import capture_samples, fit_brdf, write_estimate
 from .reflectance.refine_shape import refine_lit
@@ -178,10 +181,25 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     capture = _capture(out, capture, timings, progress)
     report = {"capture": str(capture.path), "measurements": len(capture.measurements), "geometry": geometry,
               "resolution": resolution, "models": {}}
-    face, shapes = _geometry(out, capture, geometry, face_model, shape_iterations, report, timings, progress)
+    unknown = bool(capture.unknown_lights)
+    if unknown:
+        check_estimable(capture)
+        if geometry != "fitted":
+            raise ValueError(f"lights {[l.name for l in capture.unknown_lights]} are unknown: they are estimated with "
+                             "the fitted faces, so geometry must be 'fitted'")
+    face, shapes, fits = _geometry(out, capture, geometry, face_model, shape_iterations, report, timings, progress)
+    if unknown:  # every later stage reads the estimated lights as given ones
+        capture = estimate_lights(capture, fits)
     t = time.perf_counter()
     samples = capture_samples(capture, shapes, face, resolution, progress=progress)
+    if unknown:  # the intensities that give the face one albedo under every estimated light
+        capture = balance_intensities(capture, samples)
+        samples = capture_samples(capture, shapes, face, resolution, progress=progress)
     timings["reflectance_samples"] = time.perf_counter() - t
+    if unknown:
+        report["lights"] = {"file": write_lights(out, capture).name, "picture": LIGHTS_PICTURE, "note": RELATIVE_NOTE,
+                            "estimates": [e for e in lights_document(capture)["lights"] if e["estimated"]]}
+        write_lights_picture(out / LIGHTS_PICTURE, capture)
     if refine_shape:
         shapes, samples = _refine_shapes(capture, face, shapes, samples, models[0], resolution, report, timings,
                                          progress)
@@ -236,7 +254,7 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
     """The face model and per-measurement world vertices: fitted (and written to
     ``out/shapes`` for the user) or the simulator's ground truth."""
     if geometry == "ground-truth":
-        return load_geometry(capture, "ground-truth")
+        return (*load_geometry(capture, "ground-truth"), None)
     face = load_model(face_model)  # a loaded model is taken as it is
     t = time.perf_counter()
     fits = fit_shape(capture, face, out=out / "shapes", iterations=shape_iterations, progress=progress)
@@ -266,7 +284,7 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
                            for f in fits)
         raise NoUsableShapeError(f"no shape fit converged, so there is no face geometry to measure reflectance on: "
                                  f"{detail}. The fits are in {out / 'shapes'}.")
-    return face, shapes
+    return face, shapes, fits
 
 
 def _refine_shapes(capture: Capture, face, shapes: dict, samples, model: str, resolution: int, report: dict,
@@ -303,6 +321,8 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
         warnings.simplefilter("always")
         estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
                             progress=progress, refine=refine, normals=normals, specular_maps=specular_maps)
+    if any(light.estimated for light in capture.lights):
+        estimate = replace(estimate, lighting={"lights": "estimated", "reflectance": "relative", "note": RELATIVE_NOTE})
     lamp = capture.light(first.light)
     write_estimate(estimate, out / "brdf" / model, scene, capture.camera, lamp.position, lamp.intensity,
                    light_direction=lamp.direction, force=True)  # measure's own folder

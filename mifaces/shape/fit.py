@@ -39,6 +39,9 @@ MAX_IMAGE_RMS = 0.1
 #: Feature points of measurements labelled with one pose that differ from the pose's fitted
 #: measurement's by more than this fraction of their spread (RMS) are not one pose: fitted apart.
 POSE_AGREEMENT = 0.25
+#: Parameter blocks of a fit's geometry and texture: held where only a photograph's lighting is fitted
+#: on a pose's shared face (:func:`fit_light`).
+GEOMETRY_BLOCKS = ("rotation", "translation", "log_focal", "shape", "expression", "color", "albedo")
 #: The second pass of a fit of one face to several poses (``fit_shape(one_identity=True)``): this
 #: fraction of the schedule's iterations, from each pose's first fit with the shared identity held.
 SECOND_PASS = 0.35
@@ -148,7 +151,10 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
             raise ShapeFitError(f"measurement {measurement.name!r}: {key} image is {img.shape[1]}x{img.shape[0]}, "
                                 f"the camera {camera.width}x{camera.height}")
     initial = dict(initial or {})
-    if light is not None and light.directional:
+    if light is not None and light.unknown:  # estimated: from its stated guess, else frontal (Fitter.initial)
+        if light.guess is not None and "point" in images and "point.light_angles" not in initial:
+            initial["point.light_angles"] = light_angles(camera.rotation @ light.guess)
+    elif light is not None and light.directional:
         if "point" in images and "point.light_angles" not in initial:
             initial["point.light_angles"] = start_light_angles(light, camera, camera.position)
     elif light is not None:
@@ -353,7 +359,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
             bar.set_postfix(last=leader.name, status=fit.status)
     for leader, *others in groups:
         fit = leaders[leader.name]
-        for fit_m in [fit] + [shared_fit(fit, m, capture) for m in others]:
+        for fit_m in [fit] + [_member_fit(fit, m, capture, model, schedule, options) for m in others]:
             fits[fit_m.measurement] = fit_m
             if out is not None:
                 write_fit(out, fit_m, model)
@@ -362,6 +368,50 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     if out is not None:
         write_index(out, capture, model, result, reference, model_source=source)
     return result
+
+
+def _member_fit(fit: ShapeFit, measurement, capture, model, schedule: ShapeSchedule, options: dict) -> ShapeFit:
+    """The fit of a pose group's ``measurement`` on its leader's ``fit``: its own light fitted on the
+    shared face where the capture does not know it (:func:`fit_light`), else :func:`shared_fit`."""
+    light = capture.light(measurement.light) if measurement.light else None
+    if light is None or not light.unknown or not fit.converged:
+        return shared_fit(fit, measurement, capture)
+    options = {k: v for k, v in options.items() if k != "use_diffuse"}
+    return fit_light(fit, measurement, capture.camera, model, light, schedule, **options)
+
+
+def fit_light(fit: ShapeFit, measurement, camera, model, light, schedule: ShapeSchedule | None = None,
+              **options) -> ShapeFit:
+    """The lighting of ``measurement``'s photograph on the face of ``fit`` (same pose): the
+    directed light's angles, colour, ambient, specular strength, gain and offset of the
+    photograph fitted by the shape fit's energy and optimiser (:func:`fit_measurement`), with
+    every block of the geometry and texture held (:data:`GEOMETRY_BLOCKS`) at ``fit``'s values,
+    the photograph alone (not its companion). The light starts from ``light.guess`` (world frame)
+    where stated, else frontal; the cast shadows follow the light as it moves (ray cast on the
+    held face every ``visibility_interval`` steps).
+
+    Returns
+    -------
+    ShapeFit
+        ``fit`` (its geometry and status: the face is the leader's) for ``measurement``, with this
+        photograph's fitted ``light['point']``, the light fit's loss, iterations and seconds,
+        :attr:`ShapeFit.shared_with` the leader, and the light fit's own status in ``message``.
+    """
+    model = load_model(model)
+    model = model.truncated(len(fit.coefficients))
+    start = {k: v for k, v in _start_from(fit, model, measurement).items() if "." not in k}
+    start["shape"] = fit.coefficients
+    start["log_focal"] = math.log(float(fit.focal_length[1]) / camera.fy)
+    schedule = schedule or ShapeSchedule()
+    schedule = replace(schedule, pose_iterations=1)  # the feature points do not move: the face is held
+    fixed = tuple(b for b in GEOMETRY_BLOCKS if b != ("albedo" if model.has_texture else "color"))
+    result = fit_measurement(measurement, camera, model, light=light, schedule=schedule, use_diffuse=False,
+                             initial=start, fixed=fixed, **options)
+    light_fit = f"light fitted on the face of {fit.measurement!r} (same pose): {result.status}" + \
+        (f" ({result.message})" if result.message else "")
+    return replace(fit, measurement=measurement.name, light=result.light, loss=result.loss,
+                   iterations=result.iterations, seconds=result.seconds, history=result.history,
+                   shared_with=fit.measurement, message=light_fit + (f"; {fit.message}" if fit.message else ""))
 
 
 def one_face(fits: list[ShapeFit]) -> np.ndarray | None:

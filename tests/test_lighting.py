@@ -1,0 +1,118 @@
+"""Lights nobody measured (mifaces.lighting): from fitted lights to the capture's, and their files.
+The fitted lights here are written by hand (their fit is tested in tests/test_shape.py)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from mifaces.capture import load_capture
+from mifaces.capture.types import RELATIVE_IRRADIANCE
+from mifaces.lighting import (LIGHTS_FILE, UnknownLightError, estimate_lights, sphere_shading, write_lights,
+                              write_lights_picture)
+from mifaces.model.geometry import rotation_matrix
+from mifaces.shape.targets import light_direction
+from test_real_capture import write_directional
+
+
+def _capture(tmp_path, lights=None):
+    """test_real_capture's capture (m0 under 'top', m1 under 'side', 'known' given) with 'top' and
+    'side' unknown; ``lights`` replaces them."""
+    def change(data):
+        data["lights"][:2] = lights or [{"name": "top", "unknown": True}, {"name": "side", "unknown": True}]
+        data["measurements"].append(dict(data["measurements"][1], name="m2"))  # a second photograph under 'side'
+    return load_capture(write_directional(tmp_path, change), detect=False)
+
+
+def fitted(name, direction, color=1.0, gain=1.0, status="converged"):
+    """A shape fit's result as estimate_lights reads it: a fitted point-image light (camera frame)."""
+    return SimpleNamespace(measurement=name, converged=status == "converged", light={"point": {
+        "direction": np.asarray(direction, np.float64), "color": np.full(3, color), "gain": np.full(3, gain)}})
+
+
+def angle(a, b):
+    return np.degrees(np.arccos(np.clip(np.dot(a, b) / np.linalg.norm(a) / np.linalg.norm(b), -1, 1)))
+
+
+def test_estimate_lights_shares_and_turns_into_the_world_frame(tmp_path):
+    capture = _capture(tmp_path)
+    rotation = rotation_matrix(20.0, -10.0, 5.0)
+    capture = replace(capture, camera=replace(capture.camera, rotation=rotation))
+    top, side_a, side_b = light_direction(0.3, 0.1), light_direction(0.0, 0.6), light_direction(0.1, 0.5)
+    fits = [fitted("m0", top, 0.5, 2.0), fitted("m1", side_a, 1.0, 2.0), fitted("m2", side_b, 1.0, 4.0)]
+    result = estimate_lights(capture, fits)
+    top_l, side_l, known = result.lights
+    assert known is capture.lights[2]  # a given light stays as it was
+    np.testing.assert_allclose(top_l.direction, rotation.T @ top, atol=1e-12)  # camera -> world frame
+    mean = side_a + side_b
+    np.testing.assert_allclose(side_l.direction, rotation.T @ (mean / np.linalg.norm(mean)), atol=1e-12)
+    assert all(l.estimated and l.relative and not l.unknown and l.directional for l in (top_l, side_l))
+    # intensities: colour x gain (1, and the mean of 2 and 4 = 3), scaled to mean pi
+    np.testing.assert_allclose([top_l.intensity[0], side_l.intensity[0]], np.array([1.0, 3.0]) * RELATIVE_IRRADIANCE / 2)
+    info = result.metadata["estimated_lights"]
+    assert info["side"]["photographs"] == ["m1", "m2"]
+    assert info["side"]["spread_deg"] == pytest.approx(angle(side_a, side_b) / 2, abs=1e-6)
+    # lights.json: the capture format's frame and convention, given lights too
+    document = json.loads(write_lights(tmp_path / "res", result).read_text())
+    assert (tmp_path / "res" / LIGHTS_FILE).is_file()
+    entries = {e["name"]: e for e in document["lights"]}
+    assert entries["top"]["kind"] == "directional" and entries["top"]["estimated"] is True
+    np.testing.assert_allclose(entries["top"]["direction"], top_l.direction)
+    assert entries["known"]["estimated"] is False and entries["known"]["direction"] == [0.0, 0.0, -1.0]
+    write_lights_picture(tmp_path / "res" / "lights.png", result)
+    assert (tmp_path / "res" / "lights.png").stat().st_size > 1000
+
+
+def test_unestimable_lights_are_named(tmp_path):
+    capture = _capture(tmp_path)
+    with pytest.raises(UnknownLightError, match=r"unknown light\(s\) \['side'\]: no photograph"):
+        estimate_lights(capture, [fitted("m0", (0, 0, -1)), fitted("m1", (0, 0, -1), status="not_converged")])
+    environment = _capture(tmp_path, [{"name": "top", "unknown": True, "kind": "environment"},
+                                      {"name": "side", "unknown": True}])
+    with pytest.raises(UnknownLightError, match=r"\['top'\] of kind 'environment'"):
+        estimate_lights(environment, [])
+
+
+def test_sphere_shading_is_brightest_towards_the_light():
+    d = light_direction(0.4, -0.7)  # above, towards the image's left
+    shade = sphere_shading(d, 65)
+    row, col = np.unravel_index(np.nanargmax(shade), shade.shape)
+    normal = np.array([(col + 0.5) / 65 * 2 - 1, (row + 0.5) / 65 * 2 - 1])
+    assert np.linalg.norm(normal - d[:2]) < 0.05
+    assert np.isnan(shade[0, 0]) and np.nanmin(shade) == 0.0
+
+
+def test_balance_intensities_gives_one_albedo(tmp_path):
+    """Samples of one face under two estimated lights whose intensities are off by known factors
+    (with highlights and grazing samples as outliers): the factors are found and undone."""
+    from mifaces.lighting import balance_intensities
+    from mifaces.reflectance.samples import ReflectanceSamples
+
+    capture = estimate_lights(_capture(tmp_path), [fitted("m0", (0, 0, -1)), fitted("m1", (0.5, 0, -0.8)),
+                                                   fitted("m2", (0.5, 0, -0.8))])
+    rng = np.random.default_rng(0)
+    texels = np.repeat(np.arange(400), 3)
+    photo = np.tile([0, 1, 2], 400)  # m0 (top), m1 and m2 (side)
+    albedo = rng.uniform(0.2, 0.8, 400)
+    wrong = {"top": 1.6, "side": 0.8}  # the estimated intensity is this many times the true one
+    light_of = {0: "top", 1: "side", 2: "side"}
+    r = albedo[texels] / np.array([wrong[light_of[k]] for k in photo]) * rng.lognormal(0, 0.05, len(photo))
+    r[::17] *= 5.0  # highlights
+    cosines = np.full(len(photo), 0.8)
+    cosines[::23] = 0.1  # grazing: left out
+    unit = np.stack([np.zeros_like(cosines), np.sqrt(1 - cosines ** 2), cosines], axis=1).astype(np.float32)
+    samples = ReflectanceSamples(unit, unit, np.repeat(r[:, None], 3, axis=1).astype(np.float32),
+                                 np.ones(len(photo), np.float32), texels.astype(np.int32), photo.astype(np.int16), 32,
+                                 ("m0", "m1", "m2"))
+    before = {l.name: l.intensity.mean() for l in capture.lights}
+    balanced = balance_intensities(capture, samples)
+    after = {l.name: l.intensity.mean() for l in balanced.lights}
+    ratio = (after["top"] / after["side"]) / (before["top"] / before["side"])
+    assert ratio == pytest.approx(wrong["side"] / wrong["top"], rel=0.03)
+    assert np.mean([after["top"], after["side"]]) == pytest.approx(RELATIVE_IRRADIANCE)
+    assert balanced.lights[2] is capture.lights[2]  # the given light stays
+    assert balanced.metadata["estimated_lights"]["top"]["photographs"] == ["m0"]
