@@ -116,3 +116,17 @@ def test_balance_intensities_gives_one_albedo(tmp_path):
     assert np.mean([after["top"], after["side"]]) == pytest.approx(RELATIVE_IRRADIANCE)
     assert balanced.lights[2] is capture.lights[2]  # the given light stays
     assert balanced.metadata["estimated_lights"]["top"]["photographs"] == ["m0"]
+
+
+def test_a_stated_guess_is_the_lights_angle_to_the_camera(tmp_path):
+    """The pose's face is fitted on the photograph lit nearest the camera's axis: an unknown light counts
+    by its stated guess, frontal without one."""
+    from mifaces.shape.targets import light_axis_angle
+
+    capture = _capture(tmp_path, [{"name": "top", "unknown": True, "guess": {"direction": [0, -3, -4]}},
+                                  {"name": "side", "unknown": True}])
+    m0 = capture.measurements[0]
+    pixels_to_axis = angle(capture.camera.pixel_rays(np.mean(list(m0.feature_points.values()), axis=0)), [0, 0, 1])
+    assert light_axis_angle(capture, m0) == pytest.approx(np.degrees(np.arccos(0.8)), abs=pixels_to_axis + 0.1)
+    no_guess = _capture(tmp_path / "no_guess")
+    assert light_axis_angle(no_guess, no_guess.measurements[0]) == 0.0
