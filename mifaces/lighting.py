@@ -98,7 +98,9 @@ def estimate_lights(capture: Capture, fits) -> Capture:
         The same capture, each unknown light now directional (``estimated``, ``relative``): its
         direction the normalised mean of its photographs' fitted directions (world frame), its
         intensity the mean of their :func:`fitted_intensity`, all estimated intensities scaled
-        together so that their mean is :data:`RELATIVE_IRRADIANCE` (module docstring).
+        together so that their mean is :data:`RELATIVE_IRRADIANCE` (module docstring). Where every
+        light was estimated, without the white target: nothing ties the estimated intensities to its
+        units, so reflectance is relative (:attr:`Capture.relative_reflectance`).
         ``capture.metadata['estimated_lights']`` holds per light the photographs it was
         estimated from and their angular spread (degrees).
 
@@ -136,7 +138,9 @@ def estimate_lights(capture: Capture, fits) -> Capture:
                    for light in capture.lights)
     metadata = dict(capture.metadata, estimated_lights={
         name: {"photographs": names, "spread_deg": spread} for name, (_, _, names, spread) in estimates.items()})
-    return replace(capture, lights=lights, metadata=metadata)
+    # every light estimated: nothing ties their intensities to the white target's units
+    white = capture.white_target if len(estimates) < len(capture.lights) else None
+    return replace(capture, lights=lights, metadata=metadata, white_target=white)
 
 
 #: Samples that compare the photographs' albedos (:func:`balance_intensities`): light and view at
@@ -158,8 +162,10 @@ def balance_intensities(capture: Capture, samples) -> Capture:
     log reflectance is fitted as ``a_texel - log s_light`` by alternating a texel's mean and a
     light's median (robust against highlights and shadows the direction errs on), over the samples
     of :data:`BALANCE_MIN_COSINE` and the texels seen under two or more lights. Each estimated
-    light's RGB intensity is then multiplied by its ``s``, the estimated lights' mean intensity kept
-    at :data:`RELATIVE_IRRADIANCE`. Given lights and their samples are left as they are.
+    light's RGB intensity is then divided by its ``s``. Given lights keep theirs and anchor the
+    others (their mean ``log s`` is 0): the estimated intensities are then in the given lights'
+    units. Without given lights, the estimated lights' mean intensity is kept at
+    :data:`RELATIVE_IRRADIANCE`.
 
     Returns
     -------
@@ -169,30 +175,34 @@ def balance_intensities(capture: Capture, samples) -> Capture:
     names = list(samples.measurement_names)
     light_of = {m.name: m.light for m in capture.measurements}
     estimated = [light.name for light in capture.lights if light.estimated]
-    if len(estimated) < 2:
+    given = [light.name for light in capture.lights if not light.estimated and not light.unknown]
+    if not estimated or len(estimated) + len(given) < 2:
         return capture
     keep = ((samples.light[:, 2] >= BALANCE_MIN_COSINE) & (samples.view[:, 2] >= BALANCE_MIN_COSINE)
             & np.all(samples.reflectance > 0, axis=1))
     which = np.array([light_of[name] for name in names])[samples.measurement[keep]]
-    index = {name: k for k, name in enumerate(estimated)}
+    index = {name: k for k, name in enumerate(estimated + given)}
     on = np.array([name in index for name in which], bool)
     lights = np.array([index[name] for name in which[on]], np.int64)
     texels = samples.texel[keep][on]
     log_r = np.log(np.mean(samples.reflectance[keep][on], axis=1))
-    pairs = np.unique(texels * len(estimated) + lights)  # (texel, light) seen
-    shared = np.bincount(pairs // len(estimated), minlength=int(texels.max(initial=-1)) + 1)[texels] >= 2
+    pairs = np.unique(texels * len(index) + lights)  # (texel, light) seen
+    shared = np.bincount(pairs // len(index), minlength=int(texels.max(initial=-1)) + 1)[texels] >= 2
     lights, texels, log_r = lights[shared], texels[shared], log_r[shared]
-    if not len(log_r) or len(np.unique(lights)) < len(estimated):
+    present = set(np.unique(lights).tolist())
+    if not all(index[name] in present for name in estimated):
         return capture
-    log_s = np.zeros(len(estimated))
+    anchors = [index[name] for name in given if index[name] in present]  # given lights hold their intensity
+    log_s = np.zeros(len(index))
     per_texel = np.bincount(texels)
     for _ in range(BALANCE_ROUNDS):
         a = np.bincount(texels, weights=log_r + log_s[lights]) / np.maximum(per_texel, 1)
-        log_s = np.array([np.median(a[texels[lights == k]] - log_r[lights == k]) for k in range(len(estimated))])
-        log_s -= log_s.mean()
-    factor = {name: float(np.exp(-log_s[k])) for name, k in index.items()}  # r is 1/s too small: E s too large
+        log_s = np.array([np.median(a[texels[lights == k]] - log_r[lights == k]) if k in present else 0.0
+                          for k in range(len(index))])
+        log_s -= log_s[anchors].mean() if anchors else log_s[:len(estimated)].mean()
+    factor = {name: float(np.exp(-log_s[index[name]])) for name in estimated}  # r is 1/s too small: E s too large
     scaled = {light.name: light.intensity * factor[light.name] for light in capture.lights if light.name in factor}
-    norm = RELATIVE_IRRADIANCE / float(np.mean([np.mean(v) for v in scaled.values()]))
+    norm = 1.0 if anchors else RELATIVE_IRRADIANCE / float(np.mean([np.mean(v) for v in scaled.values()]))
     info = {name: dict(capture.metadata.get("estimated_lights", {}).get(name, {}), balance=factor[name] * norm)
             for name in factor}
     return replace(capture, lights=tuple(replace(light, intensity=scaled[light.name] * norm) if light.name in scaled

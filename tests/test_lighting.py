@@ -130,3 +130,45 @@ def test_a_stated_guess_is_the_lights_angle_to_the_camera(tmp_path):
     assert light_axis_angle(capture, m0) == pytest.approx(np.degrees(np.arccos(0.8)), abs=pixels_to_axis + 0.1)
     no_guess = _capture(tmp_path / "no_guess")
     assert light_axis_angle(no_guess, no_guess.measurements[0]) == 0.0
+
+
+def _samples(wrong: dict, light_of: dict, seed: int = 0):
+    """Samples of 400 texels seen in m0, m1 and m2, the reflectance 1/``wrong[light]`` of the albedo."""
+    from mifaces.reflectance.samples import ReflectanceSamples
+
+    rng = np.random.default_rng(seed)
+    texels = np.repeat(np.arange(400), 3)
+    photo = np.tile([0, 1, 2], 400)
+    r = rng.uniform(0.2, 0.8, 400)[texels] / np.array([wrong[light_of[k]] for k in photo])
+    unit = np.tile(np.array([[0.0, 0.6, 0.8]], np.float32), (len(photo), 1))
+    return ReflectanceSamples(unit, unit, np.repeat(r[:, None], 3, axis=1).astype(np.float32),
+                              np.ones(len(photo), np.float32), texels.astype(np.int32), photo.astype(np.int16), 32,
+                              ("m0", "m1", "m2"))
+
+
+def test_given_lights_anchor_the_estimated_intensities(tmp_path):
+    """A capture mixing a given light with an unknown one: the given light keeps its intensity and the
+    estimated one is expressed in its units; a capture whose lights are all estimated has no use for
+    the white target (its units tie to no estimated light)."""
+    from mifaces.lighting import balance_intensities
+
+    capture = estimate_lights(_capture(tmp_path, [{"name": "top", "unknown": True},
+                                                  {"name": "side", "direction": [3, 0, -4], "intensity": 2.0}]),
+                              [fitted("m0", (0, 0, -1))])
+    top = capture.lights[0].intensity.mean()
+    balanced = balance_intensities(capture, _samples({"top": 1.6, "side": 1.0}, {0: "top", 1: "side", 2: "side"}))
+    assert balanced.lights[1] is capture.lights[1]  # the given light holds
+    assert balanced.lights[0].intensity.mean() == pytest.approx(top / 1.6, rel=1e-6)
+
+    def with_white_target(data):
+        data["lights"] = [{"name": n, "unknown": True} for n in ("top", "side", "known")]
+        data["measurements"].append(dict(data["measurements"][1], name="m2", light="known"))
+        data["white_target"] = {"value": 0.5, "distance_mm": 1000, "intensity": 1e6}
+
+    every = load_capture(write_directional(tmp_path / "w", with_white_target), detect=False)
+    assert every.white_target is not None
+    estimated = estimate_lights(every, [fitted(m, (0, 0, -1)) for m in ("m0", "m1", "m2")])
+    assert estimated.white_target is None and estimated.relative_reflectance
+    partly = estimate_lights(replace(every, lights=every.lights[:2] + (replace(capture.lights[1], name="known"),)),
+                             [fitted(m, (0, 0, -1)) for m in ("m0", "m1")])
+    assert partly.white_target is every.white_target
