@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .capture.types import RELATIVE_IRRADIANCE, Capture, Light
+from .capture.types import RELATIVE_IRRADIANCE, Capture
 from .files import save_figure, write_json
 
 #: File of a result folder holding the capture's lights, estimated and given.

@@ -124,7 +124,8 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         ``report.html`` (:mod:`mifaces.report_html`) with ``face.glb``: the
         face of the model best under the held-out lights (else the first model),
         in the shape fitted to the first photograph (the mean shape with
-        ``geometry='ground-truth'``).
+        ``geometry='ground-truth'``). For a capture with unknown lights, also
+        ``lights.json`` and ``report_lights.png`` (:mod:`mifaces.lighting`).
     capture : path or Capture, optional
         A capture folder; without one, the default capture of
         :func:`mifaces.studio.simulate` (built-in face, Cook-Torrance
@@ -165,10 +166,24 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     dict
         The report (also written as ``report.json``).
 
+    Notes
+    -----
+    Lights the capture does not know (``"unknown": true``) are estimated with the faces: the shape
+    fit fits each photograph's light (:func:`mifaces.shape.fit.fit_light`),
+    :func:`mifaces.lighting.estimate_lights` makes them the capture's directional lights and
+    :func:`~mifaces.lighting.balance_intensities` sets their intensities from the reflectance
+    samples; every later stage reads them as given (``docs/unknown_lights.md``). Reflectance is
+    then relative (``brdf.json``'s ``lighting``).
+
     Raises
     ------
     NoUsableShapeError
         No shape fit converged, so there is no geometry to sample reflectance on.
+    UnknownLightError
+        For an unknown light of a kind not estimated (an environment map), before any fitting,
+        or one none of whose photographs got a converged shape fit.
+    ValueError
+        For unknown lights with ``geometry='ground-truth'`` (they are estimated on fitted faces).
     """
     t0 = time.perf_counter()
     out = Path(out)

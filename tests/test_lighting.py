@@ -52,7 +52,8 @@ def test_estimate_lights_shares_and_turns_into_the_world_frame(tmp_path):
     np.testing.assert_allclose(side_l.direction, rotation.T @ (mean / np.linalg.norm(mean)), atol=1e-12)
     assert all(l.estimated and l.relative and not l.unknown and l.directional for l in (top_l, side_l))
     # intensities: colour x gain (1, and the mean of 2 and 4 = 3), scaled to mean pi
-    np.testing.assert_allclose([top_l.intensity[0], side_l.intensity[0]], np.array([1.0, 3.0]) * RELATIVE_IRRADIANCE / 2)
+    np.testing.assert_allclose([top_l.intensity[0], side_l.intensity[0]],
+                               np.array([1.0, 3.0]) * RELATIVE_IRRADIANCE / 2)
     info = result.metadata["estimated_lights"]
     assert info["side"]["photographs"] == ["m1", "m2"]
     assert info["side"]["spread_deg"] == pytest.approx(angle(side_a, side_b) / 2, abs=1e-6)

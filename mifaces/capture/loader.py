@@ -18,7 +18,8 @@ from .feature_points import detect_feature_points
 from .images import read_image
 from .problems import Problems
 from .types import (ENVMAP_HEIGHTS, ENVMAP_SIZE, FEATURE_POINT_RANGE, FORMAT, IMAGE_SUFFIXES, LIGHT_KINDS, MANIFEST,
-                    RELATIVE_IRRADIANCE, TRANSFERS, VERSION, Capture, CaptureError, Distance, Image, Light, Measurement, SpherePictures, WhiteTarget)
+                    RELATIVE_IRRADIANCE, TRANSFERS, VERSION, Capture, CaptureError, Distance, Image, Light, Measurement,
+                    SpherePictures, WhiteTarget)
 
 
 def _camera(entry, problems: Problems) -> Camera | None:
@@ -373,7 +374,8 @@ def _envmap_size(value, name, where: str, problems: Problems) -> tuple[int, int]
     low, high = ENVMAP_HEIGHTS
     if (not isinstance(value, list) or len(value) != 2
             or not all(isinstance(v, int) and not isinstance(v, bool) for v in value)):
-        problems.append(f"{where}: light {name!r}: invalid envmap size {value!r}: must be [width, height] in texels"[:300])
+        problems.append(f"{where}: light {name!r}: invalid envmap size {value!r}: "
+                        "must be [width, height] in texels"[:300])
         return None
     width, height = value
     if width != 2 * height or not low <= height <= high:
