@@ -173,3 +173,15 @@ def test_given_lights_anchor_the_estimated_intensities(tmp_path):
     partly = estimate_lights(replace(every, lights=every.lights[:2] + (replace(capture.lights[1], name="known"),)),
                              [fitted(m, (0, 0, -1)) for m in ("m0", "m1")])
     assert partly.white_target is every.white_target
+
+
+def test_samples_under_an_unknown_light_are_refused(tmp_path):
+    """The reflectance stage names an unknown light instead of reading it as an uncalibrated one."""
+    from mifaces.model import load_model
+    from mifaces.reflectance import capture_samples
+
+    capture = _capture(tmp_path)
+    face = load_model("builtin")
+    shapes = {m.name: face.shape_mean for m in capture.measurements}
+    with pytest.raises(ValueError, match="measurement 'm0': light 'top' is unknown: estimate it with the face first"):
+        capture_samples(capture, shapes, face, 16, progress=False)
