@@ -185,3 +185,14 @@ def test_samples_under_an_unknown_light_are_refused(tmp_path):
     shapes = {m.name: face.shape_mean for m in capture.measurements}
     with pytest.raises(ValueError, match="measurement 'm0': light 'top' is unknown: estimate it with the face first"):
         capture_samples(capture, shapes, face, 16, progress=False)
+
+
+def test_report_page_shows_the_lights_picture_when_there_is_one(tmp_path):
+    from mifaces.lighting import LIGHTS_PICTURE
+    from mifaces.report_html import write_html
+
+    report = {"capture": "c", "measurements": 1, "geometry": "fitted", "resolution": 8, "models": {},
+              "seconds": {"total": 1.0}}
+    assert LIGHTS_PICTURE not in write_html(tmp_path / "report.html", report).read_text()
+    (tmp_path / LIGHTS_PICTURE).write_bytes(b"png")
+    assert f'<img src="{LIGHTS_PICTURE}"' in write_html(tmp_path / "report.html", report).read_text()
