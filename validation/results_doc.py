@@ -519,6 +519,17 @@ def sec_unknown_lights(d):
     return lines
 
 
+def sec_unknown_lights_simulated(d):
+    lights = items(d.get("lights"))
+    lines = ["Each light's estimate (the mean over the photographs under it) against its true direction from the "
+             "fitted head's centre, and how far its photographs' estimates lie from that mean.", ""]
+    lines += table(["light", "angle to the truth (deg)", "photographs", "their spread (deg)"],
+                   [[name, fixed(get(v, "angle_deg"), 1), text(len(get(v, "photographs") or [])),
+                     fixed(get(v, "spread_deg"), 1)] for name, v in lights])
+    lines += [f"Shape fit with the lights estimated: {fixed(get(d, 'seconds', 'fit_shape'), 0)} s.", ""]
+    return lines
+
+
 def sec_refine(d):
     capture = d.get("capture") or {}
     schedule = d.get("schedule") or {}
@@ -634,6 +645,8 @@ LAYOUTS = {
     "refine": ("Refinement by differentiable rendering", "SIMULATED", sec_refine),
     "unknown_lights": ("Lights nobody measured: the Yale face database with its lights hidden", "real photographs",
                        sec_unknown_lights),
+    "unknown_lights_simulated": ("Lights nobody measured: the simulated capture with its lights hidden", "SIMULATED",
+                                 sec_unknown_lights_simulated),
     "shape_estimation": ("Shape estimation", "SIMULATED", sec_shape_estimation),
     "truths": ("`mifaces measure` on truths the fit cannot copy", "SIMULATED", sec_truths),
 }

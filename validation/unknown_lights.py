@@ -17,7 +17,14 @@ the face (:mod:`mifaces.lighting`). Reported:
 Writes ``DIR/<subject>/{calibrated,unknown}/...`` (as real_yaleb.py writes a subject)
 and ``validation/results/unknown_lights.{json,png}``. Real photographs, not simulated.
 
+With ``--simulated``, instead: the default simulated capture (``mifaces simulate``: six
+poses, two point lights 1.5 m away, each shared by three poses) with its lights hidden, the
+shape fit estimating them (:func:`simulated_run`), each light's estimate, the mean over its
+three photographs, against its true direction from the face (the steel-sphere calibration
+seen from the fitted head's centre); to ``validation/results/unknown_lights_simulated.json``.
+
     python validation/unknown_lights.py --data ../shared/data/yaleb --out out/unknown_lights [--subjects yaleB01]
+    python validation/unknown_lights.py --simulated --out out/unknown_lights
 """
 
 from __future__ import annotations
@@ -54,6 +61,40 @@ def angular_errors(lights_json: Path, subject_dir: Path, train: int) -> dict:
     truth = {image.light: image.direction for image in default_split(images, train)[0]}
     estimated = {e["name"]: np.asarray(e["direction"]) for e in json.loads(lights_json.read_text())["lights"]}
     return {name: float(np.degrees(np.arccos(np.clip(estimated[name] @ truth[name], -1, 1)))) for name in truth}
+
+
+def simulated_run(out: Path) -> dict:
+    """The default simulated capture at ``out/capture``, its lights hidden in a second manifest
+    beside the first (``capture_unknown.json``: the same images), fitted (:func:`mifaces.shape.fit_shape`)
+    and its lights estimated (:func:`mifaces.lighting.estimate_lights`); per light the angle (degrees)
+    between the estimate and the direction from the fitted head's centre to the calibrated lamp, and
+    the spread of its photographs' estimates."""
+    from mifaces.capture import MANIFEST, load_capture
+    from mifaces.lighting import estimate_lights
+    from mifaces.shape import fit_shape, shapes_in_world
+    from mifaces.studio import simulate
+
+    t = time.perf_counter()
+    simulate(out / "capture", force=True)
+    data = json.loads((out / "capture" / MANIFEST).read_text())
+    data["lights"] = [{"name": light["name"], "unknown": True} for light in data["lights"]]
+    write_json(out / "capture" / "capture_unknown.json", data)
+    given, hidden = load_capture(out / "capture"), load_capture(out / "capture" / "capture_unknown.json")
+    t_fit = time.perf_counter()
+    fits = fit_shape(hidden)
+    estimated = estimate_lights(hidden, fits)
+    seconds = {"simulate": t_fit - t, "fit_shape": time.perf_counter() - t_fit}
+    shapes = shapes_in_world(fits, hidden)
+    lights = {}
+    for light in estimated.lights:
+        names = [m.name for m in hidden.measurements if m.light == light.name and m.name in shapes]
+        head = np.mean([shapes[name].mean(axis=0) for name in names], axis=0)
+        truth = given.light(light.name).towards(head[None])[0][0]
+        lights[light.name] = {"angle_deg": float(np.degrees(np.arccos(np.clip(light.direction @ truth, -1, 1)))),
+                              "direction": light.direction.tolist(), "true_direction": truth.tolist(),
+                              **estimated.metadata["estimated_lights"][light.name]}
+    return {"lights": lights, "seconds": seconds,
+            "fits": {f.measurement: {"status": f.status, "shared_with": f.shared_with} for f in fits}}
 
 
 def figure(document: dict, path: Path, runs_dir: Path, data_dir: Path, train: int) -> None:
@@ -107,7 +148,18 @@ def main(argv=None) -> int:
     parser.add_argument("--spp", type=int, default=8)
     parser.add_argument("--resolution", type=int, default=256, help="texture resolution of the fits")
     parser.add_argument("--results", type=Path, default=RESULTS)
+    parser.add_argument("--simulated", action="store_true",
+                        help="the default simulated capture with its lights hidden, instead of the Yale subjects")
     args = parser.parse_args(argv)
+    command = "python validation/unknown_lights.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    if args.simulated:
+        document = {"data": "SIMULATED: the default capture of mifaces simulate (six poses, two point lights "
+                            "1.5 m away), lights hidden", "command": command, **simulated_run(args.out / "simulated")}
+        write_json(args.results / "unknown_lights_simulated.json", document)
+        for name, entry in document["lights"].items():
+            print(f"{name}: {entry['angle_deg']:.1f} deg from the truth, spread of its photographs "
+                  f"{entry['spread_deg']:.1f} deg ({len(entry['photographs'])} photographs)")
+        return 0
     if not args.data.is_dir():
         print(f"no Yale data at {args.data}: nothing to validate", file=sys.stderr)
         return 1
@@ -131,8 +183,7 @@ def main(argv=None) -> int:
     document = {
         "data": "Extended Yale Face Database B (cropped), real photographs", "train_lights": args.train,
         "models": list(models), "spp": args.spp, "texture_resolution": args.resolution,
-        "command": "python validation/unknown_lights.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "subjects": subjects,
+        "command": command, "subjects": subjects,
         "angular_error_deg": {"median": float(np.median(every)), "max": float(np.max(every)),
                               "mean": float(np.mean(every)), "lights": len(every),
                               "median_target": MEDIAN_TARGET, "max_target": MAX_TARGET,
