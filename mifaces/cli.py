@@ -405,14 +405,17 @@ def import_() -> None:
               help="Number of training lights, spread over the directions (default 8).")
 @click.option("--train-lights", default=None, help="Training lights instead: stems or tags, e.g. A+000E+00,A+035E-20.")
 @click.option("--force", is_flag=True, help="Write over an existing capture at OUT.")
-def yaleb(subject_dir: str, out: str, count: int | None, train_lights: str | None, force: bool) -> None:
+@click.option("--unknown-lights", is_flag=True,
+              help="Hide the light directions: same light names, marked unknown, estimated with the face.")
+def yaleb(subject_dir: str, out: str, count: int | None, train_lights: str | None, force: bool,
+          unknown_lights: bool) -> None:
     """Write the Extended Yale B subject in SUBJECT_DIR as a capture at OUT: the training photographs with
     their directional lights, the held-out ones named in OUT/split.json."""
     if count is not None and train_lights is not None:
         raise click.UsageError("give --train or --train-lights, not both")
     train = [s.strip() for s in train_lights.split(",") if s.strip()] if train_lights is not None else count or 8
     try:
-        path = import_subject(subject_dir, out, train, force=force)
+        path = import_subject(subject_dir, out, train, force=force, unknown_lights=unknown_lights)
     except (FileExistsError, FileNotFoundError, ValueError) as error:
         raise click.ClickException(str(error)) from None
     click.echo(f"wrote the capture {path} and {path / SPLIT}")

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +36,8 @@ from .capture import Capture, load_capture, read_ground_truth
 from .export import export_face
 from .files import write_json
 from .geometry import load_geometry
+from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, balance_intensities, check_estimable, estimate_lights,
+                       lights_document, write_lights, write_lights_picture)
 from .model import load_model
 from .reflectance import capture_samples, fit_brdf, write_estimate
 from .reflectance.refine_shape import refine_lit, refined_fits
@@ -125,7 +128,8 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         ``report.html`` (:mod:`mifaces.report_html`) with ``face.glb``: the
         face of the model best under the held-out lights (else the first model),
         in the shape fitted to the first photograph (the mean shape with
-        ``geometry='ground-truth'``).
+        ``geometry='ground-truth'``). For a capture with unknown lights, also
+        ``lights.json`` and ``report_lights.png`` (:mod:`mifaces.lighting`).
     capture : path or Capture, optional
         A capture folder; without one, the default capture of
         :func:`mifaces.studio.simulate` (built-in face, Cook-Torrance
@@ -166,10 +170,24 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     dict
         The report (also written as ``report.json``).
 
+    Notes
+    -----
+    Lights the capture does not know (``"unknown": true``) are estimated with the faces: the shape
+    fit fits each photograph's light (:func:`mifaces.shape.fit.fit_light`),
+    :func:`mifaces.lighting.estimate_lights` makes them the capture's directional lights and
+    :func:`~mifaces.lighting.balance_intensities` sets their intensities from the reflectance
+    samples; every later stage reads them as given (``docs/unknown_lights.md``). Reflectance is
+    then relative (``brdf.json``'s ``lighting``).
+
     Raises
     ------
     NoUsableShapeError
         No shape fit converged, so there is no geometry to sample reflectance on.
+    UnknownLightError
+        For an unknown light of a kind not estimated (an environment map), before any fitting,
+        or one none of whose photographs got a converged shape fit.
+    ValueError
+        For unknown lights with ``geometry='ground-truth'`` (they are estimated on fitted faces).
     """
     t0 = time.perf_counter()
     out = Path(out)
@@ -182,10 +200,25 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     capture = _capture(out, capture, timings, progress)
     report = {"capture": str(capture.path), "measurements": len(capture.measurements), "geometry": geometry,
               "resolution": resolution, "models": {}}
+    unknown = bool(capture.unknown_lights)
+    if unknown:
+        check_estimable(capture)
+        if geometry != "fitted":
+            raise ValueError(f"lights {[l.name for l in capture.unknown_lights]} are unknown: they are estimated with "
+                             "the fitted faces, so geometry must be 'fitted'")
     face, shapes, fits = _geometry(out, capture, geometry, face_model, shape_iterations, report, timings, progress)
+    if unknown:  # every later stage reads the estimated lights as given ones
+        capture = estimate_lights(capture, fits)
     t = time.perf_counter()
     samples = capture_samples(capture, shapes, face, resolution, progress=progress)
+    if unknown:  # the intensities that give the face one albedo under every estimated light
+        capture = balance_intensities(capture, samples)
+        samples = capture_samples(capture, shapes, face, resolution, progress=progress)
     timings["reflectance_samples"] = time.perf_counter() - t
+    if unknown:
+        report["lights"] = {"file": write_lights(out, capture).name, "picture": LIGHTS_PICTURE, "note": RELATIVE_NOTE,
+                            "estimates": [e for e in lights_document(capture)["lights"] if e["estimated"]]}
+        write_lights_picture(out / LIGHTS_PICTURE, capture)
     if refine_shape:
         shapes, samples = _refine_shapes(out, capture, face, shapes, fits, samples, models[0], resolution, report,
                                          timings, progress)
@@ -315,6 +348,8 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
         warnings.simplefilter("always")
         estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
                             progress=progress, refine=refine, normals=normals, specular_maps=specular_maps)
+    if any(light.estimated for light in capture.lights):
+        estimate = replace(estimate, lighting={"lights": "estimated", "reflectance": "relative", "note": RELATIVE_NOTE})
     lamp = capture.light(first.light)
     write_estimate(estimate, out / "brdf" / model, scene, capture.camera, lamp.position, lamp.intensity,
                    light_direction=lamp.direction, force=True)  # measure's own folder

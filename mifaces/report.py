@@ -144,6 +144,7 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
                          f"{_fmt(fit['loss'])} | {err_text} |")
     lines += fit_notes(report)
     lines += shapes_markdown(report)
+    lines += lights_markdown(report)
     lines += ["", "| model | training RMSE (first photograph, relative) | albedo RMSE vs ground truth | fit time (s) |",
               "|---|---|---|---|"]
     for model, entry in report["models"].items():
@@ -156,6 +157,22 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
     lines += ["", "Times (s): " + ", ".join(f"{k} {v:.1f}" for k, v in report["seconds"].items()), ""]
     with atomic_write(path, "w") as f:
         f.write("\n".join(lines))
+
+
+def lights_markdown(report: dict) -> list[str]:
+    """The report's lines on lights estimated from the photographs (:mod:`mifaces.lighting`): each
+    light's direction (world frame, towards the light), relative intensity and the spread of its
+    photographs' estimates, the picture, and what stays ambiguous; none for given lights."""
+    if "lights" not in report:
+        return []
+    lights = report["lights"]
+    lines = ["", "## Lights estimated from the photographs", "", f"![lights]({lights['picture']})", "",
+             f"Note: {lights['note']}.", "", "| light | direction (world, towards the light) | intensity (relative) | "
+             "photographs | spread (deg) |", "|---|---|---|---|---|"]
+    for e in lights["estimates"]:
+        lines.append(f"| {e['name']} | {', '.join(f'{v:+.3f}' for v in e['direction'])} | "
+                     f"{np.mean(e['intensity']):.3f} | {len(e.get('photographs', []))} | {e.get('spread_deg', 0.0):.1f} |")
+    return lines
 
 
 def shapes_markdown(report: dict) -> list[str]:

@@ -2,7 +2,8 @@
 
 The report's tables (per model and region the fitted parameters, fit status
 and loss; per model the training and validation errors) and pictures
-(``report.png``, ``report_training.png``, referenced relatively), and an
+(``report.png``, ``report_training.png``, and ``report_lights.png`` where lights were
+estimated, referenced relatively), and an
 interactive 3D view of the fitted face: the exported ``.glb``
 (:func:`mifaces.export.export_face`) in Google's ``<model-viewer>``, turnable
 (``camera-controls``) under its built-in neutral studio lighting. Nothing is
@@ -21,6 +22,7 @@ from importlib import resources
 from pathlib import Path
 
 from .files import atomic_write
+from .lighting import LIGHTS_PICTURE
 
 #: The vendored viewer and its licences (``mifaces/web``), copied beside the page.
 VIEWER = "model-viewer-umd.min.js"
@@ -102,7 +104,7 @@ def write_html(path, report: dict, glb: Path | None = None, model: str | None = 
     """Write ``report.html`` at ``path`` (and the viewer beside it), atomically; the pictures
     are the ``report*.png`` beside it."""
     path = Path(path)
-    pictures = [name for name in ("report.png", "report_training.png") if (path.parent / name).is_file()]
+    pictures = [name for name in ("report.png", "report_training.png", LIGHTS_PICTURE) if (path.parent / name).is_file()]
     if glb is not None:
         copy_viewer(path.parent)
     with atomic_write(path, "w") as f:

@@ -244,3 +244,30 @@ def test_measure_writes_the_refined_shapes_it_fits_on(capture_dir, tmp_path, mon
     again = pipeline.measure(tmp_path / "n", capture_dir, models=("phong",), resolution=48, spp=2, progress=False,
                              refine_shape=True, shape_iterations=0.25)
     assert not again["shape_refinement"]["accepted"] and not (tmp_path / "n" / pipeline.REFINED_SHAPES).exists()
+
+
+def test_measure_with_unknown_lights_checks_before_fitting(capture_dir, tmp_path, monkeypatch):
+    """Unknown lights are estimated with the fitted faces: measure refuses the true geometry, and a
+    kind it cannot estimate (an environment map), naming the lights, before any fit runs."""
+    import shutil
+
+    import mifaces.pipeline as pipeline
+    from mifaces.capture import MANIFEST
+    from mifaces.lighting import UnknownLightError
+
+    def never(*args, **kwargs):
+        raise AssertionError("fitted before the lights were checked")
+
+    monkeypatch.setattr(pipeline, "fit_shape", never)
+    copy = tmp_path / "capture"
+    shutil.copytree(capture_dir, copy)
+    data = json.loads((copy / MANIFEST).read_text())
+    names = [light["name"] for light in data["lights"]]
+    data["lights"] = [{"name": name, "unknown": True} for name in names]
+    (copy / MANIFEST).write_text(json.dumps(data))
+    with pytest.raises(ValueError, match=rf"lights \['{names[0]}'.*are unknown: .* geometry must be 'fitted'"):
+        pipeline.measure(tmp_path / "m", copy, models=("phong",), geometry="ground-truth", progress=False)
+    data["lights"][0]["kind"] = "environment"
+    (copy / MANIFEST).write_text(json.dumps(data))
+    with pytest.raises(UnknownLightError, match=rf"\['{names[0]}'\] of kind 'environment'"):
+        pipeline.measure(tmp_path / "m", copy, models=("phong",), progress=False)

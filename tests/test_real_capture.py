@@ -186,3 +186,77 @@ def test_detected_points_match_the_manifest(simulated, tmp_path, monkeypatch):
     assert np.median(errors) < 3.0 and errors.max() < 16.0, dict(zip(common, errors.round(1)))
     without = load_capture(copy, calibrate=False, detect=False)
     assert without.measurements[0].feature_points == {}
+
+
+# --------------------------------------------------------------------------------------------
+# Lights nobody measured ("unknown": true)
+# --------------------------------------------------------------------------------------------
+def _unknown(data):
+    """The first two lights unknown: 'top' with a stated guess, 'side' an environment map of the default size."""
+    data["lights"][0] = {"name": "top", "unknown": True, "guess": {"direction": [0, -3, -4]}}
+    data["lights"][1] = {"name": "side", "unknown": True, "kind": "environment"}
+
+
+def test_unknown_lights(tmp_path):
+    from mifaces.capture.types import ENVMAP_SIZE, RELATIVE_IRRADIANCE
+
+    capture = load_capture(write_directional(tmp_path, _unknown), detect=False)
+    top, side, known = capture.lights
+    assert capture.unknown_lights == (top, side)
+    for light in (top, side):
+        assert light.unknown and light.relative and not light.directional and light.position is None
+        np.testing.assert_array_equal(light.intensity, RELATIVE_IRRADIANCE)
+        with pytest.raises(ValueError, match="'(top|side)' is unknown: estimate it first"):
+            light.towards([[0, 0, 500]])
+    assert top.kind == "directional" and top.envmap_size is None
+    np.testing.assert_allclose(top.guess, [0, -0.6, -0.8])  # normalised
+    assert side.kind == "environment" and side.guess is None and side.envmap_size == ENVMAP_SIZE
+    assert not known.unknown and known.directional and known.guess is None
+    assert capture.relative_reflectance
+    # a stated size; and "unknown": false is a given light as before
+    def sized(data):
+        _unknown(data)
+        data["lights"][1]["size"] = [64, 32]
+        data["lights"][2]["unknown"] = False
+
+    capture = load_capture(write_directional(tmp_path, sized), detect=False)
+    assert capture.lights[1].envmap_size == (64, 32) and not capture.lights[2].unknown
+
+
+def _unknown_and(index, key, value):
+    def change(data):
+        _unknown(data)
+        data["lights"][index][key] = value
+    return change
+
+
+BAD_UNKNOWN = {
+    "unknown and a direction": (_unknown_and(0, "direction", [0, 0, -1]),
+                                "lights[0] (top): light 'top' is both unknown and given ('direction')"),
+    "unknown and a position": (_unknown_and(1, "position_mm", [0, 0, 100]),
+                               "lights[1] (side): light 'side' is both unknown and given ('position_mm')"),
+    "unknown and an intensity": (_unknown_and(0, "intensity", 2.0),
+                                 "light 'top' is both unknown and given ('intensity')"),
+    "unknown not a flag": (_unknown_and(0, "unknown", "yes"), "lights[0] (top).unknown: must be true or false"),
+    "unknown kind": (_unknown_and(0, "kind", "spherical_harmonics"),
+                     "lights[0] (top).kind: light 'top' has unknown kind 'spherical_harmonics'"),
+    "envmap not twice as wide": (_unknown_and(1, "size", [32, 32]),
+                                 "lights[1] (side).size: light 'side': invalid envmap size 32x32"),
+    "envmap too small": (_unknown_and(1, "size", [4, 2]), "light 'side': invalid envmap size 4x2"),
+    "envmap size not integers": (_unknown_and(1, "size", [32.5, 16]), "light 'side': invalid envmap size [32.5, 16]"),
+    "size of a directional light": (_unknown_and(0, "size", [32, 16]),
+                                    "lights[0] (top).size: light 'top' of kind 'directional' has no map size"),
+    "guess of an environment": (_unknown_and(1, "guess", {"direction": [0, 0, -1]}),
+                                "lights[1] (side).guess: light 'side' of kind 'environment' takes no guess"),
+    "guess not an object": (_unknown_and(0, "guess", [0, 0, -1]), "lights[0] (top).guess: light 'top': must be"),
+    "zero guess": (_unknown_and(0, "guess", {"direction": [0, 0, 0]}),
+                   "lights[0] (top).guess.direction: light 'top': must be non-zero"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_UNKNOWN)
+def test_bad_unknown_light_is_named(tmp_path, case):
+    change, message = BAD_UNKNOWN[case]
+    with pytest.raises(CaptureError) as error:
+        load_capture(write_directional(tmp_path, change), detect=False)
+    assert message in str(error.value), str(error.value)

@@ -572,3 +572,42 @@ def test_a_fit_continues_from_another(model, camera, posed):
         np.testing.assert_allclose(again.light["point"][key], first.light["point"][key], rtol=1e-4, atol=1e-6,
                                    err_msg=key)
     np.testing.assert_allclose(again.yaw_pitch_roll, first.yaw_pitch_roll, atol=0.5)
+
+
+def test_unknown_lights_estimated_on_the_shared_face(model, camera, posed, tmp_path):
+    """Three photographs of one pose under three directional lights nobody measured (rendered by
+    Mitsuba's path tracer, not the fitter's Phong model): the pose is fitted once, each other
+    photograph's light on that face with the geometry held; every direction is recovered, one
+    light's from its stated guess, and the capture's lights become those estimates."""
+    from dataclasses import replace
+
+    from mifaces.lighting import estimate_lights
+
+    ypr, t, v, m = posed
+    towards = [(0.1, -0.1, -1.0), (0.7, -0.2, -0.7), (-0.5, -0.45, -0.75)]
+    ms = [Measurement(f"m{i}", f"L{i}", "frontal", Image(render(model, camera, v, d)[0], m.image.saturated, 1.0,
+                                                          Path(f"m{i}.exr")), m.diffuse, (), m.feature_points)
+          for i, d in enumerate(towards)]
+    lights = (Light("L0", None, np.full(3, np.pi), relative=True, unknown=True),
+              Light("L1", None, np.full(3, np.pi), relative=True, unknown=True),
+              Light("L2", None, np.full(3, np.pi), relative=True, unknown=True, guess=np.array([-0.6, -0.5, -0.6])))
+    cap = Capture(Path("synthetic"), camera, lights, tuple(ms), (), None)
+    fits = fit_shape(cap, model, out=tmp_path, iterations=SCHEDULE, progress=False)
+    assert [f.shared_with for f in fits] == [None, "m0", "m0"]
+    assert all(f.converged for f in fits) and all(f.iterations > 0 for f in fits)
+    for f in fits[1:]:
+        np.testing.assert_array_equal(f.vertices_world, fits[0].vertices_world)  # the face is held
+        assert "light fitted on the face of 'm0'" in f.message
+    estimated = estimate_lights(cap, fits)
+    for light, d in zip(estimated.lights, towards):
+        d = np.asarray(d) / np.linalg.norm(d)
+        assert light.estimated and light.relative and not light.unknown and light.directional
+        assert np.degrees(np.arccos(np.clip(light.direction @ d, -1, 1))) < 6.0, (light.name, light.direction, d)
+    # the three lights are equal (Mitsuba's irradiance 2): their relative estimates, mean pi, within 25 %
+    # (the frontal one's least sure: its light and the ambient shade the face alike)
+    intensities = np.array([light.intensity.mean() for light in estimated.lights])
+    assert abs(intensities.mean() - np.pi) < 1e-9 and np.all(np.abs(intensities / np.pi - 1) < 0.25), intensities
+    # given lights keep the one fit and its shared copies as before
+    given = replace(cap, lights=tuple(Light(l.name, None, np.ones(3), direction=np.asarray(d) / np.linalg.norm(d),
+                                            relative=True) for l, d in zip(lights, towards)))
+    assert [f.iterations for f in fit_shape(given, model, iterations=SCHEDULE, progress=False)][1:] == [0, 0]

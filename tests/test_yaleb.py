@@ -178,3 +178,25 @@ def test_import_subject_refuses_to_overwrite(imported, tmp_path):
     assert [m["light"] for m in data["measurements"]] == ["A+035E-20", "A+010E+00"]
     assert {m["diffuse"]["path"] for m in data["measurements"]} == {"images/yaleB01_P00A+010E+00.pgm"}
     assert json.loads((copy / yaleb.SPLIT).read_text())["train"] == ["yaleB01_P00A+035E-20", "yaleB01_P00A+010E+00"]
+
+
+def test_import_subject_with_unknown_lights(imported, tmp_path):
+    """``--unknown-lights``: the same capture, its lights the same names with no direction, marked unknown."""
+    from click.testing import CliRunner
+
+    from mifaces.capture import load_capture
+    from mifaces.cli import main
+
+    out, folder = imported
+    hidden = tmp_path / "hidden"
+    result = CliRunner().invoke(main, ["import", "yaleb", str(folder), str(hidden), "--unknown-lights"])
+    assert result.exit_code == 0, result.output
+    given, unknown = load_capture(out, detect=False), load_capture(hidden, detect=False)
+    assert [l.name for l in unknown.lights] == [l.name for l in given.lights]
+    assert unknown.unknown_lights == unknown.lights and not given.unknown_lights
+    for light in unknown.lights:
+        assert light.kind == "directional" and light.direction is None and light.guess is None
+    assert json.loads((hidden / MANIFEST).read_text())["lights"][0] == {"name": "A+000E+00", "unknown": True}
+    assert [(m.name, m.light, m.pose) for m in unknown.measurements] == \
+        [(m.name, m.light, m.pose) for m in given.measurements]
+    assert (hidden / yaleb.SPLIT).read_text() == (out / yaleb.SPLIT).read_text()

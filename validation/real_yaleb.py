@@ -130,11 +130,14 @@ def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> 
 
 
 def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shadow_angle: float,
-                resolution: int, normals: bool = False, refine: bool = False, refine_shape: bool = False) -> dict:
-    """Import, measure and relight one subject; its errors and timings."""
+                resolution: int, normals: bool = False, refine: bool = False, refine_shape: bool = False,
+                unknown_lights: bool = False) -> dict:
+    """Import, measure and relight one subject; its errors and timings. With ``unknown_lights`` the
+    capture hides its light directions (``mifaces import yaleb --unknown-lights``) and ``measure``
+    estimates them (``validation/unknown_lights.py``); the held-out lights are rendered as known."""
     t0 = time.perf_counter()
     name = subject_dir.name
-    capture_dir = import_subject(subject_dir, out / "capture", train=train, force=True)
+    capture_dir = import_subject(subject_dir, out / "capture", train=train, force=True, unknown_lights=unknown_lights)
     images = {image.stem: image for image in read_subject(subject_dir)}
     train_images, heldout = default_split(list(images.values()), train)
     t_measure = time.perf_counter()

@@ -497,6 +497,39 @@ def sec_real_yaleb(d):
     return lines
 
 
+def sec_unknown_lights(d):
+    errors = d.get("angular_error_deg") or {}
+    runs = d.get("runs") or {}
+    lines = [f"Training lights {text(d.get('train_lights'))} per subject ({text(d.get('subjects'))}), hidden and estimated "
+             f"with the face. Angle between each estimated direction and the calibrated one over "
+             f"{text(errors.get('lights'))} lights: median {fixed(errors.get('median'), 1)}°, max "
+             f"{fixed(errors.get('max'), 1)}° (targets {text(errors.get('median_target'))}° / "
+             f"{text(errors.get('max_target'))}°: {'met' if errors.get('met') else 'not met'}).", ""]
+    per = items(errors.get("per_subject"))
+    names = list(get(per[0][1]) or {}) if per else []
+    lines += table(["subject"] + names, [[s] + [fixed(get(v, n), 1) for n in names] for s, v in per])
+    keys = list(get(runs, "calibrated", "relative_rmse") or {})
+    lines += ["Held-out relighting, pooled relative RMSE over the three subjects (held-out lights rendered as known):", ""]
+    lines += table(["predictor", "calibrated training lights", "estimated training lights"],
+                   [[k, fixed(get(runs, "calibrated", "relative_rmse", k, "all"), 4),
+                     fixed(get(runs, "unknown", "relative_rmse", k, "all"), 4)] for k in keys])
+    seconds = items(d.get("seconds"))
+    lines += table(["subject", "measure, calibrated (s)", "measure, estimated lights (s)"],
+                   [[s, fixed(get(v, "measure_calibrated"), 0), fixed(get(v, "measure_unknown"), 0)] for s, v in seconds])
+    return lines
+
+
+def sec_unknown_lights_simulated(d):
+    lights = items(d.get("lights"))
+    lines = ["Each light's estimate (the mean over the photographs under it) against its true direction from the "
+             "fitted head's centre, and how far its photographs' estimates lie from that mean.", ""]
+    lines += table(["light", "angle to the truth (deg)", "photographs", "their spread (deg)"],
+                   [[name, fixed(get(v, "angle_deg"), 1), text(len(get(v, "photographs") or [])),
+                     fixed(get(v, "spread_deg"), 1)] for name, v in lights])
+    lines += [f"Shape fit with the lights estimated: {fixed(get(d, 'seconds', 'fit_shape'), 0)} s.", ""]
+    return lines
+
+
 def sec_refine(d):
     capture = d.get("capture") or {}
     schedule = d.get("schedule") or {}
@@ -631,6 +664,10 @@ LAYOUTS = {
     "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
     "real_yaleb": ("Held-out relighting on the Yale face database", "real photographs", sec_real_yaleb),
     "refine": ("Refinement by differentiable rendering", "SIMULATED", sec_refine),
+    "unknown_lights": ("Lights nobody measured: the Yale face database with its lights hidden", "real photographs",
+                       sec_unknown_lights),
+    "unknown_lights_simulated": ("Lights nobody measured: the simulated capture with its lights hidden", "SIMULATED",
+                                 sec_unknown_lights_simulated),
     "shape_estimation": ("Shape estimation", "SIMULATED", sec_shape_estimation),
     "truths": ("`mifaces measure` on truths the fit cannot copy", "SIMULATED", sec_truths),
 }

@@ -17,8 +17,9 @@ from .camera import Camera
 from .feature_points import detect_feature_points
 from .images import read_image
 from .problems import Problems
-from .types import (FEATURE_POINT_RANGE, FORMAT, IMAGE_SUFFIXES, MANIFEST, RELATIVE_IRRADIANCE, TRANSFERS,
-                    VERSION, Capture, CaptureError, Distance, Image, Light, Measurement, SpherePictures, WhiteTarget)
+from .types import (ENVMAP_HEIGHTS, ENVMAP_SIZE, FEATURE_POINT_RANGE, FORMAT, IMAGE_SUFFIXES, LIGHT_KINDS, MANIFEST,
+                    RELATIVE_IRRADIANCE, TRANSFERS, VERSION, Capture, CaptureError, Distance, Image, Light, Measurement,
+                    SpherePictures, WhiteTarget)
 
 
 def _camera(entry, problems: Problems) -> Camera | None:
@@ -293,7 +294,12 @@ def _lights(data: dict, root: Path, camera: Camera | None, problems: Problems) -
         relative = e.get("relative", False)
         if not isinstance(relative, bool):
             problems.append(f"{where}.relative: must be true or false, got {relative!r}")
-        if "direction" in e:
+        unknown = e.get("unknown", False)
+        if not isinstance(unknown, bool):
+            problems.append(f"{where}.unknown: must be true or false, got {unknown!r}")
+        if unknown is True:
+            light = _unknown_light(e, name, where, problems)
+        elif "direction" in e:
             light = _directional_light(e, name, where, relative, problems)
         else:
             light = _point_light(e, name, where, relative, root, camera, problems)
@@ -319,6 +325,64 @@ def _directional_light(e: dict, name, where: str, relative, problems: Problems) 
     if name is None or direction is None or intensity is None:
         return None
     return Light(name, None, intensity, direction=direction / np.linalg.norm(direction), relative=relative is True)
+
+
+#: Keys that give a light: none of them may come with ``"unknown": true``.
+_GIVEN = ("direction", "position_mm", "spheres", "intensity")
+
+
+def _unknown_light(e: dict, name, where: str, problems: Problems) -> Light | None:
+    """A light nobody measured: its ``kind`` (:data:`LIGHT_KINDS`, default directional), for a
+    directional one an optional ``guess`` (``{"direction": [x, y, z]}``), for an environment map an
+    optional ``size`` ([width, height], width twice the height, height in :data:`ENVMAP_HEIGHTS`).
+    Its intensity is relative (:data:`RELATIVE_IRRADIANCE` until estimated)."""
+    n = len(problems)
+    for key in _GIVEN:
+        if key in e:
+            problems.append(f"{where}: light {name!r} is both unknown and given ('{key}'): "
+                            "drop 'unknown' or drop the measured values (a stated guess goes in 'guess')")
+    kind = e.get("kind", LIGHT_KINDS[0])
+    if kind not in LIGHT_KINDS:
+        problems.append(f"{where}.kind: light {name!r} has unknown kind {kind!r}; kinds: {list(LIGHT_KINDS)}")
+    guess = size = None
+    if "guess" in e:
+        if kind != "directional":
+            problems.append(f"{where}.guess: light {name!r} of kind {kind!r} takes no guess (only a directional one)")
+        elif not isinstance(e["guess"], dict) or set(e["guess"]) != {"direction"}:
+            problems.append(f"{where}.guess: light {name!r}: must be {{\"direction\": [x, y, z]}}, "
+                            f"got {e['guess']!r}"[:300])
+        else:
+            guess = problems.vector(e["guess"], "direction", f"{where}.guess", 3)
+            if guess is not None and np.linalg.norm(guess) < 1e-12:
+                problems.append(f"{where}.guess.direction: light {name!r}: must be non-zero, got {guess.tolist()}")
+                guess = None
+            elif guess is not None:
+                guess = guess / np.linalg.norm(guess)
+    if "size" in e and kind != "environment":
+        problems.append(f"{where}.size: light {name!r} of kind {kind!r} has no map size (only an environment one)")
+    elif kind == "environment":
+        size = _envmap_size(e.get("size", list(ENVMAP_SIZE)), name, f"{where}.size", problems)
+    if name is None or len(problems) > n:
+        return None
+    return Light(name, None, np.full(3, RELATIVE_IRRADIANCE), relative=True, unknown=True, kind=kind, guess=guess,
+                 envmap_size=size)
+
+
+def _envmap_size(value, name, where: str, problems: Problems) -> tuple[int, int] | None:
+    """An environment map's (width, height): two integers, width = 2 x height (latitude-longitude),
+    height in :data:`ENVMAP_HEIGHTS`."""
+    low, high = ENVMAP_HEIGHTS
+    if (not isinstance(value, list) or len(value) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) for v in value)):
+        problems.append(f"{where}: light {name!r}: invalid envmap size {value!r}: "
+                        "must be [width, height] in texels"[:300])
+        return None
+    width, height = value
+    if width != 2 * height or not low <= height <= high:
+        problems.append(f"{where}: light {name!r}: invalid envmap size {width}x{height}: the width must be twice the "
+                        f"height (a latitude-longitude map) and the height between {low} and {high}")
+        return None
+    return width, height
 
 
 def _point_light(e: dict, name, where: str, relative, root: Path, camera: Camera | None,

@@ -23,6 +23,13 @@ FEATURE_POINT_RANGE = (7, 20)
 #: Lambertian surface facing the light to pixel value 1 (radiance E/π), so reflectance reads as
 #: pixel value / cos θ and the fitted albedos fall in the range the BRDF models' parameters allow.
 RELATIVE_IRRADIANCE = float(np.pi)
+#: Kinds of a light whose lighting is unknown (``"unknown": true`` in the manifest): a distant light
+#: plus ambient, or a low-resolution environment map (``docs/unknown_lights.md``).
+LIGHT_KINDS = ("directional", "environment")
+#: Environment map of an unknown ``"environment"`` light: default size (width, height) in texels of the
+#: latitude-longitude map, and the allowed heights (the width is twice the height).
+ENVMAP_SIZE = (32, 16)
+ENVMAP_HEIGHTS = (4, 128)
 #: Transfer curves of integer images.
 TRANSFERS = ("linear", "srgb", "gamma")
 IMAGE_SUFFIXES = (".exr", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".pgm", ".ppm", ".pnm")
@@ -104,6 +111,20 @@ class Light:
         the subject towards the light. None for a point light.
     relative : bool
         The intensity is known only up to a factor common to all lights.
+    unknown : bool
+        Nobody measured this light: neither position nor direction is given, and
+        :func:`mifaces.lighting.estimate_lights` estimates it with the face (the
+        photographs sharing it share its estimate).
+    kind : str
+        What an unknown light is estimated as, one of :data:`LIGHT_KINDS`.
+    guess : (3,) float64 or None
+        An unknown directional light's stated guess of its direction (unit, world
+        frame, towards the light), where to start; None: frontal (towards the camera).
+    envmap_size : (int, int) or None
+        An unknown environment light's map size (width, height) in texels.
+    estimated : bool
+        The direction and intensity were estimated from the photographs (relative
+        intensity), not given by the capture.
     """
 
     name: str
@@ -113,6 +134,11 @@ class Light:
     calibration: object | None = None
     direction: np.ndarray | None = None
     relative: bool = False
+    unknown: bool = False
+    kind: str = "directional"
+    guess: np.ndarray | None = None
+    envmap_size: tuple[int, int] | None = None
+    estimated: bool = False
 
     @property
     def directional(self) -> bool:
@@ -126,6 +152,8 @@ class Light:
         if self.directional:
             d = np.broadcast_to(np.asarray(self.direction, np.float64), points.shape).copy()
             return d, np.full(len(points), np.inf)
+        if self.unknown:
+            raise ValueError(f"light {self.name!r} is unknown: estimate it first (mifaces.lighting.estimate_lights)")
         if self.position is None:
             raise ValueError(f"light {self.name!r} has no position (load the capture with calibrate=True)")
         offset = np.asarray(self.position, np.float64) - points
@@ -219,6 +247,11 @@ class Capture:
     def greyscale(self) -> bool:
         """Every point-light photograph is greyscale."""
         return all(m.image.greyscale for m in self.measurements)
+
+    @property
+    def unknown_lights(self) -> tuple[Light, ...]:
+        """The lights nobody measured, to estimate with the face (:attr:`Light.unknown`)."""
+        return tuple(light for light in self.lights if light.unknown)
 
     @property
     def relative_reflectance(self) -> bool:

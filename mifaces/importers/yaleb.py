@@ -171,7 +171,7 @@ def _farthest_points(images: list[YaleImage], count: int) -> list[int]:
 
 
 def import_subject(subject_dir: str | os.PathLike, out: str | os.PathLike, train: int | list[str] = 8,
-                   force: bool = False) -> Path:
+                   force: bool = False, unknown_lights: bool = False) -> Path:
     """Write one subject's training photographs as a capture, the held-out ones named in ``split.json``.
 
     The capture at ``out`` (``capture.json``, ``images/``, ``split.json``):
@@ -191,7 +191,10 @@ def import_subject(subject_dir: str | os.PathLike, out: str | os.PathLike, train
       tag (``A+035E-20``), ``direction`` from the file name
       (:func:`light_direction`), no intensity, so ``relative`` at
       :data:`~mifaces.capture.types.RELATIVE_IRRADIANCE` (the database's
-      strobes are equal, their absolute power unknown).
+      strobes are equal, their absolute power unknown). With
+      ``unknown_lights``, the same names without directions
+      (``"unknown": true``): lights to estimate with the face
+      (``docs/unknown_lights.md``).
     * **Measurements**: one per training photograph, named by its stem, the
       PGM file copied into ``images/`` as is (``transfer`` linear: the
       codes are taken as proportional to radiance, the camera's response being
@@ -215,6 +218,10 @@ def import_subject(subject_dir: str | os.PathLike, out: str | os.PathLike, train
         The training lights: a count for :func:`default_split`, or stems or light tags.
     force : bool
         Write over an existing capture at ``out``.
+    unknown_lights : bool
+        Hide the light directions: every light ``{"name": tag, "unknown": true}``
+        (the companion stays the photograph nearest the camera axis, an evenly lit
+        picture as one would take for the landmark detector).
 
     Returns
     -------
@@ -243,8 +250,8 @@ def import_subject(subject_dir: str | os.PathLike, out: str | os.PathLike, train
         "format": FORMAT, "version": VERSION,
         "camera": {"width": width, "height": height, "calibrated": False, "focal_guess_px": FOCAL_GUESS * height},
         "face_box": [0, 0, width - 1, height - 1],
-        "lights": [{"name": i.light, "direction": (i.direction + 0.0).tolist(), "relative": True}
-                   for i in training],
+        "lights": [{"name": i.light, "unknown": True} if unknown_lights else
+                   {"name": i.light, "direction": (i.direction + 0.0).tolist(), "relative": True} for i in training],
         "measurements": [{"name": i.stem, "light": i.light, "pose": POSE,
                           "image": {"path": f"images/{i.stem}.pgm", "transfer": "linear"},
                           "diffuse": {"path": f"images/{companion.stem}.pgm", "transfer": "linear"}}

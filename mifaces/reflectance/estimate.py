@@ -86,6 +86,10 @@ class BRDFEstimate:
     specular : SpecularMap or None
         Per-texel specular reflectance shrunk towards each region's
         (:func:`mifaces.reflectance.specular_maps.refine_specular`), if estimated.
+    lighting : dict or None
+        How the lights were known where they were estimated from the photographs
+        (:mod:`mifaces.lighting`): ``{"lights": "estimated", "reflectance": "relative", "note"}``,
+        written to ``brdf.json``; None for a capture whose lights are given.
     """
 
     model: str
@@ -100,6 +104,7 @@ class BRDFEstimate:
     normals: np.ndarray | None = None
     normal_refinement: dict | None = None
     specular: SpecularMap | None = None
+    lighting: dict | None = None
 
     def normal_texture(self) -> np.ndarray | None:
         """The normals as a ``normalmap`` texture ((n + 1) / 2), or None."""
@@ -129,6 +134,7 @@ class BRDFEstimate:
                 "albedo": FILES["albedo"], "refinement": self.refinement,
                 "uncertainty": {name: fit.uncertainty for name, fit in self.fits.items()},
                 **({} if self.albedo.std is None else {"albedo_std": FILES["albedo_std"]}),
+                **({} if self.lighting is None else {"lighting": self.lighting}),
                 **({} if self.normals is None else {"normals": FILES["normals"],
                                                     "normal_refinement": self.normal_refinement}),
                 **({} if self.specular is None else {"specular": FILES["specular"], "specular_shrinkage": {

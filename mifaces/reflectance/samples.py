@@ -401,7 +401,7 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     ------
     ValueError
         A measurement without geometry, geometry of another model (wrong
-        vertex count), an uncalibrated light.
+        vertex count), an uncalibrated light, a light nobody measured (``unknown``).
     """
     if resolution < 8:
         raise ValueError(f"texture resolution must be at least 8, got {resolution}")
@@ -431,6 +431,9 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     chosen = [m for m in capture.measurements if m.name in wanted]
     for m in progress_bar(chosen, desc="reflectance samples", unit="photo", enabled=progress):
         light = capture.light(m.light)
+        if light.unknown:
+            raise ValueError(f"measurement {m.name!r}: light {light.name!r} is unknown: estimate it with the face "
+                             "first (mifaces measure, or mifaces.lighting.estimate_lights on the shape fits)")
         if light.position is None and not light.directional:
             raise ValueError(f"measurement {m.name!r}: light {light.name!r} has no position "
                              "(load the capture with calibrate=True)")

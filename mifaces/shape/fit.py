@@ -40,6 +40,9 @@ MAX_IMAGE_RMS = 0.1
 #: Feature points of measurements labelled with one pose that differ from the pose's fitted
 #: measurement's by more than this fraction of their spread (RMS) are not one pose: fitted apart.
 POSE_AGREEMENT = 0.25
+#: Parameter blocks of a fit's geometry and texture: held where only a photograph's lighting is fitted
+#: on a pose's shared face (:func:`fit_light`).
+GEOMETRY_BLOCKS = ("rotation", "translation", "log_focal", "shape", "expression", "color", "albedo")
 #: The second pass of a fit of one face to several poses (``fit_shape(one_identity=True)``): this
 #: fraction of the schedule's iterations, from each pose's first fit with the shared identity held.
 SECOND_PASS = 0.35
@@ -166,9 +169,14 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
     initial = dict(initial or {})
     positions = {POINT: light_position} if light_position is not None else {}
     for key, source in lights.items():
-        if source is not None and source.directional:
+        if source is None:
+            continue
+        if source.unknown:  # estimated: from its stated guess, else frontal (Fitter.initial)
+            if source.guess is not None:
+                initial.setdefault(f"{key}.light_angles", light_angles(camera.rotation @ source.guess))
+        elif source.directional:
             initial.setdefault(f"{key}.light_angles", start_light_angles(source, camera, camera.position))
-        elif source is not None:
+        else:
             positions[key] = source.position
     fitter = Fitter(model, camera, images, targets, weights, schedule, np.random.default_rng(seed),
                     light_world=positions, fit_focal=fit_focal, initial_color=initial_color,
@@ -384,8 +392,9 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
             bar.set_postfix(last=leader.name, status=fit.status)
     for leader, *others in groups:
         fit = leaders[leader.name]
-        for fit_m in [_own_lights(fit)] + [shared_fit(fit, m, capture, index)
-                                           for index, m in enumerate(others, start=1)]:
+        keys = {m.name: lit_key(i) for i, (m, _) in enumerate(_companions(capture, others), start=1)}
+        for fit_m in [_own_lights(fit)] + [_member_fit(fit, m, capture, model, schedule, options, keys.get(m.name))
+                                           for m in others]:
             fits[fit_m.measurement] = fit_m
             if out is not None:
                 write_fit(out, fit_m, model)
@@ -394,6 +403,52 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     if out is not None:
         write_index(out, capture, model, result, reference, model_source=source)
     return result
+
+
+def _member_fit(fit: ShapeFit, measurement, capture, model, schedule: ShapeSchedule, options: dict,
+                key: str | None = None) -> ShapeFit:
+    """The fit of a pose group's ``measurement`` on its leader's ``fit``: with the light fitted for it
+    where it was the joint fit's photograph ``key``; its own light fitted on the shared face where the
+    capture does not know it (:func:`fit_light`); else :func:`shared_fit`."""
+    light = capture.light(measurement.light) if measurement.light else None
+    if key is not None or light is None or not light.unknown or not fit.converged:
+        return shared_fit(fit, measurement, capture, key)
+    options = {k: v for k, v in options.items() if k != "use_diffuse"}
+    return fit_light(fit, measurement, capture.camera, model, light, schedule, **options)
+
+
+def fit_light(fit: ShapeFit, measurement, camera, model, light, schedule: ShapeSchedule | None = None,
+              **options) -> ShapeFit:
+    """The lighting of ``measurement``'s photograph on the face of ``fit`` (same pose): the
+    directed light's angles, colour, ambient, specular strength, gain and offset of the
+    photograph fitted by the shape fit's energy and optimiser (:func:`fit_measurement`), with
+    every block of the geometry and texture held (:data:`GEOMETRY_BLOCKS`) at ``fit``'s values,
+    the photograph alone (not its companion). The light starts from ``light.guess`` (world frame)
+    where stated, else frontal; the cast shadows follow the light as it moves (ray cast on the
+    held face every ``visibility_interval`` steps).
+
+    Returns
+    -------
+    ShapeFit
+        ``fit`` (its geometry and status: the face is the leader's) for ``measurement``, with this
+        photograph's fitted ``light['point']``, the light fit's loss, iterations and seconds,
+        :attr:`ShapeFit.shared_with` the leader, and the light fit's own status in ``message``.
+    """
+    model = load_model(model)
+    model = model.truncated(len(fit.coefficients))
+    start = {k: v for k, v in _start_from(fit, model, measurement).items() if "." not in k}
+    start["shape"] = fit.coefficients
+    start["log_focal"] = math.log(float(fit.focal_length[1]) / camera.fy)
+    schedule = schedule or ShapeSchedule()
+    schedule = replace(schedule, pose_iterations=1)  # the feature points do not move: the face is held
+    fixed = tuple(b for b in GEOMETRY_BLOCKS if b != ("albedo" if model.has_texture else "color"))
+    result = fit_measurement(measurement, camera, model, light=light, schedule=schedule, use_diffuse=False,
+                             initial=start, fixed=fixed, **options)
+    light_fit = f"light fitted on the face of {fit.measurement!r} (same pose): {result.status}" + \
+        (f" ({result.message})" if result.message else "")
+    return replace(fit, measurement=measurement.name, light=result.light, loss=result.loss,
+                   iterations=result.iterations, seconds=result.seconds, history=result.history,
+                   shared_with=fit.measurement, message=light_fit + (f"; {fit.message}" if fit.message else ""))
 
 
 def one_face(fits: list[ShapeFit]) -> np.ndarray | None:
@@ -473,9 +528,11 @@ def _points_agree(a: dict, b: dict) -> bool:
 
 
 def _companions(capture, others) -> list:
-    """The photographs of a pose fitted with its leader (:data:`JOINT_PHOTOGRAPHS` at most, in the
-    capture's order), each with its light where the capture has one."""
-    return [(m, capture.light(m.light) if m.light else None) for m in others[:JOINT_PHOTOGRAPHS - 1]]
+    """The photographs of a pose fitted with its leader: those whose light the capture gives
+    (an unknown light is fitted afterwards on the pose's face, :func:`fit_light`),
+    :data:`JOINT_PHOTOGRAPHS` at most with the leader, in the capture's order, each with its light."""
+    given = [(m, capture.light(m.light) if m.light else None) for m in others]
+    return [(m, light) for m, light in given if light is None or not light.unknown][:JOINT_PHOTOGRAPHS - 1]
 
 
 def _own_lights(fit: ShapeFit) -> ShapeFit:
@@ -484,13 +541,13 @@ def _own_lights(fit: ShapeFit) -> ShapeFit:
     return replace(fit, light=own)
 
 
-def shared_fit(fit: ShapeFit, measurement, capture, index: int | None = None) -> ShapeFit:
+def shared_fit(fit: ShapeFit, measurement, capture, key: str | None = None) -> ShapeFit:
     """The fit of ``measurement`` that shares ``fit``'s geometry, pose and texture (same pose),
     0 iterations, 0 seconds. Its light is the one fitted for it where ``measurement`` was the
-    joint fit's ``index``-th companion; otherwise only the capture's light direction, in
-    camera space, where known."""
+    joint fit's photograph ``key`` (:func:`~mifaces.shape.energy.lit_key`); otherwise only the
+    capture's light direction, in camera space, where known."""
     light = {}
-    fitted = (fit.light or {}).get(lit_key(index)) if index else None
+    fitted = (fit.light or {}).get(key) if key else None
     if fitted is not None:
         light[POINT] = fitted
     else:

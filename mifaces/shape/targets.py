@@ -160,16 +160,20 @@ def eye_distance_px(vertices_camera, model, focal_px: float) -> float:
 
 def light_axis_angle(capture, measurement) -> float:
     """Angle (degrees) between a measurement's light and the camera's viewing axis, seen from the
-    feature points' centroid at the camera's distance; 0 for a measurement without a light."""
+    feature points' centroid at the camera's distance; 0 for a measurement without a light or with
+    an unknown light without a stated guess (its estimate starts frontal)."""
     if not measurement.light:
         return 0.0
     light, cam = capture.light(measurement.light), capture.camera
     fp = np.array(list(measurement.feature_points.values()))
     distance = max(float(np.linalg.norm(cam.translation)), 1.0)
     centre = cam.to_world(cam.pixel_rays(fp.mean(0)) * distance)
-    if not light.directional and light.position is None:
+    if light.unknown and light.guess is not None:  # its stated guess, as the fit starts from it
+        towards = np.asarray(light.guess, np.float64)[None]
+    elif not light.directional and light.position is None:  # unknown (taken as frontal, where it starts)
         return 0.0
-    towards, _ = light.towards(centre[None])
+    else:
+        towards, _ = light.towards(centre[None])
     d2 = (cam.position - centre) / np.linalg.norm(cam.position - centre)
     return math.degrees(math.acos(float(np.clip(towards[0] @ d2, -1, 1))))
 

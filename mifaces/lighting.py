@@ -1,0 +1,294 @@
+"""Lights nobody measured, estimated with the face (issue 26; ``docs/unknown_lights.md``).
+
+A capture's light may be unknown (``"unknown": true`` in ``capture.json``,
+:attr:`mifaces.capture.Light.unknown`). The shape fit estimates it with the
+face: the directed light of its Phong energy (:mod:`mifaces.shape.energy`:
+ambient + a distant light with cast shadows + a specular lobe, then gain and
+offset) is free in every fit, starting frontal or from the light's stated
+guess, and the photographs of a pose that share the pose's fitted face get
+their own light fitted on that face with the geometry and texture held
+(:func:`mifaces.shape.fit.fit_light`), so the differently lit photographs
+of one face are explained by one albedo. :func:`estimate_lights` turns those
+fitted lights into the capture's: one direction per light (the photographs
+that share a light share its estimate), and a relative intensity, so every
+later stage (reflectance samples, BRDF fits, renders) reads an ordinary
+directional light.
+
+Frames and conventions are the capture format's: ``direction`` a unit vector
+in the world frame from the subject towards the light; ``intensity`` the
+irradiance at normal incidence in pixel value per RGB channel.
+
+What stays ambiguous: the light's absolute intensity against the albedo's
+scale (a brighter light on a darker face gives the same photograph). It is
+fixed by scaling the estimated intensities so that their mean is
+:data:`~mifaces.capture.types.RELATIVE_IRRADIANCE` (the irradiance that brings
+a white Lambertian surface facing the light to pixel value 1): intensities are
+relative, and so is the reflectance measured under them
+(:attr:`Capture.relative_reflectance`; ``brdf.json``'s ``lighting``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from .capture.types import RELATIVE_IRRADIANCE, Capture
+from .files import save_figure, write_json
+
+#: File of a result folder holding the capture's lights, estimated and given.
+LIGHTS_FILE = "lights.json"
+#: Picture of the estimated lights beside their photographs.
+LIGHTS_PICTURE = "report_lights.png"
+#: How the reflectance measured under estimated lights is to be read (``brdf.json`` ``lighting``).
+RELATIVE_NOTE = ("lights estimated from the photographs: their intensities are relative (mean "
+                 f"{RELATIVE_IRRADIANCE:.6g}) and the albedo and specular reflectance are relative to them: "
+                 "light intensity and albedo scale cannot be told apart")
+
+
+class UnknownLightError(ValueError):
+    """An unknown light that cannot be estimated: of a kind not estimated yet, or whose
+    photographs got no converged face to estimate it on."""
+
+
+def check_estimable(capture: Capture) -> None:
+    """Raise :class:`UnknownLightError` naming every unknown light :func:`estimate_lights`
+    cannot estimate by its kind (environment maps are not estimated yet), before any fitting."""
+    maps = [light.name for light in capture.unknown_lights if light.kind != "directional"]
+    if maps:
+        raise UnknownLightError(f"unknown light(s) {maps} of kind 'environment': estimating environment maps "
+                                "is not implemented yet; describe them as kind 'directional' (a distant light "
+                                "plus ambient, docs/unknown_lights.md)")
+
+
+def fitted_direction(fit, camera) -> np.ndarray | None:
+    """The world-frame unit direction towards the light that ``fit`` (a
+    :class:`~mifaces.shape.ShapeFit`) fitted to its photograph, None where it fitted none
+    (a shared fit without lighting, a failed fit)."""
+    light = (fit.light or {}).get("point", {})
+    if "gain" not in light or not fit.converged or not np.all(np.isfinite(light["direction"])):
+        return None
+    d = camera.rotation.T @ np.asarray(light["direction"], np.float64)
+    return d / np.linalg.norm(d)
+
+
+def fitted_intensity(fit) -> np.ndarray:
+    """The RGB irradiance at normal incidence (pixel value, up to the albedo's scale) of the directed
+    light ``fit`` fitted: the energy's light colour times the photograph's gain, times
+    :data:`RELATIVE_IRRADIANCE` (the energy's diffuse term is albedo x colour x cos, a Lambertian's
+    is albedo / pi x irradiance x cos)."""
+    light = fit.light["point"]
+    return RELATIVE_IRRADIANCE * np.asarray(light["color"], np.float64) * np.asarray(light["gain"], np.float64)
+
+
+def estimate_lights(capture: Capture, fits) -> Capture:
+    """``capture`` with each unknown light replaced by its estimate from the shape fits.
+
+    Parameters
+    ----------
+    capture : Capture
+    fits : list of ShapeFit
+        :func:`mifaces.shape.fit_shape`'s, whose fitted lights (``fit.light['point']``, camera
+        frame) estimate the lights; only converged fits count.
+
+    Returns
+    -------
+    Capture
+        The same capture, each unknown light now directional (``estimated``, ``relative``): its
+        direction the normalised mean of its photographs' fitted directions (world frame), its
+        intensity the mean of their :func:`fitted_intensity`, all estimated intensities scaled
+        together so that their mean is :data:`RELATIVE_IRRADIANCE` (module docstring). Where every
+        light was estimated, without the white target: nothing ties the estimated intensities to its
+        units, so reflectance is relative (:attr:`Capture.relative_reflectance`).
+        ``capture.metadata['estimated_lights']`` holds per light the photographs it was
+        estimated from and their angular spread (degrees).
+
+    Raises
+    ------
+    UnknownLightError
+        For a light of a kind not estimated (:func:`check_estimable`), or one whose photographs
+        have no converged fit: it cannot be estimated, and nothing can be measured under it.
+    """
+    check_estimable(capture)
+    by_name = {fit.measurement: fit for fit in fits}
+    estimates, missing = {}, []
+    for light in capture.unknown_lights:
+        used = [by_name[m.name] for m in capture.measurements if m.light == light.name and m.name in by_name]
+        directions = [(fit.measurement, fitted_direction(fit, capture.camera)) for fit in used]
+        directions = [(name, d) for name, d in directions if d is not None]
+        if not directions:
+            missing.append(light.name)
+            continue
+        names = [name for name, _ in directions]
+        stack = np.array([d for _, d in directions])
+        mean = stack.sum(axis=0)
+        mean /= np.linalg.norm(mean)
+        spread = float(np.degrees(np.max(np.arccos(np.clip(stack @ mean, -1, 1)))))
+        intensity = np.mean([fitted_intensity(by_name[name]) for name in names], axis=0)
+        estimates[light.name] = (mean, intensity, names, spread)
+    if missing:
+        raise UnknownLightError(f"unknown light(s) {missing}: no photograph under them got a converged shape fit "
+                                "to estimate the light on")
+    if not estimates:
+        return capture
+    scale = RELATIVE_IRRADIANCE / float(np.mean([e[1] for e in estimates.values()]))
+    lights = tuple(replace(light, direction=estimates[light.name][0], intensity=estimates[light.name][1] * scale,
+                           unknown=False, relative=True, estimated=True) if light.name in estimates else light
+                   for light in capture.lights)
+    metadata = dict(capture.metadata, estimated_lights={
+        name: {"photographs": names, "spread_deg": spread} for name, (_, _, names, spread) in estimates.items()})
+    # every light estimated: nothing ties their intensities to the white target's units
+    white = capture.white_target if len(estimates) < len(capture.lights) else None
+    return replace(capture, lights=lights, metadata=metadata, white_target=white)
+
+
+#: Samples that compare the photographs' albedos (:func:`balance_intensities`): light and view at
+#: least this cosine from grazing, and texels seen under at least two lights.
+BALANCE_MIN_COSINE = 0.3
+#: Rounds of the alternating robust fit of :func:`balance_intensities`.
+BALANCE_ROUNDS = 20
+
+
+def balance_intensities(capture: Capture, samples) -> Capture:
+    """``capture`` with its estimated lights' intensities rescaled so that the face has one albedo
+    under all of them.
+
+    The shape fit's intensity (:func:`fitted_intensity`) trades against its ambient term, which the
+    reflectance stage does not model: a frontal light and the ambient shade a face alike. The
+    reflectance samples (``samples``, :func:`mifaces.reflectance.capture_samples`, taken under
+    these lights) say it directly: a texel's reflectance ``r = pixel / (E cos)`` is the same under
+    every light where ``E`` is right, and ``1 / s`` of it where ``E`` is ``s`` times too large. The
+    log reflectance is fitted as ``a_texel - log s_light`` by alternating a texel's mean and a
+    light's median (robust against highlights and shadows the direction errs on), over the samples
+    of :data:`BALANCE_MIN_COSINE` and the texels seen under two or more lights. Each estimated
+    light's RGB intensity is then divided by its ``s``. Given lights keep theirs and anchor the
+    others (their mean ``log s`` is 0): the estimated intensities are then in the given lights'
+    units. Without given lights, the estimated lights' mean intensity is kept at
+    :data:`RELATIVE_IRRADIANCE`.
+
+    Returns
+    -------
+    Capture
+        With ``metadata['estimated_lights'][name]['balance']`` the factor ``s`` of each light.
+    """
+    names = list(samples.measurement_names)
+    light_of = {m.name: m.light for m in capture.measurements}
+    estimated = [light.name for light in capture.lights if light.estimated]
+    given = [light.name for light in capture.lights if not light.estimated and not light.unknown]
+    if not estimated or len(estimated) + len(given) < 2:
+        return capture
+    keep = ((samples.light[:, 2] >= BALANCE_MIN_COSINE) & (samples.view[:, 2] >= BALANCE_MIN_COSINE)
+            & np.all(samples.reflectance > 0, axis=1))
+    which = np.array([light_of[name] for name in names])[samples.measurement[keep]]
+    index = {name: k for k, name in enumerate(estimated + given)}
+    on = np.array([name in index for name in which], bool)
+    lights = np.array([index[name] for name in which[on]], np.int64)
+    texels = samples.texel[keep][on]
+    log_r = np.log(np.mean(samples.reflectance[keep][on], axis=1))
+    pairs = np.unique(texels * len(index) + lights)  # (texel, light) seen
+    shared = np.bincount(pairs // len(index), minlength=int(texels.max(initial=-1)) + 1)[texels] >= 2
+    lights, texels, log_r = lights[shared], texels[shared], log_r[shared]
+    present = set(np.unique(lights).tolist())
+    if not all(index[name] in present for name in estimated):
+        return capture
+    anchors = [index[name] for name in given if index[name] in present]  # given lights hold their intensity
+    log_s = np.zeros(len(index))
+    per_texel = np.bincount(texels)
+    for _ in range(BALANCE_ROUNDS):
+        a = np.bincount(texels, weights=log_r + log_s[lights]) / np.maximum(per_texel, 1)
+        log_s = np.array([np.median(a[texels[lights == k]] - log_r[lights == k]) if k in present else 0.0
+                          for k in range(len(index))])
+        log_s -= log_s[anchors].mean() if anchors else log_s[:len(estimated)].mean()
+    factor = {name: float(np.exp(-log_s[index[name]])) for name in estimated}  # r is 1/s too small: E s too large
+    scaled = {light.name: light.intensity * factor[light.name] for light in capture.lights if light.name in factor}
+    norm = 1.0 if anchors else RELATIVE_IRRADIANCE / float(np.mean([np.mean(v) for v in scaled.values()]))
+    info = {name: dict(capture.metadata.get("estimated_lights", {}).get(name, {}), balance=factor[name] * norm)
+            for name in factor}
+    return replace(capture, lights=tuple(replace(light, intensity=scaled[light.name] * norm) if light.name in scaled
+                                         else light for light in capture.lights),
+                   metadata=dict(capture.metadata, estimated_lights=info))
+
+
+def lights_document(capture: Capture) -> dict:
+    """The ``lights.json`` document of ``capture``'s lights, in the capture format's frame and sign
+    convention (module docstring): per light ``name``, ``kind``, ``direction`` (directional) or
+    ``position_mm`` (point), ``intensity`` (RGB), ``relative`` and ``estimated``; for an
+    estimated one the photographs it came from and their spread."""
+    estimated = capture.metadata.get("estimated_lights", {})
+    entries = []
+    for light in capture.lights:
+        entry = {"name": light.name}
+        if light.unknown:
+            entry.update(kind=light.kind, estimated=False, unknown=True)
+        elif light.directional:
+            entry.update(kind="directional", direction=np.asarray(light.direction, np.float64).tolist())
+        else:
+            entry.update(kind="point", position_mm=None if light.position is None else
+                         np.asarray(light.position, np.float64).tolist())
+        if not light.unknown:
+            entry.update(intensity=np.asarray(light.intensity, np.float64).tolist(), relative=light.relative,
+                         estimated=light.estimated)
+        if light.name in estimated:
+            entry.update(estimated[light.name])
+        entries.append(entry)
+    return {"lights": entries, "frame": "world frame of the capture; direction: unit vector towards the light",
+            "intensity": "irradiance at normal incidence (pixel value) per RGB channel"
+            + ("; estimated lights: relative, their mean " + f"{RELATIVE_IRRADIANCE:.6g}" if estimated else "")}
+
+
+def write_lights(out, capture: Capture) -> Path:
+    """Write :func:`lights_document` to ``out/lights.json`` (atomically); its path."""
+    path = Path(out) / LIGHTS_FILE
+    write_json(path, lights_document(capture))
+    return path
+
+
+def sphere_shading(direction, size: int = 96) -> np.ndarray:
+    """A white Lambertian sphere seen by the camera (camera frame: x right, y down, towards the
+    viewer -z) lit by a unit light ``direction`` in the camera frame: (size, size) values in
+    [0, 1], NaN outside the sphere, so the light's direction reads as where the sphere is bright."""
+    u = (np.arange(size) + 0.5) / size * 2 - 1
+    x, y = np.meshgrid(u, u)
+    r2 = x ** 2 + y ** 2
+    normal = np.stack([x, y, -np.sqrt(np.clip(1 - r2, 0, 1))], axis=-1)  # facing the camera: -z
+    shade = np.clip(normal @ np.asarray(direction, np.float64), 0, 1)
+    return np.where(r2 <= 1, shade, np.nan)
+
+
+def write_lights_picture(path, capture: Capture, photographs: dict | None = None) -> None:
+    """``report_lights.png``: per estimated light, the first photograph taken under it and a sphere
+    lit by the estimated direction as the camera sees it (:func:`sphere_shading`), the direction's
+    tip marked on the sphere (hollow where it points away from the camera); ``photographs`` maps a
+    light's name to a photograph's pixels to show (default: the first measurement's under it)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lights = [light for light in capture.lights if light.estimated]
+    if not lights:
+        return
+    fig, axes = plt.subplots(2, len(lights), figsize=(1.9 * len(lights), 4.2), squeeze=False)
+    for col, light in enumerate(lights):
+        if photographs is not None and light.name in photographs:
+            photo = photographs[light.name]
+        else:
+            photo = next(m.image.pixels for m in capture.measurements if m.light == light.name)
+        axes[0, col].imshow(np.clip(photo / max(float(np.percentile(photo, 99.5)), 1e-6), 0, 1) ** (1 / 2.2),
+                            cmap="gray" if photo.ndim == 2 else None)
+        axes[0, col].set_title(light.name, fontsize=8)
+        d = capture.camera.rotation @ np.asarray(light.direction, np.float64)
+        size = 96
+        axes[1, col].imshow(sphere_shading(d, size), cmap="gray", vmin=0, vmax=1)
+        x, y = (d[0] + 1) / 2 * size - 0.5, (d[1] + 1) / 2 * size - 0.5
+        axes[1, col].plot([size / 2 - 0.5, x], [size / 2 - 0.5, y], color="tab:orange", lw=1.2)
+        axes[1, col].plot(x, y, "o", color="tab:orange", ms=5, mfc="tab:orange" if d[2] < 0 else "none")
+        elevation, azimuth = np.degrees(np.arcsin(np.clip(-d[1], -1, 1))), np.degrees(np.arctan2(d[0], -d[2]))
+        axes[1, col].set_title(f"az {azimuth:+.0f}°, el {elevation:+.0f}°\nintensity {np.mean(light.intensity):.2f}",
+                               fontsize=7)
+        for ax in axes[:, col]:
+            ax.axis("off")
+    fig.suptitle("Estimated lights (camera view; azimuth towards the image's right, relative intensity)", fontsize=8)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=100)
