@@ -128,12 +128,15 @@ def check_pose_recovery(model, camera, posed, tmp_path, fixed):
                         fit_focal=False, fixed=fixed)
     fit = fits[0]
     assert fit.status == CONVERGED, fit.message
-    np.testing.assert_allclose(fit.yaw_pitch_roll, ypr, atol=1.0)
+    # measured when written (ICT / Surrey): angles within 0.15 / 0.5 deg, x and y within 0.12 / 0.27 mm,
+    # depth -2.7 / +4.4 mm (from the face's size in a 128-px image: a face some 60 px wide, where a
+    # tenth of a pixel of size is 2 mm at 1.2 m), vertex RMS 2.8 / 4.5 mm (mostly that depth)
+    np.testing.assert_allclose(fit.yaw_pitch_roll, ypr, atol=0.75)
     position = fit.translation + fit.rotation @ rotation_centre(model)
-    np.testing.assert_allclose(position[:2], t[:2], atol=1.5)
-    assert abs(position[2] - t[2]) < 15.0  # depth: from the face's size in the image
+    np.testing.assert_allclose(position[:2], t[:2], atol=0.5)
+    assert abs(position[2] - t[2]) < 7.0
     err = np.linalg.norm(fit.vertices_camera - truth, axis=1)
-    assert np.sqrt(np.mean(err ** 2)) < 10.0
+    assert np.sqrt(np.mean(err ** 2)) < 6.5
     assert fit.loss["feature_rms_px"] < 0.5
     # written atomically and read back in the world frame (here world = camera)
     shapes = load_fitted_shapes(tmp_path, capture(camera, [m]))
