@@ -51,8 +51,10 @@ def test_ground_truth_skin_is_recovered(capture_dir, estimate):
     assert skin.status == "converged" and skin.samples > 5000
     # η is held at each region's published value: skin's and hair keratin's
     assert skin.params["eta"] == 1.38 and result.fits["hair"].params["eta"] == 1.55
-    assert abs(skin.params["roughness"] / truth["roughness"] - 1) < 0.15
-    np.testing.assert_allclose(skin.params["specular_reflectance"], truth["specular_reflectance"], rtol=0.15)
+    # measured when written: roughness +5.6 %, ρs -3.4 / +6.1 / +6.7 % (a single albedo per region
+    # under the highlights: docs/uncertainty.md)
+    assert abs(skin.params["roughness"] / truth["roughness"] - 1) < 0.10
+    np.testing.assert_allclose(skin.params["specular_reflectance"], truth["specular_reflectance"], rtol=0.10)
     # the refined albedo agrees with the ground truth map where there are samples
     gt = resize(read_exr(capture_dir / "ground_truth" / "albedo.exr"), (256, 256, 3), anti_aliasing=True, order=1)
     seen = result.albedo.samples >= 2
