@@ -285,10 +285,14 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     """Fit the morphable model to every pose of a capture, independently (paper sec. 4.2).
 
     Measurements sharing a ``pose`` label (one pose of the subject photographed
-    under several lights) share one fit: the pose is fitted once, on its
-    measurement whose light is nearest the camera's axis (with its diffuse
-    companion where present), and the others get that fit's geometry
-    (:attr:`ShapeFit.shared_with`); a labelled measurement whose feature points
+    under several lights) share one fit: the pose is fitted once, with the feature
+    points of its measurement whose light is nearest the camera's axis (with its
+    diffuse companion where present), on that photograph and the pose's others
+    whose lights the capture gives, together (:func:`fit_measurement`'s
+    ``companions``, :data:`JOINT_PHOTOGRAPHS` at most), each with its own light;
+    the others get that fit's geometry and the light fitted for them
+    (:attr:`ShapeFit.shared_with`), a photograph under an unknown light its light
+    fitted on that face (:func:`fit_light`); a labelled measurement whose feature points
     disagree with that one's (by more than :data:`POSE_AGREEMENT` of their
     spread) is fitted on its own, with a warning. Each fit starts from the
     average face; the texture of a frontal, frontally lit measurement (fitted
