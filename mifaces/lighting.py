@@ -36,6 +36,7 @@ import numpy as np
 
 from .capture.types import RELATIVE_IRRADIANCE, Capture
 from .files import save_figure, write_json
+from .shape.targets import light_angles
 
 #: File of a result folder holding the capture's lights, estimated and given.
 LIGHTS_FILE = "lights.json"
@@ -284,7 +285,7 @@ def write_lights_picture(path, capture: Capture, photographs: dict | None = None
         x, y = (d[0] + 1) / 2 * size - 0.5, (d[1] + 1) / 2 * size - 0.5
         axes[1, col].plot([size / 2 - 0.5, x], [size / 2 - 0.5, y], color="tab:orange", lw=1.2)
         axes[1, col].plot(x, y, "o", color="tab:orange", ms=5, mfc="tab:orange" if d[2] < 0 else "none")
-        elevation, azimuth = np.degrees(np.arcsin(np.clip(-d[1], -1, 1))), np.degrees(np.arctan2(d[0], -d[2]))
+        elevation, azimuth = np.degrees(light_angles(d))
         axes[1, col].set_title(f"az {azimuth:+.0f}°, el {elevation:+.0f}°\nintensity {np.mean(light.intensity):.2f}",
                                fontsize=7)
         for ax in axes[:, col]:

@@ -281,6 +281,7 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
     report["shapes"] = {f.measurement: {"status": f.status, "seconds": f.seconds,
                                         "feature_rms_px": f.loss.get("feature_rms_px"),
                                         "image_rms": f.loss.get("image_rms"),
+                                        "image_rms_measurement": f.loss.get("image_rms_measurement"),
                                         "shape_modes": len(f.coefficients)} for f in fits}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the failed fits are named below

@@ -66,7 +66,7 @@ from mifaces.capture import load_capture
 from mifaces.files import save_figure, write_exr, write_json, write_png
 from mifaces.geometry import load_geometry
 from mifaces.importers.yaleb import default_split, import_subject, read_subject
-from mifaces.pipeline import REFINED_SHAPES, SHAPES, measure
+from mifaces.pipeline import SHAPES, measure
 from mifaces.reflectance import fit_brdf, load_estimate
 from mifaces.render import FaceScene
 
@@ -145,8 +145,9 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
                      normals=normals, refine_shape=refine_shape)
     seconds = {"import": t_measure - t0, "measure": time.perf_counter() - t_measure}
     capture = load_capture(capture_dir, detect=False)
-    refined_shapes = out / "measure" / REFINED_SHAPES
-    face, shapes = load_geometry(capture, refined_shapes if refined_shapes.is_dir() else out / "measure" / SHAPES)
+    # the faces the BRDFs were fitted on: the refined ones where this run kept a refinement
+    folder = (report.get("shape_refinement") or {}).get("shapes", SHAPES)
+    face, shapes = load_geometry(capture, out / "measure" / folder)
     first = next(m.name for m in capture.measurements if m.name in shapes)
     scene = FaceScene(face, shapes[first])
     mask = face_mask(scene, capture.camera)

@@ -634,6 +634,20 @@ def sec_albedo_rounds(d):
     return lines + table(["truth and model", "seed", "alternations", "coverage", "intervals", "skin"], rows)
 
 
+def sec_refine_shape_default(d):
+    lines = [f"Capture {text(get(d, 'resolution'))}², seed {text(get(d, 'seed'))}; refinement "
+             f"{'kept' if get(d, 'accepted') else 'not kept'}: {text(get(d, 'reason'))}; "
+             f"{fixed(get(d, 'seconds', 'refine'), 0)} s to refine. World-frame errors of the faces against the "
+             "truth (mm, front of the face):", ""]
+    rows = []
+    for label, key in (("model fit", "model_fit"), ("refined", "refined")):
+        summary_ = get(d, "shape_errors", key, "summary") or {}
+        rows.append([label, fixed(summary_.get("mean_world_mm"), 2), fixed(summary_.get("max_world_mm"), 2),
+                     fixed(summary_.get("mean_aligned_mm"), 2), fixed(summary_.get("max_abs_depth_mm"), 2)])
+    return lines + table(["faces", "world, mean", "world, max", "after rigid alignment, mean",
+                          "largest depth offset"], rows)
+
+
 def sec_unknown(d):
     if isinstance(d, dict):
         return [f"Layout not known to `validation/results_doc.py`; top-level keys: "
@@ -664,6 +678,7 @@ LAYOUTS = {
     "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
     "real_yaleb": ("Held-out relighting on the Yale face database", "real photographs", sec_real_yaleb),
     "refine": ("Refinement by differentiable rendering", "SIMULATED", sec_refine),
+    "refine_shape_default": ("Shape refinement on the default capture", "SIMULATED", sec_refine_shape_default),
     "unknown_lights": ("Lights nobody measured: the Yale face database with its lights hidden", "real photographs",
                        sec_unknown_lights),
     "unknown_lights_simulated": ("Lights nobody measured: the simulated capture with its lights hidden", "SIMULATED",

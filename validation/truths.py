@@ -39,7 +39,7 @@ errors against the truth's map, the relative parameter errors where the
 truth is the fitted model, the skin parameters, and the fit times. Writes ``validation/results/truths.json`` and
 ``truths.png`` (entries of earlier runs of other truths are kept).
 
-    python validation/truths.py [--truths roughplastic detail] [--resolution 256 --spp 32] [--work DIR]
+    python validation/truths.py [--truths roughplastic eta] [--resolution 256 --spp 32] [--work DIR]
 
 Machine: 2 CPU cores shared with other jobs; times are indicative only.
 """
