@@ -560,6 +560,36 @@ def sec_refine(d):
     return lines
 
 
+def sec_refine_seeds(d):
+    role = text(d.get("role"))
+    lines = [f"{text(d.get('what'))}.", "",
+             f"Seeds {', '.join(text(s.get('seed')) for s in d.get('seeds') or [])} ({role} captures"
+             + ("; they chose the defaults" if role == "training" else "; they played no part in choosing the "
+                "defaults") + f"), images {text(d.get('image'))}², texture {text(d.get('texture_resolution'))}²; "
+             f"the default schedule is the variant `{text(d.get('default_variant'))}`. Mean over the seeds of the "
+             "relative errors against the truth:", ""]
+    columns = [("skin", "specular_reflectance"), ("skin", "roughness"), ("beard", "specular_reflectance"),
+               ("lips", "specular_reflectance"), ("eyebrows", "specular_reflectance"), ("hair", "specular_reflectance"),
+               ("eyes", "roughness")]
+    rows = []
+    for name, v in items(d.get("summary")):
+        rows.append([f"`{name}`", *[pct(get(v, "regions", r, p)) for r, p in columns],
+                     pct(get(v, "novel_light_relative_rmse")), text(v.get("kept", "–"))])
+    lines += table(["variant", *[f"{r} {'ρs' if p == 'specular_reflectance' else 'm'}" for r, p in columns],
+                    "novel light RMSE", "kept"], rows)
+    gains = []
+    for s in d.get("seeds") or []:
+        true = s.get("true_light_gains") or {}
+        for name, v in items(s.get("variants")):
+            if (v.get("light_gains") or {}) and any(abs(g - 1.0) > 0 for g in v["light_gains"].values()):
+                gains.append([text(s.get("seed")), f"`{name}`", ", ".join(
+                    f"{light} {num(g, 4)} ({num(true.get(light), 4)})" for light, g in v["light_gains"].items())])
+    if gains:
+        lines += ["Fitted light gains (the calibrated lights' true irradiance error at the face in brackets):", ""]
+        lines += table(["seed", "variant", "gains"], gains)
+    return lines
+
+
 def sec_shape_estimation(d):
     lines = ["Mean over each capture's measurements (the truth's vertices that face the camera); `aligned`: after "
              "a rigid alignment; `nn`: against the nearest true vertex.", ""]
@@ -678,6 +708,7 @@ LAYOUTS = {
     "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
     "real_yaleb": ("Held-out relighting on the Yale face database", "real photographs", sec_real_yaleb),
     "refine": ("Refinement by differentiable rendering", "SIMULATED", sec_refine),
+    "refine_seeds": ("The refinement's schedule on training and test captures", "SIMULATED", sec_refine_seeds),
     "refine_shape_default": ("Shape refinement on the default capture", "SIMULATED", sec_refine_shape_default),
     "unknown_lights": ("Lights nobody measured: the Yale face database with its lights hidden", "real photographs",
                        sec_unknown_lights),

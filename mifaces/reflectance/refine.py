@@ -10,11 +10,15 @@ modelled, so small regions' highlights read too weak. :func:`refine_estimate`
 starts from that fit and minimises the difference between Mitsuba renders of
 the fitted face and the photographs themselves:
 
-    E(θ, ρ_d) = Σ_k 1/|M_k| Σ_{p ∈ M_k} Σ_c ψ_ε((I_k(θ, ρ_d)[p, c] - s J_k[p, c]) / μ_k),
+    E(θ, ρ_d, g) = Σ_k 1/|M_k| Σ_{p ∈ M_k} Σ_c ψ_ε((e^{g_l(k) - ḡ} I_k(θ, ρ_d)[p, c] - s J_k[p, c]) / μ_k),
 
 where I_k is the path-traced render of measurement k (its face mesh, its
 camera, its light, the per-region plugins with parameters θ over the albedo
-texture ρ_d), J_k the photograph (s = s_white/π puts it in the renderer's
+texture ρ_d), g_l the log gain of light l, the light of measurement k (ḡ
+their mean: the overall scale belongs to the albedo and the white target; a
+calibrated lamp is off in distance by about a percent, its irradiance by
+twice that, which with the lights held the glossy parameters absorb), J_k
+the photograph (s = s_white/π puts it in the renderer's
 units, eq. 4 with the white target's scale), M_k the pixels the face covers
 (eroded by one pixel at silhouettes, saturated pixels left out), μ_k the
 photograph's mean over M_k and ψ_ε(r) = sqrt(r² + ε²) - ε the Charbonnier
@@ -64,7 +68,7 @@ from ..progress import progress as progress_bar
 from ..render import FaceScene, mitsuba_sensor
 from .albedo_correction import AlbedoCorrection
 from .parameters import ParameterSpace
-from .refine_schedule import IterateAverage, RefineSchedule, holdout_pixels
+from .refine_schedule import ALBEDO, LIGHT_GAIN, IterateAverage, RefineSchedule, holdout_pixels
 
 if TYPE_CHECKING:
     from .estimate import BRDFEstimate
@@ -115,6 +119,9 @@ class _Photograph:
     albedo_keys: list
     #: region -> covered pixels
     pixels: dict
+    #: the measurement's light, and its index in :attr:`RefineProblem.lights`
+    light: str = ""
+    light_index: int = 0
 
 
 def _box_mean(a: np.ndarray, k: int) -> np.ndarray:
@@ -291,7 +298,7 @@ class RefineProblem:
         Region -> :class:`ParameterSpace` of its glossy parameters (diffuse and
         per-region fixed parameters held).
     variables : dict
-        Name (``<region>.<k>``, ``albedo``) -> start value of each unconstrained variable.
+        Name (``<region>.<k>``, ``albedo``, ``light_gain``) -> start value of each unconstrained variable.
     """
 
     def __init__(self, estimate: BRDFEstimate, capture, shapes, face_model, schedule: RefineSchedule,
@@ -314,6 +321,9 @@ class RefineProblem:
             for region, n in photo.pixels.items():
                 pixels[region] = pixels.get(region, 0) + n
         self.pixels = pixels
+        self.lights = sorted({p.light for p in self.photographs})
+        for photo in self.photographs:
+            photo.light_index = self.lights.index(photo.light)
         self.spaces, self.variables = {}, {}
         for region, fit in estimate.fits.items():
             if pixels.get(region, 0) < MIN_PIXELS or region in schedule.held_regions:
@@ -330,7 +340,9 @@ class RefineProblem:
         self.albedo = None
         if schedule.albedo_learning_rate is not None:
             self.albedo = AlbedoCorrection(albedo, schedule.albedo_cell)
-            self.variables["albedo"] = self.albedo.start()
+            self.variables[ALBEDO] = self.albedo.start()
+        if schedule.light_gain_learning_rate is not None and len(self.lights) > 1:
+            self.variables[LIGHT_GAIN] = np.zeros(len(self.lights))
 
     def _photograph(self, capture, m, vertices, face_model, brdf, albedo, scale, lamp_radius) -> _Photograph:
         view = photograph_view(capture, m, FaceScene(face_model, vertices), brdf, albedo, self.estimate.region_map,
@@ -354,7 +366,7 @@ class RefineProblem:
             pixels[region] = pixels.get(region, 0) + int(n)
         held = holdout_pixels(view.mask, self.schedule.holdout, self.schedule.holdout_block, self.rng)
         return _Photograph(m.name, view.scene, view.params, view.target, mask_weight(view.mask & ~held),
-                           mask_weight(held), view.scale, keys, albedo_keys, pixels)
+                           mask_weight(held), view.scale, keys, albedo_keys, pixels, m.light)
 
     # -- the parameters as Dr.Jit values of the unconstrained variables --------
     def values(self, variables: dict) -> dict:
@@ -372,18 +384,33 @@ class RefineProblem:
             if region in values:
                 photo.params[key] = values[region][name]
         if self.albedo is not None:
-            texture = self.albedo.albedo(variables["albedo"])
+            texture = self.albedo.albedo(variables[ALBEDO])
             for key in photo.albedo_keys:
                 photo.params[key] = texture
         photo.params.update()
+
+    def gain(self, photo: _Photograph, variables: dict):
+        """The factor on ``photo``'s light, exp(g_l - mean g) (differentiable), or 1 where the light
+        gains are not variables (one light, or ``light_gain_learning_rate`` None)."""
+        if LIGHT_GAIN not in variables or LIGHT_GAIN not in self.variables:
+            return 1.0
+        g = variables[LIGHT_GAIN]
+        return dr.exp(dr.gather(mi.Float, g, photo.light_index) - dr.mean(g))
+
+    def light_gains(self, variables: dict) -> dict:
+        """Light name -> its fitted factor exp(g_l - mean g) (1 for each where they are not variables)."""
+        if LIGHT_GAIN not in self.variables:
+            return {name: 1.0 for name in self.lights}
+        g = np.asarray(variables[LIGHT_GAIN], np.float64)
+        return {name: float(np.exp(x - g.mean())) for name, x in zip(self.lights, g)}
 
     def loss(self, photo: _Photograph, variables: dict, spp: int, seed: int, weight: mi.TensorXf | None = None):
         """E_k of ``photo`` (:func:`image_loss`) rendered with ``spp`` samples over ``weight`` (default:
         the fitted pixels'): a differentiable mi.Float."""
         self.set(photo, variables)
         image = mi.render(photo.scene, photo.params, spp=spp, seed=seed, seed_grad=seed + 1)
-        return image_loss(image * photo.scale, photo.target, photo.weight if weight is None else weight,
-                          self.schedule.epsilon)
+        return image_loss(image * (photo.scale * self.gain(photo, variables)), photo.target,
+                          photo.weight if weight is None else weight, self.schedule.epsilon)
 
     def total_loss(self, variables: dict, spp: int, seed: int = 1 << 20) -> dict:
         """Mean E_k over the photographs on the fitted and on the held-out pixels (no gradients;
@@ -392,7 +419,7 @@ class RefineProblem:
         with dr.suspend_grad():
             for i, p in enumerate(self.photographs):
                 self.set(p, variables)
-                image = mi.render(p.scene, p.params, spp=spp, seed=seed + 2 * i) * p.scale
+                image = mi.render(p.scene, p.params, spp=spp, seed=seed + 2 * i) * (p.scale * self.gain(p, variables))
                 fit.append(image_loss(image, p.target, p.weight, self.schedule.epsilon)[0])
                 held.append(image_loss(image, p.target, p.heldout_weight, self.schedule.epsilon)[0])
         return {"fit": float(np.mean(fit)), "heldout": float(np.mean(held))}
@@ -410,7 +437,7 @@ class RefineProblem:
         albedo = self.estimate.albedo
         if self.albedo is not None:
             with dr.suspend_grad():
-                texture = np.asarray(self.albedo.albedo(variables["albedo"]), np.float32)
+                texture = np.asarray(self.albedo.albedo(variables[ALBEDO]), np.float32)
             albedo = dataclasses.replace(albedo, albedo=texture, std=None)
         return dataclasses.replace(self.estimate, fits=fits, albedo=albedo, refinement=refinement)
 
@@ -446,8 +473,10 @@ def _rates(problem: RefineProblem, schedule: RefineSchedule, iteration: int) -> 
 def _optimizer(problem: RefineProblem, schedule: RefineSchedule):
     opt = mi.ad.Adam(lr=schedule.learning_rate)
     for name, value in problem.variables.items():
-        if name == "albedo":
+        if name == ALBEDO:
             opt[name] = mi.TensorXf(np.ascontiguousarray(value, np.float32))
+        elif name == LIGHT_GAIN:
+            opt[name] = mi.Float(np.asarray(value, np.float32))
         else:
             opt[name] = mi.Float(value)
     opt.set_learning_rate(_rates(problem, schedule, 0))
@@ -503,7 +532,7 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
     opt = _optimizer(problem, schedule)
     t_build = time.perf_counter()
     with dr.suspend_grad():
-        start = {k: mi.TensorXf(opt[k]) if k == "albedo" else mi.Float(opt[k]) for k in problem.variables}
+        start = {k: mi.TensorXf(opt[k]) if k == ALBEDO else mi.Float(opt[k]) for k in problem.variables}
     before = problem.total_loss(start, schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
     t_before = time.perf_counter()
     history, average = [], IterateAverage(problem.variables, schedule)
@@ -536,6 +565,7 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
         "lamp_radius_mm": float(lamp_radius) if lamp_radius else None, "lights": sorted(problem.light_kinds),
         "photographs": [p.name for p in problem.photographs],
         "regions": sorted(problem.spaces), "region_pixels": problem.pixels,
+        "light_gains": problem.light_gains(result if accepted else start),
         "accepted": bool(accepted), "reason": reason,
         "loss_before": before["fit"], "loss_after": after["fit"],
         "heldout_loss_before": before["heldout"], "heldout_loss_after": after["heldout"],
