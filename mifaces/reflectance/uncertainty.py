@@ -90,7 +90,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse
 import scipy.stats
 
 from .parameters import ParameterSpace
@@ -250,20 +249,22 @@ def offset_sums(texel, cluster, groups: int, weight, jsum, shrinkage, offsets) -
         raise ValueError("the albedo offsets' uncertainty needs every texel's samples in one cluster")
     lam = np.zeros((t, 3))
     lam[texel] = np.asarray(shrinkage, np.float64)
-    jsum = np.asarray(jsum, np.float64)
-    p = jsum.shape[2]
-    inverse = 1.0 / (np.asarray(weight, np.float64)[:, None] + lam)  # 1/(W_t + λ_c), (T, 3)
-    n_t = np.bincount(texel, minlength=t).astype(np.float64)
-    # the sum over each cluster's texels as one sparse product (G, T) @ (T, ...)
-    members = scipy.sparse.csr_matrix((np.ones(t), (home, np.arange(t))), shape=(groups, t))
-
-    def per_cluster(values):
-        return np.asarray(members @ values.reshape(t, -1)).reshape((groups,) + values.shape[1:])
-
-    # Σ_{t ∈ g} Σ_c S_t,cᵀ B_t,c = VᵀV over the rows V = S_t,c / √(W_t + λ_c) of cluster g's texels
+    # the texels sorted by cluster: cluster g's are the rows ends[g]:ends[g + 1]
     order = np.argsort(home, kind="stable")
     ends = np.searchsorted(home[order], np.arange(groups + 1))
-    rows = (jsum * np.sqrt(inverse)[:, :, None])[order].reshape(-1, p)
+    empty = ends[:-1] == ends[1:]
+    jsum = np.asarray(jsum, np.float64)[order]
+    p = jsum.shape[2]
+    inverse = 1.0 / (np.asarray(weight, np.float64)[order, None] + lam[order])  # 1/(W_t + λ_c), (T, 3)
+    n_t = np.bincount(texel, minlength=t)[order].astype(np.float64)
+
+    def per_cluster(values):  # (T, ...) in cluster order, summed over each cluster's texels
+        sums = np.add.reduceat(values.reshape(t, -1), np.minimum(ends[:-1], t - 1), axis=0)
+        sums[empty] = 0.0
+        return sums.reshape((groups,) + values.shape[1:])
+
+    # Σ_{t ∈ g} Σ_c S_t,cᵀ B_t,c = VᵀV over the rows V = S_t,c / √(W_t + λ_c) of cluster g's texels
+    rows = (jsum * np.sqrt(inverse)[:, :, None]).reshape(-1, p)
     cross = np.stack([rows[3 * a:3 * b].T @ rows[3 * a:3 * b] for a, b in zip(ends[:-1], ends[1:])])
     o = np.asarray(offsets, np.float64)
     return OffsetSums(counts=np.bincount(cluster, minlength=groups).astype(np.float64), cross=cross,
