@@ -651,9 +651,21 @@ def sec_truths(d):
 
 def sec_albedo_rounds(d):
     lines = [f"Images {text(get(d, 'image'))}, {text(get(d, 'measurements'))} photographs, texture "
-             f"{text(get(d, 'texture'))}², intervals by {text(get(d, 'interval_method'))}. Per truth, seed and "
-             "number of alternations: skin's fitted parameters (truth in brackets) and the share of all regions' "
-             "95 % intervals that hold the truth.", ""]
+             f"{text(get(d, 'texture'))}², tuning seeds. Coverage of the 95 % intervals per truth, number of "
+             "alternations and estimate, pooled over seeds, regions, parameters and channels (intervals in "
+             "brackets), and on skin, small regions (lips, eyebrows) and the others; skin's mean relative error "
+             "per parameter (RGB parameters as the mean over channels).", ""]
+    rows = []
+    for model, per_rounds in items(get(d, "summary")):
+        for rounds, entry in items(per_rounds):
+            error = ", ".join(f"{name} {pct(get(e, 'mean_relative_error'), 1)}"
+                              for name, e in items(get(entry, "skin_error")))
+            for variant, cov in items(get(entry, "coverage")):
+                cells = [f"{pct(get(cov, c, 'coverage'), 0)} ({text(get(cov, c, 'intervals'))})"
+                         for c in ("pooled", "skin", "small", "others")]
+                rows.append([text(model), text(rounds), text(variant), *cells, error])
+    lines += table(["truth and model", "alternations", "estimate", "pooled", "skin", "small", "others",
+                    "skin error"], rows)
     rows = []
     for row in rows_of(get(d, "rows")):
         skin = ", ".join(f"{s.get('parameter')}{'' if s.get('channel') is None else '[' + str(s.get('channel')) + ']'}"
@@ -661,7 +673,32 @@ def sec_albedo_rounds(d):
                          for s in rows_of(get(row, "skin")))
         rows.append([text(get(row, "model")), text(get(row, "seed")), text(get(row, "albedo_rounds")),
                      pct(get(row, "coverage"), 0), text(get(row, "intervals")), skin])
-    return lines + table(["truth and model", "seed", "alternations", "coverage", "intervals", "skin"], rows)
+    return lines + ["Per capture, the default estimate:", ""] + table(
+        ["truth and model", "seed", "alternations", "coverage", "intervals", "skin"], rows)
+
+
+def sec_albedo_rounds_cost(d):
+    lines = [f"The region fits' time (`seconds['fit']`, best of {text(get(d, 'repeats'))} interleaved runs) without "
+             f"and with the {text(get(d, 'method'))} intervals, medians over captures and models; `intervals`: the "
+             "time spent computing them, and its share of the fit without; `against one fit`: with intervals, over "
+             "the one region fit without.", ""]
+    rows = [[text(get(e, "texture")), text(get(e, "albedo_rounds")), fixed(get(e, "without_median"), 3),
+             fixed(get(e, "with_median"), 3), pct(get(e, "overhead_median"), 0), fixed(get(e, "intervals_median"), 3),
+             pct(get(e, "intervals_share_median"), 1), fixed(get(e, "against_one_region_fit_median"), 2)]
+            for _, e in items(get(d, "summary"))]
+    return lines + table(["texture", "alternations", "fit without (s)", "with (s)", "difference", "intervals (s)",
+                          "intervals' share", "against one fit"], rows)
+
+
+def sec_albedo_rounds_exact(d):
+    lines = [f"{text(get(d, 'model'))} truth, seed {text(get(d, 'seed'))}, {text(get(d, 'albedo_rounds'))} "
+             f"alternations, {text(get(d, 'region'))} ({text(get(d, 'samples'))} samples, {text(get(d, 'tiles'))} "
+             "tiles): the standard deviation of each fitted parameter by the one-step replicates of the intervals "
+             "against the jackknife that reruns the alternation with each tile left out.", ""]
+    rows = [[text(get(e, "parameter")) + ("" if get(e, "channel") is None else f"[{get(e, 'channel')}]"),
+             fixed(get(e, "fitted"), 4), fixed(get(e, "truth"), 4), fixed(get(e, "std_one_step"), 5),
+             fixed(get(e, "std_exact"), 5)] for e in rows_of(get(d, "entries"))]
+    return lines + table(["parameter", "fitted", "truth", "std, one step", "std, refits"], rows)
 
 
 def sec_refine_shape_default(d):
@@ -689,6 +726,10 @@ def sec_unknown(d):
 # result-file name (exact, or followed by _suffix) -> (title, label where the file says none, section)
 LAYOUTS = {
     "albedo_rounds": ("The region fit alternated with the texel albedo", "SIMULATED", sec_albedo_rounds),
+    "albedo_rounds_cost": ("The region fit alternated with the texel albedo: cost", "timing (SIMULATED)",
+                           sec_albedo_rounds_cost),
+    "albedo_rounds_exact": ("The alternated fit's intervals against refitting each replicate", "SIMULATED",
+                            sec_albedo_rounds_exact),
     "bench_brdf_fit": ("The BRDF fit against scipy", "SIMULATED (synthetic reflectance samples)", sec_bench_brdf_fit),
     "bench_bsdf": ("BSDF plugins and the BRDF array API: speed", "timing (synthetic scene)", sec_bench_bsdf),
     "bench_face_render": ("The face photograph: plugin against built-in BSDFs", "timing (SIMULATED face)",

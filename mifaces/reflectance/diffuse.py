@@ -62,12 +62,55 @@ class DiffuseMap:
     std : ndarray (R, R, 3) or None
         Posterior standard deviation of ρ_d per texel (module docstring);
         None where it is not known (an albedo refined by rendering).
+    shrinkage : dict or None
+        Region label -> λ = s₀²/τ² per channel (3,), the prior weight each
+        texel's albedo was shrunk with (0: none); None where not known.
     """
 
     albedo: np.ndarray
     weight: np.ndarray
     samples: np.ndarray
     std: np.ndarray | None = None
+    shrinkage: dict | None = None
+
+
+@dataclass
+class AlbedoOffsets:
+    """Per-texel albedo offsets a region fit's reflectance was corrected by
+    (``fit_brdf(..., albedo_rounds=k)``), with what their uncertainty needs.
+
+    Each offset o_i = a_t - ā is its texel t's refined albedo (the posterior mean
+    of the module docstring, shrunk with λ) less its region's mean over the
+    samples: a function of the samples of texel t and of the glossy fit.
+    :func:`mifaces.reflectance.uncertainty.offset_sums` uses that to make the
+    intervals of the fit re-estimate the offsets when a tile is left out.
+
+    Attributes
+    ----------
+    offsets : ndarray (N, 3)
+        o_i, subtracted from the reflectance (:func:`albedo_offsets`).
+    texel : ndarray (N,)
+        Flat texel index of each sample.
+    shrinkage : ndarray (N, 3)
+        λ of each sample's region per channel (:attr:`DiffuseMap.shrinkage`; 0: none).
+    """
+
+    offsets: np.ndarray
+    texel: np.ndarray
+    shrinkage: np.ndarray
+
+    def __getitem__(self, mask) -> "AlbedoOffsets":
+        """The offsets of the samples ``mask`` selects."""
+        return AlbedoOffsets(self.offsets[mask], self.texel[mask], self.shrinkage[mask])
+
+    @classmethod
+    def of(cls, diffuse: DiffuseMap, texel, label) -> "AlbedoOffsets":
+        """The offsets of ``diffuse``'s texel albedos for samples at ``texel`` of region ``label``."""
+        texel, label = np.asarray(texel), np.asarray(label)
+        shrinkage = np.zeros((len(texel), 3))
+        for lab, lam in (diffuse.shrinkage or {}).items():
+            shrinkage[label == lab] = lam
+        return cls(albedo_offsets(diffuse.albedo.reshape(-1, 3), texel, label), texel, shrinkage)
 
 
 def specular_reflectance_factor(model, params_by_region: dict[int, dict], light, view, region) -> np.ndarray:
@@ -191,6 +234,7 @@ def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflec
     labels = region_map.ravel()
     # NaN (not known) on the texels of the regions with a BRDF until estimated, 0 outside the face
     variance = np.where(np.isin(labels, list(params_by_region))[:, None], np.nan, 0.0) * np.ones(3)
+    weights = {}  # region label -> λ per channel
     if len(texel):
         texel_region = np.zeros(size, dtype=region.dtype)
         texel_region[texel] = region  # a texel's samples share its region
@@ -198,6 +242,7 @@ def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflec
         seen = np.flatnonzero(total > 0)
         for label, (weight, s0, tau) in stats.items():
             weight = weight if shrinkage else np.zeros(3)
+            weights[label] = np.asarray(weight, np.float64)
             t = seen[texel_region[seen] == label]
             prior = np.broadcast_to(np.asarray(params_by_region[label]["diffuse_reflectance"], np.float64), (3,))
             albedo[t] = (total[t, None] * albedo[t] + weight * prior) / (total[t, None] + weight)
@@ -213,4 +258,4 @@ def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflec
     r = region_map.shape[0]
     return DiffuseMap(albedo=np.clip(albedo, 0.0, None).reshape(r, r, 3).astype(np.float32),
                       weight=total.reshape(r, r).astype(np.float32), samples=counts.reshape(r, r),
-                      std=np.sqrt(variance).reshape(r, r, 3).astype(np.float32))
+                      std=np.sqrt(variance).reshape(r, r, 3).astype(np.float32), shrinkage=weights)

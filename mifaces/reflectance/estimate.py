@@ -39,7 +39,7 @@ from ..capture import Capture, load_capture
 from ..geometry import load_geometry
 from ..model.regions import REGIONS, regions_present, texel_regions_of_mesh
 from ..render import FaceScene
-from .diffuse import DiffuseMap, albedo_offsets, refine_diffuse
+from .diffuse import AlbedoOffsets, DiffuseMap, refine_diffuse
 from .fitting import RegionFit, SubsetSchedule, fit_regions
 from .io import FILES, write_estimate
 from .refine import RefineSchedule, refine_estimate
@@ -196,7 +196,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         models with a ``specular_reflectance``). The region fits stay the summary.
     uncertainty : str or None
         How each region fit's parameter uncertainty is estimated
-        (:data:`mifaces.reflectance.uncertainty.METHODS`; the sandwich over
+        (:data:`mifaces.reflectance.uncertainty.METHODS`; the jackknife over
         texel tiles by default, see ``docs/uncertainty.md``), or None. Not
         estimated with ``normals`` (whose fits see texels through their normals
         too) nor after ``refine``: those fits get empty ``uncertainty``.
@@ -206,6 +206,10 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         region's mean (:func:`mifaces.reflectance.diffuse.albedo_offsets`), the
         albedo map refitted with the last round's glossy parts. 0: the paper's
         one region fit. (With ``normals``, whose rounds do the same, ignored.)
+        The offsets are each texel's mean (not shrunk); the last round's intervals
+        re-estimate them in every jackknife or sandwich replicate
+        (:mod:`mifaces.reflectance.uncertainty`), and still hold the truth less often
+        than they say on simulated faces (``docs/uncertainty.md``): off by default.
 
     Returns
     -------
@@ -245,12 +249,15 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
                        uncertainty=None if normals or rounds else uncertainty)
     for round_ in range(rounds):
         by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
-        texel_albedo = refine_diffuse(brdf, by_label, light, view, r, sigma, texel, label, region_map).albedo
-        offsets = albedo_offsets(texel_albedo.reshape(-1, 3), texel, label)
+        # unshrunk: the texel means (a texel effect per texel, consistent for the glossy part); shrunk
+        # towards the region's albedo they leave part of the texture in, and bias skin's lobe
+        offsets = AlbedoOffsets.of(refine_diffuse(brdf, by_label, light, view, r, sigma, texel, label, region_map,
+                                                  shrinkage=False), texel, label)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the first fit has warned already
-            fits = fit_regions(brdf, light, view, r - offsets, sigma, label, names, **region_fit,
-                               uncertainty=uncertainty if round_ == rounds - 1 else None)
+            last = round_ == rounds - 1  # its intervals re-estimate the offsets per replicate
+            fits = fit_regions(brdf, light, view, r - offsets.offsets, sigma, label, names, **region_fit,
+                               uncertainty=uncertainty if last else None, offsets=offsets if last else None)
     texel_normals = None
     if normals:
         texel_normals = _refine_normals(brdf, fits, (light, view, r, sigma, texel, measurement, label), names,

@@ -33,10 +33,11 @@ from ..brdf.model import BRDFModel
 from ..progress import progress as progress_bar
 from ..arrays import device_array
 from ..status import AT_BOUND, AT_START, CONVERGED, DEFAULTS, PRIOR
+from .diffuse import AlbedoOffsets
 from .levenberg_marquardt import levenberg_marquardt
 from .parameters import ParameterSpace, conservative_start, linear_start
 from .uncertainty import (BOOTSTRAP_DRAWS, METHODS, NOT_IDENTIFIED, PRUNED, Covariance, cluster_index, covariance,
-                          held_entries, independent_clusters, parameter_intervals, prior_intervals)
+                          held_entries, independent_clusters, offset_sums, parameter_intervals, prior_intervals)
 
 
 @dataclass
@@ -162,6 +163,23 @@ class _Problem:
         hg[:, cols, rows] = sums[:, 1 + p:]
         return sums[:, 1:1 + p], hg, 0.5 * float(sums[:, 0].sum())
 
+    def texel_sums(self, x, texel: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per texel t, W_t = Σ_{i ∈ t} 1/σ_i² (T,) and S_t = Σ_{i ∈ t} J_i/σ_i per colour channel
+        (T, 3, P), at ``x``; ``texel`` (N,) numbers the texels 0 … ``groups`` - 1. What the
+        offsets' part of the uncertainty needs (:func:`mifaces.reflectance.uncertainty.offset_sums`):
+        one kernel as :meth:`cluster_sums`'s, once per fit with ``albedo_rounds``."""
+        key = ("texels",) + _signature(self.space)
+        if key not in _FROZEN:
+            space = self.space
+            _FROZEN[key] = dr.freeze(lambda arrays, u, g: _texel_sums(space, arrays, u, g), warn_after=1000,
+                                     state_fn=lambda arrays, u, g: (dr.width(arrays["w"]), g))
+        arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w,
+                  "c": device_array(np.uint32, np.asarray(texel, np.uint32))}
+        p = len(x)
+        sums = np.asarray(_FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x], int(groups)),
+                          np.float64).reshape(groups, 1 + 3 * p)
+        return sums[:, 0], sums[:, 1:].reshape(groups, 3, p)
+
     def residuals_and_jacobian(self, x):
         """The residuals (M,) and their Jacobian (M, P), float32, on the host (for solvers that
         want them; :meth:`system` is what the fits use)."""
@@ -249,6 +267,30 @@ def _cluster_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
     return acc
 
 
+def _texel_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
+    """``[Σ 1/σ², Σ J_c/σ for channel c and free entry a (row-major)]`` per texel ``arrays["c"]``
+    as one float64 array of ``groups`` rows (J the forward-mode tangents of the residuals
+    ``(r - π f)/σ``, as in :func:`_cluster_sums`). One kernel."""
+    dr.enable_grad(u)
+    res = (arrays["r"] - dr.pi * space.model.eval(arrays["wi"], arrays["wo"], space.drjit_params(u))) * arrays["w"]
+    w = mi.Float64(arrays["w"])
+    terms = [w * w]
+    d = []
+    for uk in u:
+        dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
+        d.append([mi.Float64(c) for c in dr.grad(res)])
+        dr.clear_grad(res)
+    terms += [w * d[a][c] for c in range(3) for a in range(len(u))]
+    k = len(terms)
+    acc = dr.zeros(mi.Float64, groups * k)
+    base = arrays["c"] * k
+    mode = dr.ReduceMode.Expand if groups * k <= EXPAND_LIMIT else dr.ReduceMode.Local
+    for j, value in enumerate(terms):
+        dr.scatter_add(acc, value, base + j, mode=mode)
+    dr.eval(acc)
+    return acc
+
+
 def validate_samples(light, view, reflectance, sigma) -> None:
     """Shapes agree and nothing is NaN; raises ValueError naming the array."""
     n = len(sigma)
@@ -270,7 +312,7 @@ def min_samples(model: BRDFModel, fixed: dict | None = None) -> int:
 def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start: dict | None = None,
                fixed: dict | None = None, bounds: dict | None = None, schedule: SubsetSchedule | None = None,
                seed: int = 0, ftol: float = 1e-7, trace: list | None = None, cluster=None,
-               uncertainty: str | None = METHODS[0]) -> RegionFit:
+               uncertainty: str | None = METHODS[0], offsets: AlbedoOffsets | None = None) -> RegionFit:
     """Fit ``model`` to one region's samples by hierarchical Levenberg-Marquardt.
 
     Parameters
@@ -302,6 +344,12 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     uncertainty : str or None
         How :attr:`RegionFit.uncertainty` is estimated at the optimum, one of
         :data:`~mifaces.reflectance.uncertainty.METHODS`; None leaves it out.
+    offsets : AlbedoOffsets, optional
+        The per-texel albedo offsets ``reflectance`` was corrected by (``fit_brdf(...,
+        albedo_rounds=k)``): the jackknife and the sandwich then re-estimate them with
+        each cluster left out (:func:`~mifaces.reflectance.uncertainty.offset_sums`;
+        every texel's samples must lie in one cluster); Laplace and the bootstrap
+        take them as known.
 
     Returns
     -------
@@ -360,20 +408,22 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     intervals = {}
     if uncertainty is not None:
         data = (light, view, reflectance, sigma)
-        intervals = region_uncertainty(space, problem, params, pruned, cluster, uncertainty, data, seed)
+        intervals = region_uncertainty(space, problem, params, pruned, cluster, uncertainty, data, seed,
+                                       offsets=offsets)
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=loss,
                      samples=len(sigma), seconds=time.perf_counter() - t0, status=status,
                      reason=reason, iterations=iterations, history=history, uncertainty=intervals)
 
 
 def region_uncertainty(space: ParameterSpace, problem: _Problem, params: dict, pruned: list, cluster,
-                       method: str, data: tuple, seed: int = 0) -> dict:
+                       method: str, data: tuple, seed: int = 0, offsets: AlbedoOffsets | None = None) -> dict:
     """The parameters' uncertainty at the optimum ``params`` of ``problem`` (all
     the region's samples), by ``method``
     (:mod:`mifaces.reflectance.uncertainty`): the clusters' sums (and JᵀJ, E) from
     one kernel pass at the optimum; the bootstrap refits instead.
     ``pruned`` lobes' scales and exponents get the status ``pruned``; ``data``
-    is the region's (light, view, reflectance, sigma), for the bootstrap."""
+    is the region's (light, view, reflectance, sigma), for the bootstrap; ``offsets``
+    the albedo offsets the reflectance was corrected by (:func:`fit_region`)."""
     x = space.vector(params)
     held = held_entries(space, x)
     model, statuses = space.model, {}
@@ -396,7 +446,12 @@ def region_uncertainty(space: ParameterSpace, problem: _Problem, params: dict, p
     else:
         index, groups = cluster_index(independent_clusters(problem.n) if cluster is None else cluster)
         u, hg, loss = problem.cluster_sums(x, index, groups)  # one pass: JᵀJ = Σ_g H_g
-        cov = covariance(x, hg.sum(axis=0), loss, problem.n, u, hg, held, method)
+        terms = None
+        if offsets is not None and method != "laplace":
+            texel, texels = cluster_index(offsets.texel)
+            weight, jsum = problem.texel_sums(x, texel, texels)
+            terms = offset_sums(texel, index, groups, weight, jsum, offsets.shrinkage, offsets.offsets)
+        cov = covariance(x, hg.sum(axis=0), loss, problem.n, u, hg, held, method, offsets=terms)
     return parameter_intervals(space, cov, statuses)
 
 
@@ -514,7 +569,7 @@ NEIGHBOURS = {"lips": ["skin"], "nostrils": ["skin"], "beard": ["skin"], "eyes":
 
 def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region, region_names: dict,
                 neighbours: dict | None = None, progress: bool = False, fixed_by_region: dict | None = None,
-                cluster=None, **options) -> dict[str, RegionFit]:
+                cluster=None, offsets: AlbedoOffsets | None = None, **options) -> dict[str, RegionFit]:
     """Fit ``model`` separately in every region (paper sec. 4.4, 5.2).
 
     ``region`` gives each sample's label, ``region_names`` label -> name.
@@ -533,7 +588,8 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     parameters stayed at their start values measured nothing of them: it takes
     its neighbour's glossy part (status ``'prior'``, the reason says so) and
     lends nothing. ``cluster`` (N,) is each sample's cluster for the
-    uncertainty (:func:`fit_region`).
+    uncertainty, ``offsets`` the albedo offsets the reflectance was corrected by
+    (:func:`fit_region`).
     """
     model = brdf_models.model(model) if isinstance(model, str) else model
     neighbours = NEIGHBOURS if neighbours is None else neighbours
@@ -553,7 +609,8 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
         if fixed_by_region and name in fixed_by_region:
             held[name] = region_options["fixed"] = {**held[name], **fixed_by_region[name]}
         fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask],
-                                cluster=None if cluster is None else np.asarray(cluster)[mask], **region_options)
+                                cluster=None if cluster is None else np.asarray(cluster)[mask],
+                                offsets=None if offsets is None else offsets[mask], **region_options)
         peak = glossy_peak(model, fits[name].params)
         seen = float(np.max(reflectance[mask])) if mask.any() else 0.0
         if fits[name].status in (CONVERGED, AT_BOUND) and SPIKE not in fits[name].reason \

@@ -36,6 +36,36 @@ The sums u_g and H_g come from one Dr.Jit kernel at the optimum
 fit's own; all are model-agnostic: they also hold when the model is not the
 truth's family (they estimate the spread around the model's best fit).
 
+**Albedo offsets** (``fit_brdf(..., albedo_rounds=k)``). The alternated fit
+subtracts from each sample its texel's albedo offset o_i = a_t - ā
+(:class:`~mifaces.reflectance.diffuse.AlbedoOffsets`), estimated from the same
+samples given the glossy fit: a_t = (Σ_{s ∈ t} ω_s (r_s - π f_s) + λ ρ̄)/(W_t + λ),
+ω = 1/σ², W_t = Σ_{s ∈ t} ω_s, and ā its mean over the region's samples. Taking
+the offsets as known gives intervals far too narrow (the fit no longer sees the
+albedo texture the offsets absorbed; tuning seeds: 34-55 % coverage,
+validation/results/albedo_rounds.json). The jackknife and the sandwich instead
+re-estimate them in every replicate, at the fixed point of the alternation. A texel's offset comes only from its own samples
+(texels nest in tiles), so leaving tile g out removes its texels' offsets with
+its scores, shifts ā of the others by δ_g = -Σ_{i ∈ g} o_i / (N - N_g), and
+makes every offset follow the fit: ∂o_i/∂x = B_t - B̄, B_t = S_t/(W_t + λ) per
+channel, S_t = Σ_{s ∈ t} J_s/σ_s, B̄ the mean of B over the samples (the diffuse
+albedo's share of a_t cancels in the difference). The one-step replicate is then
+
+    d_g = (H - H_g - K_{-g})⁻¹ (u_g - Σ_c (S - S_g)_cᵀ δ_g,c),
+    K_{-g} = Σ_{t ∉ g} Σ_c S_t,cᵀ B_t,c - Σ_c (S - S_g)_cᵀ B̄^{(-g)}_c,
+
+(S, S_g the sums of S_t over all texels and over tile g's; B̄^{(-g)} the mean of
+B without tile g), H - K being the Jacobian of the alternation's fixed point
+(the glossy parameters are then measured by how a texel's samples differ from
+each other, not from other texels). The sandwich takes H - K as bread and the
+scores u_g + Σ_c S_cᵀ Σ_{i ∈ g} o_i,c / N. The shrinkage weights λ are held (a
+region-wide quantity; ``fit_brdf`` uses unshrunk texel means, λ = 0). Laplace
+and the bootstrap take the offsets as known. The replicates agree with refitting the
+alternation per tile left out within 3-5 % on a simulated face
+(validation/results/albedo_rounds_exact.json), yet the intervals hold the truth
+only 49-67 % of the time on the tuning seeds: the alternated fit's remaining error
+is a bias shared by the whole capture (docs/uncertainty.md).
+
 Intervals are symmetric in x, the fit's own coordinates (the logit of a
 parameter's position within its range, on a log scale for parameters
 spanning decades), and mapped back, so they never leave the range and are
@@ -162,8 +192,89 @@ def cluster_index(cluster) -> tuple[np.ndarray, int]:
     return lookup[cluster], int(used.sum())
 
 
+@dataclass
+class OffsetSums:
+    """Per cluster g, the sums over its texels that the albedo offsets' share of the
+    jackknife and the sandwich needs (module docstring; :func:`offset_sums`).
+
+    Attributes
+    ----------
+    counts : ndarray (G,)
+        N_g, samples.
+    cross : ndarray (G, P, P)
+        Σ_{t ∈ g} Σ_c S_t,cᵀ B_t,c.
+    jsum : ndarray (G, 3, P)
+        Σ_{t ∈ g} S_t.
+    scaled : ndarray (G, 3, P)
+        Σ_{t ∈ g} N_t B_t.
+    offsets : ndarray (G, 3)
+        Σ_{i ∈ g} o_i.
+    """
+
+    counts: np.ndarray
+    cross: np.ndarray
+    jsum: np.ndarray
+    scaled: np.ndarray
+    offsets: np.ndarray
+
+    def free(self, free: np.ndarray) -> "OffsetSums":
+        """The sums of the free entries ``free`` (P,) only."""
+        return OffsetSums(self.counts, self.cross[:, free][:, :, free], self.jsum[:, :, free],
+                          self.scaled[:, :, free], self.offsets)
+
+
+def offset_sums(texel, cluster, groups: int, weight, jsum, shrinkage, offsets) -> OffsetSums:
+    """The :class:`OffsetSums` of G = ``groups`` clusters.
+
+    Parameters
+    ----------
+    texel : ndarray (N,)
+        Each sample's texel, numbered 0 … T - 1.
+    cluster : ndarray (N,)
+        Each sample's cluster, numbered 0 … G - 1; a texel's samples must share one.
+    weight : ndarray (T,)
+        W_t = Σ_{i ∈ t} 1/σ_i².
+    jsum : ndarray (T, 3, P)
+        S_t = Σ_{i ∈ t} J_i/σ_i per channel (:meth:`mifaces.reflectance.fitting._Problem.texel_sums`).
+    shrinkage : ndarray (N, 3)
+        λ of each sample's region per channel.
+    offsets : ndarray (N, 3)
+        o_i.
+    """
+    texel, cluster = np.asarray(texel, np.int64), np.asarray(cluster, np.int64)
+    t = len(weight)
+    home = np.zeros(t, np.int64)
+    home[texel] = cluster
+    if np.any(home[texel] != cluster):
+        raise ValueError("the albedo offsets' uncertainty needs every texel's samples in one cluster")
+    lam = np.zeros((t, 3))
+    lam[texel] = np.asarray(shrinkage, np.float64)
+    # the texels sorted by cluster: cluster g's are the rows ends[g]:ends[g + 1]
+    order = np.argsort(home, kind="stable")
+    ends = np.searchsorted(home[order], np.arange(groups + 1))
+    empty = ends[:-1] == ends[1:]
+    jsum = np.asarray(jsum, np.float64)[order]
+    p = jsum.shape[2]
+    inverse = 1.0 / (np.asarray(weight, np.float64)[order, None] + lam[order])  # 1/(W_t + λ_c), (T, 3)
+    n_t = np.bincount(texel, minlength=t)[order].astype(np.float64)
+
+    def per_cluster(values):  # (T, ...) in cluster order, summed over each cluster's texels
+        sums = np.add.reduceat(values.reshape(t, -1), np.minimum(ends[:-1], t - 1), axis=0)
+        sums[empty] = 0.0
+        return sums.reshape((groups,) + values.shape[1:])
+
+    # Σ_{t ∈ g} Σ_c S_t,cᵀ B_t,c = VᵀV over the rows V = S_t,c / √(W_t + λ_c) of cluster g's texels
+    rows = (jsum * np.sqrt(inverse)[:, :, None]).reshape(-1, p)
+    cross = np.stack([rows[3 * a:3 * b].T @ rows[3 * a:3 * b] for a, b in zip(ends[:-1], ends[1:])])
+    o = np.asarray(offsets, np.float64)
+    return OffsetSums(counts=np.bincount(cluster, minlength=groups).astype(np.float64), cross=cross,
+                      jsum=per_cluster(jsum), scaled=per_cluster(jsum * (n_t[:, None] * inverse)[:, :, None]),
+                      offsets=np.stack([np.bincount(cluster, weights=o[:, c], minlength=groups) for c in range(3)],
+                                       axis=1))
+
+
 def covariance(x, jtj, loss: float, samples: int, scores: np.ndarray | None, hessians: np.ndarray | None, held,
-               method: str = METHODS[0]) -> Covariance:
+               method: str = METHODS[0], offsets: OffsetSums | None = None) -> Covariance:
     """Cov(x̂) by ``sandwich``, ``jackknife`` or ``laplace`` (module docstring).
 
     Parameters
@@ -184,6 +295,10 @@ def covariance(x, jtj, loss: float, samples: int, scores: np.ndarray | None, hes
         Entries held fixed (their rows and columns are left out).
     method : str
         ``sandwich``, ``jackknife`` or ``laplace``.
+    offsets : OffsetSums, optional
+        The clusters' sums of the albedo offsets the fit's reflectance was corrected
+        by: the jackknife and the sandwich re-estimate them per replicate (module
+        docstring); Laplace ignores them.
     """
     x, jtj = np.asarray(x, np.float64), np.asarray(jtj, np.float64)
     held = np.asarray(held, bool)
@@ -215,29 +330,61 @@ def covariance(x, jtj, loss: float, samples: int, scores: np.ndarray | None, hes
             block = np.diag(np.full(k, np.inf))
         elif k and method == "sandwich":
             c = g / (g - 1) * (n - 1) / max(n - k, 1)
-            block = _sandwich(_inverse(jtj[np.ix_(free, free)]), u.T @ u, c)
+            h = jtj[np.ix_(free, free)]
+            if offsets is None:
+                block = _sandwich(_inverse(h), u.T @ u, c)
+            else:
+                o = offsets.free(free)
+                total = o.jsum.sum(axis=0)
+                bread = h - (o.cross.sum(axis=0) - np.einsum("ca,cb->ab", total, o.scaled.sum(axis=0)) / n)
+                u = u + np.einsum("ca,gc->ga", total, o.offsets) / n
+                inv = _general_inverse(bread)
+                block = _sandwich(inv, u.T @ u, c, inv.T)
         elif k:
             hg = np.asarray(hessians, np.float64)[:, free][:, :, free]
-            block = _jackknife(jtj[np.ix_(free, free)], hg, u)
+            h = jtj[np.ix_(free, free)]
+            if offsets is None:
+                block = _jackknife(h, hg, u)
+            else:
+                o = offsets.free(free)
+                rest = n - o.counts  # samples left in each replicate
+                jsum = o.jsum.sum(axis=0)[None] - o.jsum  # Σ_{t ∉ g} S_t (G, 3, P)
+                mean_b = (o.scaled.sum(axis=0)[None] - o.scaled) / np.maximum(rest, 1)[:, None, None]
+                k_left = o.cross.sum(axis=0)[None] - o.cross - np.einsum("gca,gcb->gab", jsum, mean_b)
+                delta = -o.offsets / np.maximum(rest, 1)[:, None]  # ā_{-g} - ā
+                block = _jackknife(h, hg + k_left, u - np.einsum("gca,gc->ga", jsum, delta))
     if block is not None:
         cov[np.ix_(free, free)] = block
     return Covariance(x=x, covariance=cov, held=held, dof=dof, method=method)
 
 
-def _sandwich(inv: np.ndarray, meat: np.ndarray, c: float) -> np.ndarray:
-    """c H⁻¹ B H⁻¹, infinite in the directions H⁻¹ is."""
+def _sandwich(inv: np.ndarray, meat: np.ndarray, c: float, inv_t: np.ndarray | None = None) -> np.ndarray:
+    """c A⁻¹ B A⁻ᵀ (``inv`` = A⁻¹, ``inv_t`` = A⁻ᵀ, default A⁻¹: a symmetric A), infinite in the
+    directions A⁻¹ is."""
+    inv_t = inv if inv_t is None else inv_t
     finite = np.all(np.isfinite(inv), axis=1)
     block = np.diag(np.where(finite, 0.0, np.inf))
     f = np.ix_(finite, finite)
-    block[f] = c * inv[f] @ meat[f] @ inv[f]
+    block[f] = c * inv[f] @ meat[f] @ inv_t[f]
     return block
+
+
+def _general_inverse(a: np.ndarray) -> np.ndarray:
+    """A⁻¹ of a square A that need not be symmetric (H - K of the albedo offsets), scaled by
+    √diag(H)-like factors first; all infinite if A is singular (condition above 10¹²)."""
+    d = np.sqrt(np.maximum(np.abs(np.diag(a)), 1e-300))
+    scaled = a / np.outer(d, d)
+    if not np.all(np.isfinite(scaled)) or np.linalg.cond(scaled) > 1e12:
+        return np.full(a.shape, np.inf)
+    return np.linalg.inv(scaled) / np.outer(d, d)
 
 
 def _jackknife(h: np.ndarray, hg: np.ndarray, u: np.ndarray) -> np.ndarray:
     """(G-1)/G Σ_g d_g d_gᵀ with d_g = (H - H_g)⁻¹ u_g, the one-step change of x̂ when
     cluster g is left out: the cluster jackknife (CR3, MacKinnon & White 1985; Cameron &
     Miller 2015, sec. VI.B), meant not to shrink when a few clusters carry a parameter.
-    A parameter that one cluster alone constrains is infinite."""
+    A parameter that one cluster alone constrains is infinite. (With albedo offsets, ``hg``
+    carries H_g + K_{-g} and ``u`` the scores with the shift of ā, module docstring.)"""
     g, k = u.shape
     d = np.sqrt(np.maximum(np.diag(h), 1e-300))
     left = (h[None] - hg) / np.outer(d, d)  # scaled to a unit diagonal of H
@@ -358,5 +505,5 @@ def prior_intervals(params: dict) -> dict:
 
 
 __all__ = ["METHODS", "LEVEL", "TILE_AT_128", "MAX_CLUSTERS", "BOOTSTRAP_DRAWS", "Covariance", "covariance",
-           "cluster_index", "independent_clusters", "parameter_intervals", "held_entries", "prior_intervals",
-           "tile_clusters"]
+           "OffsetSums", "offset_sums", "cluster_index", "independent_clusters", "parameter_intervals",
+           "held_entries", "prior_intervals", "tile_clusters"]
