@@ -24,6 +24,7 @@ Writes ``validation/results/refine_gradient.json``.
 from __future__ import annotations
 
 import argparse
+import sys
 import dataclasses
 import os
 import platform
@@ -155,7 +156,7 @@ def main() -> None:
                        "photograph_over_render": ratios(problem), "seconds": round(time.perf_counter() - t, 1)}
         print(case, {n: round(r["offset_to_minimum"] or float("nan"), 4) for n, r in rows.items()}, flush=True)
     write_json(Path(args.out), {
-        "simulated": True,
+        "simulated": True, "command": "python validation/refine_gradient.py " + " ".join(sys.argv[1:]),
         "what": "gradient of the refinement's image loss at the simulator's true BRDF and albedo, in skin's and "
                 "beard's unconstrained glossy parameters (SIMULATED capture, ground-truth geometry)",
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "variant": mi.variant(),

@@ -19,7 +19,8 @@ whether the refinement was kept (held-out pixels), the relative RMSE under a lig
 used, and the fitted light gains against the true ones (the calibrated lights' irradiance error at
 the face: (d_calibrated / d_true)², normalised like the gains).
 
-Training seeds choose the defaults; the reported seeds play no part in that::
+Training seeds choose the defaults; the reported seeds play no part in that (the default is
+``gains_eyebrows_held``)::
 
     python validation/refine_seeds.py --seeds 11 12 100 --out validation/results/refine_seeds_train.json
     python validation/refine_seeds.py --seeds 1 2 3 --out validation/results/refine_seeds_test.json
@@ -31,6 +32,7 @@ import argparse
 import dataclasses
 import os
 import platform
+import sys
 import tempfile
 import time
 import warnings
@@ -47,8 +49,6 @@ from mifaces.geometry import load_geometry
 from mifaces.reflectance import fit_brdf
 from mifaces.reflectance.refine import RefineSchedule, refine_estimate
 from mifaces.studio.simulate import simulate
-
-import sys
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from refine import novel_light_errors, region_errors  # noqa: E402  (validation/refine.py)
@@ -140,7 +140,7 @@ def main() -> None:
     work = Path(tempfile.mkdtemp(prefix="refine_seeds_"))
     seeds = [run_seed(seed, args.image, args.resolution, args.variants, work) for seed in args.seeds]
     result = {
-        "simulated": True, "role": args.role,
+        "simulated": True, "role": args.role, "command": "python validation/refine_seeds.py " + " ".join(sys.argv[1:]),
         "what": "Cook-Torrance fitted in texture space on the ground-truth geometry, refined by differentiable "
                 "rendering under each schedule variant; errors against the simulator's truth (SIMULATED captures)",
         "machine": {"cpus": os.cpu_count(), "load_average_at_end": list(os.getloadavg()),

@@ -560,6 +560,27 @@ def sec_refine(d):
     return lines
 
 
+def sec_refine_gradient(d):
+    cases = list(items(d.get("cases")))
+    lines = [f"{text(d.get('what'))}; seed {text(d.get('seed'))}, {text(d.get('image'))}², "
+             f"{text(d.get('repeats'))} Monte Carlo seeds per photograph. The loss's minimum along each parameter "
+             "alone (a Newton step from the truth):", ""]
+    first = cases[0][1].get("variables") if cases else {}
+    rows = []
+    for key, v in items(first):
+        channel = v.get("channel")
+        label = f"{text(v.get('region'))} {text(v.get('parameter'))}" + (f" [{channel}]" if channel is not None else "")
+        rows.append([label, num(v.get("true_value"), 4)]
+                    + [num(get(c, "variables", key, "value_at_minimum"), 4) for _, c in cases])
+    lines += table(["parameter", "truth", *[f"`{name}`" for name, _ in cases]], rows)
+    lines += ["Photograph over render at the truth, per photograph (mean over channels):", ""]
+    photos = list(items(cases[0][1].get("photograph_over_render"))) if cases else []
+    lines += table(["case", *[name for name, _ in photos]],
+                   [[f"`{name}`", *[num(mean(get(c, "photograph_over_render", p)), 4) for p, _ in photos]]
+                    for name, c in cases])
+    return lines
+
+
 def sec_refine_seeds(d):
     role = text(d.get("role"))
     lines = [f"{text(d.get('what'))}.", "",
@@ -574,7 +595,7 @@ def sec_refine_seeds(d):
     rows = []
     for name, v in items(d.get("summary")):
         rows.append([f"`{name}`", *[pct(get(v, "regions", r, p)) for r, p in columns],
-                     pct(get(v, "novel_light_relative_rmse")), text(v.get("kept", "–"))])
+                     pct(get(v, "novel_light_relative_rmse"), 2), text(v.get("kept", "–"))])
     lines += table(["variant", *[f"{r} {'ρs' if p == 'specular_reflectance' else 'm'}" for r, p in columns],
                     "novel light RMSE", "kept"], rows)
     gains = []
@@ -749,6 +770,7 @@ LAYOUTS = {
     "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
     "real_yaleb": ("Held-out relighting on the Yale face database", "real photographs", sec_real_yaleb),
     "refine": ("Refinement by differentiable rendering", "SIMULATED", sec_refine),
+    "refine_gradient": ("The refinement loss's gradient at the truth", "SIMULATED", sec_refine_gradient),
     "refine_seeds": ("The refinement's schedule on training and test captures", "SIMULATED", sec_refine_seeds),
     "refine_shape_default": ("Shape refinement on the default capture", "SIMULATED", sec_refine_shape_default),
     "unknown_lights": ("Lights nobody measured: the Yale face database with its lights hidden", "real photographs",
