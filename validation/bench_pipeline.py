@@ -53,6 +53,9 @@ def run(out: Path, home: Path, cache: Path, extra: list[str]) -> dict:
             "peak_rss_mib": round(max(peak, before) / 1024, 1),
             "skin_cooktorrance_error": (skin.get("regions") or {}).get("skin"),
             "face_model": report.get("face_model"), "shape_errors": report.get("shape_errors"),
+            # the true reflectance on the fitted shapes, and the truth against itself with other random numbers
+            "shape_floor": (report.get("validation") or {}).get("shape_floor"),
+            "noise_floor": (report.get("validation") or {}).get("noise_floor"),
             "shapes": report.get("shapes")}
 
 

@@ -111,7 +111,7 @@ class Errors:
 def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> dict:
     """Each model fitted on ``shapes`` and refined against the training
     photographs, written to ``out/<model>``; model -> the refinement record
-    (image loss before and after, seconds)."""
+    (image loss before and after, the lights' fitted gains, seconds)."""
     records = {}
     for model in models:
         estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, refine=True,
@@ -121,7 +121,8 @@ def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> 
                           "heldout_loss_before": record["heldout_loss_before"],
                           "heldout_loss_after": record["heldout_loss_after"],
                           "accepted": record["accepted"], "reason": record["reason"],
-                          "regions": record["regions"], "seconds": round(record["seconds"]["total"], 1)}
+                          "regions": record["regions"], "light_gains": record["light_gains"],
+                          "seconds": round(record["seconds"]["total"], 1)}
         print(f"  {model} refined ({'kept' if record['accepted'] else 'not kept'}): image loss "
               f"{record['loss_before']:.4f} -> {record['loss_after']:.4f}, held-out pixels "
               f"{record['heldout_loss_before']:.4f} -> {record['heldout_loss_after']:.4f} "

@@ -274,6 +274,8 @@ def sec_bench_pipeline(d):
                                          for _, r in runs]],
         ["skin Cook–Torrance roughness error", *[pct(get(r, "skin_cooktorrance_error", "roughness"), 2)
                                                 for _, r in runs]],
+        ["shape floor under the held-out lights", *[pct(get(r, "shape_floor", "heldout_rmse"), 1) for _, r in runs]],
+        ["noise floor under the held-out lights", *[pct(get(r, "noise_floor", "heldout_rmse"), 1) for _, r in runs]],
         ["shapes converged", *[text(sum(1 for s in (get(r, "shapes") or {}).values()
                                         if get(s, "status") == "converged")) + " / "
                                + text(len(get(r, "shapes") or {})) for _, r in runs]],
@@ -494,6 +496,13 @@ def sec_real_yaleb(d):
         lines += table(["model", "all", "small shadows", "large shadows"],
                        [[k, fixed(get(v, "all"), 3), fixed(get(v, "small_shadows"), 3),
                          fixed(get(v, "large_shadows"), 3)] for k, v in ratios])
+    best = overall.get("best_model")
+    gains = [(text(s.get("subject")), get(s, "refinement", best, "light_gains")) for _, s in subjects]
+    gains = [(name, g) for name, g in gains if isinstance(g, dict) and g]
+    if gains:
+        lights = sorted({light for _, g in gains for light in g})
+        lines += [f"Light gains the refinement fitted ({text(best)}):", ""]
+        lines += table(["subject", *lights], [[name, *[num(g.get(light), 3) for light in lights]] for name, g in gains])
     return lines
 
 
