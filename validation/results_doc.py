@@ -569,6 +569,26 @@ def sec_refine(d):
     return lines
 
 
+def sec_light_calibration_bias(d):
+    lines = [f"Seeds {text(d.get('seeds'))} ({text(d.get('role'))}); Cook–Torrance truth, the default fit with the "
+             "capture's calibrated lights and with the simulator's true ones.", ""]
+    rows = []
+    for lights, v in items(d.get("summary")):
+        errors = v.get("skin_mean_abs_relative_error") or {}
+        rows.append([lights, pct(errors.get("specular_reflectance")), pct(errors.get("roughness")),
+                     pct(v.get("skin_coverage"), 0), pct(v.get("pooled_coverage"), 0)])
+    lines += table(["lights", "skin ρs error", "skin m error", "skin coverage", "pooled coverage"], rows)
+    per_seed = []
+    for r in rows_of(d.get("rows")):
+        skin = {(s.get("parameter"), s.get("channel")): s for s in r.get("skin") or []}
+        rho = [v.get("fitted") for (p, _), v in skin.items() if p == "specular_reflectance"]
+        truth = [v.get("truth") for (p, _), v in skin.items() if p == "specular_reflectance"]
+        per_seed.append([text(r.get("seed")), text(r.get("lights")), num(mean(rho)) if rho else DASH,
+                         num(mean(truth)) if truth else DASH])
+    lines += table(["seed", "lights", "skin ρs (mean over channels)", "truth"], per_seed)
+    return lines
+
+
 def sec_refine_gradient(d):
     cases = list(items(d.get("cases")))
     lines = [f"{text(d.get('what'))}; seed {text(d.get('seed'))}, {text(d.get('image'))}², "
@@ -779,6 +799,8 @@ LAYOUTS = {
     "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
     "real_yaleb": ("Held-out relighting on the Yale face database", "real photographs", sec_real_yaleb),
     "refine": ("Refinement by differentiable rendering", "SIMULATED", sec_refine),
+    "light_calibration_bias": ("The texture-space fit with calibrated and true lights", "SIMULATED",
+                               sec_light_calibration_bias),
     "refine_gradient": ("The refinement loss's gradient at the truth", "SIMULATED", sec_refine_gradient),
     "refine_seeds": ("The refinement's schedule on training and test captures", "SIMULATED", sec_refine_seeds),
     "refine_shape_default": ("Shape refinement on the default capture", "SIMULATED", sec_refine_shape_default),

@@ -1,0 +1,101 @@
+"""Is the texture-space fit's capture-wide skin bias the lights' calibration? (SIMULATED)
+
+The captures of ``validation/uncertainty.py`` (its image size, photographs, samples and texture) on
+its tuning seeds, Cook–Torrance truth with skin drawn per seed (:func:`uncertainty.skin_truth`), are
+fitted twice with the default ``fit_brdf``: with the lights as the capture's steel spheres calibrate
+them, and with the simulator's true light positions (the reflectance samples recomputed). Per fit:
+skin's parameters against the truth, and how often the 95 % intervals (the default jackknife) hold
+the true values, skin and pooled.
+
+    python validation/light_calibration_bias.py [--seeds 100 101 102 103 104]
+
+Writes ``validation/results/light_calibration_bias.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import tempfile
+import warnings
+from pathlib import Path
+
+import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import uncertainty as U  # noqa: E402  (the captures and checks of validation/uncertainty.py)
+
+from mifaces.capture import read_ground_truth  # noqa: E402
+from mifaces.files import write_json  # noqa: E402
+from mifaces.reflectance import fit_brdf  # noqa: E402
+from mifaces.reflectance.samples import capture_samples  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def with_true_lights(capture):
+    truth = {light.name: light for light in read_ground_truth(capture).lights}
+    return dataclasses.replace(capture, lights=tuple(
+        dataclasses.replace(light, position=np.asarray(truth[light.name].position, np.float64))
+        for light in capture.lights))
+
+
+def run(seed: int, work: Path) -> list[dict]:
+    capture, face, shapes, samples = U._simulate(work / f"cooktorrance_{seed}", seed, brdf="cooktorrance",
+                                                 brdf_params=U.skin_truth(seed))
+    truth = U._truth_of(capture, "cooktorrance")
+    true_capture = with_true_lights(capture)
+    true_samples = capture_samples(true_capture, shapes, face, U.TEXTURE, progress=False)
+    rows = []
+    for lights, cap, smp in (("calibrated", capture, samples), ("true", true_capture, true_samples)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            estimate = fit_brdf(cap, "cooktorrance", shapes, face_model=face, resolution=U.TEXTURE, samples=smp,
+                                progress=False)
+        records = U._checks(estimate, truth, U.unc.METHODS[0], {"seed": seed, "lights": lights})
+        covered = [r["covered"] for r in records if r["covered"] is not None]
+        skin = [r for r in records if r["region"] == "skin"]
+        rows.append({"seed": seed, "lights": lights,
+                     "coverage": float(np.mean(covered)) if covered else None, "intervals": len(covered),
+                     "skin_covered": [r["covered"] for r in skin],
+                     "skin": [{k: r[k] for k in ("parameter", "channel", "truth", "fitted", "lo", "hi", "covered")}
+                              for r in skin]})
+        print(f"seed {seed} {lights}: coverage {rows[-1]['coverage']:.2f}, skin "
+              + ", ".join(f"{r['parameter'][:4]}[{r['channel']}] {r['fitted']:.3f} ({r['truth']:.3f})"
+                          + ("" if r["covered"] else " miss") for r in skin), flush=True)
+    return rows
+
+
+def summary(rows: list[dict]) -> dict:
+    out = {}
+    for lights in ("calibrated", "true"):
+        mine = [r for r in rows if r["lights"] == lights]
+        skin = [s for r in mine for s in r["skin"]]
+        out[lights] = {
+            "pooled_coverage": float(np.mean([r["coverage"] for r in mine])),
+            "skin_coverage": float(np.mean([s["covered"] for s in skin if s["covered"] is not None])),
+            "skin_mean_abs_relative_error": {
+                p: float(np.mean([abs(s["fitted"] / s["truth"] - 1) for s in skin if s["parameter"] == p]))
+                for p in sorted({s["parameter"] for s in skin})}}
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[100, 101, 102, 103, 104])
+    parser.add_argument("--out", default=str(RESULTS / "light_calibration_bias.json"))
+    args = parser.parse_args()
+    work = Path(tempfile.mkdtemp(prefix="light_bias_"))
+    rows = [row for seed in args.seeds for row in run(seed, work)]
+    result = {"label": "SIMULATED", "command": "python validation/light_calibration_bias.py "
+              + " ".join(sys.argv[1:]), "seeds": args.seeds, "role": "tuning seeds of validation/uncertainty.py",
+              "rows": rows, "summary": summary(rows)}
+    write_json(Path(args.out), result)
+    print(result["summary"])
+
+
+if __name__ == "__main__":
+    main()
