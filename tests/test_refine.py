@@ -231,7 +231,7 @@ def test_the_lights_gains_take_up_a_light_calibrated_too_weak(small_capture):
     """Two lights at their true positions; the capture states the first 10 % weaker than it shone.
     With the lights' gains free, the refinement finds the first light's photographs 1/0.9 times
     brighter than the second's; with the lights held as calibrated, every gain stays 1."""
-    from mifaces.capture import load_capture, read_ground_truth
+    from mifaces.capture import load_capture, with_true_lights
     from mifaces.geometry import load_geometry
     from mifaces.reflectance import fit_brdf
 
@@ -240,8 +240,7 @@ def test_the_lights_gains_take_up_a_light_calibrated_too_weak(small_capture):
     face, shapes = load_geometry(capture, "ground-truth")
     with pytest.warns(UserWarning):
         estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, resolution=64, progress=False)
-    truth = {light.name: np.asarray(light.position) for light in read_ground_truth(capture).lights}
-    first, second = (dataclasses.replace(light, position=truth[light.name]) for light in capture.lights)
+    first, second = with_true_lights(capture).lights
     weak = dataclasses.replace(capture, lights=(dataclasses.replace(first, intensity=0.9 * np.asarray(first.intensity)),
                                                 second))
     expected = 1 / 0.9

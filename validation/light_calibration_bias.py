@@ -15,7 +15,6 @@ Writes ``validation/results/light_calibration_bias.json``.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import tempfile
 import warnings
@@ -28,19 +27,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import uncertainty as U  # noqa: E402  (the captures and checks of validation/uncertainty.py)
 
-from mifaces.capture import read_ground_truth  # noqa: E402
+from mifaces.capture import with_true_lights  # noqa: E402
 from mifaces.files import write_json  # noqa: E402
 from mifaces.reflectance import fit_brdf  # noqa: E402
 from mifaces.reflectance.samples import capture_samples  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-
-
-def with_true_lights(capture):
-    truth = {light.name: light for light in read_ground_truth(capture).lights}
-    return dataclasses.replace(capture, lights=tuple(
-        dataclasses.replace(light, position=np.asarray(truth[light.name].position, np.float64))
-        for light in capture.lights))
 
 
 def run(seed: int, work: Path) -> list[dict]:

@@ -39,7 +39,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mifaces.capture import load_capture, read_ground_truth
+from mifaces.capture import load_capture, read_ground_truth, with_true_lights
 from mifaces.files import write_json
 from mifaces.geometry import load_geometry
 from mifaces.reflectance import fit_brdf
@@ -66,13 +66,6 @@ def truth_estimate(capture, face, shapes, resolution: int):
             for r, f in estimate.fits.items()}
     albedo = dataclasses.replace(estimate.albedo, albedo=np.asarray(truth.albedo, np.float32))
     return dataclasses.replace(estimate, fits=fits, albedo=albedo)
-
-
-def with_true_lights(capture):
-    truth = {light.name: light for light in read_ground_truth(capture).lights}
-    return dataclasses.replace(capture, lights=tuple(
-        dataclasses.replace(light, position=np.asarray(truth[light.name].position, np.float64))
-        for light in capture.lights))
 
 
 def _variables(problem, names, shift: float) -> dict:

@@ -31,7 +31,8 @@ Conventions
 
 
 from .camera import Camera
-from .ground_truth import GroundTruth, TrueLight, TrueMeasurement, read_ground_truth, write_ground_truth
+from .ground_truth import (GroundTruth, TrueLight, TrueMeasurement, read_ground_truth, with_true_lights,
+                           write_ground_truth)
 from .images import decode, read_image
 from .loader import load_capture
 from .types import (FEATURE_POINT_RANGE, FORMAT, GROUND_TRUTH, IMAGE_SUFFIXES, MANIFEST, TRANSFERS, VERSION,
@@ -40,4 +41,4 @@ from .types import (FEATURE_POINT_RANGE, FORMAT, GROUND_TRUTH, IMAGE_SUFFIXES, M
 __all__ = ["Camera", "Capture", "CaptureError", "Distance", "Image", "Light", "Measurement", "SpherePictures",
            "WhiteTarget", "decode", "read_image", "load_capture", "MANIFEST", "FORMAT", "VERSION", "GROUND_TRUTH",
            "FEATURE_POINT_RANGE", "TRANSFERS", "IMAGE_SUFFIXES", "GroundTruth", "TrueLight", "TrueMeasurement",
-           "read_ground_truth", "write_ground_truth"]
+           "read_ground_truth", "with_true_lights", "write_ground_truth"]

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -229,6 +229,17 @@ def read_ground_truth(capture: Capture | str | os.PathLike) -> GroundTruth | Non
         noise=scene["noise"], path=folder,
         maps={name: read_exr(folder / path) for name, path in scene.get("maps", {}).items()},
         description=scene.get("truth", {}))
+
+
+def with_true_lights(capture: Capture) -> Capture:
+    """``capture`` with each light at the position the simulator placed it (``ground_truth/``), in
+    place of where its steel spheres located it: what a fit would see with a perfect calibration."""
+    truth = read_ground_truth(capture)
+    if truth is None:
+        raise ValueError(f"capture {capture.path}: no ground truth, so no true light positions")
+    positions = {light.name: light.position for light in truth.lights}
+    return replace(capture, lights=tuple(replace(light, position=np.asarray(positions[light.name], np.float64))
+                                         for light in capture.lights))
 
 
 def _scene_json(truth: GroundTruth) -> dict:

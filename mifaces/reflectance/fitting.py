@@ -146,17 +146,8 @@ class _Problem:
         (N,) numbers the clusters 0 … ``groups`` - 1 (JᵀJ = Σ_g H_g). One kernel (frozen per
         parameter space as :meth:`system`'s is), whose sums stay on the Dr.Jit side: for the
         covariance (:mod:`mifaces.reflectance.uncertainty`), once per fit."""
-        key = ("clusters",) + _signature(self.space)
-        if key not in _FROZEN:
-            space = self.space
-            _FROZEN[key] = dr.freeze(lambda arrays, u, g: _cluster_sums(space, arrays, u, g), warn_after=1000,
-                                     state_fn=lambda arrays, u, g: (dr.width(arrays["w"]), g))
-        arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w,
-                  "c": device_array(np.uint32, np.asarray(cluster, np.uint32))}
         p = len(x)
-        k = 1 + p + p * (p + 1) // 2
-        sums = np.asarray(_FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x], int(groups)),
-                          np.float64).reshape(groups, k)
+        sums = self._group_sums("clusters", _cluster_sums, x, cluster, groups, 1 + p + p * (p + 1) // 2)
         hg = np.zeros((groups, p, p))
         rows, cols = np.triu_indices(p)
         hg[:, rows, cols] = sums[:, 1 + p:]
@@ -168,17 +159,23 @@ class _Problem:
         (T, 3, P), at ``x``; ``texel`` (N,) numbers the texels 0 … ``groups`` - 1. What the
         offsets' part of the uncertainty needs (:func:`mifaces.reflectance.uncertainty.offset_sums`):
         one kernel as :meth:`cluster_sums`'s, once per fit with ``albedo_rounds``."""
-        key = ("texels",) + _signature(self.space)
+        p = len(x)
+        sums = self._group_sums("texels", _texel_sums, x, texel, groups, 1 + 3 * p)
+        return sums[:, 0], sums[:, 1:].reshape(groups, 3, p)
+
+    def _group_sums(self, name: str, kernel, x, group: np.ndarray, groups: int, width: int) -> np.ndarray:
+        """``kernel(space, arrays, u, groups)``'s per-group sums at ``x`` for the samples' ``group``
+        (N,) numbers 0 … ``groups`` - 1, as a (groups, width) float64 array: one kernel, frozen per
+        parameter space and ``name``."""
+        key = (name,) + _signature(self.space)
         if key not in _FROZEN:
             space = self.space
-            _FROZEN[key] = dr.freeze(lambda arrays, u, g: _texel_sums(space, arrays, u, g), warn_after=1000,
+            _FROZEN[key] = dr.freeze(lambda arrays, u, g: kernel(space, arrays, u, g), warn_after=1000,
                                      state_fn=lambda arrays, u, g: (dr.width(arrays["w"]), g))
         arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w,
-                  "c": device_array(np.uint32, np.asarray(texel, np.uint32))}
-        p = len(x)
-        sums = np.asarray(_FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x], int(groups)),
-                          np.float64).reshape(groups, 1 + 3 * p)
-        return sums[:, 0], sums[:, 1:].reshape(groups, 3, p)
+                  "c": device_array(np.uint32, np.asarray(group, np.uint32))}
+        sums = _FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x], int(groups))
+        return np.asarray(sums, np.float64).reshape(groups, width)
 
     def residuals_and_jacobian(self, x):
         """The residuals (M,) and their Jacobian (M, P), float32, on the host (for solvers that

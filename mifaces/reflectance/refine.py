@@ -392,7 +392,7 @@ class RefineProblem:
     def gain(self, photo: _Photograph, variables: dict):
         """The factor on ``photo``'s light, exp(g_l - mean g) (differentiable), or 1 where the light
         gains are not variables (one light, or ``light_gain_learning_rate`` None)."""
-        if LIGHT_GAIN not in variables or LIGHT_GAIN not in self.variables:
+        if LIGHT_GAIN not in self.variables:
             return 1.0
         g = variables[LIGHT_GAIN]
         return dr.exp(dr.gather(mi.Float, g, photo.light_index) - dr.mean(g))
