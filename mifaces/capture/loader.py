@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import check_image_size, check_name, resolve_inside
+from ..files import check_image_size, check_name, read_exr, resolve_inside
 from ..landmarks import NoFaceError
 from ..model.landmarks import FEATURE_POINTS
 from .calibration import CalibrationError, calibrate_light
@@ -299,6 +299,8 @@ def _lights(data: dict, root: Path, camera: Camera | None, problems: Problems) -
             problems.append(f"{where}.unknown: must be true or false, got {unknown!r}")
         if unknown is True:
             light = _unknown_light(e, name, where, problems)
+        elif e.get("kind") == "environment" or "map" in e:
+            light = _environment_light(e, name, where, relative, root, problems)
         elif "direction" in e:
             light = _directional_light(e, name, where, relative, problems)
         else:
@@ -328,7 +330,51 @@ def _directional_light(e: dict, name, where: str, relative, problems: Problems) 
 
 
 #: Keys that give a light: none of them may come with ``"unknown": true``.
-_GIVEN = ("direction", "position_mm", "spheres", "intensity")
+_GIVEN = ("direction", "position_mm", "spheres", "intensity", "map")
+
+
+def _environment_light(e: dict, name, where: str, relative, root: Path, problems: Problems) -> Light | None:
+    """A given environment map: ``map``, a latitude-longitude OpenEXR file (width twice the height,
+    linear RGB radiance in pixel value, times the optional ``scale``) in the frame of
+    :func:`mifaces.environment.environment_emitter`."""
+    n = len(problems)
+    if e.get("kind", "environment") != "environment":
+        problems.append(f"{where}: light {name!r} has a 'map' but kind {e['kind']!r}: a map is an environment light")
+    for key in ("direction", "position_mm", "spheres", "intensity", "size", "guess"):
+        if key in e:
+            problems.append(f"{where}: light {name!r} is an environment map: it takes no '{key}'")
+    rel = problems.need(e, "map", where, str)
+    scale = problems.number(e, "scale", where, positive=True, default=1.0, required=False)
+    if rel is None or len(problems) > n:
+        return None
+    try:
+        path = resolve_inside(root, rel, problems.allow_outside)
+    except (ValueError, OSError) as err:
+        problems.append(f"{where}.map: {err}")
+        return None
+    if path.suffix.lower() != ".exr" or not path.is_file():
+        problems.append(f"{where}.map: light {name!r}: {rel!r} is not an OpenEXR file in the capture")
+        return None
+    try:
+        envmap = read_exr(path)
+    except Exception as err:  # noqa: BLE001 - any reader failure is a problem of this capture
+        problems.append(f"{where}.map: cannot read {rel}: {err}")
+        return None
+    if envmap.ndim != 3 or envmap.shape[2] < 3:
+        problems.append(f"{where}.map: light {name!r}: {rel} must be an RGB image, got shape {envmap.shape}")
+        return None
+    envmap = envmap[..., :3]
+    height, width = envmap.shape[:2]
+    low, high = ENVMAP_HEIGHTS[0], 4096
+    if width != 2 * height or not low <= height <= high:
+        problems.append(f"{where}.map: light {name!r}: invalid envmap size {width}x{height}: the width must be twice "
+                        f"the height (a latitude-longitude map) and the height between {low} and {high}")
+        return None
+    if not np.all(np.isfinite(envmap)) or envmap.min() < 0:
+        problems.append(f"{where}.map: light {name!r}: {rel} has NaN, infinite or negative radiance")
+        return None
+    return Light(name, None, np.ones(3), relative=relative is True, kind="environment",
+                 envmap=np.ascontiguousarray(envmap * np.float32(scale), np.float32))
 
 
 def _unknown_light(e: dict, name, where: str, problems: Problems) -> Light | None:

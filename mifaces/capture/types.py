@@ -122,6 +122,11 @@ class Light:
         frame, towards the light), where to start; None: frontal (towards the camera).
     envmap_size : (int, int) or None
         An unknown environment light's map size (width, height) in texels.
+    envmap : (H, 2H, 3) float32 or None
+        An environment light's map (``kind`` ``'environment'``, given or estimated):
+        latitude-longitude radiance in pixel value, in the camera-placed frame of
+        :func:`mifaces.environment.environment_emitter` (local +y the camera's up,
+        +z towards the camera, the centre column behind the camera).
     estimated : bool
         The direction and intensity were estimated from the photographs (relative
         intensity), not given by the capture.
@@ -139,6 +144,12 @@ class Light:
     guess: np.ndarray | None = None
     envmap_size: tuple[int, int] | None = None
     estimated: bool = False
+    envmap: np.ndarray | None = None
+
+    @property
+    def environment(self) -> bool:
+        """Light from everywhere, an environment map (given, estimated, or to estimate)."""
+        return self.kind == "environment"
 
     @property
     def directional(self) -> bool:
@@ -154,6 +165,9 @@ class Light:
             return d, np.full(len(points), np.inf)
         if self.unknown:
             raise ValueError(f"light {self.name!r} is unknown: estimate it first (mifaces.lighting.estimate_lights)")
+        if self.environment:
+            raise ValueError(f"light {self.name!r} is an environment map: it has no one direction "
+                             "(mifaces.reflectance.samples.environment_transport)")
         if self.position is None:
             raise ValueError(f"light {self.name!r} has no position (load the capture with calibrate=True)")
         offset = np.asarray(self.position, np.float64) - points
