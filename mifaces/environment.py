@@ -46,6 +46,8 @@ TURBIDITY = (1.0, 10.0)
 #: Environments the validation renders: the studio and a sky with the sun
 #: at these angles about the camera (azimuth, elevation; :meth:`Camera.direction`).
 SKY_SUN_ANGLES = (-35.0, 40.0)
+#: Luminance weights (Rec. 709) that rank texels and directions by brightness.
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 def camera_frame(camera) -> np.ndarray:
@@ -59,6 +61,40 @@ def _transform(columns: np.ndarray) -> mi.ScalarTransform4f:
     matrix = np.eye(4)
     matrix[:3, :3] = columns
     return mi.ScalarTransform4f(matrix.tolist())
+
+
+def texel_directions(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit directions (H*W, 3) in the map's frame of an H x W map's texels, row by row, as
+    Mitsuba's ``envmap`` places them: texel (row j, column i) at u = (i + 1/2) / W,
+    v = j / (H - 1) (it interpolates bilinearly, the first and last rows at the poles), and their solid angles (H*W,) (the
+    rows' bands around them; they sum to 4π)."""
+    u = (np.arange(width) + 0.5) / width
+    v = np.arange(height) / (height - 1)
+    phi, theta = np.meshgrid(2 * np.pi * u, np.pi * v)
+    d = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta), -np.sin(theta) * np.cos(phi)], axis=-1)
+    edges = np.clip((np.arange(height + 1) - 0.5) / (height - 1), 0, 1) * np.pi
+    band = np.cos(edges[:-1]) - np.cos(edges[1:])
+    solid = np.repeat(band[:, None] * 2 * np.pi / width, width, axis=1)
+    return d.reshape(-1, 3), solid.ravel()
+
+
+def to_world(directions: np.ndarray, camera) -> np.ndarray:
+    """Directions (N, 3) in the map's frame turned into ``camera``'s world frame."""
+    return np.asarray(directions, np.float64) @ camera_frame(camera).T
+
+
+def to_map(directions: np.ndarray, camera) -> np.ndarray:
+    """World directions (N, 3) turned into the map's frame (inverse of :func:`to_world`)."""
+    return np.asarray(directions, np.float64) @ camera_frame(camera)
+
+
+def dominant_direction(envmap: np.ndarray, camera) -> np.ndarray:
+    """The world unit direction of ``envmap``'s irradiance vector (placed by
+    :func:`environment_emitter` for ``camera``): where most of its light comes from."""
+    envmap = np.asarray(envmap, np.float64)
+    d, solid = texel_directions(envmap.shape[1], envmap.shape[0])
+    vector = to_world(((envmap.reshape(-1, 3) @ LUMINANCE) * solid) @ d, camera)
+    return vector / max(float(np.linalg.norm(vector)), 1e-30)
 
 
 def studio_environment(height: int = STUDIO_HEIGHT) -> np.ndarray:

@@ -34,12 +34,23 @@ from pathlib import Path
 
 import numpy as np
 
+import mitsuba as mi
+import scipy.ndimage
+
 from .capture.types import RELATIVE_IRRADIANCE, Capture
-from .files import save_figure, write_json
+from .environment import LUMINANCE, texel_directions, to_world
+from .files import save_figure, write_exr, write_json
+from .model.mesh import mitsuba_mesh
+from .model.texture_space import rasterize
+from .progress import progress as progress_bar
+from .reflectance.environment import estimate_map, transport
+from .reflectance.samples import _unoccluded, texel_geometry
 from .shape.targets import light_angles
 
 #: File of a result folder holding the capture's lights, estimated and given.
 LIGHTS_FILE = "lights.json"
+#: Folder of a result folder holding the estimated environment maps, ``<name>.exr``.
+LIGHTS_FOLDER = "lights"
 #: Picture of the estimated lights beside their photographs.
 LIGHTS_PICTURE = "report_lights.png"
 #: How the reflectance measured under estimated lights is to be read (``brdf.json`` ``lighting``).
@@ -54,13 +65,20 @@ class UnknownLightError(ValueError):
 
 
 def check_estimable(capture: Capture) -> None:
-    """Raise :class:`UnknownLightError` naming every unknown light :func:`estimate_lights`
-    cannot estimate by its kind (environment maps are not estimated yet), before any fitting."""
-    maps = [light.name for light in capture.unknown_lights if light.kind != "directional"]
-    if maps:
-        raise UnknownLightError(f"unknown light(s) {maps} of kind 'environment': estimating environment maps "
-                                "is not implemented yet; describe them as kind 'directional' (a distant light "
-                                "plus ambient, docs/unknown_lights.md)")
+    """Raise :class:`UnknownLightError` naming every unknown light :func:`estimate_lights` and
+    :func:`estimate_environments` cannot estimate, before any fitting: an environment map whose
+    photographs show one pose only (one view of a face under a map cannot tell the map's
+    low frequencies from the albedo's)."""
+    single = []
+    for light in capture.unknown_lights:
+        if light.environment:
+            views = {m.pose if m.pose is not None else m.name for m in capture.measurements if m.light == light.name}
+            if len(views) < 2:
+                single.append(light.name)
+    if single:
+        raise UnknownLightError(f"unknown environment light(s) {single}: their photographs show one pose of the "
+                                "face; estimating a map needs two or more (the head turned under the same light), "
+                                "or describe them as kind 'directional' (docs/unknown_lights.md)")
 
 
 def fitted_direction(fit, camera) -> np.ndarray | None:
@@ -115,6 +133,8 @@ def estimate_lights(capture: Capture, fits) -> Capture:
     by_name = {fit.measurement: fit for fit in fits}
     estimates, missing = {}, []
     for light in capture.unknown_lights:
+        if light.environment:  # estimate_environments' work
+            continue
         used = [by_name[m.name] for m in capture.measurements if m.light == light.name and m.name in by_name]
         directions = [(fit.measurement, fitted_direction(fit, capture.camera)) for fit in used]
         directions = [(name, d) for name, d in directions if d is not None]
@@ -140,7 +160,7 @@ def estimate_lights(capture: Capture, fits) -> Capture:
     metadata = dict(capture.metadata, estimated_lights={
         name: {"photographs": names, "spread_deg": spread} for name, (_, _, names, spread) in estimates.items()})
     # every light estimated: nothing ties their intensities to the white target's units
-    white = capture.white_target if len(estimates) < len(capture.lights) else None
+    white = capture.white_target if len(capture.unknown_lights) < len(capture.lights) else None
     return replace(capture, lights=lights, metadata=metadata, white_target=white)
 
 
@@ -175,8 +195,10 @@ def balance_intensities(capture: Capture, samples) -> Capture:
     """
     names = list(samples.measurement_names)
     light_of = {m.name: m.light for m in capture.measurements}
-    estimated = [light.name for light in capture.lights if light.estimated]
-    given = [light.name for light in capture.lights if not light.estimated and not light.unknown]
+    # environment maps keep the scale their estimate fixed (estimate_environments)
+    estimated = [light.name for light in capture.lights if light.estimated and not light.environment]
+    given = [light.name for light in capture.lights
+             if not light.estimated and not light.unknown and not light.environment]
     if not estimated or len(estimated) + len(given) < 2:
         return capture
     keep = ((samples.light[:, 2] >= BALANCE_MIN_COSINE) & (samples.view[:, 2] >= BALANCE_MIN_COSINE)
@@ -211,6 +233,90 @@ def balance_intensities(capture: Capture, samples) -> Capture:
                    metadata=dict(capture.metadata, estimated_lights=info))
 
 
+#: Texture resolution the photographs are read at to estimate a map (:func:`photograph_transport`).
+ESTIMATE_RESOLUTION = 96
+#: Texels seen at a cosine below this are left out of the estimate (grazing, misregistered).
+ESTIMATE_MIN_COSINE = 0.3
+
+
+def photograph_transport(camera, pixels, saturated, vertices, triangles, uv, coverage, size) -> tuple:
+    """What one photograph says about a map of ``size`` (width, height): its radiance (N, 3) at the
+    texels (N,) of ``coverage`` it sees well (visible, at least :data:`ESTIMATE_MIN_COSINE` from
+    grazing, unsaturated, inside the image) and their transport matrix (N, J) on the face
+    ``vertices`` (world, mm), for :func:`estimate_map`."""
+    geo = texel_geometry(vertices, triangles, uv, coverage)
+    p, n = geo.position, geo.normal
+    extent = float(np.ptp(np.asarray(vertices), axis=0).max())
+    offset = 1e-4 * extent
+    scene = mi.load_dict({"type": "scene", "face": mitsuba_mesh(vertices, triangles, uv)})
+    to_camera = camera.position[None, :] - p
+    cos_v = np.sum(to_camera / np.linalg.norm(to_camera, axis=1, keepdims=True) * n, axis=1)
+    keep = cos_v >= ESTIMATE_MIN_COSINE
+    keep[keep] = _unoccluded(scene, p[keep], np.broadcast_to(camera.position, p[keep].shape), n[keep], offset)
+    xy = camera.project(p)
+    keep &= (xy[:, 0] >= 0) & (xy[:, 0] <= camera.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= camera.height - 1)
+    coords = [xy[keep, 1], xy[keep, 0]]
+    radiance = np.stack([scipy.ndimage.map_coordinates(np.asarray(pixels, np.float32)[..., c], coords, order=1,
+                                                       mode="nearest") for c in range(3)], axis=1)
+    ok = np.ones(len(radiance), bool)
+    if saturated is not None:
+        near = scipy.ndimage.binary_dilation(np.asarray(saturated, bool)).astype(np.uint8)
+        ok = ~scipy.ndimage.map_coordinates(near, coords, order=0, mode="nearest").astype(bool)
+    index = np.flatnonzero(keep)[ok]
+    directions, solid = texel_directions(*size)
+    t = transport(scene, p[index], n[index], to_world(directions, camera), solid, offset, 10.0 * extent)
+    return radiance[ok], t, geo.texel[index]
+
+
+def estimate_environments(capture: Capture, shapes, face_model, resolution: int = ESTIMATE_RESOLUTION,
+                          progress: bool = True) -> Capture:
+    """``capture`` with each unknown environment light replaced by its map estimated from the
+    photographs on the fitted faces (:func:`mifaces.reflectance.environment.estimate_map`).
+
+    Parameters
+    ----------
+    capture : Capture
+    shapes : mapping
+        Measurement name -> (V, 3) world vertices of ``face_model`` (the fitted faces).
+    face_model : MorphableModel
+    resolution : int
+        Texture resolution the photographs are read at.
+
+    Returns
+    -------
+    Capture
+        Each unknown environment light now given (``estimated``, ``relative``) with its map
+        (:attr:`~mifaces.capture.Light.envmap`); ``metadata['estimated_lights'][name]`` holds the
+        photographs it came from and the fit's ``residual``, ``samples`` and ``texels``.
+
+    Raises
+    ------
+    UnknownLightError
+        For a light none of whose photographs has a shape.
+    """
+    todo = [light for light in capture.unknown_lights if light.environment]
+    if not todo:
+        return capture
+    coverage = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
+    maps, info = {}, dict(capture.metadata.get("estimated_lights", {}))
+    for light in progress_bar(todo, desc="environment maps", unit="map", enabled=progress):
+        used = [m for m in capture.measurements if m.light == light.name and m.name in shapes]
+        if not used:
+            raise UnknownLightError(f"unknown light {light.name!r}: no photograph under it has a fitted face "
+                                    "to estimate the map on")
+        parts = [photograph_transport(capture.camera, m.image.pixels, m.image.saturated, shapes[m.name],
+                                      face_model.triangles, face_model.uv, coverage, light.envmap_size)
+                 for m in used]
+        envmap, fit = estimate_map(*zip(*parts), size=light.envmap_size)
+        maps[light.name] = envmap
+        info[light.name] = {"photographs": [m.name for m in used], **fit}
+    lights = tuple(replace(light, envmap=maps[light.name], unknown=False, relative=True, estimated=True)
+                   if light.name in maps else light for light in capture.lights)
+    white = capture.white_target if any(not light.estimated for light in lights) else None
+    return replace(capture, lights=lights, metadata=dict(capture.metadata, estimated_lights=info),
+                   white_target=white)
+
+
 def lights_document(capture: Capture) -> dict:
     """The ``lights.json`` document of ``capture``'s lights, in the capture format's frame and sign
     convention (module docstring): per light ``name``, ``kind``, ``direction`` (directional) or
@@ -222,25 +328,42 @@ def lights_document(capture: Capture) -> dict:
         entry = {"name": light.name}
         if light.unknown:
             entry.update(kind=light.kind, estimated=False, unknown=True)
+        elif light.environment:
+            entry.update(kind="environment", size=[int(light.envmap.shape[1]), int(light.envmap.shape[0])])
+            if light.estimated:
+                entry["map"] = f"{LIGHTS_FOLDER}/{light.name}.exr"
         elif light.directional:
             entry.update(kind="directional", direction=np.asarray(light.direction, np.float64).tolist())
         else:
             entry.update(kind="point", position_mm=None if light.position is None else
                          np.asarray(light.position, np.float64).tolist())
-        if not light.unknown:
+        if light.environment and not light.unknown:
+            entry.update(relative=light.relative, estimated=light.estimated)
+        elif not light.unknown:
             entry.update(intensity=np.asarray(light.intensity, np.float64).tolist(), relative=light.relative,
                          estimated=light.estimated)
         if light.name in estimated:
             entry.update(estimated[light.name])
         entries.append(entry)
-    return {"lights": entries, "frame": "world frame of the capture; direction: unit vector towards the light",
-            "intensity": "irradiance at normal incidence (pixel value) per RGB channel"
-            + ("; estimated lights: relative, their mean " + f"{RELATIVE_IRRADIANCE:.6g}" if estimated else "")}
+    document = {"lights": entries, "frame": "world frame of the capture; direction: unit vector towards the light",
+                "intensity": "irradiance at normal incidence (pixel value) per RGB channel"
+                + ("; estimated lights: relative, their mean " + f"{RELATIVE_IRRADIANCE:.6g}" if estimated else "")}
+    if any(light.environment for light in capture.lights):
+        document["map"] = (f"environment maps: latitude-longitude OpenEXR, linear RGB radiance in pixel value, in "
+                           "the frame of mifaces.environment.environment_emitter (+y the camera's up, +z towards the "
+                           "camera); an estimated map is relative: its largest unoccluded irradiance is "
+                           f"{RELATIVE_IRRADIANCE:.6g}")
+    return document
 
 
 def write_lights(out, capture: Capture) -> Path:
-    """Write :func:`lights_document` to ``out/lights.json`` (atomically); its path."""
+    """Write :func:`lights_document` to ``out/lights.json`` and each estimated environment map to
+    ``out/lights/<name>.exr`` (atomically); the path of ``lights.json``."""
     path = Path(out) / LIGHTS_FILE
+    for light in capture.lights:
+        if light.environment and light.estimated:
+            (Path(out) / LIGHTS_FOLDER).mkdir(parents=True, exist_ok=True)
+            write_exr(Path(out) / LIGHTS_FOLDER / f"{light.name}.exr", light.envmap)
     write_json(path, lights_document(capture))
     return path
 
@@ -279,6 +402,16 @@ def write_lights_picture(path, capture: Capture, photographs: dict | None = None
         axes[0, col].imshow(np.clip(photo / max(float(np.percentile(photo, 99.5)), 1e-6), 0, 1) ** (1 / 2.2),
                             cmap="gray" if photo.ndim == 2 else None)
         axes[0, col].set_title(light.name, fontsize=8)
+        if light.environment:  # the map: its centre column towards the camera, up the camera's up
+            shown = np.asarray(light.envmap, np.float64)
+            axes[1, col].imshow(np.clip(shown / max(float(shown.max()), 1e-12), 0, 1) ** (1 / 2.2),
+                                extent=(-180, 180, -90, 90), interpolation="nearest")
+            axes[1, col].set_title("map (centre: towards the camera)", fontsize=7)
+            axes[1, col].set_xticks([-180, 0, 180])
+            axes[1, col].set_yticks([-90, 0, 90])
+            axes[1, col].tick_params(labelsize=6)
+            axes[0, col].axis("off")
+            continue
         d = capture.camera.rotation @ np.asarray(light.direction, np.float64)
         size = 96
         axes[1, col].imshow(sphere_shading(d, size), cmap="gray", vmin=0, vmax=1)

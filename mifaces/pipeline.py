@@ -33,15 +33,17 @@ import numpy as np
 
 from .brdf import NAMES
 from .capture import Capture, load_capture, read_ground_truth
+from .capture.types import RELATIVE_IRRADIANCE
+from .environment import dominant_direction
 from .export import export_face
 from .files import write_json
 from .geometry import load_geometry
-from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, balance_intensities, check_estimable, estimate_lights,
-                       lights_document, write_lights, write_lights_picture)
+from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, balance_intensities, check_estimable, estimate_environments,
+                       estimate_lights, lights_document, write_lights, write_lights_picture)
 from .model import load_model
 from .reflectance import capture_samples, fit_brdf, write_estimate
 from .reflectance.refine_shape import refine_lit, refined_fits
-from .render import FaceScene
+from .render import FaceScene, light_arguments
 from .report import (ground_truth_errors, ranking, write_markdown, write_picture, write_uncertainty_picture,
                      write_validation_picture)
 from .report_html import write_html
@@ -69,8 +71,14 @@ class NoUsableShapeError(ValueError):
 def novel_light(capture, centre: np.ndarray) -> dict:
     """A light none of the measurements used, as keyword arguments of
     :meth:`mifaces.render.FaceScene.render`: :func:`novel_point_light` for
-    point lights, :func:`novel_direction` for directional ones."""
+    point lights, :func:`novel_direction` for directional ones; for an environment map a
+    directional light of irradiance :data:`RELATIVE_IRRADIANCE` mirrored from the map's
+    :func:`~mifaces.environment.dominant_direction`."""
     first = capture.lights[0]
+    if first.environment:  # a directional light from the other side of where most of the map's light comes
+        towards = capture.camera.rotation @ dominant_direction(first.envmap, capture.camera)
+        return {"light_direction": capture.camera.rotation.T @ _mirrored(towards),
+                "intensity": np.full(3, RELATIVE_IRRADIANCE)}
     if first.directional:
         return {"light_direction": novel_direction(capture), "intensity": first.intensity}
     return {"light_position": novel_point_light(capture, centre), "intensity": first.intensity}
@@ -208,7 +216,9 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
                              "the fitted faces, so geometry must be 'fitted'")
     face, shapes, fits = _geometry(out, capture, geometry, face_model, shape_iterations, report, timings, progress)
     if unknown:  # every later stage reads the estimated lights as given ones
-        capture = estimate_lights(capture, fits)
+        t = time.perf_counter()
+        capture = estimate_environments(estimate_lights(capture, fits), shapes, face, progress=progress)
+        timings["estimate_lights"] = time.perf_counter() - t
     t = time.perf_counter()
     samples = capture_samples(capture, shapes, face, resolution, progress=progress)
     if unknown:  # the intensities that give the face one albedo under every estimated light
@@ -351,17 +361,17 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
                             progress=progress, refine=refine, normals=normals, specular_maps=specular_maps)
     if any(light.estimated for light in capture.lights):
         estimate = replace(estimate, lighting={"lights": "estimated", "reflectance": "relative", "note": RELATIVE_NOTE})
-    lamp = capture.light(first.light)
-    write_estimate(estimate, out / "brdf" / model, scene, capture.camera, lamp.position, lamp.intensity,
-                   light_direction=lamp.direction, force=True)  # measure's own folder
+    lamp = light_arguments(capture.light(first.light))
+    write_estimate(estimate, out / "brdf" / model, scene, capture.camera, lamp.get("light_position"),
+                   lamp.get("intensity"), light_direction=lamp.get("light_direction"), envmap=lamp.get("envmap"),
+                   force=True)  # measure's own folder
     timings[f"fit_brdf_{model}"] = time.perf_counter() - t
     entry = estimate.to_json()
     entry["warnings"] = [str(w.message) for w in caught]
     entry["ground_truth"] = ground_truth_errors(estimate, capture)
     brdf, albedo = estimate.to_json(), estimate.albedo.albedo
     maps = {"normals": estimate.normal_texture(), "specular": estimate.specular_texture()}
-    rendered = scene.render(brdf, albedo, capture.camera, lamp.position, lamp.intensity, spp=spp,
-                            light_direction=lamp.direction, **maps)
+    rendered = scene.render(brdf, albedo, capture.camera, spp=spp, **lamp, **maps)
     relit = scene.render(brdf, albedo, capture.camera, spp=spp, **novel, **maps)
     photo = first.image.pixels
     face_pixels = photo.mean(axis=2) > 0.02 * photo.max()

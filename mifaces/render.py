@@ -188,6 +188,21 @@ def face_shapes(model, vertices: np.ndarray, truth: dict, texture=None, normals:
 # --------------------------------------------------------------------------------------------
 # One face scene: the description, in memory, rendered, written
 # --------------------------------------------------------------------------------------------
+def light_arguments(light) -> dict:
+    """The keyword arguments of :meth:`FaceScene.render` (and ``scene``, ``description``) for a
+    capture's :class:`~mifaces.capture.Light`: its position or direction and intensity, or its
+    environment map."""
+    if light.environment:
+        if light.envmap is None:
+            raise ValueError(f"light {light.name!r} is an unknown environment map: estimate it first")
+        return {"envmap": light.envmap}
+    if light.directional:
+        return {"light_direction": light.direction, "intensity": light.intensity}
+    if light.position is None:
+        raise ValueError(f"light {light.name!r} has no position (load the capture with calibrate=True)")
+    return {"light_position": light.position, "intensity": light.intensity}
+
+
 class FaceScene:
     """A face's region meshes, built once, in scenes under any per-region
     BRDF, albedo map, camera and light.

@@ -69,7 +69,8 @@ from scipy.spatial.transform import Rotation
 from skimage.transform import resize
 
 from .capture import Camera, read_ground_truth
-from .environment import SKY_SUN_ANGLES, camera_frame, sky_emitter, studio_environment
+from .capture.types import RELATIVE_IRRADIANCE
+from .environment import SKY_SUN_ANGLES, camera_frame, dominant_direction, sky_emitter, studio_environment
 from .geometry import load_geometry
 from .model.regions import REGIONS
 from .model.mesh import mitsuba_mesh
@@ -194,11 +195,16 @@ def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -
     :data:`LIGHT_CANDIDATES`, those whose smallest angle (seen from
     ``centre``) to every capture light and to each other is largest; point
     lights at the capture lights' mean distance with the first light's
-    intensity (directional lights for a capture of directional lights).
+    intensity (directional lights for a capture of directional lights, and for one lit by environment
+    maps: irradiance :data:`~mifaces.capture.types.RELATIVE_IRRADIANCE`, away from where most of
+    each map's light comes from).
     Each dict also holds ``angle_to_capture`` (degrees)."""
     lights = list(capture.lights)
-    directional = lights[0].directional
-    if directional:
+    environment = all(light.environment for light in lights)
+    directional = lights[0].directional or environment
+    if environment:  # where most of each map's light comes from
+        used = np.array([dominant_direction(light.envmap, capture.camera) for light in lights], np.float64)
+    elif directional:
         used = np.array([light.direction for light in lights], np.float64)
     else:
         used = np.array([light.position for light in lights], np.float64) - centre
@@ -214,7 +220,8 @@ def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -
     out = []
     for k in chosen:
         angle = float(np.degrees(np.arccos(np.clip(used @ candidates[k], -1, 1))).min())
-        light = {"intensity": np.asarray(lights[0].intensity, np.float64), "angle_to_capture": angle}
+        intensity = np.full(3, RELATIVE_IRRADIANCE) if environment else np.asarray(lights[0].intensity, np.float64)
+        light = {"intensity": intensity, "angle_to_capture": angle}
         if directional:
             light["light_direction"] = candidates[k]
         else:

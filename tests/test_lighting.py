@@ -74,7 +74,7 @@ def test_unestimable_lights_are_named(tmp_path):
         estimate_lights(capture, [fitted("m0", (0, 0, -1)), fitted("m1", (0, 0, -1), status="not_converged")])
     environment = _capture(tmp_path, [{"name": "top", "unknown": True, "kind": "environment"},
                                       {"name": "side", "unknown": True}])
-    with pytest.raises(UnknownLightError, match=r"\['top'\] of kind 'environment'"):
+    with pytest.raises(UnknownLightError, match=r"\['top'\]: their photographs show one pose"):
         estimate_lights(environment, [])
 
 

@@ -248,7 +248,7 @@ def test_measure_writes_the_refined_shapes_it_fits_on(capture_dir, tmp_path, mon
 
 def test_measure_with_unknown_lights_checks_before_fitting(capture_dir, tmp_path, monkeypatch):
     """Unknown lights are estimated with the fitted faces: measure refuses the true geometry, and a
-    kind it cannot estimate (an environment map), naming the lights, before any fit runs."""
+    light it cannot estimate (an environment map seen in one pose), naming the lights, before any fit runs."""
     import shutil
 
     import mifaces.pipeline as pipeline
@@ -268,6 +268,9 @@ def test_measure_with_unknown_lights_checks_before_fitting(capture_dir, tmp_path
     with pytest.raises(ValueError, match=rf"lights \['{names[0]}'.*are unknown: .* geometry must be 'fitted'"):
         pipeline.measure(tmp_path / "m", copy, models=("phong",), geometry="ground-truth", progress=False)
     data["lights"][0]["kind"] = "environment"
+    for m in data["measurements"]:  # the environment's photographs all of one pose: its map is not estimable
+        if m["light"] == names[0]:
+            m["pose"] = "one"
     (copy / MANIFEST).write_text(json.dumps(data))
-    with pytest.raises(UnknownLightError, match=rf"\['{names[0]}'\] of kind 'environment'"):
+    with pytest.raises(UnknownLightError, match=rf"\['{names[0]}'\]: their photographs show one pose"):
         pipeline.measure(tmp_path / "m", copy, models=("phong",), progress=False)

@@ -38,7 +38,7 @@ from .. import brdf as brdf_models
 from ..capture import Capture, load_capture
 from ..geometry import load_geometry
 from ..model.regions import REGIONS, regions_present, texel_regions_of_mesh
-from ..render import FaceScene
+from ..render import FaceScene, light_arguments
 from .diffuse import AlbedoOffsets, DiffuseMap, refine_diffuse
 from .fitting import RegionFit, SubsetSchedule, fit_regions
 from .io import FILES, write_estimate
@@ -292,9 +292,10 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         estimate.seconds["total"] = time.perf_counter() - t0
     if out is not None:
         first = next(m for m in capture.measurements if m.name == estimate.measurements[0])
-        lamp = capture.light(first.light)
-        write_estimate(estimate, out, FaceScene(face, shapes[first.name]), capture.camera, lamp.position,
-                       lamp.intensity, light_direction=lamp.direction, force=force)
+        lamp = light_arguments(capture.light(first.light))
+        write_estimate(estimate, out, FaceScene(face, shapes[first.name]), capture.camera, lamp.get("light_position"),
+                       lamp.get("intensity"), light_direction=lamp.get("light_direction"), envmap=lamp.get("envmap"),
+                       force=force)
     return estimate
 
 

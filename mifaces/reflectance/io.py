@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 from .. import brdf as brdf_models
 from ..files import (ResultSetError, atomic_write, read_exr, result_set, verify_set, write_exr,
                      write_json, write_png)
+from ..environment import environment_emitter
 from ..render import FaceScene, scene_xml
 
 if TYPE_CHECKING:
@@ -36,7 +37,8 @@ if TYPE_CHECKING:
 
 #: The fitted BRDF's files in an output folder.
 FILES = {"brdf": "brdf.json", "albedo": "albedo.exr", "preview": "albedo.png", "scene": "scene.xml",
-         "normals": "normals.exr", "specular": "specular.exr", "albedo_std": "albedo_std.exr"}
+         "normals": "normals.exr", "specular": "specular.exr", "albedo_std": "albedo_std.exr",
+         "environment": "environment.exr"}
 #: Samples per pixel of ``scene.xml`` (``mi.load_file(path, spp=N)`` overrides it).
 SCENE_SPP = 64
 #: The key path of the sample count in a scene dict.
@@ -46,7 +48,7 @@ KIND = "brdf"
 
 
 def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_position, intensity, *,
-                   light_direction=None, force: bool = False) -> dict[str, Path]:
+                   light_direction=None, envmap=None, force: bool = False) -> dict[str, Path]:
     """Write ``brdf.json``, ``albedo.exr`` (+ ``albedo.png``), ``meshes/*.ply``
     and ``scene.xml`` into folder ``out`` as one result set
     (:func:`mifaces.files.result_set`): all of them or none.
@@ -63,13 +65,18 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
     light_direction : (3,) array, optional
         A directional light instead (world frame, towards the light;
         ``intensity`` is then its irradiance).
+    envmap : (H, W, 3) array, optional
+        An environment map instead (:attr:`mifaces.capture.Light.envmap`),
+        written beside the scene as ``environment.exr``.
     force : bool
         Replace a fitted BRDF that ``out`` holds (else a ``FileExistsError``).
     """
     out = Path(out)
     document = estimate.to_json()
     normals, specular = estimate.normal_texture(), estimate.specular_texture()
-    scene = face.description(document, camera, light_position, intensity, spp=SCENE_SPP, albedo=FILES["albedo"],
+    environment = None if envmap is None else environment_emitter(FILES["environment"], camera)
+    scene = face.description(document, camera, light_position, intensity, environment, spp=SCENE_SPP,
+                             albedo=FILES["albedo"],
                              light_direction=light_direction, normals=None if normals is None else FILES["normals"],
                              specular=None if specular is None else FILES["specular"])
     # (description checks the BRDF and the light before anything is written)
@@ -88,11 +95,13 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
             write_exr(folder / FILES["specular"], specular)
         if estimate.albedo.std is not None:
             write_exr(folder / FILES["albedo_std"], estimate.albedo.std)
+        if envmap is not None:
+            write_exr(folder / FILES["environment"], envmap)
         face.write_meshes(folder)
         with atomic_write(folder / FILES["scene"], "w") as f:
             f.write(scene_xml(scene, {"spp": SPP_PATH}, comment))
     optional = {"normals": normals is not None, "specular": specular is not None,
-                "albedo_std": estimate.albedo.std is not None}
+                "albedo_std": estimate.albedo.std is not None, "environment": envmap is not None}
     return {key: out / name for key, name in FILES.items() if optional.get(key, True)}
 
 

@@ -65,10 +65,11 @@ from scipy.ndimage import binary_erosion
 from .. import brdf as brdf_models
 from ..model.regions import REGIONS
 from ..progress import progress as progress_bar
-from ..render import FaceScene, mitsuba_sensor
+from ..render import FaceScene, light_arguments, mitsuba_sensor
 from .albedo_correction import AlbedoCorrection
 from .parameters import ParameterSpace
-from .refine_schedule import ALBEDO, LIGHT_GAIN, IterateAverage, RefineSchedule, holdout_pixels
+from .refine_schedule import (ALBEDO, LIGHT_GAIN, IterateAverage, RefineSchedule, environment_variable,
+                              holdout_pixels)
 
 if TYPE_CHECKING:
     from .estimate import BRDFEstimate
@@ -122,6 +123,8 @@ class _Photograph:
     #: the measurement's light, and its index in :attr:`RefineProblem.lights`
     light: str = ""
     light_index: int = 0
+    #: the scene parameter of an environment light's map, if the light is one
+    envmap_key: str | None = None
 
 
 def _box_mean(a: np.ndarray, k: int) -> np.ndarray:
@@ -153,12 +156,8 @@ def _light(capture, measurement, lamp_radius: float | None) -> tuple[dict, dict 
     """The keyword arguments of :meth:`FaceScene.scene` for the measurement's
     light, and the sphere lamp that replaces its point light (or None)."""
     light = capture.light(measurement.light)
-    if light.directional:
-        return {"light_direction": light.direction, "intensity": light.intensity}, None
-    if light.position is None:
-        raise ValueError(f"measurement {measurement.name!r}: light {light.name!r} has no position")
-    kwargs = {"light_position": light.position, "intensity": light.intensity}
-    if not lamp_radius:
+    kwargs = light_arguments(light)
+    if "light_position" not in kwargs or not lamp_radius:
         return kwargs, None
     radiance = np.asarray(light.intensity, np.float64) / (np.pi * lamp_radius ** 2)  # same intensity, I = L π r²
     return kwargs, {"type": "sphere", "center": [float(x) for x in light.position], "radius": float(lamp_radius),
@@ -186,7 +185,7 @@ class PhotographView:
     scale : float
         1/μ_k: multiplies a render to compare it with ``target``.
     light_kind : str
-        ``'point'``, ``'directional'`` or ``'sphere'``.
+        ``'point'``, ``'directional'``, ``'sphere'`` or ``'environment'``.
     """
 
     scene: mi.Scene
@@ -243,7 +242,8 @@ def photograph_view(capture, m, face: FaceScene, brdf: dict, albedo: np.ndarray,
     k = downsample
     camera = capture.camera
     kwargs, lamp = _light(capture, m, lamp_radius)
-    kind = "sphere" if lamp is not None else "directional" if "light_direction" in kwargs else "point"
+    kind = ("sphere" if lamp is not None else "directional" if "light_direction" in kwargs
+            else "environment" if "envmap" in kwargs else "point")
     description = face.scene(brdf, albedo, camera, normals=normals, specular=specular, **kwargs)
     labels = coverage(mi.load_dict({"type": "scene", **{key: v for key, v in description.items()
                                                       if key.startswith("face_")}}), camera, region_map)
@@ -343,6 +343,15 @@ class RefineProblem:
             self.variables[ALBEDO] = self.albedo.start()
         if schedule.light_gain_learning_rate is not None and len(self.lights) > 1:
             self.variables[LIGHT_GAIN] = np.zeros(len(self.lights))
+        #: estimated environment light -> (its map's shape, its start's mean log radiance)
+        self.environments = {}
+        if schedule.environment_learning_rate is not None:
+            for name in self.lights:
+                light = capture.light(name)
+                if light.environment and light.estimated and light.envmap is not None:
+                    log = np.log(np.maximum(np.asarray(light.envmap, np.float64), ENVMAP_FLOOR))
+                    self.environments[name] = (log.shape, float(log.mean()))
+                    self.variables[environment_variable(name)] = log
 
     def _photograph(self, capture, m, vertices, face_model, brdf, albedo, scale, lamp_radius) -> _Photograph:
         view = photograph_view(capture, m, FaceScene(face_model, vertices), brdf, albedo, self.estimate.region_map,
@@ -365,8 +374,9 @@ class RefineProblem:
             region = names.get(int(label), "skin")
             pixels[region] = pixels.get(region, 0) + int(n)
         held = holdout_pixels(view.mask, self.schedule.holdout, self.schedule.holdout_block, self.rng)
+        envmap_key = next((key for key in view.params.keys() if key == "environment.data"), None)
         return _Photograph(m.name, view.scene, view.params, view.target, mask_weight(view.mask & ~held),
-                           mask_weight(held), view.scale, keys, albedo_keys, pixels, m.light)
+                           mask_weight(held), view.scale, keys, albedo_keys, pixels, m.light, envmap_key=envmap_key)
 
     # -- the parameters as Dr.Jit values of the unconstrained variables --------
     def values(self, variables: dict) -> dict:
@@ -387,7 +397,26 @@ class RefineProblem:
             texture = self.albedo.albedo(variables[ALBEDO])
             for key in photo.albedo_keys:
                 photo.params[key] = texture
+        if photo.light in self.environments and photo.envmap_key is not None:
+            photo.params[photo.envmap_key] = padded_envmap(self.environment_map(photo.light, variables))
         photo.params.update()
+
+    def environment_map(self, light: str, variables: dict):
+        """Estimated environment light ``light``'s map (H, W, 3) as a differentiable TensorXf: exp of
+        its log-radiance variable, the mean log held at its start's."""
+        shape, mean = self.environments[light]
+        x = variables[environment_variable(light)]
+        return mi.TensorXf(dr.exp(x.array - dr.mean(x.array) + mean), shape)
+
+    def environment_prior(self, variables: dict):
+        """The estimated maps' smoothness prior (:attr:`RefineSchedule.environment_smoothness`): mi.Float."""
+        total = mi.Float(0.0)
+        for light, (shape, _) in self.environments.items():
+            x = variables[environment_variable(light)].array
+            for a, b in _neighbour_pairs(shape):
+                d = dr.gather(mi.Float, x, a) - dr.gather(mi.Float, x, b)
+                total += dr.mean(d * d)
+        return self.schedule.environment_smoothness * total
 
     def gain(self, photo: _Photograph, variables: dict):
         """The factor on ``photo``'s light, exp(g_l - mean g) (differentiable), or 1 where the light
@@ -409,8 +438,9 @@ class RefineProblem:
         the fitted pixels'): a differentiable mi.Float."""
         self.set(photo, variables)
         image = mi.render(photo.scene, photo.params, spp=spp, seed=seed, seed_grad=seed + 1)
-        return image_loss(image * (photo.scale * self.gain(photo, variables)), photo.target,
+        loss = image_loss(image * (photo.scale * self.gain(photo, variables)), photo.target,
                           photo.weight if weight is None else weight, self.schedule.epsilon)
+        return loss + self.environment_prior(variables) if self.environments and weight is None else loss
 
     def total_loss(self, variables: dict, spp: int, seed: int = 1 << 20) -> dict:
         """Mean E_k over the photographs on the fitted and on the held-out pixels (no gradients;
@@ -440,6 +470,35 @@ class RefineProblem:
                 texture = np.asarray(self.albedo.albedo(variables[ALBEDO]), np.float32)
             albedo = dataclasses.replace(albedo, albedo=texture, std=None)
         return dataclasses.replace(self.estimate, fits=fits, albedo=albedo, refinement=refinement)
+
+    def environment_maps(self, variables: dict) -> dict:
+        """Estimated environment light -> its map (H, W, 3) float32 at ``variables``."""
+        with dr.suspend_grad():
+            return {light: np.asarray(self.environment_map(light, variables), np.float32)
+                    for light in self.environments}
+
+
+#: Radiance an estimated map's texel is floored at before its logarithm is taken (the map's units).
+ENVMAP_FLOOR = 1e-4
+
+
+def _neighbour_pairs(shape) -> list:
+    """Flat index pairs (UInt32, UInt32) of each (H, W, 3) texel and channel with its right
+    neighbour (wrapping round) and the one below."""
+    h, w, c = shape
+    index = np.arange(h * w * c).reshape(h, w, c)
+    right = (index.ravel(), np.roll(index, -1, axis=1).ravel())
+    below = (index[:-1].ravel(), index[1:].ravel())
+    return [(mi.UInt32(a.astype(np.uint32)), mi.UInt32(b.astype(np.uint32))) for a, b in (right, below)]
+
+
+def padded_envmap(envmap: mi.TensorXf) -> mi.TensorXf:
+    """An (H, W, 3) map as Mitsuba's ``envmap`` stores its ``data``: (H, W + 2, 3), the last column
+    before the first and the first after the last (it wraps round in azimuth)."""
+    h, w, c = envmap.shape
+    rows, cols, chans = np.meshgrid(np.arange(h), (np.arange(w + 2) - 1) % w, np.arange(c), indexing="ij")
+    index = mi.UInt32(((rows * w + cols) * c + chans).ravel().astype(np.uint32))
+    return mi.TensorXf(dr.gather(mi.Float, envmap.array, index), (h, w + 2, c))
 
 
 class _kernel_history:
@@ -473,7 +532,7 @@ def _rates(problem: RefineProblem, schedule: RefineSchedule, iteration: int) -> 
 def _optimizer(problem: RefineProblem, schedule: RefineSchedule):
     opt = mi.ad.Adam(lr=schedule.learning_rate)
     for name, value in problem.variables.items():
-        if name == ALBEDO:
+        if name == ALBEDO or np.ndim(value) == 3:  # the albedo correction, an environment map
             opt[name] = mi.TensorXf(np.ascontiguousarray(value, np.float32))
         elif name == LIGHT_GAIN:
             opt[name] = mi.Float(np.asarray(value, np.float32))
@@ -532,7 +591,8 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
     opt = _optimizer(problem, schedule)
     t_build = time.perf_counter()
     with dr.suspend_grad():
-        start = {k: mi.TensorXf(opt[k]) if k == ALBEDO else mi.Float(opt[k]) for k in problem.variables}
+        start = {k: mi.TensorXf(opt[k]) if isinstance(opt[k], mi.TensorXf) else mi.Float(opt[k])
+                 for k in problem.variables}
     before = problem.total_loss(start, schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
     t_before = time.perf_counter()
     history, average = [], IterateAverage(problem.variables, schedule)
@@ -566,6 +626,8 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
         "photographs": [p.name for p in problem.photographs],
         "regions": sorted(problem.spaces), "region_pixels": problem.pixels,
         "light_gains": problem.light_gains(result if accepted else start),
+        "environment_maps": {light: m.tolist() for light, m in
+                             problem.environment_maps(result if accepted else start).items()},
         "accepted": bool(accepted), "reason": reason,
         "loss_before": before["fit"], "loss_after": after["fit"],
         "heldout_loss_before": before["heldout"], "heldout_loss_after": after["heldout"],

@@ -17,8 +17,14 @@ MAX_RATE_SCALE = 2.0
 #: did not fit: this fraction of the blocks of each photograph's face pixels, blocks of this side
 #: (render pixels), drawn at random.
 HOLDOUT, HOLDOUT_BLOCK = 0.2, 4
-#: Names of the refinement's variables that are not a region's: the albedo correction and the lights' log gains.
-ALBEDO, LIGHT_GAIN = "albedo", "light_gain"
+#: Names of the refinement's variables that are not a region's: the albedo correction and the lights' log gains;
+#: an estimated environment light's log radiance map is ``ENVIRONMENT + ":" + its name``.
+ALBEDO, LIGHT_GAIN, ENVIRONMENT = "albedo", "light_gain", "environment"
+
+
+def environment_variable(light: str) -> str:
+    """The name of the refinement's variable holding estimated environment light ``light``'s log map."""
+    return f"{ENVIRONMENT}:{light}"
 
 
 def holdout_pixels(mask: np.ndarray, fraction: float, block: int, rng: np.random.Generator) -> np.ndarray:
@@ -62,6 +68,16 @@ class RefineSchedule:
         lamp 1.5 m away), which moves its irradiance by twice that, and a
         refinement whose lights are held absorbs that into the glossy
         parameters. None holds the lights as calibrated.
+    environment_learning_rate : float or None
+        With a number, an estimated environment light's map
+        (:attr:`mifaces.capture.Light.estimated`) is a variable too, its log
+        radiance per texel with this step, the mean log held (the overall
+        scale is the albedo's); None holds it at the texture-space estimate.
+        A given map is always held.
+    environment_smoothness : float
+        Weight of the estimated map's smoothness prior: this times the mean
+        squared difference of neighbouring texels' log radiance, added to
+        the loss (the loss is about the relative pixel error).
     decay : float
         The learning rates fall from their value to ``decay`` times it over
         the iterations (half a cosine).
@@ -119,6 +135,8 @@ class RefineSchedule:
     albedo_learning_rate: float | None = 0.02
     albedo_cell: int = 2
     light_gain_learning_rate: float | None = 0.005
+    environment_learning_rate: float | None = 0.03
+    environment_smoothness: float = 0.05
     decay: float = 0.1
     epsilon: float = 0.02
     evaluation_spp: int = 16
@@ -139,7 +157,9 @@ class RefineSchedule:
                 raise ValueError(f"RefineSchedule.{name} must be >= 1, got {getattr(self, name)!r}")
         if self.max_depth < 2:
             raise ValueError(f"RefineSchedule.max_depth must be >= 2 (direct light), got {self.max_depth!r}")
-        for name in ("albedo_learning_rate", "light_gain_learning_rate"):
+        if not self.environment_smoothness >= 0:
+            raise ValueError(f"RefineSchedule.environment_smoothness must be >= 0, got {self.environment_smoothness!r}")
+        for name in ("albedo_learning_rate", "light_gain_learning_rate", "environment_learning_rate"):
             if getattr(self, name) is not None and not getattr(self, name) > 0:
                 raise ValueError(f"RefineSchedule.{name} must be > 0 or None, got {getattr(self, name)!r}")
         if self.pixel_reference is not None and self.pixel_reference < 1:
@@ -151,8 +171,11 @@ class RefineSchedule:
         """Learning rate of variable ``name`` (``albedo`` or a region's, seen
         by ``pixels``) at ``iteration``: from its value (scaled by
         ``pixel_reference``) down to ``decay`` times it by half a cosine."""
-        rate = {ALBEDO: self.albedo_learning_rate, LIGHT_GAIN: self.light_gain_learning_rate}.get(
-            name, self.learning_rate)
+        if name.startswith(ENVIRONMENT + ":"):
+            rate, pixels = self.environment_learning_rate, None
+        else:
+            rate = {ALBEDO: self.albedo_learning_rate, LIGHT_GAIN: self.light_gain_learning_rate}.get(
+                name, self.learning_rate)
         if name not in (ALBEDO, LIGHT_GAIN) and self.pixel_reference is not None and pixels:
             rate *= min(MAX_RATE_SCALE, float(np.sqrt(self.pixel_reference / pixels)))
         t = iteration / max(self.iterations - 1, 1)
@@ -192,4 +215,4 @@ class IterateAverage:
         return {name: mi.TensorXf(v) if isinstance(variables[name], mi.TensorXf) else v for name, v in out.items()}
 
 
-__all__ = ["RefineSchedule", "IterateAverage"]
+__all__ = ["RefineSchedule", "IterateAverage", "environment_variable"]

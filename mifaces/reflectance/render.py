@@ -17,7 +17,7 @@ from ..capture import Capture, load_capture
 from ..files import check_writable
 from ..geometry import load_geometry
 from ..model import MorphableModel
-from ..render import FaceScene, save_image
+from ..render import FaceScene, light_arguments, save_image
 from .estimate import BRDFEstimate
 from .io import load_estimate
 
@@ -82,7 +82,10 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
         vertices = turn(vertices, yaw, -capture.camera.rotation[1])  # the camera's up direction in the world frame
     lamp = capture.light(next(m.light for m in capture.measurements if m.name == name))
     if light_position is None and light_direction is None and envmap is None:
-        light_position, light_direction = lamp.position, lamp.direction
+        if lamp.environment:
+            envmap = light_arguments(lamp)["envmap"]
+        else:
+            light_position, light_direction = lamp.position, lamp.direction
     if intensity is None and (light_position is not None or light_direction is not None):
         intensity = lamp.intensity
     image = FaceScene(face, vertices).render(data, albedo, capture.camera, light_position, intensity, envmap,

@@ -33,6 +33,7 @@ from ..files import atomic_path
 from ..model.geometry import tangent_frames
 from ..model.mesh import mitsuba_mesh
 from ..progress import progress as progress_bar
+from .environment import LUMINANCE, equivalent_lights
 from ..model.regions import texel_regions_of_mesh
 from ..model.texture_space import rasterize
 
@@ -276,7 +277,8 @@ def _unoccluded(scene, origin, target, normal, offset: float) -> np.ndarray:
 
 def measurement_samples(camera, light_position, intensity, pixels, vertices, triangles, uv, coverage, *,
                         saturated=None, scale: float = np.pi, erosion: int = 1, min_cosine: float = MIN_COSINE,
-                        name: str = "", offset: float | None = None, light_direction=None) -> ReflectanceSamples:
+                        name: str = "", offset: float | None = None, light_direction=None,
+                        envmap=None) -> ReflectanceSamples:
     """Reflectance samples of one photograph (paper sec. 4.3, 5.3).
 
     Parameters
@@ -299,6 +301,10 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
     light_direction : (3,) array, optional
         A directional light instead of the point light: unit vector in the
         world frame towards the light.
+    envmap : (H, 2H, 3) array, optional
+        An environment map instead (:attr:`mifaces.capture.Light.envmap`): each
+        texel is read as lit by the directional light that stands for the map
+        there (:func:`mifaces.reflectance.environment.equivalent_lights`).
 
     Returns
     -------
@@ -319,7 +325,11 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
     offset = 1e-4 * size if offset is None else offset
     scene = mi.load_dict({"type": "scene", "face": mitsuba_mesh(vertices, triangles, uv)})
     to_camera = camera.position[None, :] - p
-    if light_direction is not None:  # a distant light: one direction, no falloff
+    if envmap is not None:  # per texel the directional light that stands for the map
+        l_world, e = equivalent_lights(scene, p, n, envmap, camera, offset, 10.0 * size)
+        dist_light = np.full(len(p), np.inf)
+        light_target = None
+    elif light_direction is not None:  # a distant light: one direction, no falloff
         l_world = np.broadcast_to(np.asarray(light_direction, np.float64) /
                                   np.linalg.norm(light_direction), p.shape).copy()
         dist_light = np.full(len(p), np.inf)
@@ -334,7 +344,12 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
     front = (cos_l > 0) & (cos_v > 0)
     visible, lit = np.zeros(len(p), bool), np.zeros(len(p), bool)
     visible[front] = _unoccluded(scene, p[front], np.broadcast_to(camera.position, p[front].shape), n[front], offset)
-    lit[front] = _unoccluded(scene, p[front], light_target[front], n[front], offset)
+    if light_target is None:  # the map's light arrives unoccluded along its irradiance vector, by construction
+        lit[front] = (e[front] @ LUMINANCE) > 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            intensity = e / np.where(cos_l > 0, cos_l, np.nan)[:, None]  # irradiance at normal incidence
+    else:
+        lit[front] = _unoccluded(scene, p[front], light_target[front], n[front], offset)
     # the photograph at each texel's projection (bilinear; pixel centres at integers)
     xy = camera.project(p)
     inside = (xy[:, 0] >= 0) & (xy[:, 0] <= camera.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= camera.height - 1)
@@ -434,13 +449,14 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
         if light.unknown:
             raise ValueError(f"measurement {m.name!r}: light {light.name!r} is unknown: estimate it with the face "
                              "first (mifaces measure, or mifaces.lighting.estimate_lights on the shape fits)")
-        if light.position is None and not light.directional:
+        if light.position is None and not light.directional and light.envmap is None:
             raise ValueError(f"measurement {m.name!r}: light {light.name!r} has no position "
                              "(load the capture with calibrate=True)")
         parts.append(measurement_samples(capture.camera, light.position, light.intensity, m.image.pixels,
                                          geometry[m.name], face_model.triangles, face_model.uv, coverage,
                                          saturated=m.image.saturated, scale=scale, erosion=erosion,
-                                         min_cosine=min_cosine, name=m.name, light_direction=light.direction))
+                                         min_cosine=min_cosine, name=m.name, light_direction=light.direction,
+                                         envmap=light.envmap))
     samples = ReflectanceSamples.concatenate(parts)
     samples.label = samples.region(region_map).astype(np.uint8)
     samples.region_map = region_map

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..environment import dominant_direction
 from ..model import MorphableModel, load_model
 from ..progress import progress as progress_bar
 from ..status import CONVERGED, DIVERGED, NOT_CONVERGED
@@ -171,9 +172,12 @@ def fit_measurement(measurement, camera, model="builtin", light_position=None, s
     for key, source in lights.items():
         if source is None:
             continue
-        if source.unknown:  # estimated: from its stated guess, else frontal (Fitter.initial)
+        if source.unknown or source.environment:  # a free directed light: from its guess, else frontal
             if source.guess is not None:
                 initial.setdefault(f"{key}.light_angles", light_angles(camera.rotation @ source.guess))
+            elif source.envmap is not None:  # a given map: from where most of its light comes
+                initial.setdefault(f"{key}.light_angles",
+                                   light_angles(camera.rotation @ dominant_direction(source.envmap, camera)))
         elif source.directional:
             initial.setdefault(f"{key}.light_angles", start_light_angles(source, camera, camera.position))
         else:
@@ -415,7 +419,7 @@ def _member_fit(fit: ShapeFit, measurement, capture, model, schedule: ShapeSched
     where it was the joint fit's photograph ``key``; its own light fitted on the shared face where the
     capture does not know it (:func:`fit_light`); else :func:`shared_fit`."""
     light = capture.light(measurement.light) if measurement.light else None
-    if key is not None or light is None or not light.unknown or not fit.converged:
+    if key is not None or light is None or not light.unknown or light.environment or not fit.converged:
         return shared_fit(fit, measurement, capture, key)
     options = {k: v for k, v in options.items() if k != "use_diffuse"}
     return fit_light(fit, measurement, capture.camera, model, light, schedule, **options)
@@ -536,7 +540,8 @@ def _companions(capture, others) -> list:
     (an unknown light is fitted afterwards on the pose's face, :func:`fit_light`),
     :data:`JOINT_PHOTOGRAPHS` at most with the leader, in the capture's order, each with its light."""
     given = [(m, capture.light(m.light) if m.light else None) for m in others]
-    return [(m, light) for m, light in given if light is None or not light.unknown][:JOINT_PHOTOGRAPHS - 1]
+    return [(m, light) for m, light in given
+            if light is None or not (light.unknown or light.environment)][:JOINT_PHOTOGRAPHS - 1]
 
 
 def _own_lights(fit: ShapeFit) -> ShapeFit:

@@ -43,7 +43,7 @@ def start_light_angles(light, camera, head_world) -> tuple[float, float] | None:
     """Start angles (:func:`light_angles`) of a capture's :class:`~mifaces.capture.Light` seen
     from the world point ``head_world`` (mm): a directional light's direction, a point light's
     direction from there, turned into the camera frame; None for a light with neither."""
-    if light is None or (not light.directional and light.position is None):
+    if light is None or light.environment or (not light.directional and light.position is None):
         return None
     towards, _ = light.towards(np.asarray(head_world, np.float64)[None])
     return light_angles(camera.rotation @ towards[0])
@@ -168,6 +168,8 @@ def light_axis_angle(capture, measurement) -> float:
     fp = np.array(list(measurement.feature_points.values()))
     distance = max(float(np.linalg.norm(cam.translation)), 1.0)
     centre = cam.to_world(cam.pixel_rays(fp.mean(0)) * distance)
+    if light.environment:  # light from everywhere: no one axis
+        return 0.0
     if light.unknown and light.guess is not None:  # its stated guess, as the fit starts from it
         towards = np.asarray(light.guess, np.float64)[None]
     elif not light.directional and light.position is None:  # unknown (taken as frontal, where it starts)

@@ -1,0 +1,168 @@
+"""Environment lights in the texture-space stages (mifaces.reflectance.environment, mifaces.lighting):
+given maps in the capture format, the light a map sends to a surface, a map estimated from
+photographs, and the files an estimate writes."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mifaces.capture import Camera, CaptureError, load_capture
+from mifaces.capture.types import RELATIVE_IRRADIANCE
+from mifaces.environment import (LUMINANCE, dominant_direction, environment_emitter, studio_environment,
+                                 texel_directions, to_world)
+from mifaces.files import read_exr, write_exr
+from mifaces.lighting import LIGHTS_FILE, LIGHTS_FOLDER, write_lights, write_lights_picture
+from mifaces.reflectance.environment import (equivalent_lights, estimate_map, reduced_map, unoccluded_peak)
+from mifaces.reflectance.refine import padded_envmap
+from mifaces.render import mitsuba_sensor
+from test_real_capture import write_directional
+
+#: A camera 1 m along +z looking at the origin (the world's y up is the image's up).
+CAMERA = Camera(32, 32, 200.0, 200.0, 15.5, 15.5, np.zeros(0), np.diag([1.0, -1.0, -1.0]), np.array([0, 0, 1000.0]))
+
+
+def _with_map(tmp_path, envmap, **entry):
+    """test_real_capture's capture with its first light replaced by a given environment map."""
+    write_exr(tmp_path / "lights" / "room.exr", envmap)
+
+    def change(data):
+        data["lights"][0] = {"name": "room", "kind": "environment", "map": "lights/room.exr", **entry}
+        for m in data["measurements"]:
+            if m["light"] == "top":
+                m["light"] = "room"
+    return write_directional(tmp_path, change)
+
+
+def test_a_given_map_loads_as_an_environment_light(tmp_path):
+    envmap = studio_environment(16)
+    capture = load_capture(_with_map(tmp_path, envmap, scale=2.0), detect=False)
+    room = capture.light("room")
+    assert room.environment and not room.unknown and not room.directional and room.position is None
+    np.testing.assert_allclose(room.envmap, 2.0 * envmap, rtol=1e-3)  # the stated scale applied (EXR half floats)
+    with pytest.raises(ValueError, match="'room' is an environment map: it has no one direction"):
+        room.towards(np.zeros((1, 3)))
+
+
+@pytest.mark.parametrize("entry, envmap, message", [
+    ({"direction": [0, 0, -1]}, None, "light 'room' is an environment map: it takes no 'direction'"),
+    ({"kind": "directional"}, None, "light 'room' has a 'map' but kind 'directional'"),
+    ({}, np.ones((8, 8, 3), np.float32), "invalid envmap size 8x8"),
+    ({}, -np.ones((8, 16, 3), np.float32), "has NaN, infinite or negative radiance"),
+    ({"map": "lights/none.exr"}, None, "'lights/none.exr' is not an OpenEXR file in the capture"),
+])
+def test_a_bad_given_map_is_named(tmp_path, entry, envmap, message):
+    with pytest.raises(CaptureError) as error:
+        load_capture(_with_map(tmp_path, studio_environment(8) if envmap is None else envmap, **entry), detect=False)
+    assert message in str(error.value), str(error.value)
+
+
+def test_texel_directions_are_where_mitsuba_reads_the_map():
+    """A map with one bright texel: Mitsuba's envmap is brightest in that texel's direction."""
+    width, height = 16, 8
+    image = np.zeros((height, width, 3), np.float32)
+    image[2, 5] = 1.0
+    emitter = mi.load_dict({"type": "envmap", "bitmap": mi.Bitmap(image)})
+    d, solid = texel_directions(width, height)
+    assert solid.sum() == pytest.approx(4 * np.pi)
+    si = dr.zeros(mi.SurfaceInteraction3f, len(d))
+    si.wi = mi.Vector3f(np.ascontiguousarray(-d.T, np.float32))
+    value = np.array(emitter.eval(si))[0]
+    assert np.argmax(value) == 2 * width + 5 and value.max() == pytest.approx(1.0, rel=1e-3)
+    # and the refinement writes a map into Mitsuba's padded layout
+    np.testing.assert_array_equal(np.array(padded_envmap(mi.TensorXf(image))), np.array(mi.traverse(emitter)["data"]))
+
+
+def test_the_maps_irradiance_matches_mitsubas_render():
+    """A white Lambertian sphere under the studio map: the render reads E / pi where E is
+    equivalent_lights' irradiance (the map reduced to 32 x 16 texels)."""
+    radius = 50.0
+    envmap = studio_environment(32)
+    scene = mi.load_dict({"type": "scene", "integrator": {"type": "direct"}, "sensor": mitsuba_sensor(CAMERA, 256),
+                          "emitter": environment_emitter(envmap, CAMERA),
+                          "ball": {"type": "sphere", "radius": radius,
+                                   "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [1, 1, 1]}}}})
+    image = np.array(mi.render(scene, spp=256))[..., :3].reshape(-1, 3)
+    ys, xs = np.mgrid[0:CAMERA.height, 0:CAMERA.width]
+    d = CAMERA.pixel_rays(np.stack([xs, ys], -1).reshape(-1, 2).astype(float)) @ CAMERA.rotation
+    b = d @ CAMERA.position
+    disc = b * b - (CAMERA.position @ CAMERA.position - radius ** 2)
+    hit = disc > 0
+    p = CAMERA.position + (-b[hit] - np.sqrt(disc[hit]))[:, None] * d[hit]
+    n = p / radius
+    inner = n[:, 2] > 0.5  # away from the silhouette's partly covered pixels
+    occluder = mi.load_dict({"type": "scene", "ball": {"type": "sphere", "radius": radius}})
+    direction, e = equivalent_lights(occluder, p[inner], n[inner], envmap, CAMERA, 1e-3, 1e4)
+    ratio = image[hit][inner] @ LUMINANCE / (e @ LUMINANCE / np.pi)
+    assert np.median(ratio) == pytest.approx(1.0, abs=0.02)
+    assert np.percentile(np.abs(ratio - 1), 90) < 0.06
+    # the equivalent light comes from the lit side: the key panel is on the image's left (+azimuth)
+    key = dominant_direction(envmap, CAMERA)
+    assert key @ CAMERA.direction(40.0, 30.0) > 0.8 and np.median(direction @ key) > 0.5
+
+
+def _rotation(yaw, pitch):
+    a, b = np.radians(yaw), np.radians(pitch)
+    turn = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    tilt = np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+    return tilt @ turn
+
+
+def test_estimate_map_recovers_the_light_with_one_albedo():
+    """Texels of random albedo and normal seen in six head poses under the studio map: the
+    estimated map gives every normal towards the camera the true irradiance (up to the stated
+    scale), although no photograph alone tells the map from the albedo."""
+    rng = np.random.default_rng(3)
+    size = (16, 8)
+    direction, radiance, _ = reduced_map(studio_environment(32), size)
+    d, solid = texel_directions(*size)
+    truth = radiance.reshape(size[1], size[0], 3)
+    normals = rng.normal(size=(600, 3))
+    normals[:, 2] = np.abs(normals[:, 2]) + 0.3
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    albedo = rng.uniform(0.2, 0.8, (len(normals), 3))
+    parts = []
+    for yaw, pitch in ((-30, 0), (-15, 12), (0, -12), (15, 15), (30, 0), (0, 0)):
+        t = np.clip(normals @ _rotation(yaw, pitch).T @ d.T, 0, None) * solid
+        pixels = albedo / np.pi * (t @ radiance) * (1 + 0.01 * rng.normal(size=(len(normals), 3)))
+        parts.append((pixels, t, np.arange(len(normals))))
+    estimate, info = estimate_map(*zip(*parts), size=size, rounds=20)
+    assert estimate.shape == (8, 16, 3) and estimate.min() >= 0
+    assert unoccluded_peak(estimate) @ LUMINANCE == pytest.approx(RELATIVE_IRRADIANCE, rel=1e-6)
+    cosines = np.clip(d @ d.T, 0, None) * solid
+    front = d[:, 2] > 0.2
+    e_true = cosines @ truth.reshape(-1, 3) * (RELATIVE_IRRADIANCE / (unoccluded_peak(truth) @ LUMINANCE))
+    e_fit = cosines @ estimate.reshape(-1, 3)
+    def error(e):
+        e = e * (np.mean(e_true[front]) / np.mean(e[front]))  # the shape of the light, not its scale
+        return np.sqrt(np.mean((e - e_true)[front] ** 2) / np.mean(e_true[front] ** 2))
+
+    assert error(e_fit) < 0.08, error(e_fit)
+    assert error(cosines @ np.ones((len(d), 3))) > 0.3  # a uniform light would not pass
+    assert info["residual"] < 0.03 and info["texels"] == len(normals)
+    with pytest.raises(ValueError, match="too few usable texels"):
+        estimate_map([p[0][:5] for p in parts], [p[1][:5] for p in parts], [p[2][:5] for p in parts], size)
+
+
+def test_an_estimated_map_is_written_and_shown(tmp_path):
+    capture = load_capture(_with_map(tmp_path / "c", studio_environment(8)), detect=False)
+    estimated = replace(capture.light("room"), envmap=studio_environment(8), estimated=True, relative=True)
+    capture = replace(capture, lights=(estimated, *capture.lights[1:]))
+    document = json.loads(write_lights(tmp_path / "res", capture).read_text())
+    entry = {e["name"]: e for e in document["lights"]}["room"]
+    assert entry["kind"] == "environment" and entry["estimated"] and entry["map"] == f"{LIGHTS_FOLDER}/room.exr"
+    np.testing.assert_allclose(read_exr(tmp_path / "res" / entry["map"])[..., :3], studio_environment(8), rtol=1e-3)
+    assert "environment maps: latitude-longitude" in document["map"]
+    assert (tmp_path / "res" / LIGHTS_FILE).is_file()
+    write_lights_picture(tmp_path / "res" / "lights.png", capture)
+    assert (tmp_path / "res" / "lights.png").stat().st_size > 1000
+
+
+def test_to_world_places_the_maps_centre_towards_the_camera():
+    centre = np.array([[0.0, 0.0, 1.0]])  # the map frame's +z: u = 1/2, the centre column
+    np.testing.assert_allclose(to_world(centre, CAMERA)[0], CAMERA.position / np.linalg.norm(CAMERA.position))
