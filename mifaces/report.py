@@ -167,11 +167,18 @@ def lights_markdown(report: dict) -> list[str]:
         return []
     lights = report["lights"]
     lines = ["", "## Lights estimated from the photographs", "", f"![lights]({lights['picture']})", "",
-             f"Note: {lights['note']}.", "", "| light | direction (world, towards the light) | intensity (relative) | "
-             "photographs | spread (deg) |", "|---|---|---|---|---|"]
-    for e in lights["estimates"]:
-        lines.append(f"| {e['name']} | {', '.join(f'{v:+.3f}' for v in e['direction'])} | "
-                     f"{np.mean(e['intensity']):.3f} | {len(e.get('photographs', []))} | {e.get('spread_deg', 0.0):.1f} |")
+             f"Note: {lights['note']}."]
+    directed = [e for e in lights["estimates"] if e["kind"] != "environment"]
+    maps = [e for e in lights["estimates"] if e["kind"] == "environment"]
+    if directed:
+        lines += ["", "| light | direction (world, towards the light) | intensity (relative) | photographs | "
+                  "spread (deg) |", "|---|---|---|---|---|"]
+        lines += [f"| {e['name']} | {', '.join(f'{v:+.3f}' for v in e['direction'])} | {np.mean(e['intensity']):.3f} | "
+                  f"{len(e.get('photographs', []))} | {e.get('spread_deg', 0.0):.1f} |" for e in directed]
+    if maps:
+        lines += ["", "| environment light | map | size | photographs | residual (relative RMS) |", "|---|---|---|---|---|"]
+        lines += [f"| {e['name']} | [{e['map']}]({e['map']}) | {e['size'][0]}x{e['size'][1]} | "
+                  f"{len(e.get('photographs', []))} | {e.get('residual', float('nan')):.3f} |" for e in maps]
     return lines
 
 

@@ -70,7 +70,8 @@ from skimage.transform import resize
 
 from .capture import Camera, read_ground_truth
 from .capture.types import RELATIVE_IRRADIANCE
-from .environment import SKY_SUN_ANGLES, camera_frame, dominant_direction, sky_emitter, studio_environment
+from .environment import (LUMINANCE, SKY_SUN_ANGLES, camera_frame, dominant_direction, sky_emitter,
+                          studio_environment)
 from .geometry import load_geometry
 from .model.regions import REGIONS
 from .model.mesh import mitsuba_mesh
@@ -151,21 +152,22 @@ def region_texels(region_map: np.ndarray, label: int, count: int = UV_SAMPLES, s
 
 
 def brdf_rmse(truth: dict, fit: dict, region: str, true_albedo, fit_albedo, uv: np.ndarray,
-              grid: int = GRID, truth_maps: dict | None = None) -> float | None:
+              grid: int = GRID, truth_maps: dict | None = None, scale: float = 1.0) -> float | None:
     """The relative BRDF error of one region (module docstring): truth and fit
     (``brdf.json`` documents) at texture coordinates ``uv`` (k, 2), with the
     diffuse reflectances ``true_albedo`` and ``fit_albedo`` (RGB). None where
     the truth's ``eval`` is zero everywhere (a delta BSDF, such as the smooth
     boundary of a subsurface truth). ``truth_maps``: a spatially varying
     truth's parameter textures (:func:`mifaces.studio.varying.map_textures`),
-    read at ``uv``."""
+    read at ``uv``. ``scale`` multiplies the fit's BRDF (a relative estimate's, in the truth's
+    units)."""
     d = hemisphere_grid(grid)
     i, o = np.meshgrid(np.arange(len(d)), np.arange(len(d)), indexing="ij")
     pairs = i.size
     wi, wo = np.tile(d[i.ravel()], (len(uv), 1)), np.tile(d[o.ravel()], (len(uv), 1))
     at = np.repeat(uv, pairs, axis=0)
     f_true = eval_bsdf(region_bsdf(truth, region, rgb(true_albedo), maps=truth_maps), at, wi, wo)
-    f_fit = eval_bsdf(region_bsdf(fit, region, rgb(fit_albedo)), at, wi, wo)
+    f_fit = scale * eval_bsdf(region_bsdf(fit, region, rgb(fit_albedo)), at, wi, wo)
     scale = float(np.sum(f_true ** 2))
     if not scale > 0 or not np.isfinite(scale):
         return None  # a truth without a finite BRDF (a smooth boundary over a scattering medium): no BRDF error
@@ -422,6 +424,19 @@ class Validator:
         return {"heldout_rmse": float(np.sqrt(np.mean(np.square(lights)))),
                 "environment_rmse": float(np.sqrt(np.mean(np.square(environments))))}
 
+    def reflectance_scale(self, estimate, true_albedo: np.ndarray) -> float:
+        """1 for a capture whose reflectance is absolute; for one measured under estimated lights
+        (``brdf.json``'s ``lighting``: light intensity and albedo scale cannot be told apart) the
+        factor that puts it in the truth's units: the median ratio of the true to the fitted
+        albedo's luminance over skin, as a colour chart of known albedo would give it. The BRDF
+        errors and the renders are compared after that factor."""
+        if getattr(estimate, "lighting", None) is None:
+            return 1.0
+        skin = estimate.region_map == REGIONS["skin"]
+        fitted = estimate.albedo.albedo[skin] @ LUMINANCE
+        ok = fitted > 1e-6
+        return float(np.median(true_albedo[skin][ok] @ LUMINANCE / fitted[ok])) if ok.any() else 1.0
+
     def validate(self, estimate) -> tuple[dict, dict]:
         """The measures of one fitted model (module docstring) and its images.
 
@@ -448,25 +463,29 @@ class Validator:
         if r not in self._albedo:
             self._albedo[r] = resize(self.ground_truth.albedo, (r, r, 3), anti_aliasing=True, order=1)
         true_albedo = self._albedo[r]
+        scale = self.reflectance_scale(estimate, true_albedo)
         regions = {}
         for name in estimate.fits:
             texels = estimate.region_map == REGIONS[name]
             uv = region_texels(estimate.region_map, REGIONS[name])
             if len(uv):
                 regions[name] = brdf_rmse(self.ground_truth.brdf, fit, name, true_albedo[texels].mean(axis=0),
-                                          albedo[texels].mean(axis=0), uv, truth_maps=self._truth_maps)
+                                          albedo[texels].mean(axis=0), uv, truth_maps=self._truth_maps,
+                                          scale=scale)
         errors = ground_truth_errors(estimate, self.capture, self.ground_truth)
         images, per_condition = {}, {}
         for name, light in self.conditions.items():
-            images[name] = self.fit_scene.render(fit, albedo, self.camera, spp=self.spp, seed=SEED, **light, **maps)
+            images[name] = scale * self.fit_scene.render(fit, albedo, self.camera, spp=self.spp, seed=SEED, **light,
+                                                         **maps)
             per_condition[name] = relative_rmse(images[name], self.truth[name], self.mask)
         entry = {"brdf_rmse": regions, "albedo_rmse": errors["albedo"]["rmse_sampled"], **self._pooled(per_condition),
-                 "per_condition": per_condition}
+                 "per_condition": per_condition, "reflectance_scale": scale}
         if self._true_shape is not None:
             on_truth = per_condition
             if self._true_shape:
-                on_truth = {name: relative_rmse(self.truth_scene.render(fit, albedo, self.camera, spp=self.spp,
-                                                                        seed=SEED, **light, **maps),
+                on_truth = {name: relative_rmse(scale * self.truth_scene.render(fit, albedo, self.camera,
+                                                                                spp=self.spp, seed=SEED, **light,
+                                                                                **maps),
                                                 self.truth[name], self.truth_mask)
                             for name, light in self.conditions.items()}
             entry.update({f"{k}{TRUE_SHAPE}": v for k, v in self._pooled(on_truth).items()})
