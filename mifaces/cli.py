@@ -35,7 +35,7 @@ from .report import RANKED
 from .shape import fit_shape as fit_shapes
 from .shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
 from .status import CONVERGED
-from .studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
+from .studio.simulate import COMPANIONS, ENVIRONMENTS, PRESETS, simulate as simulate_capture
 
 #: Largest texture resolution R the commands take (R x R texels).
 MAX_TEXTURE = math.isqrt(MAX_IMAGE_PIXELS)
@@ -122,10 +122,13 @@ def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
 @click.option("--companion", default=default(simulate_capture, "companion"), show_default=True,
               type=click.Choice(COMPANIONS),
               help="Companion of each point-light photograph.")
+@click.option("--environment", type=click.Choice(ENVIRONMENTS), default=None,
+              help="Light every photograph by the generated studio or the sun and sky instead of the point lights: "
+                   "the capture states the map as its one environment light; each measurement a head turn.")
 @click.option("--force", is_flag=True, help="Replace a simulated capture at OUT (never a real one).")
 def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None, varying: bool, detail: bool,
              subsurface: bool, measurements: int, resolution: tuple[int, int], seed: int, preset: str | None, spp: int, companion: str,
-             force: bool) -> None:
+             environment: str | None, force: bool) -> None:
     """Simulate a capture session with ground truth into folder OUT (paper sec. 3)."""
     overrides = None
     if brdf_params is not None:
@@ -137,9 +140,11 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
     result = simulate_capture(out, model=face_model, brdf=brdf_model, brdf_params=overrides, measurements=measurements,
                               resolution=resolution, seed=seed, preset=preset, spp=spp, companion=companion,
                               force=force, varying=varying, detail=detail,
-                              subsurface=subsurface)
+                              subsurface=subsurface, environment=environment)
+    lights = (f"the {environment} environment" if environment is not None
+              else f"{result.lights} light{'s' * (result.lights != 1)}")
     click.echo(f"simulated {result.measurements} measurement{'s' * (result.measurements != 1)} under "
-               f"{result.lights} light{'s' * (result.lights != 1)} in {result.seconds:.1f} s "
+               f"{lights} in {result.seconds:.1f} s "
                f"({result.seconds_per_measurement:.1f} s per measurement)")
     click.echo(f"  capture:      {result.path}\n  ground truth: {ground_truth_folder(result.path)}")
 

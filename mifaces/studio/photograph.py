@@ -17,7 +17,7 @@ import numpy as np
 
 from ..capture import Camera
 from ..model.landmarks import FEATURE_POINTS
-from .scene import DIFFUSE_LIGHT, Studio, lamp, point_light, scene, steel_spheres
+from .scene import DIFFUSE_LIGHT, Studio, face_light, lamp, scene, steel_spheres
 
 #: Sensor model: electrons at full scale (shot noise) and read noise (full-scale units).
 FULL_WELL = 20000.0
@@ -42,8 +42,8 @@ class SpherePhotographs:
 
 @dataclass(frozen=True, eq=False)
 class Photographs:
-    """The pictures of one measurement: the point-light photograph and its companions
-    (``diffuse`` or None, ``exposures`` a list of (picture, exposure), maybe empty)."""
+    """The pictures of one measurement: the point-light (or environment-lit) photograph and its
+    companions (``diffuse`` or None, ``exposures`` a list of (picture, exposure), maybe empty)."""
 
     point: np.ndarray
     exposure: float
@@ -91,10 +91,11 @@ def photograph_spheres(studio: Studio, light: int, spp: int, seeds: Iterator[int
 
 def photograph_face(studio: Studio, shapes: dict, light: int, companion: str, spp: int, seeds: Iterator[int],
                     rng: np.random.Generator) -> Photographs:
-    """The face (Mitsuba ``shapes``) under point light ``light``, and its companions:
-    ``'diffuse'`` (a picture under the diffuse light, half the samples), ``'exposures'``
-    (the same render at :data:`EXPOSURE_FACTORS` times the exposure) or ``'both'``."""
-    radiance = render(scene(studio, shapes, point_light(studio, light), spp), spp, next(seeds))
+    """The face (Mitsuba ``shapes``) under point light ``light`` (or the studio's environment,
+    :func:`~mifaces.studio.scene.face_light`), and its companions: ``'diffuse'`` (a picture under
+    the diffuse light, half the samples), ``'exposures'`` (the same render at
+    :data:`EXPOSURE_FACTORS` times the exposure) or ``'both'``."""
+    radiance = render(scene(studio, shapes, face_light(studio, light), spp), spp, next(seeds))
     point = camera_noise(radiance * studio.exposure, rng)
     diffuse, exposures = None, []
     if companion in ("diffuse", "both"):

@@ -4,7 +4,10 @@ A fixed, calibrated camera on the +z axis through the head; point lights on
 a sphere of about :data:`LIGHT_DISTANCE` around the head, in front of the
 face; four steel spheres in a plane facing the camera, around the head, to
 locate each light from; a black room (no geometry but the subject and the
-spheres: the walls return no light). Lengths in mm, world frame.
+spheres: the walls return no light). Or, for a capture lit by an environment
+(:mod:`mifaces.studio.environment_light`), that environment around the same
+camera, no point lights and no spheres, and the head turned differently in
+every photograph (:func:`head_turns`). Lengths in mm, world frame.
 """
 
 from __future__ import annotations
@@ -15,7 +18,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..capture import Camera
+from ..environment import environment_emitter
 from ..render import mitsuba_sensor, rgb
+from .environment_light import EnvironmentLight, environment_light
 
 #: Studio geometry (mm). Camera distance to the head centre, field height there.
 CAMERA_DISTANCE = 1200.0
@@ -32,6 +37,9 @@ SPHERE_OFFSETS = np.array([[-95.0, 95.0, 0.0], [95.0, 95.0, 0.0], [-95.0, -95.0,
 WHITE_LEVEL = 0.5
 #: Up to three poses per light: (yaw, pitch, roll) in degrees, before the subject's jitter.
 POSES = [(0.0, 0.0, 0.0), (-25.0, 0.0, 0.0), (25.0, 0.0, 0.0)]
+#: The head turns of an environment-lit capture spread over these yaw and pitch ranges (degrees).
+TURN_YAW = (-35.0, 35.0)
+TURN_PITCH = (-12.0, 12.0)
 #: Mitsuba's path tracer: shadows and one-bounce-and-more interreflection.
 INTEGRATOR = {"type": "path", "max_depth": 4, "hide_emitters": False}
 #: The diffuse light of the companion and steel-sphere outline pictures: uniform white from all around.
@@ -63,6 +71,13 @@ class Studio:
     integrator : dict
         The Mitsuba integrator of its pictures (:data:`INTEGRATOR`; the
         volumetric path tracer for a translucent subject).
+    poses : list of (yaw, pitch, roll)
+        The head turns (degrees, before the sitter's jitter) the pose indices
+        of :attr:`schedule` refer to: :data:`POSES`, or :func:`head_turns`.
+    environment : EnvironmentLight or None
+        The environment lighting every photograph instead of the point light
+        (then ``light_positions`` is empty, ``exposure`` 1 and ``per_light``
+        one condition holding every measurement).
     """
 
     camera: Camera
@@ -74,6 +89,8 @@ class Studio:
     sphere_centers: np.ndarray
     sensor: dict
     integrator: dict = field(default_factory=lambda: dict(INTEGRATOR))
+    poses: list[tuple[float, float, float]] = field(default_factory=lambda: list(POSES))
+    environment: EnvironmentLight | None = None
 
     @property
     def schedule(self) -> list[tuple[int, int]]:
@@ -97,6 +114,20 @@ def light_directions(count: int, rng: np.random.Generator, azimuth=(-70.0, 70.0)
     return np.array(out)
 
 
+def head_turns(count: int, rng: np.random.Generator) -> list[tuple[float, float, float]]:
+    """``count`` head turns (yaw, pitch, roll = 0; degrees) that see the face from varied sides:
+    yaw stratified over :data:`TURN_YAW` (one jittered stratum each), pitch over
+    :data:`TURN_PITCH` in golden-ratio order, so that neighbours in yaw differ in pitch."""
+    golden = (math.sqrt(5) - 1) / 2
+    turns = []
+    for i in range(count):
+        u = (i + 0.5 + rng.uniform(-0.3, 0.3)) / count
+        v = ((i + 0.5) * golden + rng.uniform(-0.05, 0.05)) % 1.0
+        turns.append((TURN_YAW[0] + u * (TURN_YAW[1] - TURN_YAW[0]),
+                      TURN_PITCH[0] + v * (TURN_PITCH[1] - TURN_PITCH[0]), 0.0))
+    return turns
+
+
 def studio_camera(width: int, height: int, head: np.ndarray) -> Camera:
     """The fixed camera: on the +z axis through the head centre at
     :data:`CAMERA_DISTANCE`, looking at it, :data:`FIELD_HEIGHT` mm of field
@@ -109,10 +140,18 @@ def studio_camera(width: int, height: int, head: np.ndarray) -> Camera:
 
 
 def set_up_studio(width: int, height: int, head: np.ndarray, measurements: int, rng: np.random.Generator,
-                  spp: int) -> Studio:
+                  spp: int, environment: str | None = None) -> Studio:
     """The studio for ``measurements`` photographs of a head centred at ``head``:
     ceil(K / 3) light conditions with up to three poses each (the deficit from
-    the last lights), the lights placed with ``rng``."""
+    the last lights), the lights placed with ``rng``; or, with ``environment``
+    (:data:`mifaces.studio.environment_light.ENVIRONMENTS`), one condition, that
+    environment, with ``measurements`` head turns (:func:`head_turns`)."""
+    if environment is not None:
+        camera = studio_camera(width, height, head)
+        return Studio(camera=camera, head=head, light_positions=np.zeros((0, 3)),
+                      intensity=np.full(3, np.pi * LIGHT_DISTANCE ** 2), exposure=1.0, per_light=[measurements],
+                      sphere_centers=head + SPHERE_OFFSETS, sensor=mitsuba_sensor(camera, spp),
+                      poses=head_turns(measurements, rng), environment=environment_light(environment, camera))
     n_lights = math.ceil(measurements / 3)
     per_light = [3] * n_lights
     for i in range(3 * n_lights - measurements):  # the deficit (at most 2) from the last lights
@@ -158,6 +197,14 @@ def lamp(studio: Studio, light: int) -> dict:
     radiance = studio.intensity / (np.pi * LAMP_RADIUS ** 2)
     return {"lamp": {"type": "sphere", "center": studio.light_positions[light].tolist(), "radius": LAMP_RADIUS,
                      "emitter": {"type": "area", "radiance": rgb(radiance)}}}
+
+
+def face_light(studio: Studio, light: int) -> dict:
+    """What lights the face photographs of condition ``light``: the studio's environment
+    (its map in pixel value: the photographs' exposure is 1), or the point light."""
+    if studio.environment is not None:
+        return {"environment": environment_emitter(studio.environment.map, studio.camera)}
+    return point_light(studio, light)
 
 
 def point_light(studio: Studio, light: int) -> dict:

@@ -7,7 +7,11 @@ between measurements; per measurement a point-light photograph and a
 companion under diffuse light (or an exposure series); per light the two
 steel-sphere pictures the light is located from; camera noise and exposure.
 Rendering is Mitsuba's path tracer (shadows and interreflection) in a black
-room (no geometry but the subject: the walls return no light).
+room (no geometry but the subject: the walls return no light). With
+``environment``, every photograph is lit instead by the generated studio or
+by the sun and sky, which the capture states as one given environment light
+(:mod:`mifaces.studio.environment_light`), and the head turns differently in
+each measurement.
 
 The steps: :mod:`mifaces.studio.subject` (the face, its albedo, its poses),
 :mod:`mifaces.studio.scene` (the studio and its Mitsuba scenes),
@@ -72,11 +76,13 @@ from ..render import face_shapes, region_bsdf, region_meshes
 from .photograph import albedo_texture, annotate, photograph_face, photograph_spheres, visible_feature_points
 from . import subsurface as translucent
 from .detail import fine_detail, span_residual
+from .environment_light import ENVIRONMENTS, check_environment
 from .scene import set_up_studio
 from .subject import head_pose, make_subject, with_detail
 from .truth import DIGITS, brdf_with_overrides
 from .varying import VARYING, map_textures, region_means, varying_maps
-from .write import ground_truth, true_measurement, write_manifest, write_photographs, write_sphere_photographs
+from .write import (ground_truth, light_names, pose_name, true_measurement, write_environment, write_manifest,
+                    write_photographs, write_sphere_photographs)
 
 PRESETS = {"paper": {"measurements": 22}}
 #: Most measurements one simulated capture holds.
@@ -106,7 +112,7 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
              measurements: int = 6, resolution: tuple[int, int] = (512, 512), seed: int = 0,
              preset: str | None = None, spp: int = 64, companion: str = "diffuse",
              albedo_resolution: int = 1024, progress: bool = True, force: bool = False, varying: bool = False,
-             detail: bool = False, subsurface: bool = False) -> SimulationResult:
+             detail: bool = False, subsurface: bool = False, environment: str | None = None) -> SimulationResult:
     """Simulate a capture session and write it, with ground truth, to ``out``.
 
     Parameters
@@ -125,7 +131,8 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
         Overrides in the ``brdf.json`` layout (``{"model", "regions": {region: {param: value}}}``),
         with the plugin's (or built-in's) parameter names.
     measurements : int
-        Number of measurements K: ceil(K / 3) light conditions with up to three poses each.
+        Number of measurements K: ceil(K / 3) light conditions with up to three poses each
+        (under an ``environment``: K head turns).
     resolution : (width, height)
     seed : int
         Identity, albedo detail, lights, poses, expressions, noise and Monte Carlo
@@ -157,6 +164,16 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
         (:mod:`mifaces.studio.subsurface`), rendered with Mitsuba's
         volumetric path tracer: much slower, use few pixels and samples.
         Needs the Cook–Torrance truth (the boundary's reflection).
+    environment : {'studio', 'sky'}, optional
+        Light every photograph by an environment instead of the point lights
+        (:data:`mifaces.studio.environment_light.ENVIRONMENTS`): the generated studio
+        (:func:`mifaces.environment.studio_environment`) or Mitsuba's sun and sky with the
+        sun at :data:`mifaces.environment.SKY_SUN_ANGLES` about the camera, baked into a map
+        (:func:`mifaces.environment.bake_environment`). The capture states that map as its one
+        given environment light (``lights/<name>.exr``, pixel value, the frame of
+        :func:`mifaces.environment.environment_emitter`), the photographs are rendered with
+        exactly it; no steel spheres, no point lights, no white target; each measurement
+        its own head turn (:func:`mifaces.studio.scene.head_turns`).
 
     Returns
     -------
@@ -172,6 +189,7 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     t_start = time.perf_counter()
     measurements, (width, height) = _check_arguments(measurements, resolution, preset, companion, spp,
                                                      albedo_resolution, seed)
+    check_environment(environment)
     out = check_result_target(out, KIND, force)  # before the work: writable, and nothing to lose
     face_model = load_model(model)
     truth = brdf_with_overrides(brdf, brdf_params)
@@ -184,10 +202,13 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
                          f"{sorted(VARYING)}; got {truth['model']!r}")
     # what the photographs show stays in ground_truth/: the set manifest records only the set's shape
     info = {"measurements": measurements, "resolution": [width, height], "companion": companion}
+    if environment is not None:
+        info["environment"] = environment
     with result_set(out, KIND, force=force, info=info) as folder:
         lights, render_seconds = _simulate_into(folder, face_model, truth, measurements, width, height, seed, spp, companion,
                                                 albedo_resolution, progress, {"varying": varying, "detail": detail,
-                                                                           "subsurface": subsurface})
+                                                                           "subsurface": subsurface},
+                                                environment)
     return SimulationResult(out, measurements, lights, time.perf_counter() - t_start, render_seconds)
 
 
@@ -213,38 +234,45 @@ def _truth_subject(face_model, truth: dict, rng: np.random.Generator, seed: int,
 
 def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width: int, height: int, seed: int,
                    spp: int, companion: str, albedo_resolution: int, progress: bool,
-                   variation: dict) -> tuple[int, list[float]]:
+                   variation: dict, environment: str | None = None) -> tuple[int, list[float]]:
     """The simulation of :func:`simulate`, written into folder ``out``: the number of light
     conditions and each measurement's render time."""
     rng = np.random.default_rng(seed)  # one generator, drawn from in a fixed order: subject, lights, frames
     subject, maps, recorded, description = _truth_subject(face_model, truth, rng, seed, albedo_resolution, variation)
     texture, textures = albedo_texture(subject.albedo), map_textures(maps)
-    studio = set_up_studio(width, height, subject.head, measurements, rng, spp)
+    studio = set_up_studio(width, height, subject.head, measurements, rng, spp, environment)
+    if studio.environment is not None:
+        description.update(studio.environment.description)
     if variation["subsurface"]:
         studio = replace(studio, integrator=translucent.INTEGRATOR)
     seeds = itertools.count(seed * 1000 + 1)  # Monte Carlo seed of each render, in order
     frames = measurements * (1 + (companion in ("diffuse", "both")) + (companion in ("exposures", "both")))
-    bar = progress_bar(total=frames + 2 * len(studio.per_light), desc="simulating", unit="frame", enabled=progress)
+    spheres = 0 if studio.environment is not None else 2 * len(studio.per_light)
+    bar = progress_bar(total=frames + spheres, desc="simulating", unit="frame", enabled=progress)
 
-    lights = []
-    for li in range(len(studio.per_light)):
-        lights.append(write_sphere_photographs(out, studio, li, photograph_spheres(studio, li, spp, seeds, rng)))
-        bar.update(2)
+    if studio.environment is not None:
+        lights = [write_environment(out, studio.environment)]
+    else:
+        lights = []
+        for li in range(len(studio.per_light)):
+            lights.append(write_sphere_photographs(out, studio, li, photograph_spheres(studio, li, spp, seeds, rng)))
+            bar.update(2)
+    light_name = light_names(studio)
     entries, true_measurements, render_seconds = [], [], []
     names = visible_feature_points(face_model)
     for index, (li, pi) in enumerate(studio.schedule):
         t0 = time.perf_counter()
         name = f"m{index:02d}"
-        pose = head_pose(face_model, subject, pi, rng)
+        pose = head_pose(face_model, subject, studio.poses[pi], rng)
         vertices = pose.vertices.astype(np.float32)
         shapes = true_face_shapes(face_model, vertices, truth, texture, textures, variation["subsurface"])
         photographs = photograph_face(studio, shapes, li, companion, spp, seeds, rng)
         bar.update(1 + (photographs.diffuse is not None) + bool(photographs.exposures))
-        entry = write_photographs(out, name, li, pi, photographs)
+        entry = write_photographs(out, name, light_name[li], pose_name(studio, li, pi), photographs)
         # feature points: the visible landmarks, as an annotator would click them
         entry["feature_points"], exact = annotate(shapes, pose.vertices, face_model, names, studio.camera, rng)
         entries.append(entry)
-        true_measurements.append(true_measurement(name, li, pose, exact, face_model))
+        true_measurements.append(true_measurement(name, light_name[li], pose, exact, face_model))
         render_seconds.append(time.perf_counter() - t0)
     bar.close()
 

@@ -10,7 +10,6 @@ import scipy.ndimage as ndi
 
 from ..model.geometry import head_centre, rotation_matrix
 from ..model.texture_space import bake
-from .scene import POSES
 from .skin import paint_skin
 
 
@@ -75,11 +74,12 @@ def with_detail(subject: Subject, detail: np.ndarray) -> Subject:
     return replace(subject, neutral=(subject.neutral + detail).astype(np.float32), detail=np.asarray(detail, np.float64))
 
 
-def head_pose(face_model, subject: Subject, pose: int, rng: np.random.Generator) -> HeadPose:
-    """The subject at pose ``pose`` of :data:`mifaces.studio.scene.POSES`, as a sitter holds it:
-    jittered by up to 3° yaw, 4° pitch, 2° roll, moved by 3 mm (standard deviation) and with a
-    small random expression."""
-    yaw, pitch, roll = POSES[pose]
+def head_pose(face_model, subject: Subject, turn: tuple[float, float, float],
+              rng: np.random.Generator) -> HeadPose:
+    """The subject turned by ``turn`` (yaw, pitch, roll in degrees: one of the studio's poses,
+    :attr:`mifaces.studio.scene.Studio.poses`), as a sitter holds it: jittered by up to 3° yaw,
+    4° pitch, 2° roll, moved by 3 mm (standard deviation) and with a small random expression."""
+    yaw, pitch, roll = turn
     yaw += rng.uniform(-3, 3)
     pitch += rng.uniform(-4, 4)
     roll += rng.uniform(-2, 2)
