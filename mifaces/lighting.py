@@ -60,7 +60,7 @@ RELATIVE_NOTE = ("lights estimated from the photographs: their intensities are r
 
 
 class UnknownLightError(ValueError):
-    """An unknown light that cannot be estimated: of a kind not estimated yet, or whose
+    """An unknown light that cannot be estimated: a map seen in one pose only, or one whose
     photographs got no converged face to estimate it on."""
 
 
@@ -393,7 +393,9 @@ def write_lights_picture(path, capture: Capture, photographs: dict | None = None
     lights = [light for light in capture.lights if light.estimated]
     if not lights:
         return
-    fig, axes = plt.subplots(2, len(lights), figsize=(1.9 * len(lights), 4.2), squeeze=False)
+    widths = [3.4 if light.environment else 1.9 for light in lights]  # a map is twice as wide as high
+    fig, axes = plt.subplots(2, len(lights), figsize=(max(sum(widths), 3.6), 4.2), squeeze=False,
+                             gridspec_kw={"width_ratios": widths})
     for col, light in enumerate(lights):
         if photographs is not None and light.name in photographs:
             photo = photographs[light.name]
@@ -423,6 +425,8 @@ def write_lights_picture(path, capture: Capture, photographs: dict | None = None
                                fontsize=7)
         for ax in axes[:, col]:
             ax.axis("off")
-    fig.suptitle("Estimated lights (camera view; azimuth towards the image's right, relative intensity)", fontsize=8)
+    fig.suptitle("Estimated lights (camera view; azimuth towards\nthe image's right; relative intensity)"
+                 if any(not light.environment for light in lights) else "Estimated environment light\n(relative radiance)",
+                 fontsize=8)
     fig.tight_layout()
     save_figure(fig, path, dpi=100)

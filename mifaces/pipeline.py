@@ -52,7 +52,7 @@ from .shape.fit import model_source
 from .shape.io import write_fit, write_index
 from .shape_errors import capture_shape_errors
 from .studio import simulate
-from .validation import Validator, relative_rmse
+from .validation import Validator, coverage, relative_rmse
 
 #: Models ``measure`` fits unless told otherwise.
 MODELS = NAMES
@@ -222,8 +222,10 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     t = time.perf_counter()
     samples = capture_samples(capture, shapes, face, resolution, progress=progress)
     if unknown:  # the intensities that give the face one albedo under every estimated light
-        capture = balance_intensities(capture, samples)
-        samples = capture_samples(capture, shapes, face, resolution, progress=progress)
+        balanced = balance_intensities(capture, samples)
+        if balanced is not capture:
+            capture = balanced
+            samples = capture_samples(capture, shapes, face, resolution, progress=progress)
     timings["reflectance_samples"] = time.perf_counter() - t
     if unknown:
         report["lights"] = {"file": write_lights(out, capture).name, "picture": LIGHTS_PICTURE, "note": RELATIVE_NOTE,
@@ -374,6 +376,6 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
     rendered = scene.render(brdf, albedo, capture.camera, spp=spp, **lamp, **maps)
     relit = scene.render(brdf, albedo, capture.camera, spp=spp, **novel, **maps)
     photo = first.image.pixels
-    face_pixels = photo.mean(axis=2) > 0.02 * photo.max()
+    face_pixels = coverage(scene, capture.camera)  # the fitted face's pixels, whatever the background shows
     entry["training_rmse"] = relative_rmse(rendered, photo, face_pixels)
     return entry, (model, photo, rendered, relit, estimate)

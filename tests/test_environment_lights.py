@@ -166,3 +166,50 @@ def test_an_estimated_map_is_written_and_shown(tmp_path):
 def test_to_world_places_the_maps_centre_towards_the_camera():
     centre = np.array([[0.0, 0.0, 1.0]])  # the map frame's +z: u = 1/2, the centre column
     np.testing.assert_allclose(to_world(centre, CAMERA)[0], CAMERA.position / np.linalg.norm(CAMERA.position))
+
+
+@pytest.fixture(scope="module")
+def studio_capture(tmp_path_factory):
+    """A small capture of three head turns under the generated studio map."""
+    from mifaces.studio import simulate
+
+    out = tmp_path_factory.mktemp("studio") / "capture"
+    simulate(out, environment="studio", measurements=3, resolution=(96, 96), spp=8, albedo_resolution=128,
+             progress=False, seed=4)
+    return out
+
+
+def test_measure_estimates_a_hidden_map_with_the_face(studio_capture, tmp_path):
+    """The studio's map hidden: measure estimates it, writes it, refines it with the BRDF, and says
+    that the reflectance is relative."""
+    import shutil
+
+    from mifaces.capture import MANIFEST
+    from mifaces.pipeline import measure
+
+    hidden = tmp_path / "hidden"
+    shutil.copytree(studio_capture, hidden)
+    data = json.loads((hidden / MANIFEST).read_text())
+    true_map = load_capture(studio_capture, detect=False).lights[0].envmap
+    data["lights"] = [{"name": "studio", "unknown": True, "kind": "environment", "size": [16, 8]}]
+    (hidden / MANIFEST).write_text(json.dumps(data))
+    report = measure(tmp_path / "m", hidden, models=("phong",), resolution=64, spp=4, refine=True, progress=False)
+    estimate = report["lights"]["estimates"][0]
+    assert estimate["kind"] == "environment" and estimate["size"] == [16, 8] and estimate["photographs"] == [
+        "m00", "m01", "m02"]
+    envmap = read_exr(tmp_path / "m" / estimate["map"])[..., :3]
+    assert envmap.shape == (8, 16, 3)
+    # the estimate lights the face from where the studio's key light is
+    key = dominant_direction(true_map, load_capture(hidden, detect=False).camera)
+    camera = load_capture(hidden, detect=False).camera
+    assert dominant_direction(envmap, camera) @ key > 0.7
+    brdf = json.loads((tmp_path / "m" / "brdf" / "phong" / "brdf.json").read_text())
+    assert brdf["lighting"]["reflectance"] == "relative"
+    refined = np.asarray(brdf["refinement"]["environment_maps"]["studio"])
+    assert refined.shape == (8, 16, 3) and brdf["refinement"]["lights"] == ["environment"]
+    if brdf["refinement"]["accepted"]:  # the map moved with the BRDF
+        assert np.abs(refined - envmap).max() > 1e-3
+    assert "| environment light | map |" in (tmp_path / "m" / "report.md").read_text()
+    # the fitted face's scene is lit as its first photograph was: by the estimated map, beside it
+    assert (tmp_path / "m" / "brdf" / "phong" / "environment.exr").is_file()
+    assert 'value="environment.exr"' in (tmp_path / "m" / "brdf" / "phong" / "scene.xml").read_text()

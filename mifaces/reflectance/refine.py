@@ -322,9 +322,13 @@ class RefineProblem:
                 pixels[region] = pixels.get(region, 0) + n
         self.pixels = pixels
         self.lights = sorted({p.light for p in self.photographs})
+        #: the glossy parameters start at the model's start values, not the texture-space fit's
+        self.restarted = (schedule.restart_under_maps and
+                          any(capture.light(name).environment for name in self.lights))
         for photo in self.photographs:
             photo.light_index = self.lights.index(photo.light)
-        self.spaces, self.variables = {}, {}
+        #: each region variable's value in the texture-space fit (where it starts unless restarted)
+        self.spaces, self.variables, self.fitted = {}, {}, {}
         for region, fit in estimate.fits.items():
             if pixels.get(region, 0) < MIN_PIXELS or region in schedule.held_regions:
                 continue
@@ -335,8 +339,12 @@ class RefineProblem:
             if not len(space):
                 continue
             self.spaces[region] = space
-            for i, x in enumerate(space.vector(fit.params)):
+            start = dict(fit.params)
+            if self.restarted:  # the one-direction reading of a map biases the glossy fit: start afresh
+                start.update({k: v for k, v in self.model.start_values().items() if k not in fixed})
+            for i, (x, x_fit) in enumerate(zip(space.vector(start), space.vector(fit.params))):
                 self.variables[f"{region}.{i}"] = float(x)
+                self.fitted[f"{region}.{i}"] = float(x_fit)
         self.albedo = None
         if schedule.albedo_learning_rate is not None:
             self.albedo = AlbedoCorrection(albedo, schedule.albedo_cell)
@@ -349,7 +357,8 @@ class RefineProblem:
             for name in self.lights:
                 light = capture.light(name)
                 if light.environment and light.estimated and light.envmap is not None:
-                    log = np.log(np.maximum(np.asarray(light.envmap, np.float64), ENVMAP_FLOOR))
+                    envmap = np.asarray(light.envmap, np.float64)
+                    log = np.log(np.maximum(envmap, ENVMAP_FLOOR * max(float(envmap.mean()), 1e-30)))
                     self.environments[name] = (log.shape, float(log.mean()))
                     self.variables[environment_variable(name)] = log
 
@@ -478,8 +487,9 @@ class RefineProblem:
                     for light in self.environments}
 
 
-#: Radiance an estimated map's texel is floored at before its logarithm is taken (the map's units).
-ENVMAP_FLOOR = 1e-4
+#: Radiance an estimated map's texel is floored at before its logarithm is taken, relative to the map's mean
+#: (a texel the estimate left black can still brighten, and the smoothness prior stays finite).
+ENVMAP_FLOOR = 1e-2
 
 
 def _neighbour_pairs(shape) -> list:
@@ -593,7 +603,9 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
     with dr.suspend_grad():
         start = {k: mi.TensorXf(opt[k]) if isinstance(opt[k], mi.TensorXf) else mi.Float(opt[k])
                  for k in problem.variables}
-    before = problem.total_loss(start, schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
+    # the texture-space fit's loss, which the result must beat on held-out pixels (also where it restarted)
+    before = problem.total_loss({**start, **{k: mi.Float(v) for k, v in problem.fitted.items()}},
+                                schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
     t_before = time.perf_counter()
     history, average = [], IterateAverage(problem.variables, schedule)
     bar = progress_bar(range(schedule.iterations), desc="refining", unit="it", enabled=progress)
@@ -625,6 +637,7 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
         "lamp_radius_mm": float(lamp_radius) if lamp_radius else None, "lights": sorted(problem.light_kinds),
         "photographs": [p.name for p in problem.photographs],
         "regions": sorted(problem.spaces), "region_pixels": problem.pixels,
+        "restarted": bool(problem.restarted),
         "light_gains": problem.light_gains(result if accepted else start),
         "environment_maps": {light: m.tolist() for light, m in
                              problem.environment_maps(result if accepted else start).items()},

@@ -78,6 +78,13 @@ class RefineSchedule:
         Weight of the estimated map's smoothness prior: this times the mean
         squared difference of neighbouring texels' log radiance, added to
         the loss (the loss is about the relative pixel error).
+    restart_under_maps : bool
+        Where a photograph is lit by an environment map, start the glossy
+        parameters at the model's start values
+        (:meth:`~mifaces.brdf.model.BRDFModel.start_values`) rather than at
+        the texture-space fit's: that fit reads each texel as lit from one
+        direction, which is right for the diffuse part and biased for the
+        glossy one (``docs/unknown_lights.md``).
     decay : float
         The learning rates fall from their value to ``decay`` times it over
         the iterations (half a cosine).
@@ -136,7 +143,8 @@ class RefineSchedule:
     albedo_cell: int = 2
     light_gain_learning_rate: float | None = 0.005
     environment_learning_rate: float | None = 0.03
-    environment_smoothness: float = 0.05
+    environment_smoothness: float = 0.01
+    restart_under_maps: bool = True
     decay: float = 0.1
     epsilon: float = 0.02
     evaluation_spp: int = 16

@@ -1,0 +1,265 @@
+"""What not knowing an environment costs: simulated captures lit by the studio and by the sky.
+
+For each environment (``mifaces simulate --environment studio|sky``: eight head turns under one
+map, the photographs rendered with exactly the map the capture states) and each seed, the
+capture is measured twice with ``mifaces measure`` (Cook-Torrance, the truth's family, fitted
+faces, ``--refine``): once with the map given, once with the light hidden
+(``{"name", "unknown": true, "kind": "environment"}``: the map is estimated with the face,
+``mifaces.lighting.estimate_environments``, and refined with the BRDF). Reported per run:
+
+* skin's BRDF error against the truth (the validation's relative BRDF RMSE) and its fitted
+  parameters' errors;
+* the held-out-light error (novel pose, the validation's held-out directional lights) and the
+  environment error (novel pose, the studio and sky), raw; the estimated run's reflectance is
+  relative, so the validation compares it after one factor (``reflectance_scale``: the median
+  ratio of true to fitted skin albedo, what a colour chart would give);
+* the ratio of the hidden-light run's held-out error to the given-map run's (target: at most 1.5);
+* the estimated map against the true one: the relative error of the irradiance it gives normals
+  facing the camera's half-space (scale removed), before and after the refinement;
+* the extra seconds the estimate costs (``measure``'s timings).
+
+The defaults of the estimate (map size, smoothness, floor, refinement rates, and restarting the
+glossy parameters under a map: ``--tuning``) were set on seed 11 (both environments), which the
+report leaves out; reported seeds default to 1 and 2.
+
+    python validation/environment_lights.py --out out/environment_lights [--seeds 1 2]
+    python validation/environment_lights.py --tuning --out out/environment_lights_tuning
+
+Writes ``validation/results/environment_lights.{json,png}``. SIMULATED.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
+
+import numpy as np
+
+from mifaces.capture import MANIFEST, load_capture
+from mifaces.environment import LUMINANCE, texel_directions
+from mifaces.files import read_exr, save_figure, write_json
+from mifaces.lighting import LIGHTS_FOLDER
+from mifaces.pipeline import measure
+from mifaces.reflectance.environment import reduced_map
+from mifaces.studio import simulate
+from mifaces.studio.environment_light import ENVIRONMENTS
+
+RESULTS = Path(__file__).resolve().parent / "results"
+#: Target of issue 26: the hidden-light run's held-out error over the given-map run's.
+RATIO_TARGET = 1.5
+#: The BRDF model measured: the truth's family.
+MODEL = "cooktorrance"
+#: The seed the estimate's defaults were set on, not reported.
+TUNING_SEED = 11
+#: Photographs per capture, their size and samples per pixel, the texture resolution.
+MEASUREMENTS, IMAGE, SPP, RESOLUTION = 8, 256, 32, 256
+
+
+def hide_lights(capture: Path, out: Path) -> Path:
+    """A copy of ``capture`` whose lights are unknown environment maps (same names)."""
+    shutil.copytree(capture, out)
+    data = json.loads((out / MANIFEST).read_text())
+    data["lights"] = [{"name": light["name"], "unknown": True, "kind": "environment"} for light in data["lights"]]
+    (out / MANIFEST).write_text(json.dumps(data, indent=1))
+    return out
+
+
+def irradiance_error(true_map: np.ndarray, estimate: np.ndarray) -> float:
+    """Relative RMS error of the unoccluded irradiance ``estimate`` gives the normals of the
+    camera's half-space (the map frame's z > 0.2) against ``true_map``'s, the scale removed."""
+    h, w = estimate.shape[:2]
+    _, truth, _ = reduced_map(true_map, (w, h))
+    d, solid = texel_directions(w, h)
+    cosines = np.clip(d @ d.T, 0, None) * solid
+    front = d[:, 2] > 0.2
+    e_true, e_fit = ((cosines @ np.asarray(m, np.float64).reshape(-1, 3))[front] for m in (truth, estimate))
+    e_fit *= (e_true @ LUMINANCE).mean() / (e_fit @ LUMINANCE).mean()
+    return float(np.sqrt(np.mean((e_fit - e_true) ** 2) / np.mean(e_true ** 2)))
+
+
+def run_summary(report: dict, out: Path) -> dict:
+    """What one ``measure`` run says: skin's errors, the novel-pose errors, times."""
+    entry = report["models"][MODEL]
+    validation = entry["validation"]
+    truth = entry.get("ground_truth", {}).get("regions", {}).get("skin", {})
+    refinement = entry.get("refinement", {})
+    return {"skin_brdf_rmse": validation["brdf_rmse"]["skin"],
+            "skin_parameter_errors": {k: v for k, v in truth.items() if isinstance(v, (int, float, list))},
+            "skin": entry["regions"]["skin"],
+            "heldout_rmse": validation["heldout_rmse"], "environment_rmse": validation["environment_rmse"],
+            "heldout_rmse_true_shape": validation.get("heldout_rmse_true_shape"),
+            "reflectance_scale": validation["reflectance_scale"],
+            "shape_floor": report["validation"]["shape_floor"],
+            "refinement_accepted": refinement.get("accepted"), "seconds": report["seconds"]}
+
+
+def one(environment: str, seed: int, out: Path) -> dict:
+    """Both runs of one environment and seed."""
+    folder = out / f"{environment}_{seed}"
+    if folder.exists():
+        shutil.rmtree(folder)
+    capture = folder / "capture"
+    simulate(capture, environment=environment, seed=seed, measurements=MEASUREMENTS, resolution=(IMAGE, IMAGE),
+             spp=SPP, progress=False)
+    hidden = hide_lights(capture, folder / "capture_hidden")
+    runs = {}
+    for name, source in (("given", capture), ("estimated", hidden)):
+        t = time.perf_counter()
+        report = measure(folder / name, source, models=(MODEL,), resolution=RESOLUTION, refine=True, progress=False)
+        runs[name] = run_summary(report, folder / name)
+        print(f"{environment} seed {seed}, map {name}: held-out {runs[name]['heldout_rmse']:.4f}, skin BRDF "
+              f"{runs[name]['skin_brdf_rmse']:.4f} ({time.perf_counter() - t:.0f} s)", flush=True)
+    true_map = load_capture(capture, detect=False).lights[0].envmap
+    light = json.loads((folder / "estimated" / "lights.json").read_text())["lights"][0]
+    estimate = read_exr(folder / "estimated" / light["map"])[..., :3]
+    brdf = json.loads((folder / "estimated" / "brdf" / MODEL / "brdf.json").read_text())
+    refined = brdf.get("refinement", {}).get("environment_maps", {}).get(light["name"])
+    runs["map"] = {"name": light["name"], "size": light["size"], "residual": light.get("residual"),
+                   "irradiance_error": irradiance_error(true_map, estimate),
+                   "irradiance_error_refined": None if refined is None else irradiance_error(true_map, np.asarray(refined)),
+                   "file": str(folder / "estimated" / LIGHTS_FOLDER / f"{light['name']}.exr")}
+    runs["heldout_ratio"] = runs["estimated"]["heldout_rmse"] / runs["given"]["heldout_rmse"]
+    runs["extra_seconds"] = runs["estimated"]["seconds"]["total"] - runs["given"]["seconds"]["total"]
+    return runs
+
+
+def tuning(environment: str, out: Path) -> dict:
+    """The choice of ``RefineSchedule.restart_under_maps`` on the tuning seed: the given map, the
+    true faces, the refinement started from the texture-space fit's glossy parameters and from the
+    model's start values; skin's parameters and the held-out pixels' loss of each."""
+    from mifaces.capture import read_ground_truth
+    from mifaces.reflectance import fit_brdf
+    from mifaces.reflectance.refine_schedule import RefineSchedule
+
+    capture_dir = out / f"tuning_{environment}" / "capture"
+    if capture_dir.parent.exists():
+        shutil.rmtree(capture_dir.parent)
+    simulate(capture_dir, environment=environment, seed=TUNING_SEED, measurements=MEASUREMENTS,
+             resolution=(IMAGE, IMAGE), spp=SPP, progress=False)
+    capture = load_capture(capture_dir)
+    truth = read_ground_truth(capture).brdf["regions"]["skin"]
+    rows = {"truth": truth}
+    for restart in (False, True):
+        t = time.perf_counter()
+        estimate = fit_brdf(capture, MODEL, "ground-truth", resolution=RESOLUTION,
+                            refine=RefineSchedule(restart_under_maps=restart), progress=False)
+        record = estimate.refinement
+        rows["restarted" if restart else "from_the_fit"] = {
+            "skin": {k: v for k, v in estimate.fits["skin"].params.items() if k in truth},
+            "heldout_loss_before": record["heldout_loss_before"], "heldout_loss_after": record["heldout_loss_after"],
+            "accepted": record["accepted"], "seconds": time.perf_counter() - t}
+        print(f"tuning {environment}, restart {restart}: {rows['restarted' if restart else 'from_the_fit']}", flush=True)
+    return rows
+
+
+def figure(document: dict, out: Path, path: Path) -> None:
+    """Per environment (first seed): the true map, the estimate and the refined estimate; and per
+    run the held-out errors with the map given and estimated."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cases = document["cases"]
+    fig, axes = plt.subplots(len(ENVIRONMENTS), 4, figsize=(12, 2.6 * len(ENVIRONMENTS)), squeeze=False)
+    for row, environment in enumerate(ENVIRONMENTS):
+        keys = [k for k in cases if k.startswith(environment + "_")]
+        if not keys:
+            continue
+        case = cases[keys[0]]
+        folder = out / keys[0]
+        true_map = load_capture(folder / "capture", detect=False).lights[0].envmap
+        estimate = read_exr(case["map"]["file"])[..., :3]
+        brdf = json.loads((folder / "estimated" / "brdf" / MODEL / "brdf.json").read_text())
+        refined = brdf.get("refinement", {}).get("environment_maps", {}).get(case["map"]["name"])
+        shown = [("true map", true_map), ("estimated", estimate)]
+        if refined is not None:
+            shown.append(("refined with the BRDF", np.asarray(refined)))
+        for col, (title, image) in enumerate(shown):
+            image = np.asarray(image, np.float64)
+            axes[row, col].imshow(np.clip(image / np.percentile(image, 99.5), 0, 1) ** (1 / 2.2),
+                                  extent=(-180, 180, -90, 90), interpolation="nearest")
+            axes[row, col].set_title(f"{environment}: {title}", fontsize=8)
+            axes[row, col].tick_params(labelsize=6)
+        for col in range(len(shown), 3):
+            axes[row, col].axis("off")
+        ax = axes[row, 3]
+        names = [k for k in keys]
+        x = np.arange(len(names))
+        ax.bar(x - 0.2, [cases[k]["given"]["heldout_rmse"] for k in names], 0.4, label="map given")
+        ax.bar(x + 0.2, [cases[k]["estimated"]["heldout_rmse"] for k in names], 0.4, label="map estimated")
+        ax.set_xticks(x, [k.split("_")[1] for k in names], fontsize=7)
+        ax.set_xlabel("seed", fontsize=7)
+        ax.set_ylabel("held-out relative RMSE", fontsize=7)
+        ax.legend(fontsize=6)
+    fig.suptitle("SIMULATED: environment maps estimated with the face (centre of a map: towards the camera)",
+                 fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--environments", nargs="+", default=list(ENVIRONMENTS), choices=ENVIRONMENTS)
+    parser.add_argument("--results", type=Path, default=RESULTS)
+    parser.add_argument("--tuning", action="store_true",
+                        help=f"instead: the choice of restart_under_maps on seed {TUNING_SEED}, true faces "
+                             "(environment_lights_tuning.json)")
+    args = parser.parse_args(argv)
+    if args.tuning:
+        command = "python validation/environment_lights.py " + " ".join(argv if argv is not None else sys.argv[1:])
+        document = {"simulated": True, "command": command, "model": MODEL, "seed": TUNING_SEED,
+                    "geometry": "ground-truth", "measurements": MEASUREMENTS, "image": IMAGE, "spp": SPP,
+                    "resolution": RESOLUTION,
+                    "what": "the refinement's glossy start under a given map: the texture-space fit's, or the "
+                            "model's start values (RefineSchedule.restart_under_maps)",
+                    "environments": {e: tuning(e, args.out) for e in args.environments}}
+        args.results.mkdir(parents=True, exist_ok=True)
+        write_json(args.results / "environment_lights_tuning.json", document)
+        return 0
+    if TUNING_SEED in args.seeds:
+        print(f"note: seed {TUNING_SEED} is the one the defaults were set on", flush=True)
+    command = "python validation/environment_lights.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    cases = {}
+    for environment in args.environments:
+        for seed in args.seeds:
+            cases[f"{environment}_{seed}"] = one(environment, seed, args.out)
+    summary = {}
+    for environment in args.environments:
+        mine = [c for k, c in cases.items() if k.startswith(environment + "_")]
+        summary[environment] = {
+            "heldout_rmse_given": float(np.mean([c["given"]["heldout_rmse"] for c in mine])),
+            "heldout_rmse_estimated": float(np.mean([c["estimated"]["heldout_rmse"] for c in mine])),
+            "heldout_ratio_max": float(np.max([c["heldout_ratio"] for c in mine])),
+            "skin_brdf_rmse_given": float(np.mean([c["given"]["skin_brdf_rmse"] for c in mine])),
+            "skin_brdf_rmse_estimated": float(np.mean([c["estimated"]["skin_brdf_rmse"] for c in mine])),
+            "irradiance_error": float(np.mean([c["map"]["irradiance_error"] for c in mine])),
+            "irradiance_error_refined": float(np.mean([c["map"]["irradiance_error_refined"] for c in mine
+                                                       if c["map"]["irradiance_error_refined"] is not None] or [np.nan])),
+            "extra_seconds_max": float(np.max([c["extra_seconds"] for c in mine]))}
+    document = {"simulated": True, "command": command, "model": MODEL, "seeds": args.seeds,
+                "tuning_seed": TUNING_SEED, "measurements": MEASUREMENTS, "image": IMAGE, "spp": SPP,
+                "resolution": RESOLUTION, "ratio_target": RATIO_TARGET,
+                "ratio_met": all(s["heldout_ratio_max"] <= RATIO_TARGET for s in summary.values()),
+                "summary": summary, "cases": cases}
+    args.results.mkdir(parents=True, exist_ok=True)
+    write_json(args.results / "environment_lights.json", document)
+    figure(document, args.out, args.results / "environment_lights.png")
+    for environment, s in summary.items():
+        print(f"{environment}: held-out {s['heldout_rmse_given']:.4f} given, {s['heldout_rmse_estimated']:.4f} "
+              f"estimated (worst ratio {s['heldout_ratio_max']:.2f}); skin BRDF {s['skin_brdf_rmse_given']:.4f} / "
+              f"{s['skin_brdf_rmse_estimated']:.4f}; map irradiance error {s['irradiance_error']:.3f} -> "
+              f"{s['irradiance_error_refined']:.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
