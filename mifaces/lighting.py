@@ -44,6 +44,7 @@ from .model.mesh import mitsuba_mesh
 from .model.texture_space import rasterize
 from .progress import progress as progress_bar
 from .reflectance.environment import estimate_map, transport
+from .reflectance.light_balance import log_light_errors
 from .reflectance.samples import _unoccluded, texel_geometry
 from .shape.targets import light_angles
 
@@ -164,11 +165,6 @@ def estimate_lights(capture: Capture, fits) -> Capture:
     return replace(capture, lights=lights, metadata=metadata, white_target=white)
 
 
-#: Samples that compare the photographs' albedos (:func:`balance_intensities`): light and view at
-#: least this cosine from grazing, and texels seen under at least two lights.
-BALANCE_MIN_COSINE = 0.3
-#: Rounds of the alternating robust fit of :func:`balance_intensities`.
-BALANCE_ROUNDS = 20
 
 
 def balance_intensities(capture: Capture, samples) -> Capture:
@@ -182,7 +178,7 @@ def balance_intensities(capture: Capture, samples) -> Capture:
     every light where ``E`` is right, and ``1 / s`` of it where ``E`` is ``s`` times too large. The
     log reflectance is fitted as ``a_texel - log s_light`` by alternating a texel's mean and a
     light's median (robust against highlights and shadows the direction errs on), over the samples
-    of :data:`BALANCE_MIN_COSINE` and the texels seen under two or more lights. Each estimated
+    of :data:`~mifaces.reflectance.light_balance.BALANCE_MIN_COSINE` and the texels seen under two or more lights. Each estimated
     light's RGB intensity is then divided by its ``s``. Given lights keep theirs and anchor the
     others (their mean ``log s`` is 0): the estimated intensities are then in the given lights'
     units. Without given lights, the estimated lights' mean intensity is kept at
@@ -193,37 +189,17 @@ def balance_intensities(capture: Capture, samples) -> Capture:
     Capture
         With ``metadata['estimated_lights'][name]['balance']`` the factor ``s`` of each light.
     """
-    names = list(samples.measurement_names)
-    light_of = {m.name: m.light for m in capture.measurements}
     # environment maps keep the scale their estimate fixed (estimate_environments)
     estimated = [light.name for light in capture.lights if light.estimated and not light.environment]
     given = [light.name for light in capture.lights
              if not light.estimated and not light.unknown and not light.environment]
     if not estimated or len(estimated) + len(given) < 2:
         return capture
-    keep = ((samples.light[:, 2] >= BALANCE_MIN_COSINE) & (samples.view[:, 2] >= BALANCE_MIN_COSINE)
-            & np.all(samples.reflectance > 0, axis=1))
-    which = np.array([light_of[name] for name in names])[samples.measurement[keep]]
-    index = {name: k for k, name in enumerate(estimated + given)}
-    on = np.array([name in index for name in which], bool)
-    lights = np.array([index[name] for name in which[on]], np.int64)
-    texels = samples.texel[keep][on]
-    log_r = np.log(np.mean(samples.reflectance[keep][on], axis=1))
-    pairs = np.unique(texels * len(index) + lights)  # (texel, light) seen
-    shared = np.bincount(pairs // len(index), minlength=int(texels.max(initial=-1)) + 1)[texels] >= 2
-    lights, texels, log_r = lights[shared], texels[shared], log_r[shared]
-    present = set(np.unique(lights).tolist())
-    if not all(index[name] in present for name in estimated):
+    log_s = log_light_errors(capture, samples, estimated + given, anchors=given)  # given lights hold theirs
+    if log_s is None or not all(name in log_s for name in estimated):
         return capture
-    anchors = [index[name] for name in given if index[name] in present]  # given lights hold their intensity
-    log_s = np.zeros(len(index))
-    per_texel = np.bincount(texels)
-    for _ in range(BALANCE_ROUNDS):
-        a = np.bincount(texels, weights=log_r + log_s[lights]) / np.maximum(per_texel, 1)
-        log_s = np.array([np.median(a[texels[lights == k]] - log_r[lights == k]) if k in present else 0.0
-                          for k in range(len(index))])
-        log_s -= log_s[anchors].mean() if anchors else log_s[:len(estimated)].mean()
-    factor = {name: float(np.exp(-log_s[index[name]])) for name in estimated}  # r is 1/s too small: E s too large
+    anchors = [name for name in given if name in log_s]
+    factor = {name: float(np.exp(-log_s[name])) for name in estimated}  # r is 1/s too small: E s too large
     scaled = {light.name: light.intensity * factor[light.name] for light in capture.lights if light.name in factor}
     norm = 1.0 if anchors else RELATIVE_IRRADIANCE / float(np.mean([np.mean(v) for v in scaled.values()]))
     info = {name: dict(capture.metadata.get("estimated_lights", {}).get(name, {}), balance=factor[name] * norm)

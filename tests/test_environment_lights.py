@@ -206,6 +206,7 @@ def test_measure_estimates_a_hidden_map_with_the_face(studio_capture, tmp_path):
     brdf = json.loads((tmp_path / "m" / "brdf" / "phong" / "brdf.json").read_text())
     assert brdf["lighting"]["reflectance"] == "relative"
     refined = np.asarray(brdf["refinement"]["environment_maps"]["studio"])
+    assert brdf["refinement"]["restarted"] is True  # under a map the glossy part starts afresh
     assert refined.shape == (8, 16, 3) and brdf["refinement"]["lights"] == ["environment"]
     if brdf["refinement"]["accepted"]:  # the map moved with the BRDF
         assert np.abs(refined - envmap).max() > 1e-3
@@ -213,3 +214,35 @@ def test_measure_estimates_a_hidden_map_with_the_face(studio_capture, tmp_path):
     # the fitted face's scene is lit as its first photograph was: by the estimated map, beside it
     assert (tmp_path / "m" / "brdf" / "phong" / "environment.exr").is_file()
     assert 'value="environment.exr"' in (tmp_path / "m" / "brdf" / "phong" / "scene.xml").read_text()
+
+
+def test_the_refinement_differentiates_an_estimated_map(studio_capture):
+    """An estimated map is a variable of the refinement: its log radiance gets a gradient from the
+    photographs, its mean is held, and a given map stays fixed."""
+    from mifaces.geometry import load_geometry
+    from mifaces.reflectance import fit_brdf
+    from mifaces.reflectance.refine import RefineProblem
+    from mifaces.reflectance.refine_schedule import RefineSchedule, environment_variable
+
+    capture = load_capture(studio_capture)
+    face, shapes = load_geometry(capture, "ground-truth")
+    estimate = fit_brdf(capture, "phong", "ground-truth", resolution=32, progress=False)
+    schedule = RefineSchedule(spp=2, evaluation_spp=2)
+    given = RefineProblem(estimate, capture, shapes, face, schedule)
+    assert given.restarted and given.environments == {} and not any(k.startswith("environment") for k in given.variables)
+    light = capture.lights[0]
+    estimated = replace(capture, lights=(replace(light, estimated=True, relative=True),))
+    problem = RefineProblem(estimate, estimated, shapes, face, schedule)
+    name = environment_variable(light.name)
+    assert name in problem.variables and problem.variables[name].shape == light.envmap.shape
+    variables = {k: mi.TensorXf(np.asarray(v, np.float32)) if np.ndim(v) == 3 else mi.Float(np.asarray(v, np.float32))
+                 for k, v in problem.variables.items()}
+    dr.enable_grad(variables[name])
+    loss = problem.loss(problem.photographs[0], variables, spp=2, seed=1)
+    dr.backward(loss)
+    gradient = np.asarray(dr.grad(variables[name]))
+    assert np.all(np.isfinite(gradient)) and np.abs(gradient).max() > 0
+    # the mean log radiance is held: a uniform shift of the variable changes no texel
+    shifted = dict(variables, **{name: variables[name] + 1.0})
+    np.testing.assert_allclose(np.asarray(problem.environment_map(light.name, shifted)),
+                               np.asarray(problem.environment_map(light.name, variables)), rtol=1e-4)

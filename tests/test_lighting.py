@@ -196,3 +196,34 @@ def test_report_page_shows_the_lights_picture_when_there_is_one(tmp_path):
     assert LIGHTS_PICTURE not in write_html(tmp_path / "report.html", report).read_text()
     (tmp_path / LIGHTS_PICTURE).write_bytes(b"png")
     assert f'<img src="{LIGHTS_PICTURE}"' in write_html(tmp_path / "report.html", report).read_text()
+
+
+def test_balance_given_lights_finds_a_lamp_that_is_off(tmp_path):
+    """Two given lights over the same texels, 'side' stated 6 % too strong: its samples read 6 %
+    too dark. The balance finds the factor (the two lights' mean kept), corrects the intensities
+    and the samples, and leaves a capture of one given light alone."""
+    from mifaces.reflectance.light_balance import balance_given_lights
+    from mifaces.reflectance.samples import ReflectanceSamples
+
+    capture = load_capture(write_directional(tmp_path), detect=False)
+    rng = np.random.default_rng(0)
+    n = 400
+    albedo = rng.uniform(0.2, 0.6, (n, 1)) * np.ones(3)
+    highlight = np.where(rng.random((n, 1)) < 0.1, 0.5, 0.0)  # a few highlights under 'top' only
+    reflectance = np.concatenate([albedo + highlight, albedo / 1.06]).astype(np.float32)
+    up = np.tile(np.array([[0.0, 0.0, 1.0]], np.float32), (2 * n, 1))
+    samples = ReflectanceSamples(light=up, view=up, reflectance=reflectance, sigma=np.ones(2 * n, np.float32),
+                                 texel=np.tile(np.arange(n, dtype=np.int32), 2),
+                                 measurement=np.repeat(np.arange(2, dtype=np.int16), n), resolution=32,
+                                 measurement_names=("m0", "m1"))
+    balanced, corrected = balance_given_lights(capture, samples)
+    factor = balanced.metadata["light_balance"]
+    assert factor["side"] / factor["top"] == pytest.approx(1.06, rel=1e-3)
+    assert factor["side"] * factor["top"] == pytest.approx(1.0, rel=1e-9)  # the mean kept
+    np.testing.assert_allclose(balanced.light("side").intensity, capture.light("side").intensity / factor["side"])
+    plain = highlight[:, 0] == 0  # after the balance both lights read one albedo
+    np.testing.assert_allclose(np.median(corrected.reflectance[n:] / albedo, axis=0),
+                               np.median(corrected.reflectance[:n][plain] / albedo[plain], axis=0), rtol=1e-3)
+    assert balanced.light("known") is capture.light("known")  # no samples under it: unchanged
+    one = replace(capture, lights=(capture.lights[0], replace(capture.lights[1], unknown=True), capture.lights[2]))
+    assert balance_given_lights(one, replace(samples, measurement_names=("m0", "m0")))[0] is one

@@ -136,6 +136,7 @@ def test_refinement_reuses_its_kernels_and_records_itself(fitted):
     record = refined.refinement
     assert record["photographs"] == ["m00", "m01"]
     assert "skin" in record["regions"] and record["lamp_radius_mm"] is None and record["lights"] == ["point"]
+    assert record["restarted"] is False and record["environment_maps"] == {}  # point lights: from the fit
     assert np.isfinite(record["loss_before"]) and np.isfinite(record["loss_after"])
     # from lobes 60 % too weak the held-out pixels' loss falls: the refined estimate is kept
     assert record["accepted"] and record["heldout_loss_after"] < record["heldout_loss_before"], record["reason"]

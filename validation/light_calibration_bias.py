@@ -2,8 +2,11 @@
 
 The captures of ``validation/uncertainty.py`` (its image size, photographs, samples and texture) on
 its tuning seeds, Cook–Torrance truth with skin drawn per seed (:func:`uncertainty.skin_truth`), are
-fitted twice with the default ``fit_brdf``: with the lights as the capture's steel spheres calibrate
-them, and with the simulator's true light positions (the reflectance samples recomputed). Per fit:
+fitted three times with the default ``fit_brdf``: with the lights as the capture's steel spheres
+calibrate them; with those lights balanced by the face's one albedo (``balance_lights=True``,
+:func:`mifaces.reflectance.light_balance.balance_given_lights`; each light's factor recorded beside
+the true one, ``true_light_errors``); and with the simulator's true light positions (the reflectance
+samples recomputed). Per fit:
 skin's parameters against the truth, and how often the 95 % intervals (the default jackknife) hold
 the true values, skin and pooled.
 
@@ -42,15 +45,17 @@ def run(seed: int, work: Path) -> list[dict]:
     true_capture = with_true_lights(capture)
     true_samples = capture_samples(true_capture, shapes, face, U.TEXTURE, progress=False)
     rows = []
-    for lights, cap, smp in (("calibrated", capture, samples), ("true", true_capture, true_samples)):
+    for lights, cap, smp in (("calibrated", capture, samples), ("balanced", capture, samples),
+                             ("true", true_capture, true_samples)):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             estimate = fit_brdf(cap, "cooktorrance", shapes, face_model=face, resolution=U.TEXTURE, samples=smp,
-                                progress=False)
+                                progress=False, balance_lights=lights == "balanced")
         records = U._checks(estimate, truth, U.unc.METHODS[0], {"seed": seed, "lights": lights})
         covered = [r["covered"] for r in records if r["covered"] is not None]
         skin = [r for r in records if r["region"] == "skin"]
-        rows.append({"seed": seed, "lights": lights,
+        rows.append({"seed": seed, "lights": lights, "light_balance": estimate.light_balance,
+                     "true_light_errors": light_errors(capture, true_capture, shapes),
                      "coverage": float(np.mean(covered)) if covered else None, "intervals": len(covered),
                      "skin_covered": [r["covered"] for r in skin],
                      "skin": [{k: r[k] for k in ("parameter", "channel", "truth", "fitted", "lo", "hi", "covered")}
@@ -61,9 +66,21 @@ def run(seed: int, work: Path) -> list[dict]:
     return rows
 
 
+def light_errors(capture, true_capture, shapes) -> dict:
+    """Per light, the factor its calibrated irradiance at the faces' centre is off by against the
+    true light's (the mean log over the lights 0, as the balance measures it)."""
+    centre = np.mean([np.mean(v, axis=0) for v in shapes.values()], axis=0)
+    ratio = {}
+    for light in capture.lights:
+        true = true_capture.light(light.name)
+        ratio[light.name] = float(np.sum((true.position - centre) ** 2) / np.sum((light.position - centre) ** 2))
+    mean = np.mean(np.log(list(ratio.values())))
+    return {name: float(np.exp(np.log(v) - mean)) for name, v in ratio.items()}
+
+
 def summary(rows: list[dict]) -> dict:
     out = {}
-    for lights in ("calibrated", "true"):
+    for lights in ("calibrated", "balanced", "true"):
         mine = [r for r in rows if r["lights"] == lights]
         skin = [s for r in mine for s in r["skin"]]
         out[lights] = {
@@ -79,11 +96,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[100, 101, 102, 103, 104])
     parser.add_argument("--out", default=str(RESULTS / "light_calibration_bias.json"))
+    parser.add_argument("--role", default="tuning seeds of validation/uncertainty.py")
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="light_bias_"))
     rows = [row for seed in args.seeds for row in run(seed, work)]
     result = {"label": "SIMULATED", "command": "python validation/light_calibration_bias.py "
-              + " ".join(sys.argv[1:]), "seeds": args.seeds, "role": "tuning seeds of validation/uncertainty.py",
+              + " ".join(sys.argv[1:]), "seeds": args.seeds, "role": args.role,
               "rows": rows, "summary": summary(rows)}
     write_json(Path(args.out), result)
     print(result["summary"])

@@ -615,7 +615,8 @@ def sec_refine(d):
 
 def sec_light_calibration_bias(d):
     lines = [f"Seeds {text(d.get('seeds'))} ({text(d.get('role'))}); Cook–Torrance truth, the default fit with the "
-             "capture's calibrated lights and with the simulator's true ones.", ""]
+             "capture's calibrated lights, with them balanced by the face's one albedo (`balance_lights`, where "
+             "the file has it), and with the simulator's true ones.", ""]
     rows = []
     for lights, v in items(d.get("summary")):
         errors = v.get("skin_mean_abs_relative_error") or {}
@@ -627,9 +628,14 @@ def sec_light_calibration_bias(d):
         skin = {(s.get("parameter"), s.get("channel")): s for s in r.get("skin") or []}
         rho = [v.get("fitted") for (p, _), v in skin.items() if p == "specular_reflectance"]
         truth = [v.get("truth") for (p, _), v in skin.items() if p == "specular_reflectance"]
+        balance = r.get("light_balance") or {}
+        errors = r.get("true_light_errors") or {}
         per_seed.append([text(r.get("seed")), text(r.get("lights")), num(mean(rho)) if rho else DASH,
-                         num(mean(truth)) if truth else DASH])
-    lines += table(["seed", "lights", "skin ρs (mean over channels)", "truth"], per_seed)
+                         num(mean(truth)) if truth else DASH,
+                         ", ".join(f"{k} {num(v, 4)}" for k, v in balance.items()) or DASH,
+                         ", ".join(f"{k} {num(v, 4)}" for k, v in errors.items()) or DASH])
+    lines += table(["seed", "lights", "skin ρs (mean over channels)", "truth", "balance factors",
+                    "true calibration errors"], per_seed)
     return lines
 
 

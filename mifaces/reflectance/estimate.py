@@ -42,6 +42,7 @@ from ..render import FaceScene, light_arguments
 from .diffuse import AlbedoOffsets, DiffuseMap, refine_diffuse
 from .fitting import RegionFit, SubsetSchedule, fit_regions
 from .io import FILES, write_estimate
+from .light_balance import balance_given_lights
 from .refine import RefineSchedule, refine_estimate
 from .samples import ReflectanceSamples, capture_samples
 from .specular_maps import SpecularMap, refine_specular
@@ -90,6 +91,10 @@ class BRDFEstimate:
         How the lights were known where they were estimated from the photographs
         (:mod:`mifaces.lighting`): ``{"lights": "estimated", "reflectance": "relative", "note"}``,
         written to ``brdf.json``; None for a capture whose lights are given.
+    light_balance : dict or None
+        Light name -> the factor its given intensity was off by, as the face's one albedo
+        says (``fit_brdf(..., balance_lights=True)``,
+        :func:`mifaces.reflectance.light_balance.balance_given_lights`); None where not balanced.
     """
 
     model: str
@@ -105,6 +110,7 @@ class BRDFEstimate:
     normal_refinement: dict | None = None
     specular: SpecularMap | None = None
     lighting: dict | None = None
+    light_balance: dict | None = None
 
     def normal_texture(self) -> np.ndarray | None:
         """The normals as a ``normalmap`` texture ((n + 1) / 2), or None."""
@@ -135,6 +141,7 @@ class BRDFEstimate:
                 "uncertainty": {name: fit.uncertainty for name, fit in self.fits.items()},
                 **({} if self.albedo.std is None else {"albedo_std": FILES["albedo_std"]}),
                 **({} if self.lighting is None else {"lighting": self.lighting}),
+                **({} if self.light_balance is None else {"light_balance": self.light_balance}),
                 **({} if self.normals is None else {"normals": FILES["normals"],
                                                     "normal_refinement": self.normal_refinement}),
                 **({} if self.specular is None else {"specular": FILES["specular"], "specular_shrinkage": {
@@ -147,7 +154,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
              out=None, seed: int = 0, progress: bool = True, force: bool = False,
              refine: bool | RefineSchedule = False, normals: bool = False,
              normal_options: dict | None = None, specular_maps: bool = False,
-             uncertainty: str | None = METHODS[0], albedo_rounds: int = 0) -> BRDFEstimate:
+             uncertainty: str | None = METHODS[0], albedo_rounds: int = 0,
+             balance_lights: bool = False) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture.
 
     Parameters
@@ -210,6 +218,11 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         re-estimate them in every jackknife or sandwich replicate
         (:mod:`mifaces.reflectance.uncertainty`), and still hold the truth less often
         than they say on simulated faces (``docs/uncertainty.md``): off by default.
+    balance_lights : bool
+        Correct the given lights' relative intensities by the face's one albedo before
+        fitting (:func:`mifaces.reflectance.light_balance.balance_given_lights`; the mean
+        kept): a calibrated lamp a percent off in distance biases the glossy fit
+        (``docs/uncertainty.md``). The refinement, if on, starts from the balanced lights.
 
     Returns
     -------
@@ -228,6 +241,10 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         raise ValueError(f"the samples are at resolution {samples.resolution}, not {resolution}")
     if len(samples) == 0:
         raise ValueError("no valid reflectance samples: every texel is hidden, shadowed, grazing or saturated")
+    light_balance = None
+    if balance_lights:
+        capture, samples = balance_given_lights(capture, samples)
+        light_balance = capture.metadata.get("light_balance")
     t_samples = time.perf_counter()
     region_map = (samples.region_map if samples.region_map is not None
                   else texel_regions_of_mesh(face.region_map, face.uv, face.triangles, resolution))
@@ -281,7 +298,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
                             region_map=region_map, samples=int(len(texel)), specular=specular,
                             measurements=tuple(samples.measurement_names),
                             seconds={"samples": t_samples - t0, "fit": t_fit - t_samples, "refine": t_end - t_fit,
-                                     "total": t_end - t0})
+                                     "total": t_end - t0}, light_balance=light_balance)
     if texel_normals is not None:
         first = next(name for name in estimate.measurements if name in shapes)
         estimate.normals = mitsuba_tangent_normals(texel_normals.normals, face, shapes[first]).astype(np.float32)

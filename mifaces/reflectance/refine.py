@@ -39,8 +39,12 @@ Each photograph's scene is the one face-scene builder's
 a film cropped to the face, and the light of the capture: a point light, a
 directional light, or, where the capture states ``lamp_radius_mm`` (in its
 ``metadata``) or the caller gives ``lamp_radius``, a spherical area light of
-that radius and the same radiant intensity. No environment, no other
-geometry. The scenes are built once; each step writes the parameters
+that radius and the same radiant intensity; or an environment map (Mitsuba's
+``envmap``). An estimated map (:attr:`mifaces.capture.Light.estimated`) is a
+variable too: its log radiance per texel, the mean held, with a smoothness
+prior (:attr:`RefineSchedule.environment_learning_rate`); under a map the
+glossy parameters start at the model's start values
+(:attr:`RefineSchedule.restart_under_maps`). No other geometry. The scenes are built once; each step writes the parameters
 (opaque, so the kernels compiled on the first pass over the photographs are
 reused) and renders.
 
@@ -298,7 +302,8 @@ class RefineProblem:
         Region -> :class:`ParameterSpace` of its glossy parameters (diffuse and
         per-region fixed parameters held).
     variables : dict
-        Name (``<region>.<k>``, ``albedo``, ``light_gain``) -> start value of each unconstrained variable.
+        Name (``<region>.<k>``, ``albedo``, ``light_gain``, ``environment:<light>``) -> start value of
+        each unconstrained variable.
     """
 
     def __init__(self, estimate: BRDFEstimate, capture, shapes, face_model, schedule: RefineSchedule,

@@ -1,0 +1,94 @@
+"""The lights' relative intensities checked against the face's one albedo.
+
+A texel's reflectance ``r = pixel / (E cos)`` is the same under every light where each light's
+irradiance ``E`` is right, and ``1 / s`` of it where ``E`` is ``s`` times too large. The reflectance
+samples of a capture's photographs therefore measure each light's intensity error relative to the
+others (:func:`log_light_errors`). :func:`mifaces.lighting.balance_intensities` uses that to set
+estimated lights' intensities; :func:`balance_given_lights` corrects calibrated ones (a lamp the
+steel spheres place a percent too far gives 2 % too little light, which skin's ρs absorbs many
+times over: ``docs/refine.md``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+#: Samples that compare the photographs' albedos (:func:`log_light_errors`): light and view at
+#: least this cosine from grazing, and texels seen under at least two lights.
+BALANCE_MIN_COSINE = 0.3
+#: Rounds of the alternating robust fit of :func:`log_light_errors`.
+BALANCE_ROUNDS = 20
+
+
+def log_light_errors(capture, samples, lights, anchors=()) -> dict | None:
+    """How far off each light's intensity is, by the face's one albedo: ``log s`` per light of
+    ``lights`` (names) such that its irradiance is ``s`` times too large, from the reflectance
+    samples (:func:`mifaces.reflectance.capture_samples`) taken under ``capture``'s lights.
+
+    The log reflectance is fitted as ``a_texel - log s_light`` by alternating a texel's mean and
+    a light's median (robust against highlights and shadows), over the samples of light and view
+    at least :data:`BALANCE_MIN_COSINE` from grazing and the texels seen under two or more of the
+    lights. The mean ``log s`` of the ``anchors`` present (of all the lights present without
+    anchors) is 0. None where fewer than two of the lights have such samples; a light without
+    any is left out."""
+    names = list(samples.measurement_names)
+    light_of = {m.name: m.light for m in capture.measurements}
+    keep = ((samples.light[:, 2] >= BALANCE_MIN_COSINE) & (samples.view[:, 2] >= BALANCE_MIN_COSINE)
+            & np.all(samples.reflectance > 0, axis=1))
+    which = np.array([light_of[name] for name in names])[samples.measurement[keep]]
+    index = {name: k for k, name in enumerate(lights)}
+    on = np.array([name in index for name in which], bool)
+    if not on.any():
+        return None
+    light = np.array([index[name] for name in which[on]], np.int64)
+    texels = samples.texel[keep][on]
+    log_r = np.log(np.mean(samples.reflectance[keep][on], axis=1))
+    pairs = np.unique(texels * len(index) + light)  # (texel, light) seen
+    shared = np.bincount(pairs // len(index), minlength=int(texels.max(initial=-1)) + 1)[texels] >= 2
+    light, texels, log_r = light[shared], texels[shared], log_r[shared]
+    present = sorted(set(np.unique(light).tolist()))
+    if len(present) < 2:
+        return None
+    held = [index[name] for name in anchors if index[name] in present] or present
+    log_s = np.zeros(len(index))
+    per_texel = np.bincount(texels)
+    for _ in range(BALANCE_ROUNDS):
+        a = np.bincount(texels, weights=log_r + log_s[light]) / np.maximum(per_texel, 1)
+        log_s = np.array([np.median(a[texels[light == k]] - log_r[light == k]) if k in present else 0.0
+                          for k in range(len(index))])
+        log_s -= log_s[held].mean()
+    return {name: float(log_s[k]) for name, k in index.items() if k in present}
+
+
+def balance_given_lights(capture, samples):
+    """``capture`` and its reflectance ``samples`` with each given light's intensity corrected by
+    the face's one albedo (:func:`log_light_errors`), their mean log intensity kept (the overall
+    scale is the white target's). A calibrated lamp is off in distance by about a percent, its
+    irradiance by twice that, which the glossy parameters otherwise absorb
+    (``docs/uncertainty.md``). Captures of fewer than two given point or directional lights come
+    back unchanged.
+
+    Returns
+    -------
+    (Capture, ReflectanceSamples)
+        The lights' intensities divided by their ``s``, each sample's reflectance times its light's
+        ``s``, and ``capture.metadata['light_balance']`` the factors ``s``.
+    """
+    names = [light.name for light in capture.lights
+             if not light.unknown and not light.estimated and not light.environment]
+    log_s = log_light_errors(capture, samples, names) if len(names) >= 2 else None
+    if not log_s:
+        return capture, samples
+    factor = {name: float(np.exp(value)) for name, value in log_s.items()}
+    light_of = {m.name: m.light for m in capture.measurements}
+    per_measurement = np.array([factor.get(light_of[name], 1.0) for name in samples.measurement_names])
+    balanced = replace(samples, reflectance=(samples.reflectance * per_measurement[samples.measurement][:, None])
+                       .astype(samples.reflectance.dtype))
+    lights = tuple(replace(light, intensity=np.asarray(light.intensity, np.float64) / factor[light.name])
+                   if light.name in factor else light for light in capture.lights)
+    return replace(capture, lights=lights, metadata=dict(capture.metadata, light_balance=factor)), balanced
+
+
+__all__ = ["BALANCE_MIN_COSINE", "BALANCE_ROUNDS", "log_light_errors", "balance_given_lights"]
