@@ -256,12 +256,16 @@ def _short(value) -> str:
 @click.option("--refine-shape/--no-refine-shape", default=default(measure_capture, "refine_shape"), show_default=True,
               help="Refine the fitted faces beyond the model by differentiable rendering (minutes; kept only where "
                    "it lowers the loss on held-out pixels).")
+@click.option("--balance-lights/--no-balance-lights", default=default(measure_capture, "balance_lights"),
+              show_default=True, help="Correct the given lights' relative intensities by the face's one albedo before "
+                                      "the BRDF fits (a lamp a percent off biases the glossy fit).")
 def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int,
-            refine: bool, normals: bool, specular_maps: bool, refine_shape: bool) -> None:
+            refine: bool, normals: bool, specular_maps: bool, refine_shape: bool, balance_lights: bool) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
     check_writable(out_dir)
     report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution,
-                             refine=refine, normals=normals, specular_maps=specular_maps, refine_shape=refine_shape)
+                             refine=refine, normals=normals, specular_maps=specular_maps, refine_shape=refine_shape,
+                             balance_lights=balance_lights)
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")

@@ -42,6 +42,7 @@ from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, balance_intensities, check
                        estimate_lights, lights_document, write_lights, write_lights_picture)
 from .model import load_model
 from .reflectance import capture_samples, fit_brdf, write_estimate
+from .reflectance.light_balance import balance_given_lights
 from .reflectance.refine_shape import refine_lit, refined_fits
 from .render import FaceScene, light_arguments
 from .report import (ground_truth_errors, ranking, write_markdown, write_picture, write_uncertainty_picture,
@@ -119,7 +120,7 @@ def novel_point_light(capture, centre: np.ndarray) -> np.ndarray:
 def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resolution: int = 512,
             shape_iterations: float | None = None, spp: int = 64, face_model="builtin", progress: bool = True,
             refine: bool = False, normals: bool = False, specular_maps: bool = False,
-            refine_shape: bool = False) -> dict:
+            refine_shape: bool = False, balance_lights: bool = False) -> dict:
     """Measure the reflectance of the face in ``capture``, writing everything to ``out``.
 
     The stages hand their results to each other in memory: the face model is
@@ -172,6 +173,11 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         every photograph, and it is kept only if it lowers the loss on pixels it
         did not fit; the samples are then taken on the refined faces. Off by
         default: it costs minutes (``docs/refine_shape.md``).
+    balance_lights : bool
+        Correct the given lights' relative intensities by the face's one albedo
+        before any BRDF is fitted
+        (:func:`mifaces.reflectance.light_balance.balance_given_lights`; the
+        factors go to the report's ``light_balance``).
 
     Returns
     -------
@@ -226,6 +232,9 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         if balanced is not capture:
             capture = balanced
             samples = capture_samples(capture, shapes, face, resolution, progress=progress)
+    if balance_lights:
+        capture, samples = balance_given_lights(capture, samples)
+        report["light_balance"] = capture.metadata.get("light_balance")
     timings["reflectance_samples"] = time.perf_counter() - t
     if unknown:
         report["lights"] = {"file": write_lights(out, capture).name, "picture": LIGHTS_PICTURE, "note": RELATIVE_NOTE,

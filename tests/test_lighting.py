@@ -211,8 +211,11 @@ def test_balance_given_lights_finds_a_lamp_that_is_off(tmp_path):
     albedo = rng.uniform(0.2, 0.6, (n, 1)) * np.ones(3)
     highlight = np.where(rng.random((n, 1)) < 0.1, 0.5, 0.0)  # a few highlights under 'top' only
     reflectance = np.concatenate([albedo + highlight, albedo / 1.06]).astype(np.float32)
-    up = np.tile(np.array([[0.0, 0.0, 1.0]], np.float32), (2 * n, 1))
-    samples = ReflectanceSamples(light=up, view=up, reflectance=reflectance, sigma=np.ones(2 * n, np.float32),
+    # light and view 50 degrees from the normal in planes at right angles: the half vector 40 degrees off
+    a = np.radians(50.0)
+    light = np.tile(np.array([[np.sin(a), 0.0, np.cos(a)]], np.float32), (2 * n, 1))
+    view = np.tile(np.array([[0.0, np.sin(a), np.cos(a)]], np.float32), (2 * n, 1))
+    samples = ReflectanceSamples(light=light, view=view, reflectance=reflectance, sigma=np.ones(2 * n, np.float32),
                                  texel=np.tile(np.arange(n, dtype=np.int32), 2),
                                  measurement=np.repeat(np.arange(2, dtype=np.int16), n), resolution=32,
                                  measurement_names=("m0", "m1"))
@@ -225,5 +228,12 @@ def test_balance_given_lights_finds_a_lamp_that_is_off(tmp_path):
     np.testing.assert_allclose(np.median(corrected.reflectance[n:] / albedo, axis=0),
                                np.median(corrected.reflectance[:n][plain] / albedo[plain], axis=0), rtol=1e-3)
     assert balanced.light("known") is capture.light("known")  # no samples under it: unchanged
+    # highlights seen in the mirror direction under 'side' are not read: the factor stays
+    up = np.tile(np.array([[0.0, 0.0, 1.0]], np.float32), (n, 1))
+    shiny = replace(samples, light=np.concatenate([samples.light, up]), view=np.concatenate([samples.view, up]),
+                    reflectance=np.concatenate([reflectance, (3 * albedo).astype(np.float32)]),
+                    sigma=np.ones(3 * n, np.float32), texel=np.tile(np.arange(n, dtype=np.int32), 3),
+                    measurement=np.repeat(np.array([0, 1, 1], np.int16), n))
+    assert balance_given_lights(capture, shiny)[0].metadata["light_balance"] == pytest.approx(factor, rel=1e-9)
     one = replace(capture, lights=(capture.lights[0], replace(capture.lights[1], unknown=True), capture.lights[2]))
     assert balance_given_lights(one, replace(samples, measurement_names=("m0", "m0")))[0] is one

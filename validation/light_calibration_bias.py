@@ -5,7 +5,9 @@ its tuning seeds, Cook–Torrance truth with skin drawn per seed (:func:`uncerta
 fitted three times with the default ``fit_brdf``: with the lights as the capture's steel spheres
 calibrate them; with those lights balanced by the face's one albedo (``balance_lights=True``,
 :func:`mifaces.reflectance.light_balance.balance_given_lights`; each light's factor recorded beside
-the true one, ``true_light_errors``); and with the simulator's true light positions (the reflectance
+the true one, ``true_light_errors``; ``balance_sweep``: the factors the balance finds reading the
+samples at several distances from the highlights, and their mean error, which chose
+``GIVEN_MAX_HALF_COSINE``); and with the simulator's true light positions (the reflectance
 samples recomputed). Per fit:
 skin's parameters against the truth, and how often the 95 % intervals (the default jackknife) hold
 the true values, skin and pooled.
@@ -33,9 +35,12 @@ import uncertainty as U  # noqa: E402  (the captures and checks of validation/un
 from mifaces.capture import with_true_lights  # noqa: E402
 from mifaces.files import write_json  # noqa: E402
 from mifaces.reflectance import fit_brdf  # noqa: E402
+from mifaces.reflectance.light_balance import GIVEN_MAX_HALF_COSINE, log_light_errors  # noqa: E402
 from mifaces.reflectance.samples import capture_samples  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
+#: Half-vector cosines above which the balance's sweep leaves samples out (None: all samples).
+SWEEP = (None, 0.9, 0.8, 0.7)
 
 
 def run(seed: int, work: Path) -> list[dict]:
@@ -44,6 +49,14 @@ def run(seed: int, work: Path) -> list[dict]:
     truth = U._truth_of(capture, "cooktorrance")
     true_capture = with_true_lights(capture)
     true_samples = capture_samples(true_capture, shapes, face, U.TEXTURE, progress=False)
+    errors = light_errors(capture, true_capture, shapes)
+    sweep = {}
+    for threshold in SWEEP:  # how far from the highlights the balance reads the samples
+        names = [light.name for light in capture.lights]
+        log_s = log_light_errors(capture, samples, names, max_half_cosine=threshold) or {}
+        factors = {name: float(np.exp(v)) for name, v in log_s.items()}
+        sweep[str(threshold)] = {"factors": factors, "mean_abs_error": float(np.mean(
+            [abs(np.log(factors[n]) - np.log(errors[n])) for n in factors]))}
     rows = []
     for lights, cap, smp in (("calibrated", capture, samples), ("balanced", capture, samples),
                              ("true", true_capture, true_samples)):
@@ -55,7 +68,7 @@ def run(seed: int, work: Path) -> list[dict]:
         covered = [r["covered"] for r in records if r["covered"] is not None]
         skin = [r for r in records if r["region"] == "skin"]
         rows.append({"seed": seed, "lights": lights, "light_balance": estimate.light_balance,
-                     "true_light_errors": light_errors(capture, true_capture, shapes),
+                     "true_light_errors": errors, "balance_sweep": sweep if lights == "balanced" else None,
                      "coverage": float(np.mean(covered)) if covered else None, "intervals": len(covered),
                      "skin_covered": [r["covered"] for r in skin],
                      "skin": [{k: r[k] for k in ("parameter", "channel", "truth", "fitted", "lo", "hi", "covered")}
@@ -89,6 +102,10 @@ def summary(rows: list[dict]) -> dict:
             "skin_mean_abs_relative_error": {
                 p: float(np.mean([abs(s["fitted"] / s["truth"] - 1) for s in skin if s["parameter"] == p]))
                 for p in sorted({s["parameter"] for s in skin})}}
+    sweeps = [r["balance_sweep"] for r in rows if r.get("balance_sweep")]
+    out["balance_sweep"] = {key: float(np.mean([s[key]["mean_abs_error"] for s in sweeps])) for key in sweeps[0]} \
+        if sweeps else {}
+    out["balance_max_half_cosine"] = GIVEN_MAX_HALF_COSINE
     return out
 
 

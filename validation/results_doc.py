@@ -545,15 +545,22 @@ def sec_environment_lights(d):
              f"on fitted faces and refined; seeds {text(d.get('seeds'))} (the defaults were set on seed "
              f"{text(d.get('tuning_seed'))}, not shown). Each capture is measured with its map given and with "
              "its light hidden (estimated with the face). The estimated run's reflectance is relative: the "
-             "validation compares it after one factor (the median ratio of true to fitted skin albedo).", ""]
+             "validation compares it after one factor (the median ratio of true to fitted skin albedo, "
+             "the last column); the skin parameter errors are before that factor.", ""]
     lines += table(["environment", "held-out error, map given", "map estimated", "worst ratio (target <= "
-                    f"{text(d.get('ratio_target'))})", "skin BRDF error, given", "estimated",
-                    "map irradiance error", "after refinement", "extra seconds (max)"],
+                    f"{text(d.get('ratio_target'))})", "on the true shape: given", "estimated", "worst ratio",
+                    "shape floor, given", "estimated"],
                    [[name, pct(get(v, "heldout_rmse_given")), pct(get(v, "heldout_rmse_estimated")),
-                     fixed(get(v, "heldout_ratio_max"), 2), pct(get(v, "skin_brdf_rmse_given")),
-                     pct(get(v, "skin_brdf_rmse_estimated")), pct(get(v, "irradiance_error")),
-                     pct(get(v, "irradiance_error_refined")), fixed(get(v, "extra_seconds_max"), 0)]
+                     fixed(get(v, "heldout_ratio_max"), 2), pct(get(v, "heldout_rmse_true_shape_given")),
+                     pct(get(v, "heldout_rmse_true_shape_estimated")),
+                     fixed(get(v, "heldout_ratio_true_shape_max", default=None), 2),
+                     pct(get(v, "shape_floor_given", default=None)), pct(get(v, "shape_floor_estimated", default=None))]
                     for name, v in summary])
+    lines += table(["environment", "skin BRDF error, map given", "map estimated", "map irradiance error",
+                    "after refinement", "extra seconds (max)"],
+                   [[name, pct(get(v, "skin_brdf_rmse_given")), pct(get(v, "skin_brdf_rmse_estimated")),
+                     pct(get(v, "irradiance_error")), pct(get(v, "irradiance_error_refined")),
+                     fixed(get(v, "extra_seconds_max"), 0)] for name, v in summary])
     cases = items(d.get("cases"))
     lines += table(["capture", "held-out, given", "held-out, estimated", "ratio", "skin ρs error, given",
                     "estimated", "skin roughness error, given", "estimated", "reflectance factor"],
@@ -619,10 +626,18 @@ def sec_light_calibration_bias(d):
              "the file has it), and with the simulator's true ones.", ""]
     rows = []
     for lights, v in items(d.get("summary")):
+        if not isinstance(v, dict) or "pooled_coverage" not in v:  # the balance's sweep: below
+            continue
         errors = v.get("skin_mean_abs_relative_error") or {}
         rows.append([lights, pct(errors.get("specular_reflectance")), pct(errors.get("roughness")),
                      pct(v.get("skin_coverage"), 0), pct(v.get("pooled_coverage"), 0)])
     lines += table(["lights", "skin ρs error", "skin m error", "skin coverage", "pooled coverage"], rows)
+    sweep = get(d, "summary", "balance_sweep", default=None)
+    if sweep:
+        lines += [f"The balance's error against the true calibration errors (mean |log|), reading the samples whose "
+                  f"half vector's cosine to the normal is at most the threshold (the default "
+                  f"{text(get(d, 'summary', 'balance_max_half_cosine'))}):", ""]
+        lines += table(["threshold", "mean error"], [[k, pct(v, 2)] for k, v in items(sweep)])
     per_seed = []
     for r in rows_of(d.get("rows")):
         skin = {(s.get("parameter"), s.get("channel")): s for s in r.get("skin") or []}

@@ -20,9 +20,14 @@ import numpy as np
 BALANCE_MIN_COSINE = 0.3
 #: Rounds of the alternating robust fit of :func:`log_light_errors`.
 BALANCE_ROUNDS = 20
+#: :func:`balance_given_lights` reads only samples whose half vector lies at least this far from the
+#: normal (cosine at most this): highlights pull the estimate towards equal lights, and a calibrated
+#: lamp is off by a percent or two. Chosen on the uncertainty validation's tuning captures, seeds
+#: 100-104 (``validation/light_calibration_bias.py``: ``balance_sweep``; docs/uncertainty.md).
+GIVEN_MAX_HALF_COSINE = 0.8
 
 
-def log_light_errors(capture, samples, lights, anchors=()) -> dict | None:
+def log_light_errors(capture, samples, lights, anchors=(), max_half_cosine: float | None = None) -> dict | None:
     """How far off each light's intensity is, by the face's one albedo: ``log s`` per light of
     ``lights`` (names) such that its irradiance is ``s`` times too large, from the reflectance
     samples (:func:`mifaces.reflectance.capture_samples`) taken under ``capture``'s lights.
@@ -30,13 +35,17 @@ def log_light_errors(capture, samples, lights, anchors=()) -> dict | None:
     The log reflectance is fitted as ``a_texel - log s_light`` by alternating a texel's mean and
     a light's median (robust against highlights and shadows), over the samples of light and view
     at least :data:`BALANCE_MIN_COSINE` from grazing and the texels seen under two or more of the
-    lights. The mean ``log s`` of the ``anchors`` present (of all the lights present without
-    anchors) is 0. None where fewer than two of the lights have such samples; a light without
-    any is left out."""
+    lights; with ``max_half_cosine``, only samples whose half vector's cosine to the normal is at
+    most that (away from the highlights). The mean ``log s`` of the ``anchors`` present (of all the
+    lights present without anchors) is 0. None where fewer than two of the lights have such
+    samples; a light without any is left out."""
     names = list(samples.measurement_names)
     light_of = {m.name: m.light for m in capture.measurements}
     keep = ((samples.light[:, 2] >= BALANCE_MIN_COSINE) & (samples.view[:, 2] >= BALANCE_MIN_COSINE)
             & np.all(samples.reflectance > 0, axis=1))
+    if max_half_cosine is not None:
+        half = samples.light + samples.view
+        keep &= half[:, 2] <= max_half_cosine * np.linalg.norm(half, axis=1)
     which = np.array([light_of[name] for name in names])[samples.measurement[keep]]
     index = {name: k for k, name in enumerate(lights)}
     on = np.array([name in index for name in which], bool)
@@ -78,7 +87,7 @@ def balance_given_lights(capture, samples):
     """
     names = [light.name for light in capture.lights
              if not light.unknown and not light.estimated and not light.environment]
-    log_s = log_light_errors(capture, samples, names) if len(names) >= 2 else None
+    log_s = log_light_errors(capture, samples, names, max_half_cosine=GIVEN_MAX_HALF_COSINE) if len(names) >= 2 else None
     if not log_s:
         return capture, samples
     factor = {name: float(np.exp(value)) for name, value in log_s.items()}
@@ -91,4 +100,5 @@ def balance_given_lights(capture, samples):
     return replace(capture, lights=lights, metadata=dict(capture.metadata, light_balance=factor)), balanced
 
 
-__all__ = ["BALANCE_MIN_COSINE", "BALANCE_ROUNDS", "log_light_errors", "balance_given_lights"]
+__all__ = ["BALANCE_MIN_COSINE", "BALANCE_ROUNDS", "GIVEN_MAX_HALF_COSINE", "log_light_errors",
+           "balance_given_lights"]
