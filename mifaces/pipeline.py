@@ -75,7 +75,7 @@ def novel_light(capture, centre: np.ndarray) -> dict:
     point lights, :func:`novel_direction` for directional ones; for an environment map a
     directional light of irradiance :data:`RELATIVE_IRRADIANCE` mirrored from the map's
     :func:`~mifaces.environment.dominant_direction`."""
-    first = capture.lights[0]
+    first = next((light for light in capture.lights if not light.environment), capture.lights[0])
     if first.environment:  # a directional light from the other side of where most of the map's light comes
         towards = capture.camera.rotation @ dominant_direction(first.envmap, capture.camera)
         return {"light_direction": capture.camera.rotation.T @ _mirrored(towards),
@@ -110,7 +110,7 @@ def novel_point_light(capture, centre: np.ndarray) -> np.ndarray:
     the capture's lights from ``centre`` (the head, world frame) mirrored
     left-right in the camera's view (or turned 40° sideways where it is
     frontal), at their mean distance."""
-    offsets = np.array([light.position for light in capture.lights]) - centre
+    offsets = np.array([light.position for light in capture.lights if light.position is not None]) - centre
     distance = float(np.mean(np.linalg.norm(offsets, axis=1)))
     direction = capture.camera.rotation @ offsets.mean(axis=0)  # camera frame: x right
     direction = _mirrored(direction / np.linalg.norm(direction))

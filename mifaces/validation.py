@@ -198,18 +198,20 @@ def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -
     ``centre``) to every capture light and to each other is largest; point
     lights at the capture lights' mean distance with the first light's
     intensity (directional lights for a capture of directional lights, and for one lit by environment
-    maps: irradiance :data:`~mifaces.capture.types.RELATIVE_IRRADIANCE`, away from where most of
-    each map's light comes from).
+    maps alone: irradiance :data:`~mifaces.capture.types.RELATIVE_IRRADIANCE`); away from where most
+    of each environment map's light comes from, too.
     Each dict also holds ``angle_to_capture`` (degrees)."""
-    lights = list(capture.lights)
-    environment = all(light.environment for light in lights)
-    directional = lights[0].directional or environment
-    if environment:  # where most of each map's light comes from
-        used = np.array([dominant_direction(light.envmap, capture.camera) for light in lights], np.float64)
+    maps = [dominant_direction(light.envmap, capture.camera) for light in capture.lights if light.environment]
+    lights = [light for light in capture.lights if not light.environment]  # the point or directional ones
+    environment = not lights
+    directional = environment or lights[0].directional
+    if environment:
+        used = np.zeros((0, 3))
     elif directional:
         used = np.array([light.direction for light in lights], np.float64)
     else:
         used = np.array([light.position for light in lights], np.float64) - centre
+    used = np.concatenate([used, np.reshape(maps, (-1, 3))])  # and where most of each map's light comes from
     used /= np.linalg.norm(used, axis=1, keepdims=True)
     candidates = np.array([capture.camera.direction(a, e) for a, e in LIGHT_CANDIDATES])
     chosen = []

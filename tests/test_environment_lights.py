@@ -246,3 +246,24 @@ def test_the_refinement_differentiates_an_estimated_map(studio_capture):
     shifted = dict(variables, **{name: variables[name] + 1.0})
     np.testing.assert_allclose(np.asarray(problem.environment_map(light.name, shifted)),
                                np.asarray(problem.environment_map(light.name, variables)), rtol=1e-4)
+
+
+def test_held_out_lights_avoid_the_maps_light(studio_capture):
+    """Held-out lights of a capture lit by a map alone are directional, of irradiance pi, and none
+    comes from where most of the map's light does; beside point lights, the map's direction is
+    avoided too."""
+    from mifaces.validation import held_out_lights
+
+    capture = load_capture(studio_capture)
+    key = dominant_direction(capture.lights[0].envmap, capture.camera)
+    lights = held_out_lights(capture, np.zeros(3), count=3)
+    assert all("light_direction" in light and np.allclose(light["intensity"], RELATIVE_IRRADIANCE) for light in lights)
+    assert all(np.degrees(np.arccos(np.clip(light["light_direction"] @ key, -1, 1))) >= light["angle_to_capture"] - 1e-6
+               and light["angle_to_capture"] > 20 for light in lights)
+    from mifaces.capture.types import Light
+    lamp = Light("lamp", capture.camera.position * 1.5, np.full(3, 1e6))
+    mixed = replace(capture, lights=(capture.lights[0], lamp))
+    for light in held_out_lights(mixed, np.zeros(3), count=3):
+        assert "light_position" in light and np.allclose(light["intensity"], 1e6)
+        towards = light["light_position"] / np.linalg.norm(light["light_position"])
+        assert np.degrees(np.arccos(np.clip(towards @ key, -1, 1))) >= light["angle_to_capture"] - 1e-6
