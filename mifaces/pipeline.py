@@ -65,6 +65,12 @@ GEOMETRIES = ("fitted", "ground-truth")
 SHAPES, REFINED_SHAPES = "shapes", "shapes_refined"
 
 
+#: Said where a capture lit by an environment map is measured without the refinement.
+MAP_WITHOUT_REFINE = ("photographs lit by an environment map are read as lit from one direction per texel: right for "
+                      "the albedo, biased for the glossy parameters (skin's specular far too weak); measure with "
+                      "refine=True (--refine), which renders the map itself (docs/unknown_lights.md)")
+
+
 class NoUsableShapeError(ValueError):
     """No photograph of a capture got a shape fit that the next stages can use."""
 
@@ -236,6 +242,9 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         capture, samples = balance_given_lights(capture, samples)
         report["light_balance"] = capture.metadata.get("light_balance")
     timings["reflectance_samples"] = time.perf_counter() - t
+    if not refine and any(light.environment for light in capture.lights):
+        report["environment_note"] = MAP_WITHOUT_REFINE
+        warnings.warn(MAP_WITHOUT_REFINE, stacklevel=2)
     if unknown:
         report["lights"] = {"file": write_lights(out, capture).name, "picture": LIGHTS_PICTURE, "note": RELATIVE_NOTE,
                             "estimates": [e for e in lights_document(capture)["lights"] if e["estimated"]]}

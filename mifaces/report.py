@@ -143,6 +143,8 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
             lines.append(f"| {model} | {region} | {fit['samples']} | {fit['status']} | {text} | "
                          f"{_fmt(fit['loss'])} | {err_text} |")
     lines += fit_notes(report)
+    if "environment_note" in report:
+        lines += ["", f"Note: {report['environment_note']}."]
     lines += shapes_markdown(report)
     lines += lights_markdown(report)
     lines += ["", "| model | training RMSE (first photograph, relative) | albedo RMSE vs ground truth | fit time (s) |",

@@ -267,3 +267,15 @@ def test_held_out_lights_avoid_the_maps_light(studio_capture):
         assert "light_position" in light and np.allclose(light["intensity"], 1e6)
         towards = light["light_position"] / np.linalg.norm(light["light_position"])
         assert np.degrees(np.arccos(np.clip(towards @ key, -1, 1))) >= light["angle_to_capture"] - 1e-6
+
+
+def test_a_map_without_the_refinement_is_flagged(studio_capture, tmp_path):
+    """A capture lit by a map, measured without --refine: the report and a warning say that the
+    glossy parameters need the refinement."""
+    from mifaces.pipeline import MAP_WITHOUT_REFINE, measure
+
+    with pytest.warns(UserWarning, match="read as lit from one direction per texel"):
+        report = measure(tmp_path / "m", studio_capture, models=("phong",), geometry="ground-truth", resolution=32,
+                         spp=2, progress=False)
+    assert report["environment_note"] == MAP_WITHOUT_REFINE
+    assert f"Note: {MAP_WITHOUT_REFINE}." in (tmp_path / "m" / "report.md").read_text()
