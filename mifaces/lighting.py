@@ -46,6 +46,7 @@ from .progress import progress as progress_bar
 from .reflectance.environment import estimate_map, transport
 from .reflectance.light_balance import log_light_errors
 from .reflectance.samples import _unoccluded, texel_geometry
+from .shape.fit import fit_light
 from .shape.targets import light_angles
 
 #: File of a result folder holding the capture's lights, estimated and given.
@@ -165,6 +166,32 @@ def estimate_lights(capture: Capture, fits) -> Capture:
     return replace(capture, lights=lights, metadata=metadata, white_target=white)
 
 
+
+
+def as_given(estimated: Capture) -> Capture:
+    """``estimated`` (:func:`estimate_lights`'s) with its estimated directional lights read as given:
+    what the shape fit of the alternation (:func:`refit_lights`) fits the faces under."""
+    return replace(estimated, lights=tuple(replace(light, estimated=False) if light.estimated and light.directional
+                                           else light for light in estimated.lights))
+
+
+def refit_lights(capture: Capture, fits, face_model, **options) -> list:
+    """Each photograph under an unknown directional light of ``capture`` with its light fitted again
+    (:func:`mifaces.shape.fit.fit_light`) on its pose's face in ``fits``: the faces
+    :func:`mifaces.shape.fit_shape` fitted to every photograph of a pose under the first estimates
+    (:func:`as_given`). The other photographs keep their fits. One round of the alternation of
+    shape and lights (``docs/unknown_lights.md``)."""
+    by_name = {fit.measurement: fit for fit in fits}
+    out = []
+    for fit in fits:
+        measurement = next(m for m in capture.measurements if m.name == fit.measurement)
+        light = capture.light(measurement.light) if measurement.light else None
+        leader = by_name.get(fit.shared_with, fit) if fit.shared_with else fit
+        if light is None or not light.unknown or light.environment or not leader.converged:
+            out.append(fit)
+            continue
+        out.append(fit_light(leader, measurement, capture.camera, face_model, light, **options))
+    return out
 
 
 def balance_intensities(capture: Capture, samples) -> Capture:

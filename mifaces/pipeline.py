@@ -38,8 +38,9 @@ from .environment import dominant_direction
 from .export import export_face
 from .files import write_json
 from .geometry import load_geometry
-from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, balance_intensities, check_estimable, estimate_environments,
-                       estimate_lights, lights_document, write_lights, write_lights_picture)
+from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, as_given, balance_intensities, check_estimable,
+                       estimate_environments, estimate_lights, lights_document, refit_lights, write_lights,
+                       write_lights_picture)
 from .model import load_model
 from .reflectance import capture_samples, fit_brdf, write_estimate
 from .reflectance.light_balance import balance_given_lights
@@ -229,7 +230,16 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     face, shapes, fits = _geometry(out, capture, geometry, face_model, shape_iterations, report, timings, progress)
     if unknown:  # every later stage reads the estimated lights as given ones
         t = time.perf_counter()
-        capture = estimate_environments(estimate_lights(capture, fits), shapes, face, progress=progress)
+        estimated = estimate_lights(capture, fits)
+        if any(light.unknown and not light.environment for light in capture.lights):
+            # one round of alternation: each pose's face fitted to all its photographs under the first
+            # estimates, then each light fitted again on that face
+            first = timings["fit_shape"]
+            face, shapes, fits = _geometry(out, as_given(estimated), geometry, face, shape_iterations, report,
+                                           timings, progress)
+            timings["fit_shape"], timings["fit_shape_alternation"] = first, timings["fit_shape"]
+            estimated = estimate_lights(capture, refit_lights(capture, fits, face))
+        capture = estimate_environments(estimated, shapes, face, progress=progress)
         timings["estimate_lights"] = time.perf_counter() - t
     t = time.perf_counter()
     samples = capture_samples(capture, shapes, face, resolution, progress=progress)

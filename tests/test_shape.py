@@ -614,3 +614,32 @@ def test_unknown_lights_estimated_on_the_shared_face(model, camera, posed, tmp_p
     given = replace(cap, lights=tuple(Light(l.name, None, np.ones(3), direction=np.asarray(d) / np.linalg.norm(d),
                                             relative=True) for l, d in zip(lights, towards)))
     assert [f.iterations for f in fit_shape(given, model, iterations=SCHEDULE, progress=False)][1:] == [0, 0]
+
+
+def test_alternation_refits_the_lights_on_the_face_of_all_photographs(model, camera, posed, tmp_path):
+    """One round of the alternation (measure's, for unknown directional lights): the pose's face
+    fitted to all photographs under the first estimates read as given, then each unknown light
+    fitted again on that face; the estimates stay right and a given light's fit is kept."""
+    from mifaces.lighting import as_given, estimate_lights, refit_lights
+
+    ypr, t, v, m = posed
+    towards = [(0.1, -0.1, -1.0), (0.7, -0.2, -0.7), (-0.5, -0.45, -0.75)]
+    ms = [Measurement(f"m{i}", f"L{i}", "frontal", Image(render(model, camera, v, d)[0], m.image.saturated, 1.0,
+                                                          Path(f"m{i}.exr")), m.diffuse, (), m.feature_points)
+          for i, d in enumerate(towards)]
+    known = np.asarray(towards[2]) / np.linalg.norm(towards[2])
+    lights = (Light("L0", None, np.full(3, np.pi), relative=True, unknown=True),
+              Light("L1", None, np.full(3, np.pi), relative=True, unknown=True),
+              Light("L2", None, np.ones(3), direction=known, relative=True))
+    cap = Capture(Path("synthetic"), camera, lights, tuple(ms), (), None)
+    first = estimate_lights(cap, fit_shape(cap, model, iterations=SCHEDULE, progress=False))
+    given = as_given(first)
+    assert [l.estimated for l in given.lights] == [False] * 3 and [l.unknown for l in given.lights] == [False] * 3
+    fits = fit_shape(given, model, iterations=SCHEDULE, progress=False)
+    refitted = refit_lights(cap, fits, model)
+    assert refitted[2] is fits[2]  # the given light's photograph keeps its fit
+    assert all("light fitted on the face of" in f.message for f in refitted[:2])
+    second = estimate_lights(cap, refitted)
+    for light, d in zip(second.lights[:2], towards):
+        d = np.asarray(d) / np.linalg.norm(d)
+        assert light.estimated and np.degrees(np.arccos(np.clip(light.direction @ d, -1, 1))) < 6.0, light.name

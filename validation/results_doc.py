@@ -532,9 +532,9 @@ def sec_unknown_lights_simulated(d):
     lights = items(d.get("lights"))
     lines = ["Each light's estimate (the mean over the photographs under it) against its true direction from the "
              "fitted head's centre, and how far its photographs' estimates lie from that mean.", ""]
-    lines += table(["light", "angle to the truth (deg)", "photographs", "their spread (deg)"],
-                   [[name, fixed(get(v, "angle_deg"), 1), text(len(get(v, "photographs") or [])),
-                     fixed(get(v, "spread_deg"), 1)] for name, v in lights])
+    lines += table(["light", "angle to the truth (deg)", "before the alternation", "photographs", "their spread (deg)"],
+                   [[name, fixed(get(v, "angle_deg"), 1), fixed(get(v, "angle_deg_first_pass", default=None), 1),
+                     text(len(get(v, "photographs") or [])), fixed(get(v, "spread_deg"), 1)] for name, v in lights])
     lines += [f"Shape fit with the lights estimated: {fixed(get(d, 'seconds', 'fit_shape'), 0)} s.", ""]
     return lines
 

@@ -66,11 +66,13 @@ def angular_errors(lights_json: Path, subject_dir: Path, train: int) -> dict:
 def simulated_run(out: Path) -> dict:
     """The default simulated capture at ``out/capture``, its lights hidden in a second manifest
     beside the first (``capture_unknown.json``: the same images), fitted (:func:`mifaces.shape.fit_shape`)
-    and its lights estimated (:func:`mifaces.lighting.estimate_lights`); per light the angle (degrees)
+    and its lights estimated (:func:`mifaces.lighting.estimate_lights`, with ``measure``'s round of
+    alternation: :func:`~mifaces.lighting.as_given`, :func:`~mifaces.lighting.refit_lights`); per light
+    the angle (degrees)
     between the estimate and the direction from the fitted head's centre to the calibrated lamp, and
     the spread of its photographs' estimates."""
     from mifaces.capture import MANIFEST, load_capture
-    from mifaces.lighting import estimate_lights
+    from mifaces.lighting import as_given, estimate_lights, refit_lights
     from mifaces.shape import fit_shape, shapes_in_world
     from mifaces.studio import simulate
 
@@ -82,15 +84,21 @@ def simulated_run(out: Path) -> dict:
     given, hidden = load_capture(out / "capture"), load_capture(out / "capture" / "capture_unknown.json")
     t_fit = time.perf_counter()
     fits = fit_shape(hidden)
+    first = estimate_lights(hidden, fits)
+    t_alternation = time.perf_counter()
+    fits = refit_lights(hidden, fit_shape(as_given(first)), "builtin")  # measure's round of alternation
     estimated = estimate_lights(hidden, fits)
-    seconds = {"simulate": t_fit - t, "fit_shape": time.perf_counter() - t_fit}
+    seconds = {"simulate": t_fit - t, "fit_shape": t_alternation - t_fit,
+               "alternation": time.perf_counter() - t_alternation}
     shapes = shapes_in_world(fits, hidden)
     lights = {}
     for light in estimated.lights:
         names = [m.name for m in hidden.measurements if m.light == light.name and m.name in shapes]
         head = np.mean([shapes[name].mean(axis=0) for name in names], axis=0)
         truth = given.light(light.name).towards(head[None])[0][0]
+        before = first.light(light.name).direction
         lights[light.name] = {"angle_deg": float(np.degrees(np.arccos(np.clip(light.direction @ truth, -1, 1)))),
+                              "angle_deg_first_pass": float(np.degrees(np.arccos(np.clip(before @ truth, -1, 1)))),
                               "direction": light.direction.tolist(), "true_direction": truth.tolist(),
                               **estimated.metadata["estimated_lights"][light.name]}
     return {"lights": lights, "seconds": seconds,
