@@ -274,15 +274,12 @@ def _texel_radiance(source, frame: np.ndarray, texels: np.ndarray, height: int, 
 
 def irradiance(envmap: np.ndarray, normals) -> np.ndarray:
     """Irradiance E(n) = ∫ L(ω) max(0, n·ω) dω (N, 3) of an equirectangular map ``envmap``
-    (H, W, 3, linear radiance) on surfaces facing unit ``normals`` (N, 3, the map's local frame);
-    each texel a constant radiance over its solid angle (2π / W)(π / H) sin θ. A white
-    Lambertian surface facing n reflects radiance E(n) / π."""
+    (H, W, 3, linear radiance) on unoccluded surfaces facing unit ``normals`` (N, 3, the map's local
+    frame), each texel in its direction and solid angle as Mitsuba reads it (:func:`texel_directions`).
+    A white Lambertian surface facing n reflects radiance E(n) / π."""
     envmap = np.asarray(envmap, np.float64)
-    height, width = envmap.shape[:2]
-    v = (np.arange(height)[:, None] + 0.5) / height
-    directions = map_directions((np.arange(width)[None] + 0.5) / width, v).reshape(-1, 3)
-    solid_angle = np.broadcast_to(2 * np.pi ** 2 / (width * height) * np.sin(np.pi * v), (height, width))
-    power = envmap.reshape(-1, 3) * solid_angle.reshape(-1, 1)
+    directions, solid = texel_directions(envmap.shape[1], envmap.shape[0])
+    power = envmap.reshape(-1, 3) * solid[:, None]
     normals = np.atleast_2d(np.asarray(normals, np.float64))
     step = max(1, _BAKE_LANES // 16 // len(directions))
     return np.concatenate([np.clip(normals[k:k + step] @ directions.T, 0, None) @ power

@@ -35,7 +35,6 @@ from pathlib import Path
 import numpy as np
 
 import mitsuba as mi
-import scipy.ndimage
 
 from .capture.types import RELATIVE_IRRADIANCE, Capture
 from .environment import LUMINANCE, texel_directions, to_world
@@ -45,7 +44,7 @@ from .model.texture_space import rasterize
 from .progress import progress as progress_bar
 from .reflectance.environment import estimate_map, transport
 from .reflectance.light_balance import log_light_errors
-from .reflectance.samples import _unoccluded, texel_geometry
+from .reflectance.samples import _unoccluded, read_photograph, texel_geometry
 from .shape.fit import fit_light
 from .shape.targets import light_angles
 
@@ -256,15 +255,7 @@ def photograph_transport(camera, pixels, saturated, vertices, triangles, uv, cov
     cos_v = np.sum(to_camera / np.linalg.norm(to_camera, axis=1, keepdims=True) * n, axis=1)
     keep = cos_v >= ESTIMATE_MIN_COSINE
     keep[keep] = _unoccluded(scene, p[keep], np.broadcast_to(camera.position, p[keep].shape), n[keep], offset)
-    xy = camera.project(p)
-    keep &= (xy[:, 0] >= 0) & (xy[:, 0] <= camera.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= camera.height - 1)
-    coords = [xy[keep, 1], xy[keep, 0]]
-    radiance = np.stack([scipy.ndimage.map_coordinates(np.asarray(pixels, np.float32)[..., c], coords, order=1,
-                                                       mode="nearest") for c in range(3)], axis=1)
-    ok = np.ones(len(radiance), bool)
-    if saturated is not None:
-        near = scipy.ndimage.binary_dilation(np.asarray(saturated, bool)).astype(np.uint8)
-        ok = ~scipy.ndimage.map_coordinates(near, coords, order=0, mode="nearest").astype(bool)
+    radiance, ok = read_photograph(camera, pixels, saturated, p[keep])
     index = np.flatnonzero(keep)[ok]
     directions, solid = texel_directions(*size)
     t = transport(scene, p[index], n[index], to_world(directions, camera), solid, offset, 10.0 * extent)

@@ -40,7 +40,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..capture.types import RELATIVE_IRRADIANCE
-from ..environment import LUMINANCE, texel_directions, to_world
+from ..environment import LUMINANCE, irradiance, texel_directions, to_world
 
 #: (width, height) of the map a given one is reduced to for the texture-space stages.
 TRANSPORT_SIZE = (32, 16)
@@ -95,30 +95,29 @@ def _rays(scene, position, normal, directions, offset: float, maxt: float):
     return ti, di, dr.select(escapes, cos, 0.0)
 
 
-def irradiance(scene, position, normal, directions, radiance, solid, offset: float, maxt: float,
-               chunk: int = 1 << 22) -> tuple[np.ndarray, np.ndarray]:
+def shadowed_irradiance(scene, position, normal, directions, radiance, solid, offset: float, maxt: float,
+                        chunk: int = 1 << 22) -> tuple[np.ndarray, np.ndarray]:
     """The irradiance (N, 3) the map's texels (world ``directions`` (J, 3), ``radiance`` (J, 3),
     ``solid`` angles (J,)) send to each surface point (``position``, ``normal``: (N, 3), world,
     mm) in ``scene``, with cast shadows, and the direction (N, 3) of each point's irradiance
-    vector (luminance-weighted; zero where no light arrives)."""
+    vector (luminance-weighted; zero where no light arrives). One kernel per chunk of
+    ``chunk`` (point, direction) pairs: the rays are traced once and scattered into all six sums."""
     n, j = len(position), len(directions)
     weights = np.asarray(radiance, np.float64) * np.asarray(solid, np.float64)[:, None]
     lum = weights @ LUMINANCE
-    e_out, v_out = np.zeros((n, 3)), np.zeros((n, 3))
+    out = np.zeros((n, 6))
     step = max(1, chunk // max(j, 1))
     table = mi.Float(np.concatenate([weights, lum[:, None] * np.asarray(directions, np.float64)], axis=1)
                      .astype(np.float32).ravel())
     for start in range(0, n, step):
         stop = min(n, start + step)
         ti, di, t = _rays(scene, position[start:stop], normal[start:stop], directions, offset, maxt)
-        size = stop - start
-        for k, out in ((0, e_out), (3, v_out)):
-            for c in range(3):
-                value = t * dr.gather(mi.Float, table, di * 6 + k + c)
-                acc = dr.zeros(mi.Float, size)
-                dr.scatter_reduce(dr.ReduceOp.Add, acc, value, ti)
-                out[start:stop, c] = np.array(acc, np.float64)
-    return e_out, v_out
+        sums = [dr.zeros(mi.Float, stop - start) for _ in range(6)]
+        for k, acc in enumerate(sums):
+            dr.scatter_reduce(dr.ReduceOp.Add, acc, t * dr.gather(mi.Float, table, di * 6 + k), ti)
+        dr.eval(sums)
+        out[start:stop] = np.stack([np.array(acc, np.float64) for acc in sums], axis=1)
+    return out[:, :3], out[:, 3:]
 
 
 def transport(scene, position, normal, directions, solid, offset: float, maxt: float) -> np.ndarray:
@@ -136,18 +135,24 @@ def equivalent_lights(scene, position, normal, envmap: np.ndarray, camera, offse
     docstring): world directions (N, 3) towards it (zero where nothing lights the point) and
     irradiance E (N, 3) it gives the point (E = irradiance at normal incidence x cos)."""
     direction, radiance, solid = reduced_map(envmap)
-    e, vector = irradiance(scene, position, normal, to_world(direction, camera), radiance, solid, offset, maxt)
+    e, vector = shadowed_irradiance(scene, position, normal, to_world(direction, camera), radiance, solid, offset,
+                                    maxt)
     length = np.linalg.norm(vector, axis=1, keepdims=True)
     return np.where(length > 0, vector / np.maximum(length, 1e-30), 0.0), e
 
 
-def _neighbours(width: int, height: int) -> np.ndarray:
-    """The smoothness prior's difference operator G (pairs, J): each texel against its right
-    neighbour (wrapping around) and the one below."""
+def neighbour_pairs(width: int, height: int) -> np.ndarray:
+    """Index pairs (P, 2) of a ``width`` x ``height`` map's texels (row by row) that the smoothness
+    priors compare: each texel and its right neighbour (wrapping round in azimuth), and each texel
+    and the one below."""
     index = np.arange(width * height).reshape(height, width)
-    pairs = [np.stack([index.ravel(), np.roll(index, -1, axis=1).ravel()], 1),
-             np.stack([index[:-1].ravel(), index[1:].ravel()], 1)]
-    pairs = np.concatenate(pairs)
+    return np.concatenate([np.stack([index.ravel(), np.roll(index, -1, axis=1).ravel()], 1),
+                           np.stack([index[:-1].ravel(), index[1:].ravel()], 1)])
+
+
+def _neighbours(width: int, height: int) -> np.ndarray:
+    """The smoothness prior's difference operator G (P, J) over :func:`neighbour_pairs`."""
+    pairs = neighbour_pairs(width, height)
     g = np.zeros((len(pairs), width * height))
     g[np.arange(len(pairs)), pairs[:, 0]] = 1.0
     g[np.arange(len(pairs)), pairs[:, 1]] = -1.0
@@ -174,17 +179,15 @@ def _nonnegative_solve(lhs: np.ndarray, rhs: np.ndarray, start: np.ndarray, swee
 
 def unoccluded_peak(envmap: np.ndarray) -> np.ndarray:
     """The largest unoccluded irradiance (3,) the map gives a surface of any of its texels'
-    directions as normal: the scale an estimated map is fixed to."""
-    height, width = envmap.shape[:2]
-    d, solid = texel_directions(width, height)
-    cos = np.clip(d @ d.T, 0, None) * solid[None, :]
-    e = cos @ np.asarray(envmap, np.float64).reshape(-1, 3)
+    directions as normal (:func:`mifaces.environment.irradiance`): the scale an estimated map is
+    fixed to."""
+    e = irradiance(envmap, texel_directions(envmap.shape[1], envmap.shape[0])[0])
     return e[np.argmax(e @ LUMINANCE)]
 
 
 def estimate_map(radiance: list[np.ndarray], transports: list[np.ndarray], texels: list[np.ndarray],
-                 size: tuple[int, int], smoothness: float = SMOOTHNESS, rounds: int = ROUNDS,
-                 initial: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+                 size: tuple[int, int], smoothness: float = SMOOTHNESS,
+                 rounds: int = ROUNDS) -> tuple[np.ndarray, dict]:
     """An environment map (H, W, 3) that, with one albedo per texel, explains the photographs
     (module docstring).
 
@@ -197,8 +200,6 @@ def estimate_map(radiance: list[np.ndarray], transports: list[np.ndarray], texel
     texels : list of (N_k,) int
         Their texel indices (shared albedo where equal).
     size : (width, height)
-    initial : (H, W, 3), optional
-        Where the map starts; uniform by default.
 
     Returns
     -------
@@ -216,7 +217,7 @@ def estimate_map(radiance: list[np.ndarray], transports: list[np.ndarray], texel
                          f"{width}x{height} environment map")
     g = _neighbours(width, height)
     gg = g.T @ g
-    light = (np.ones((j, 3)) if initial is None else np.asarray(initial, np.float64).reshape(j, 3)).copy()
+    light = np.ones((j, 3))  # a uniform map to start
     weight = np.ones(len(r))
     residual = np.nan
     for _ in range(rounds):

@@ -212,18 +212,10 @@ def _sums(space: ParameterSpace, arrays: dict, u: list, jacobian: bool):
     without ``jacobian`` only the first entry. One kernel: the derivatives are forward-mode
     tangents of the same expression, the sums scatter-adds into a small array (per-thread
     copies on the LLVM backend, ``dr.ReduceMode.Expand``)."""
-    if jacobian:
-        dr.enable_grad(u)
-    res = (arrays["r"] - dr.pi * space.model.eval(arrays["wi"], arrays["wo"], space.drjit_params(u))) * arrays["w"]
     n, p = dr.width(arrays["w"]), len(u)
-    r = [mi.Float64(c) for c in dr.detach(res)]
+    r, d = _residual_tangents(space, arrays, u, tangents=jacobian)
     sums = [r[0] * r[0] + r[1] * r[1] + r[2] * r[2]]
     if jacobian:
-        d = []
-        for uk in u:
-            dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
-            d.append([mi.Float64(c) for c in dr.grad(res)])
-            dr.clear_grad(res)
         sums += [d[a][0] * d[b][0] + d[a][1] * d[b][1] + d[a][2] * d[b][2] for a in range(p) for b in range(a, p)]
         sums += [d[a][0] * r[0] + d[a][1] * r[1] + d[a][2] * r[2] for a in range(p)]
     acc = dr.zeros(mi.Float64, len(sums))
@@ -237,55 +229,56 @@ def _sums(space: ParameterSpace, arrays: dict, u: list, jacobian: bool):
 EXPAND_LIMIT = 1 << 16
 
 
-def _cluster_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
-    """``[Σ |ρ|², u_g (P entries), H_g (upper triangle, row-major)]`` per cluster ``arrays["c"]`` as one
-    float64 array of ``groups`` rows: the residuals ``(r - π f)/σ`` and their forward-mode
-    tangents (as in :func:`_sums`), scatter-added per cluster. One kernel."""
-    dr.enable_grad(u)
+def _residual_tangents(space: ParameterSpace, arrays: dict, u: list, tangents: bool = True) -> tuple[list, list]:
+    """The residuals ``(r - π f)/σ`` of ``arrays`` (``wi``, ``wo``, ``r``, ``w``; three float64
+    channels) and, with ``tangents``, their forward-mode tangents along each unconstrained
+    parameter ``u[a]`` (``d[a][c]``; else none)."""
+    if tangents:
+        dr.enable_grad(u)
     res = (arrays["r"] - dr.pi * space.model.eval(arrays["wi"], arrays["wo"], space.drjit_params(u))) * arrays["w"]
-    p = len(u)
     r = [mi.Float64(c) for c in dr.detach(res)]
     d = []
-    for uk in u:
+    for uk in u if tangents else ():
         dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
         d.append([mi.Float64(c) for c in dr.grad(res)])
         dr.clear_grad(res)
-    terms = [r[0] * r[0] + r[1] * r[1] + r[2] * r[2]]
-    terms += [d[a][0] * r[0] + d[a][1] * r[1] + d[a][2] * r[2] for a in range(p)]
-    terms += [d[a][0] * d[b][0] + d[a][1] * d[b][1] + d[a][2] * d[b][2] for a in range(p) for b in range(a, p)]
+    return r, d
+
+
+def _group_scatter(terms: list, group, groups: int):
+    """``terms`` (per-sample float64 arrays) summed per group ``group`` into one array of ``groups``
+    rows of ``len(terms)``. Neighbouring samples share a group: per-thread copies of a small array,
+    else atomics reduced per packet. One kernel."""
     k = len(terms)
     acc = dr.zeros(mi.Float64, groups * k)
-    base = arrays["c"] * k
-    # neighbouring samples share a tile: per-thread copies of a small acc, else atomics reduced per packet
+    base = group * k
     mode = dr.ReduceMode.Expand if groups * k <= EXPAND_LIMIT else dr.ReduceMode.Local
     for j, value in enumerate(terms):
         dr.scatter_add(acc, value, base + j, mode=mode)
     dr.eval(acc)
     return acc
+
+
+def _cluster_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
+    """``[Σ |ρ|², u_g (P entries), H_g (upper triangle, row-major)]`` per cluster ``arrays["c"]`` as one
+    float64 array of ``groups`` rows: the residuals ``(r - π f)/σ`` and their forward-mode
+    tangents (as in :func:`_sums`), scatter-added per cluster. One kernel."""
+    r, d = _residual_tangents(space, arrays, u)
+    p = len(u)
+    terms = [r[0] * r[0] + r[1] * r[1] + r[2] * r[2]]
+    terms += [d[a][0] * r[0] + d[a][1] * r[1] + d[a][2] * r[2] for a in range(p)]
+    terms += [d[a][0] * d[b][0] + d[a][1] * d[b][1] + d[a][2] * d[b][2] for a in range(p) for b in range(a, p)]
+    return _group_scatter(terms, arrays["c"], groups)
 
 
 def _texel_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
     """``[Σ 1/σ², Σ J_c/σ for channel c and free entry a (row-major)]`` per texel ``arrays["c"]``
     as one float64 array of ``groups`` rows (J the forward-mode tangents of the residuals
     ``(r - π f)/σ``, as in :func:`_cluster_sums`). One kernel."""
-    dr.enable_grad(u)
-    res = (arrays["r"] - dr.pi * space.model.eval(arrays["wi"], arrays["wo"], space.drjit_params(u))) * arrays["w"]
+    _, d = _residual_tangents(space, arrays, u)
     w = mi.Float64(arrays["w"])
-    terms = [w * w]
-    d = []
-    for uk in u:
-        dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
-        d.append([mi.Float64(c) for c in dr.grad(res)])
-        dr.clear_grad(res)
-    terms += [w * d[a][c] for c in range(3) for a in range(len(u))]
-    k = len(terms)
-    acc = dr.zeros(mi.Float64, groups * k)
-    base = arrays["c"] * k
-    mode = dr.ReduceMode.Expand if groups * k <= EXPAND_LIMIT else dr.ReduceMode.Local
-    for j, value in enumerate(terms):
-        dr.scatter_add(acc, value, base + j, mode=mode)
-    dr.eval(acc)
-    return acc
+    terms = [w * w] + [w * d[a][c] for c in range(3) for a in range(len(u))]
+    return _group_scatter(terms, arrays["c"], groups)
 
 
 def validate_samples(light, view, reflectance, sigma) -> None:

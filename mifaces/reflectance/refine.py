@@ -71,6 +71,7 @@ from ..model.regions import REGIONS
 from ..progress import progress as progress_bar
 from ..render import FaceScene, light_arguments, mitsuba_sensor
 from .albedo_correction import AlbedoCorrection
+from .environment import neighbour_pairs
 from .parameters import ParameterSpace
 from .refine_schedule import (ALBEDO, LIGHT_GAIN, IterateAverage, RefineSchedule, environment_variable,
                               holdout_pixels)
@@ -498,13 +499,13 @@ ENVMAP_FLOOR = 1e-2
 
 
 def _neighbour_pairs(shape) -> list:
-    """Flat index pairs (UInt32, UInt32) of each (H, W, 3) texel and channel with its right
-    neighbour (wrapping round) and the one below."""
+    """Flat index pairs (UInt32, UInt32) of each (H, W, 3) map's texel and channel with the
+    neighbours of :func:`~mifaces.reflectance.environment.neighbour_pairs`: the right neighbours,
+    then those below (the prior averages each group)."""
     h, w, c = shape
-    index = np.arange(h * w * c).reshape(h, w, c)
-    right = (index.ravel(), np.roll(index, -1, axis=1).ravel())
-    below = (index[:-1].ravel(), index[1:].ravel())
-    return [(mi.UInt32(a.astype(np.uint32)), mi.UInt32(b.astype(np.uint32))) for a, b in (right, below)]
+    pairs = neighbour_pairs(w, h)[:, :, None] * c + np.arange(c)  # (P, 2, channel)
+    return [(mi.UInt32(group[:, 0].ravel().astype(np.uint32)), mi.UInt32(group[:, 1].ravel().astype(np.uint32)))
+            for group in (pairs[:w * h], pairs[w * h:])]
 
 
 def padded_envmap(envmap: mi.TensorXf) -> mi.TensorXf:

@@ -275,6 +275,23 @@ def _unoccluded(scene, origin, target, normal, offset: float) -> np.ndarray:
     return ~np.array(hit, dtype=bool) if dr.is_jit_v(mi.Float) else np.array([not hit])
 
 
+def read_photograph(camera, pixels, saturated, points) -> tuple[np.ndarray, np.ndarray]:
+    """The photograph ``pixels`` (H, W, 3) at the projections of world ``points`` (N, 3): bilinear,
+    pixel centres at integers; (N, 3) radiance, and (N,) whether the point projects inside the
+    image and away from ``saturated`` pixels ((H, W) bool or None; dilated by one pixel, since
+    the bilinear taps touch the neighbours)."""
+    xy = camera.project(points)
+    ok = (xy[:, 0] >= 0) & (xy[:, 0] <= camera.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= camera.height - 1)
+    coords = [xy[:, 1], xy[:, 0]]
+    pixels = np.asarray(pixels, np.float32)
+    radiance = np.stack([scipy.ndimage.map_coordinates(pixels[..., c], coords, order=1, mode="nearest")
+                         for c in range(3)], axis=1)
+    if saturated is not None:
+        near = scipy.ndimage.binary_dilation(np.asarray(saturated, bool))
+        ok &= ~scipy.ndimage.map_coordinates(near.astype(np.uint8), coords, order=0, mode="nearest").astype(bool)
+    return radiance, ok
+
+
 def measurement_samples(camera, light_position, intensity, pixels, vertices, triangles, uv, coverage, *,
                         saturated=None, scale: float = np.pi, erosion: int = 1, min_cosine: float = MIN_COSINE,
                         name: str = "", offset: float | None = None, light_direction=None,
@@ -350,16 +367,7 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
             intensity = e / np.where(cos_l > 0, cos_l, np.nan)[:, None]  # irradiance at normal incidence
     else:
         lit[front] = _unoccluded(scene, p[front], light_target[front], n[front], offset)
-    # the photograph at each texel's projection (bilinear; pixel centres at integers)
-    xy = camera.project(p)
-    inside = (xy[:, 0] >= 0) & (xy[:, 0] <= camera.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= camera.height - 1)
-    coords = [xy[:, 1], xy[:, 0]]
-    radiance = np.stack([scipy.ndimage.map_coordinates(pixels[..., c], coords, order=1, mode="nearest")
-                         for c in range(3)], axis=1)
-    ok = inside
-    if saturated is not None:
-        near = scipy.ndimage.binary_dilation(np.asarray(saturated, bool))  # bilinear taps touch the neighbours
-        ok &= ~scipy.ndimage.map_coordinates(near.astype(np.uint8), coords, order=0, mode="nearest").astype(bool)
+    radiance, ok = read_photograph(camera, pixels, saturated, p)
     r = reflectance(radiance, dist_light, intensity, cos_l, scale)
 
     def image(values, fill):
