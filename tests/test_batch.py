@@ -23,6 +23,7 @@ from click.testing import CliRunner
 from mifaces.batch import find_captures, is_complete
 from mifaces.cli import main
 from mifaces.population import robust_summary
+from mifaces.status import NOT_FITTED
 
 pytestmark = pytest.mark.slow
 
@@ -96,7 +97,13 @@ def test_batch_failure_does_not_stop_the_others(captures, tmp_path):
     population = json.loads((out / "population.json").read_text())
     assert population["subjects"] == sorted(GOOD)
     phong = population["models"]["phong"]
-    assert phong["parameters"]["skin"]["exponent"]["n"] == 4
+    # A skin fit that ends as ``prior`` or ``defaults`` (on these tiny captures it
+    # can, on some CPUs) is no measurement and is left out of the statistics.
+    skin = {name: json.loads((out / name / "report.json").read_text())["models"]["phong"]["fit"]["skin"]["status"]
+            for name in GOOD}
+    fitted = sorted(name for name, status in skin.items() if status not in NOT_FITTED)
+    assert len(fitted) >= 2, skin
+    assert sorted(phong["parameters"]["skin"]["exponent"]["values"]) == fitted
     assert phong["status"]["converged"] >= 4
     assert phong["ground_truth"]["albedo"]["rmse_sampled"]["n"] == 4
     assert (out / "population.png").stat().st_size > 0 and "## phong" in (out / "population.md").read_text()
