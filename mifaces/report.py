@@ -197,10 +197,13 @@ def shapes_markdown(report: dict) -> list[str]:
                 + (" plus fine detail outside the span" if face.get("truth_detail") else "")
                 + ", so it lies outside the fitted span by construction" if "truth_shape_modes" in face else "")
              + ".", "", "| photograph | status | feature RMS (px) | photometric residual | world error (mm) "
-                        "| after rigid alignment (mm) | depth (mm) |", "|---|---|---|---|---|---|---|"]
+                        "| after rigid alignment (mm) | depth (mm) | scale about the camera (%) "
+                        "| after that scale (mm) |", "|---|---|---|---|---|---|---|---|---|"]
     for name, entry in report["shapes"].items():
         e = entry.get("errors") or {}
         cells = [f"{e[k]:.2f}" if k in e else "" for k in ("world_mm", "aligned_mm", "depth_mm")]
+        cells += [f"{e['scale_pct']:+.2f}" if "scale_pct" in e else "", f"{e['scaled_mm']:.2f}" if "scaled_mm" in e
+                  else ""]
         fit = [f"{entry[k]:.{d}f}" if entry.get(k) is not None else "" for k, d in (("feature_rms_px", 2),
                                                                                    ("image_rms", 3))]
         lines.append(f"| {name} | {entry['status']} | " + " | ".join(fit + cells) + " |")

@@ -186,10 +186,11 @@ def test_report_gives_each_fitted_shape_its_errors_and_the_modes_used():
     report = {"face_model": {"name": "builtin", "model_shape_modes": 100, "fit_shape_modes": 50,
                              "truth_shape_modes": 100, "truth_detail": True},
               "shapes": {"m00": {"status": "converged", "feature_rms_px": 0.81, "image_rms": 0.0312,
-                                 "errors": {"world_mm": 2.5, "aligned_mm": 1.2, "depth_mm": -2.25}},
+                                 "errors": {"world_mm": 2.5, "aligned_mm": 1.2, "depth_mm": -2.25,
+                                            "scale_pct": -0.19, "scaled_mm": 1.3}},
                          "m01": {"status": "not_converged", "feature_rms_px": 0.7, "image_rms": 0.2}}}
     text = "\n".join(shapes_markdown(report))
     assert "leading 50 of its 100 identity modes" in text and "drew on 100 plus fine detail" in text
-    assert "| m00 | converged | 0.81 | 0.031 | 2.50 | 1.20 | -2.25 |" in text
-    assert "| m01 | not_converged | 0.70 | 0.200 |  |  |  |" in text
+    assert "| m00 | converged | 0.81 | 0.031 | 2.50 | 1.20 | -2.25 | -0.19 | 1.30 |" in text
+    assert "| m01 | not_converged | 0.70 | 0.200 |  |  |  |  |  |" in text
     assert shapes_markdown({"shapes": {}}) == []  # true shapes: nothing fitted, no section
