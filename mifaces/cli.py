@@ -35,7 +35,8 @@ from .report import RANKED
 from .shape import fit_shape as fit_shapes
 from .shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
 from .status import CONVERGED
-from .studio.simulate import COMPANIONS, ENVIRONMENTS, PRESETS, simulate as simulate_capture
+from .studio.environment_light import ENVIRONMENTS
+from .studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
 
 #: Largest texture resolution R the commands take (R x R texels).
 MAX_TEXTURE = math.isqrt(MAX_IMAGE_PIXELS)

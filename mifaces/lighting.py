@@ -37,7 +37,7 @@ import numpy as np
 import mitsuba as mi
 
 from .capture.types import RELATIVE_IRRADIANCE, Capture
-from .environment import LUMINANCE, texel_directions, to_world
+from .environment import texel_directions, to_world
 from .files import save_figure, write_exr, write_json
 from .model.mesh import mitsuba_mesh
 from .model.texture_space import rasterize
@@ -165,8 +165,6 @@ def estimate_lights(capture: Capture, fits) -> Capture:
     return replace(capture, lights=lights, metadata=metadata, white_target=white)
 
 
-
-
 def as_given(estimated: Capture) -> Capture:
     """``estimated`` (:func:`estimate_lights`'s) with its estimated directional lights read as given:
     what the shape fit of the alternation (:func:`refit_lights`) fits the faces under."""
@@ -228,8 +226,8 @@ def balance_intensities(capture: Capture, samples) -> Capture:
     factor = {name: float(np.exp(-log_s[name])) for name in estimated}  # r is 1/s too small: E s too large
     scaled = {light.name: light.intensity * factor[light.name] for light in capture.lights if light.name in factor}
     norm = 1.0 if anchors else RELATIVE_IRRADIANCE / float(np.mean([np.mean(v) for v in scaled.values()]))
-    info = {name: dict(capture.metadata.get("estimated_lights", {}).get(name, {}), balance=factor[name] * norm)
-            for name in factor}
+    info = dict(capture.metadata.get("estimated_lights", {}))  # an estimated map's entry stays
+    info.update({name: dict(info.get(name, {}), balance=factor[name] * norm) for name in factor})
     return replace(capture, lights=tuple(replace(light, intensity=scaled[light.name] * norm) if light.name in scaled
                                          else light for light in capture.lights),
                    metadata=dict(capture.metadata, estimated_lights=info))

@@ -391,10 +391,9 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
                             progress=progress, refine=refine, normals=normals, specular_maps=specular_maps)
     if any(light.estimated for light in capture.lights):
         estimate = replace(estimate, lighting={"lights": "estimated", "reflectance": "relative", "note": RELATIVE_NOTE})
-    lamp = light_arguments(capture.light(first.light))
-    write_estimate(estimate, out / "brdf" / model, scene, capture.camera, lamp.get("light_position"),
-                   lamp.get("intensity"), light_direction=lamp.get("light_direction"), envmap=lamp.get("envmap"),
-                   force=True)  # measure's own folder
+    light = capture.light(first.light)
+    write_estimate(estimate, out / "brdf" / model, scene, capture.camera, light, force=True)  # measure's own folder
+    lamp = light_arguments(estimate.fitted_light(light))
     timings[f"fit_brdf_{model}"] = time.perf_counter() - t
     entry = estimate.to_json()
     entry["warnings"] = [str(w.message) for w in caught]

@@ -14,7 +14,7 @@ from .status import CONVERGED, NOT_FITTED
 from .validation import TRUE_SHAPE
 
 
-def ground_truth_errors(estimate, capture, ground_truth=None) -> dict | None:
+def ground_truth_errors(estimate, capture, ground_truth=None, albedo_scale: float = 1.0) -> dict | None:
     """How far a fit is from a simulated capture's ground truth (``ground_truth/``).
 
     Returns None for a capture without ground truth, else ``{"truth_model",
@@ -24,7 +24,9 @@ def ground_truth_errors(estimate, capture, ground_truth=None) -> dict | None:
     published value, is left out); the albedo errors, RMSE and mean error of
     the refined map against the truth's (downsampled to the fit's
     resolution), on texels with samples and on all face texels, always.
-    ``ground_truth`` (the capture's, already read) saves reading it again.
+    ``ground_truth`` (the capture's, already read) saves reading it again. ``albedo_scale``
+    multiplies the fitted albedo first (a relative estimate's, in the truth's units:
+    :meth:`mifaces.validation.Validator.reflectance_scale`); the parameter errors are as fitted.
     """
     from skimage.transform import resize
 
@@ -41,7 +43,7 @@ def ground_truth_errors(estimate, capture, ground_truth=None) -> dict | None:
                                                 / np.abs(np.asarray(value, float))))
                              for key, value in truth["regions"][name].items() if key != "eta"}
     r = estimate.resolution
-    error = estimate.albedo.albedo - resize(ground_truth.albedo, (r, r, 3), anti_aliasing=True, order=1)
+    error = albedo_scale * estimate.albedo.albedo - resize(ground_truth.albedo, (r, r, 3), anti_aliasing=True, order=1)
     seen = estimate.albedo.samples > 0
     face = estimate.region_map > 0
     skin = seen & (estimate.region_map == REGIONS["skin"])
@@ -51,7 +53,6 @@ def ground_truth_errors(estimate, capture, ground_truth=None) -> dict | None:
               "bias_sampled": float(error[seen].mean()), "texels_sampled": int(seen.sum()),
               "texels_face": int(face.sum())}
     return {"truth_model": truth["model"], "regions": regions, "albedo": albedo}
-
 
 
 #: The validation's image errors the report ranks the models by, and their labels: the fitted faces, and
@@ -197,8 +198,8 @@ def shapes_markdown(report: dict) -> list[str]:
                 + (" plus fine detail outside the span" if face.get("truth_detail") else "")
                 + ", so it lies outside the fitted span by construction" if "truth_shape_modes" in face else "")
              + ".", "", "| photograph | status | feature RMS (px) | photometric residual | world error (mm) "
-                        "| after rigid alignment (mm) | depth (mm) | scale about the camera (%) "
-                        "| after that scale (mm) |", "|---|---|---|---|---|---|---|---|---|"]
+                        "| after rigid alignment (mm) | depth (mm) | size against the truth (%) "
+                        "| after that size about the camera (mm) |", "|---|---|---|---|---|---|---|---|---|"]
     for name, entry in report["shapes"].items():
         e = entry.get("errors") or {}
         cells = [f"{e[k]:.2f}" if k in e else "" for k in ("world_mm", "aligned_mm", "depth_mm")]

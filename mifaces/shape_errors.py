@@ -14,13 +14,15 @@ neck and the back of the head may stay coarse):
   the true one (Kabsch): the shape's own error.
 * ``depth_mm``: the mean signed offset along the camera's viewing axis
   (positive: the fit lies farther from the camera than the truth).
-* ``scale_pct`` and ``scaled_mm``: the scale ``s`` about the camera's centre
-  that best maps the true face onto the fitted one (in per cent, ``100 (s -
-  1)``), and the mean distance left after it. A pinhole camera cannot tell a
+* ``scale_pct`` and ``scaled_mm``: the fitted face's size against the true
+  one's (``s``, the ratio of their RMS distances from their centroids; in per
+  cent, ``100 (s - 1)``), and the mean distance left after the true face is
+  scaled by ``s`` about the camera's centre. A pinhole camera cannot tell a
   face from one ``s`` times larger and ``s`` times farther: every pixel is the
-  same. A fit that knows the face's size to 0.1 % still places it about
-  1.2 mm off in depth at 1.2 m. Where ``scaled_mm`` is far below
-  ``world_mm``, the world error is that ambiguity (``docs/shape_estimation.md``).
+  same, and a fit that gets the size 0.1 % wrong places the face about 1.2 mm
+  off in depth at 1.2 m. Where ``scaled_mm`` is far below ``world_mm``, the
+  world error is that ambiguity; a face of the right size at the wrong depth
+  leaves ``scaled_mm`` equal to ``world_mm`` (``docs/shape_estimation.md``).
 """
 
 from __future__ import annotations
@@ -58,7 +60,7 @@ def shape_errors(fitted: np.ndarray, true: np.ndarray, mask: np.ndarray, camera)
     rotation, translation = rigid_alignment(f, t)
     axis = np.asarray(camera.rotation, np.float64)[2]  # world direction of the camera's +z (forward)
     centre = np.asarray(camera.position, np.float64)
-    scale = float(np.sum((t - centre) * (f - centre)) / np.sum((t - centre) ** 2))  # f - c ~ s (t - c)
+    scale = float(np.sqrt(np.sum((f - f.mean(axis=0)) ** 2) / np.sum((t - t.mean(axis=0)) ** 2)))  # sizes
     return {"world_mm": float(np.linalg.norm(f - t, axis=1).mean()),
             "aligned_mm": float(np.linalg.norm(f @ rotation.T + translation - t, axis=1).mean()),
             "depth_mm": float(np.mean((f - t) @ axis)),

@@ -61,6 +61,8 @@ of its reflectance alone, which separates the models.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
+from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
@@ -72,6 +74,7 @@ from .capture import Camera, read_ground_truth
 from .capture.types import RELATIVE_IRRADIANCE
 from .environment import (LUMINANCE, SKY_SUN_ANGLES, camera_frame, dominant_direction, sky_emitter,
                           studio_environment)
+from .files import read_exr
 from .geometry import load_geometry
 from .model.regions import REGIONS
 from .model.mesh import mitsuba_mesh
@@ -168,10 +171,10 @@ def brdf_rmse(truth: dict, fit: dict, region: str, true_albedo, fit_albedo, uv: 
     at = np.repeat(uv, pairs, axis=0)
     f_true = eval_bsdf(region_bsdf(truth, region, rgb(true_albedo), maps=truth_maps), at, wi, wo)
     f_fit = scale * eval_bsdf(region_bsdf(fit, region, rgb(fit_albedo)), at, wi, wo)
-    scale = float(np.sum(f_true ** 2))
-    if not scale > 0 or not np.isfinite(scale):
+    energy = float(np.sum(f_true ** 2))
+    if not energy > 0 or not np.isfinite(energy):
         return None  # a truth without a finite BRDF (a smooth boundary over a scattering medium): no BRDF error
-    return float(np.sqrt(np.sum((f_fit - f_true) ** 2) / scale))
+    return float(np.sqrt(np.sum((f_fit - f_true) ** 2) / energy))
 
 
 # --------------------------------------------------------------------------------------------
@@ -189,6 +192,31 @@ def novel_rotation(camera, pose=NOVEL_POSE) -> np.ndarray:
 def turned(vertices: np.ndarray, rotation: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """``vertices`` (V, 3) turned by ``rotation`` about ``centre`` (world, mm)."""
     return (np.asarray(vertices, np.float64) - centre) @ np.asarray(rotation).T + centre
+
+
+def true_lights(capture, truth):
+    """``capture`` with each light it estimated (or still does not know) replaced by the one the
+    simulator placed (``truth``, its ground truth): its point light, or the environment map it
+    rendered with. The held-out lights are chosen away from these, so that a run that estimated
+    its lights is judged under the same held-out lights as one that was given them."""
+    placed = {light.name: light for light in truth.lights}
+    rendered = truth.description.get("map")  # an environment-lit capture's one map, inside the capture
+    lights = []
+    for light in capture.lights:
+        if not (light.estimated or light.unknown):
+            lights.append(light)
+        elif light.name in placed:
+            true = placed[light.name]
+            lights.append(replace(light, position=np.asarray(true.position, np.float64), direction=None,
+                                  intensity=np.asarray(true.intensity, np.float64), envmap=None,
+                                  unknown=False, estimated=False, relative=False))
+        elif light.environment and rendered is not None:
+            lights.append(replace(light, envmap=read_exr(Path(capture.path) / rendered)[..., :3], unknown=False,
+                                  estimated=False, relative=False))
+        else:
+            raise ValueError(f"light {light.name!r} was estimated, and the ground truth does not say where the "
+                             "simulator placed it")
+    return replace(capture, lights=tuple(lights))
 
 
 def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -> list[dict]:
@@ -351,7 +379,7 @@ class Validator:
         self.fit_scene = FaceScene(face_model, turned(fit_vertices, rotation, centre))
         self.camera = face_camera(capture.camera, turned(true_vertices, rotation, centre), size)
         self.spp = int(spp)
-        held_out = held_out_lights(capture, centre, lights)
+        held_out = held_out_lights(true_lights(capture, self.ground_truth), centre, lights)
         self.conditions = {f"light_{k + 1}": {key: value for key, value in light.items() if key != "angle_to_capture"}
                            for k, light in enumerate(held_out)}
         if environments is None:
@@ -430,11 +458,11 @@ class Validator:
         """1 for a capture whose reflectance is absolute; for one measured under estimated lights
         (``brdf.json``'s ``lighting``: light intensity and albedo scale cannot be told apart) the
         factor that puts it in the truth's units: the median ratio of the true to the fitted
-        albedo's luminance over skin, as a colour chart of known albedo would give it. The BRDF
-        errors and the renders are compared after that factor."""
+        albedo's luminance over the skin texels with samples, as a colour chart of known albedo
+        would give it. The BRDF and albedo errors and the renders are compared after that factor."""
         if getattr(estimate, "lighting", None) is None:
             return 1.0
-        skin = estimate.region_map == REGIONS["skin"]
+        skin = (estimate.region_map == REGIONS["skin"]) & (estimate.albedo.samples > 0)
         fitted = estimate.albedo.albedo[skin] @ LUMINANCE
         ok = fitted > 1e-6
         return float(np.median(true_albedo[skin][ok] @ LUMINANCE / fitted[ok])) if ok.any() else 1.0
@@ -474,7 +502,7 @@ class Validator:
                 regions[name] = brdf_rmse(self.ground_truth.brdf, fit, name, true_albedo[texels].mean(axis=0),
                                           albedo[texels].mean(axis=0), uv, truth_maps=self._truth_maps,
                                           scale=scale)
-        errors = ground_truth_errors(estimate, self.capture, self.ground_truth)
+        errors = ground_truth_errors(estimate, self.capture, self.ground_truth, albedo_scale=scale)
         images, per_condition = {}, {}
         for name, light in self.conditions.items():
             images[name] = scale * self.fit_scene.render(fit, albedo, self.camera, spp=self.spp, seed=SEED, **light,
@@ -498,4 +526,4 @@ class Validator:
 
 __all__ = ["GRID", "UV_SAMPLES", "NOVEL_POSE", "HELD_OUT_LIGHTS", "RENDER_SIZE", "SPP", "LIGHT_CANDIDATES",
            "TRUE_SHAPE", "hemisphere_grid", "eval_bsdf", "region_texels", "brdf_rmse", "novel_rotation", "turned",
-           "held_out_lights", "face_camera", "coverage", "relative_rmse", "pose_angle", "Validator"]
+           "true_lights", "held_out_lights", "face_camera", "coverage", "relative_rmse", "pose_angle", "Validator"]

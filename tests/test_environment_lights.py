@@ -12,14 +12,14 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mifaces.capture import Camera, CaptureError, load_capture
+from mifaces.capture import Camera, CaptureError, load_capture, read_ground_truth
 from mifaces.capture.types import RELATIVE_IRRADIANCE
-from mifaces.environment import (LUMINANCE, dominant_direction, environment_emitter, studio_environment,
-                                 texel_directions, to_world)
+from mifaces.environment import (LUMINANCE, dominant_direction, environment_emitter, irradiance, peak_irradiance,
+                                 studio_environment, texel_directions, to_world)
 from mifaces.files import read_exr, write_exr
 from mifaces.lighting import LIGHTS_FILE, LIGHTS_FOLDER, write_lights, write_lights_picture
-from mifaces.reflectance.environment import (equivalent_lights, estimate_map, reduced_map, unoccluded_peak)
-from mifaces.reflectance.refine import padded_envmap
+from mifaces.reflectance.environment import equivalent_lights, estimate_map, reduced_map
+from mifaces.reflectance.refine import ENVMAP_FLOOR, padded_envmap
 from mifaces.render import mitsuba_sensor
 from test_real_capture import write_directional
 
@@ -133,17 +133,16 @@ def test_estimate_map_recovers_the_light_with_one_albedo():
         parts.append((pixels, t, np.arange(len(normals))))
     estimate, info = estimate_map(*zip(*parts), size=size, rounds=20)
     assert estimate.shape == (8, 16, 3) and estimate.min() >= 0
-    assert unoccluded_peak(estimate) @ LUMINANCE == pytest.approx(RELATIVE_IRRADIANCE, rel=1e-6)
-    cosines = np.clip(d @ d.T, 0, None) * solid
+    assert peak_irradiance(estimate) @ LUMINANCE == pytest.approx(RELATIVE_IRRADIANCE, rel=1e-6)
     front = d[:, 2] > 0.2
-    e_true = cosines @ truth.reshape(-1, 3) * (RELATIVE_IRRADIANCE / (unoccluded_peak(truth) @ LUMINANCE))
-    e_fit = cosines @ estimate.reshape(-1, 3)
+    e_true = irradiance(truth, d) * (RELATIVE_IRRADIANCE / (peak_irradiance(truth) @ LUMINANCE))
+    e_fit = irradiance(estimate, d)
     def error(e):
         e = e * (np.mean(e_true[front]) / np.mean(e[front]))  # the shape of the light, not its scale
         return np.sqrt(np.mean((e - e_true)[front] ** 2) / np.mean(e_true[front] ** 2))
 
     assert error(e_fit) < 0.08, error(e_fit)
-    assert error(cosines @ np.ones((len(d), 3))) > 0.3  # a uniform light would not pass
+    assert error(irradiance(np.ones_like(truth), d)) > 0.3  # a uniform light would not pass
     assert info["residual"] < 0.03 and info["texels"] == len(normals)
     with pytest.raises(ValueError, match="too few usable texels"):
         estimate_map([p[0][:5] for p in parts], [p[1][:5] for p in parts], [p[2][:5] for p in parts], size)
@@ -205,15 +204,21 @@ def test_measure_estimates_a_hidden_map_with_the_face(studio_capture, tmp_path):
     assert dominant_direction(envmap, camera) @ key > 0.7
     brdf = json.loads((tmp_path / "m" / "brdf" / "phong" / "brdf.json").read_text())
     assert brdf["lighting"]["reflectance"] == "relative"
-    refined = np.asarray(brdf["refinement"]["environment_maps"]["studio"])
     assert brdf["refinement"]["restarted"] is True  # under a map the glossy part starts afresh
-    assert refined.shape == (8, 16, 3) and brdf["refinement"]["lights"] == ["environment"]
-    if brdf["refinement"]["accepted"]:  # the map moved with the BRDF
-        assert np.abs(refined - envmap).max() > 1e-3
+    assert brdf["refinement"]["lights"] == ["environment"]
     assert "| environment light | map |" in (tmp_path / "m" / "report.md").read_text()
-    # the fitted face's scene is lit as its first photograph was: by the estimated map, beside it
-    assert (tmp_path / "m" / "brdf" / "phong" / "environment.exr").is_file()
+    # the fitted face's scene is lit as the BRDF was fitted: by the refined map where the refinement
+    # was kept (it moved from its floored start), else by the estimate; beside the scene
+    scene_map = read_exr(tmp_path / "m" / "brdf" / "phong" / "environment.exr")[..., :3]
     assert 'value="environment.exr"' in (tmp_path / "m" / "brdf" / "phong" / "scene.xml").read_text()
+    if brdf["refinement"]["accepted"]:
+        refined = np.asarray(brdf["refinement"]["environment_maps"]["studio"])
+        start = np.maximum(envmap, ENVMAP_FLOOR * envmap.mean())
+        assert refined.shape == (8, 16, 3) and np.abs(np.log(refined) - np.log(start)).max() > 1e-2
+        np.testing.assert_allclose(scene_map, refined, rtol=1e-3)
+    else:
+        assert brdf["refinement"]["environment_maps"] == {}
+        np.testing.assert_allclose(scene_map, envmap, rtol=1e-3)
 
 
 def test_the_refinement_differentiates_an_estimated_map(studio_capture):
@@ -279,3 +284,27 @@ def test_a_map_without_the_refinement_is_flagged(studio_capture, tmp_path):
                          spp=2, progress=False)
     assert report["environment_note"] == MAP_WITHOUT_REFINE
     assert f"Note: {MAP_WITHOUT_REFINE}." in (tmp_path / "m" / "report.md").read_text()
+
+
+def test_held_out_lights_of_an_estimated_map_are_the_given_maps(studio_capture):
+    """The held-out lights avoid the map the simulator rendered with, not the estimate: a run that
+    estimated its map is judged under the same lights as one given the map."""
+    from mifaces.validation import held_out_lights, true_lights
+
+    capture = load_capture(studio_capture)
+    truth = read_ground_truth(capture)
+    light = capture.lights[0]
+    turned = np.roll(light.envmap, light.envmap.shape[1] // 4, axis=1)  # an estimate a quarter turn off
+    estimated = replace(capture, lights=(replace(light, envmap=turned, estimated=True, relative=True),))
+    restored = true_lights(estimated, truth)
+    np.testing.assert_array_equal(restored.lights[0].envmap, light.envmap)
+    assert not restored.lights[0].estimated and true_lights(capture, truth).lights == capture.lights
+    given = held_out_lights(true_lights(capture, truth), np.zeros(3), count=3)
+    for a, b in zip(held_out_lights(restored, np.zeros(3), count=3), given):
+        np.testing.assert_array_equal(a["light_direction"], b["light_direction"])
+    # the estimate itself would have moved them
+    assert any(not np.allclose(a["light_direction"], b["light_direction"])
+               for a, b in zip(held_out_lights(estimated, np.zeros(3), count=3), given))
+    from mifaces.capture import with_true_lights
+    with pytest.raises(ValueError, match=r"placed no point light for light\(s\) \['studio'\]"):
+        with_true_lights(capture)

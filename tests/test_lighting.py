@@ -110,6 +110,9 @@ def test_balance_intensities_gives_one_albedo(tmp_path):
                                  np.ones(len(photo), np.float32), texels.astype(np.int32), photo.astype(np.int16), 32,
                                  ("m0", "m1", "m2"))
     before = {l.name: l.intensity.mean() for l in capture.lights}
+    # an estimated map's entry (estimate_environments runs before the balance) is kept
+    capture = replace(capture, metadata=dict(capture.metadata, estimated_lights=dict(
+        capture.metadata["estimated_lights"], sky={"photographs": ["m9"], "residual": 0.1})))
     balanced = balance_intensities(capture, samples)
     after = {l.name: l.intensity.mean() for l in balanced.lights}
     ratio = (after["top"] / after["side"]) / (before["top"] / before["side"])
@@ -117,6 +120,7 @@ def test_balance_intensities_gives_one_albedo(tmp_path):
     assert np.mean([after["top"], after["side"]]) == pytest.approx(RELATIVE_IRRADIANCE)
     assert balanced.lights[2] is capture.lights[2]  # the given light stays
     assert balanced.metadata["estimated_lights"]["top"]["photographs"] == ["m0"]
+    assert balanced.metadata["estimated_lights"]["sky"] == {"photographs": ["m9"], "residual": 0.1}
 
 
 def test_a_stated_guess_is_the_lights_angle_to_the_camera(tmp_path):

@@ -18,9 +18,9 @@ faces, ``--refine``): once with the map given, once with the light hidden
   facing the camera's half-space (scale removed), before and after the refinement;
 * the extra seconds the estimate costs (``measure``'s timings).
 
-The defaults of the estimate (map size, smoothness, floor, refinement rates, and restarting the
-glossy parameters under a map: ``--tuning``) were set on seed 11 (both environments), which the
-report leaves out; reported seeds default to 1 and 2.
+The defaults of the estimate were set on seed 11 (both environments), which the report leaves
+out: restarting the glossy parameters under a map with ``--tuning``; the map size, smoothness,
+floor and refinement rates in development runs not committed. Reported seeds default to 1 and 2.
 
     python validation/environment_lights.py --out out/environment_lights [--seeds 1 2]
     python validation/environment_lights.py --tuning --out out/environment_lights_tuning
@@ -42,11 +42,10 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 import numpy as np
 
 from mifaces.capture import MANIFEST, load_capture
-from mifaces.environment import LUMINANCE, texel_directions
+from mifaces.environment import LUMINANCE, irradiance, texel_directions
 from mifaces.files import read_exr, save_figure, write_json
 from mifaces.lighting import LIGHTS_FOLDER
 from mifaces.pipeline import measure
-from mifaces.reflectance.environment import reduced_map
 from mifaces.studio import simulate
 from mifaces.studio.environment_light import ENVIRONMENTS
 
@@ -74,16 +73,14 @@ def irradiance_error(true_map: np.ndarray, estimate: np.ndarray) -> float:
     """Relative RMS error of the unoccluded irradiance ``estimate`` gives the normals of the
     camera's half-space (the map frame's z > 0.2) against ``true_map``'s, the scale removed."""
     h, w = estimate.shape[:2]
-    _, truth, _ = reduced_map(true_map, (w, h))
-    d, solid = texel_directions(w, h)
-    cosines = np.clip(d @ d.T, 0, None) * solid
-    front = d[:, 2] > 0.2
-    e_true, e_fit = ((cosines @ np.asarray(m, np.float64).reshape(-1, 3))[front] for m in (truth, estimate))
+    d, _ = texel_directions(w, h)
+    front = d[d[:, 2] > 0.2]
+    e_true, e_fit = irradiance(true_map, front), irradiance(estimate, front)
     e_fit *= (e_true @ LUMINANCE).mean() / (e_fit @ LUMINANCE).mean()
     return float(np.sqrt(np.mean((e_fit - e_true) ** 2) / np.mean(e_true ** 2)))
 
 
-def run_summary(report: dict, out: Path) -> dict:
+def run_summary(report: dict) -> dict:
     """What one ``measure`` run says: skin's errors, the novel-pose errors, times."""
     entry = report["models"][MODEL]
     validation = entry["validation"]
@@ -112,17 +109,20 @@ def one(environment: str, seed: int, out: Path) -> dict:
     for name, source in (("given", capture), ("estimated", hidden)):
         t = time.perf_counter()
         report = measure(folder / name, source, models=(MODEL,), resolution=RESOLUTION, refine=True, progress=False)
-        runs[name] = run_summary(report, folder / name)
+        runs[name] = run_summary(report)
         print(f"{environment} seed {seed}, map {name}: held-out {runs[name]['heldout_rmse']:.4f}, skin BRDF "
               f"{runs[name]['skin_brdf_rmse']:.4f} ({time.perf_counter() - t:.0f} s)", flush=True)
     true_map = load_capture(capture, detect=False).lights[0].envmap
     light = json.loads((folder / "estimated" / "lights.json").read_text())["lights"][0]
     estimate = read_exr(folder / "estimated" / light["map"])[..., :3]
     brdf = json.loads((folder / "estimated" / "brdf" / MODEL / "brdf.json").read_text())
-    refined = brdf.get("refinement", {}).get("environment_maps", {}).get(light["name"])
+    # the map the BRDF was fitted under: refined where the refinement was kept
+    refined = (brdf.get("refinement") or {}).get("environment_maps", {}).get(light["name"])
     runs["map"] = {"name": light["name"], "size": light["size"], "residual": light.get("residual"),
                    "irradiance_error": irradiance_error(true_map, estimate),
-                   "irradiance_error_refined": None if refined is None else irradiance_error(true_map, np.asarray(refined)),
+                   "irradiance_error_refined": irradiance_error(true_map, estimate if refined is None
+                                                                else np.asarray(refined)),
+                   "refined": refined is not None,
                    "file": str(folder / "estimated" / LIGHTS_FOLDER / f"{light['name']}.exr")}
     runs["heldout_ratio"] = runs["estimated"]["heldout_rmse"] / runs["given"]["heldout_rmse"]
     runs["extra_seconds"] = runs["estimated"]["seconds"]["total"] - runs["given"]["seconds"]["total"]
@@ -177,7 +177,7 @@ def figure(document: dict, out: Path, path: Path) -> None:
         true_map = load_capture(folder / "capture", detect=False).lights[0].envmap
         estimate = read_exr(case["map"]["file"])[..., :3]
         brdf = json.loads((folder / "estimated" / "brdf" / MODEL / "brdf.json").read_text())
-        refined = brdf.get("refinement", {}).get("environment_maps", {}).get(case["map"]["name"])
+        refined = (brdf.get("refinement") or {}).get("environment_maps", {}).get(case["map"]["name"])
         shown = [("true map", true_map), ("estimated", estimate)]
         if refined is not None:
             shown.append(("refined with the BRDF", np.asarray(refined)))

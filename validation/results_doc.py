@@ -832,9 +832,10 @@ def sec_refine_shape_default(d):
 
 def sec_shape_depth(d):
     lines = [f"Default capture (512², six photographs), seeds {text(', '.join(map(str, get(d, 'seeds') or [])))}; "
-             "the fitted faces against the truth over the front of the face (mm). `scale`: the scale about the "
-             "camera's centre that best maps the true face onto the fitted one; `after the scale`: the error "
-             f"left after it. Aim without alignment: {fixed(get(d, 'world_target_mm'), 1)} mm.", ""]
+             "the fitted faces against the truth over the front of the face (mm). `size`: the fitted face's size "
+             "against the true one's; `after that size`: the error left after the true face is scaled by that "
+             "ratio about the camera's centre (a pinhole camera cannot tell a face s times larger and s times "
+             f"farther). Aim without alignment: {fixed(get(d, 'world_target_mm'), 1)} mm.", ""]
     rows = []
     for run in rows_of(get(d, "runs")):
         for name, e in items(get(run, "shape_errors")):
@@ -845,8 +846,9 @@ def sec_shape_depth(d):
                          fixed(e.get("aligned_mm"), 2)])
     held = get(d, "summary_focal_held") or {}
     notes = ["", f"With the calibrated focal length held (`fit_focal=False`): world error up to "
-             f"{fixed(held.get('max_world_mm'), 2)} mm, scale up to {fixed(held.get('max_abs_scale_pct'), 2)} %.", ""]
-    return lines + table(["seed", "photograph", "world", "depth", "scale", "after the scale",
+             f"{fixed(held.get('max_world_mm'), 2)} mm, size off by up to {fixed(held.get('max_abs_scale_pct'), 2)} %.",
+             ""]
+    return lines + table(["seed", "photograph", "world", "depth", "size", "after that size",
                           "after rigid alignment"], rows) + (notes if held else [])
 
 
@@ -889,7 +891,7 @@ LAYOUTS = {
     "refine_gradient": ("The refinement loss's gradient at the truth", "SIMULATED", sec_refine_gradient),
     "refine_seeds": ("The refinement's schedule on training and test captures", "SIMULATED", sec_refine_seeds),
     "refine_shape_default": ("Shape refinement on the default capture", "SIMULATED", sec_refine_shape_default),
-    "shape_depth": ("Where the fitted faces lie in depth: the scale-depth ambiguity", "SIMULATED", sec_shape_depth),
+    "shape_depth": ("Where the fitted faces lie in depth", "SIMULATED", sec_shape_depth),
     "unknown_lights": ("Lights nobody measured: the Yale face database with its lights hidden", "real photographs",
                        sec_unknown_lights),
     "environment_lights": ("Environment maps nobody measured: simulated captures under the studio and the sky",

@@ -1,15 +1,15 @@
-"""Where the fitted faces lie in depth, and why: the scale-depth ambiguity of one camera (SIMULATED).
+"""Where the fitted faces lie in depth, and whether the face's size explains it (SIMULATED).
 
 Simulates the default capture (``mifaces simulate``: 512², six photographs, two lamps) for each
 seed, fits its faces with the defaults (:func:`mifaces.shape.fit_shape`: one identity, each
 photograph its pose) and scores them against the truth by
 :func:`mifaces.shape_errors.capture_shape_errors`: the world-frame error without alignment,
-after a rigid alignment, the depth offset, and the scale about the camera's centre that best
-maps the true face onto the fitted one with the error left after it; then the same with the
-calibrated focal length held (``fit_focal=False``; ``focal_held``). A pinhole camera sees a
-face s times larger and s times farther exactly as it sees the face: where the error left after
-that one scale is far below the world error, the world error is the ambiguity, and only the
-face's absolute size pins it (0.1 % of it is 1.2 mm in depth at 1.2 m).
+after a rigid alignment, the depth offset, the fitted face's size against the true one's and the
+error left after the true face is scaled by that ratio about the camera's centre; then the same
+with the calibrated focal length held (``fit_focal=False``; ``focal_held``). A pinhole camera sees
+a face s times larger and s times farther exactly as it sees the face: where the error left after
+that size is far below the world error, the world error is that ambiguity; where it is not, each
+photograph's depth is off on its own.
 
 Seed 0 is the capture the shape fit's defaults were developed on; the default seeds (1, 2)
 were not used to choose anything.
@@ -77,8 +77,8 @@ def main(argv=None) -> int:
     for seed in args.seeds:
         runs.append(seed_run(seed, args.work))
         s = runs[-1]["shape_errors"]["summary"]
-        print(f"seed {seed}: world {s['mean_world_mm']:.2f} mm (max {s['max_world_mm']:.2f}), after the scale "
-              f"{s['mean_scaled_mm']:.2f} mm, rigid {s['mean_aligned_mm']:.2f} mm; largest scale "
+        print(f"seed {seed}: world {s['mean_world_mm']:.2f} mm (max {s['max_world_mm']:.2f}), after the size "
+              f"{s['mean_scaled_mm']:.2f} mm, rigid {s['mean_aligned_mm']:.2f} mm; size off by up to "
               f"{s['max_abs_scale_pct']:.2f} %", flush=True)
     summaries = [r["shape_errors"]["summary"] for r in runs]
     held = [r["focal_held"]["shape_errors"]["summary"] for r in runs]

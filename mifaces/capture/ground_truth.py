@@ -238,6 +238,10 @@ def with_true_lights(capture: Capture) -> Capture:
     if truth is None:
         raise ValueError(f"capture {capture.path}: no ground truth, so no true light positions")
     positions = {light.name: light.position for light in truth.lights}
+    unplaced = [light.name for light in capture.lights if light.name not in positions]
+    if unplaced:
+        raise ValueError(f"capture {capture.path}: the simulator placed no point light for light(s) {unplaced} "
+                         "(an environment or directional light has no true position)")
     return replace(capture, lights=tuple(replace(light, position=np.asarray(positions[light.name], np.float64))
                                          for light in capture.lights))
 

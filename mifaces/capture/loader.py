@@ -17,9 +17,9 @@ from .camera import Camera
 from .feature_points import detect_feature_points
 from .images import read_image
 from .problems import Problems
-from .types import (ENVMAP_HEIGHTS, ENVMAP_SIZE, FEATURE_POINT_RANGE, FORMAT, IMAGE_SUFFIXES, LIGHT_KINDS, MANIFEST,
-                    RELATIVE_IRRADIANCE, TRANSFERS, VERSION, Capture, CaptureError, Distance, Image, Light, Measurement,
-                    SpherePictures, WhiteTarget)
+from .types import (ENVMAP_HEIGHTS, ENVMAP_SIZE, FEATURE_POINT_RANGE, FORMAT, GIVEN_ENVMAP_HEIGHTS, IMAGE_SUFFIXES,
+                    LIGHT_KINDS, MANIFEST, RELATIVE_IRRADIANCE, TRANSFERS, VERSION, Capture, CaptureError, Distance,
+                    Image, Light, Measurement, SpherePictures, WhiteTarget)
 
 
 def _camera(entry, problems: Problems) -> Camera | None:
@@ -364,11 +364,8 @@ def _environment_light(e: dict, name, where: str, relative, root: Path, problems
         problems.append(f"{where}.map: light {name!r}: {rel} must be an RGB image, got shape {envmap.shape}")
         return None
     envmap = envmap[..., :3]
-    height, width = envmap.shape[:2]
-    low, high = ENVMAP_HEIGHTS[0], 4096
-    if width != 2 * height or not low <= height <= high:
-        problems.append(f"{where}.map: light {name!r}: invalid envmap size {width}x{height}: the width must be twice "
-                        f"the height (a latitude-longitude map) and the height between {low} and {high}")
+    if _envmap_size([int(envmap.shape[1]), int(envmap.shape[0])], name, f"{where}.map", problems,
+                    GIVEN_ENVMAP_HEIGHTS) is None:
         return None
     if not np.all(np.isfinite(envmap)) or envmap.min() < 0:
         problems.append(f"{where}.map: light {name!r}: {rel} has NaN, infinite or negative radiance")
@@ -414,10 +411,11 @@ def _unknown_light(e: dict, name, where: str, problems: Problems) -> Light | Non
                  envmap_size=size)
 
 
-def _envmap_size(value, name, where: str, problems: Problems) -> tuple[int, int] | None:
+def _envmap_size(value, name, where: str, problems: Problems, heights=ENVMAP_HEIGHTS) -> tuple[int, int] | None:
     """An environment map's (width, height): two integers, width = 2 x height (latitude-longitude),
-    height in :data:`ENVMAP_HEIGHTS`."""
-    low, high = ENVMAP_HEIGHTS
+    height in ``heights`` (low, high): :data:`ENVMAP_HEIGHTS` for a map to estimate,
+    :data:`GIVEN_ENVMAP_HEIGHTS` for a given one."""
+    low, high = heights
     if (not isinstance(value, list) or len(value) != 2
             or not all(isinstance(v, int) and not isinstance(v, bool) for v in value)):
         problems.append(f"{where}: light {name!r}: invalid envmap size {value!r}: "

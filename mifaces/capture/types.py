@@ -30,6 +30,8 @@ LIGHT_KINDS = ("directional", "environment")
 #: latitude-longitude map, and the allowed heights (the width is twice the height).
 ENVMAP_SIZE = (32, 16)
 ENVMAP_HEIGHTS = (4, 128)
+#: Heights (pixels) a given environment map may have (the width is twice the height).
+GIVEN_ENVMAP_HEIGHTS = (4, 4096)
 #: Transfer curves of integer images.
 TRANSFERS = ("linear", "srgb", "gamma")
 IMAGE_SUFFIXES = (".exr", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".pgm", ".ppm", ".pnm")
@@ -167,7 +169,7 @@ class Light:
             raise ValueError(f"light {self.name!r} is unknown: estimate it first (mifaces.lighting.estimate_lights)")
         if self.environment:
             raise ValueError(f"light {self.name!r} is an environment map: it has no one direction "
-                             "(mifaces.reflectance.samples.environment_transport)")
+                             "(mifaces.reflectance.environment.equivalent_lights)")
         if self.position is None:
             raise ValueError(f"light {self.name!r} has no position (load the capture with calibrate=True)")
         offset = np.asarray(self.position, np.float64) - points

@@ -40,7 +40,8 @@ import mitsuba as mi
 import numpy as np
 
 from ..capture.types import RELATIVE_IRRADIANCE
-from ..environment import LUMINANCE, irradiance, texel_directions, to_world
+from ..environment import LUMINANCE, peak_irradiance, texel_directions, to_world
+from ..population import MAD_SCALE
 
 #: (width, height) of the map a given one is reduced to for the texture-space stages.
 TRANSPORT_SIZE = (32, 16)
@@ -89,8 +90,9 @@ def _rays(scene, position, normal, directions, offset: float, maxt: float):
     nn = dr.gather(mi.Vector3f, mi.Vector3f(np.asarray(normal, np.float32).T), ti)
     w = dr.gather(mi.Vector3f, mi.Vector3f(np.asarray(directions, np.float32).T), di)
     cos = dr.dot(nn, w)
-    ray = mi.Ray3f(p + offset * nn, w)
-    ray.maxt = maxt
+    # opaque: each face has its own offset and ray length, and the kernel is compiled once
+    ray = mi.Ray3f(p + dr.opaque(mi.Float, offset) * nn, w)
+    ray.maxt = dr.opaque(mi.Float, maxt)
     escapes = (cos > 0) & ~scene.ray_test(ray, cos > 0)
     return ti, di, dr.select(escapes, cos, 0.0)
 
@@ -177,14 +179,6 @@ def _nonnegative_solve(lhs: np.ndarray, rhs: np.ndarray, start: np.ndarray, swee
     return x
 
 
-def unoccluded_peak(envmap: np.ndarray) -> np.ndarray:
-    """The largest unoccluded irradiance (3,) the map gives a surface of any of its texels'
-    directions as normal (:func:`mifaces.environment.irradiance`): the scale an estimated map is
-    fixed to."""
-    e = irradiance(envmap, texel_directions(envmap.shape[1], envmap.shape[0])[0])
-    return e[np.argmax(e @ LUMINANCE)]
-
-
 def estimate_map(radiance: list[np.ndarray], transports: list[np.ndarray], texels: list[np.ndarray],
                  size: tuple[int, int], smoothness: float = SMOOTHNESS,
                  rounds: int = ROUNDS) -> tuple[np.ndarray, dict]:
@@ -203,7 +197,8 @@ def estimate_map(radiance: list[np.ndarray], transports: list[np.ndarray], texel
 
     Returns
     -------
-    envmap : (H, W, 3) float32, scaled by :func:`unoccluded_peak` to :data:`RELATIVE_IRRADIANCE`
+    envmap : (H, W, 3) float32, scaled so that its
+        :func:`~mifaces.environment.peak_irradiance` has luminance :data:`RELATIVE_IRRADIANCE`
     info : dict
         ``rounds``, ``residual`` (relative RMS of the last round), ``samples``.
     """
@@ -236,11 +231,11 @@ def estimate_map(radiance: list[np.ndarray], transports: list[np.ndarray], texel
             light[:, c] = _nonnegative_solve(lhs, rhs, light[:, c])
         model = albedo[texel] * (t @ light)
         res = (r - model) @ LUMINANCE
-        scale = 1.4826 * np.median(np.abs(res)) + 1e-12
+        scale = MAD_SCALE * np.median(np.abs(res)) + 1e-12
         weight = np.minimum(1.0, HUBER * scale / np.maximum(np.abs(res), 1e-30))
         residual = float(np.sqrt(np.mean(res ** 2)) / max(float(np.sqrt(np.mean((r @ LUMINANCE) ** 2))), 1e-30))
     envmap = light.reshape(height, width, 3)
-    peak = unoccluded_peak(envmap) @ LUMINANCE
+    peak = peak_irradiance(envmap) @ LUMINANCE
     envmap = envmap * (RELATIVE_IRRADIANCE / max(float(peak), 1e-30))
     return envmap.astype(np.float32), {"rounds": rounds, "residual": residual, "samples": int(len(r)),
                                        "texels": int(len(ids))}

@@ -28,6 +28,7 @@ or any mapping from measurement name to world-space vertices.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -38,7 +39,7 @@ from .. import brdf as brdf_models
 from ..capture import Capture, load_capture
 from ..geometry import load_geometry
 from ..model.regions import REGIONS, regions_present, texel_regions_of_mesh
-from ..render import FaceScene, light_arguments
+from ..render import FaceScene
 from .diffuse import AlbedoOffsets, DiffuseMap, refine_diffuse
 from .fitting import RegionFit, SubsetSchedule, fit_regions
 from .io import FILES, write_estimate
@@ -111,6 +112,15 @@ class BRDFEstimate:
     specular: SpecularMap | None = None
     lighting: dict | None = None
     light_balance: dict | None = None
+
+    def fitted_light(self, light):
+        """``light`` (:class:`~mifaces.capture.Light`) as this estimate was fitted under it: an
+        estimated environment map that the refinement refined (``refinement['environment_maps']``,
+        kept only where the refinement was) is that refined map; any other light is itself."""
+        maps = (self.refinement or {}).get("environment_maps") or {}
+        if light.environment and light.estimated and light.name in maps:
+            return dataclasses.replace(light, envmap=np.asarray(maps[light.name], np.float32))
+        return light
 
     def normal_texture(self) -> np.ndarray | None:
         """The normals as a ``normalmap`` texture ((n + 1) / 2), or None."""
@@ -309,9 +319,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         estimate.seconds["total"] = time.perf_counter() - t0
     if out is not None:
         first = next(m for m in capture.measurements if m.name == estimate.measurements[0])
-        lamp = light_arguments(capture.light(first.light))
-        write_estimate(estimate, out, FaceScene(face, shapes[first.name]), capture.camera, lamp.get("light_position"),
-                       lamp.get("intensity"), light_direction=lamp.get("light_direction"), envmap=lamp.get("envmap"),
+        write_estimate(estimate, out, FaceScene(face, shapes[first.name]), capture.camera, capture.light(first.light),
                        force=force)
     return estimate
 

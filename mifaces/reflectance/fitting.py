@@ -214,15 +214,11 @@ def _sums(space: ParameterSpace, arrays: dict, u: list, jacobian: bool):
     copies on the LLVM backend, ``dr.ReduceMode.Expand``)."""
     n, p = dr.width(arrays["w"]), len(u)
     r, d = _residual_tangents(space, arrays, u, tangents=jacobian)
-    sums = [r[0] * r[0] + r[1] * r[1] + r[2] * r[2]]
+    sums = [0.5 * (r[0] * r[0] + r[1] * r[1] + r[2] * r[2])]
     if jacobian:
         sums += [d[a][0] * d[b][0] + d[a][1] * d[b][1] + d[a][2] * d[b][2] for a in range(p) for b in range(a, p)]
         sums += [d[a][0] * r[0] + d[a][1] * r[1] + d[a][2] * r[2] for a in range(p)]
-    acc = dr.zeros(mi.Float64, len(sums))
-    for k, value in enumerate(sums):
-        dr.scatter_add(acc, value * (0.5 if k == 0 else 1.0), dr.full(mi.UInt32, k, n))
-    dr.eval(acc)
-    return acc
+    return _group_scatter(sums, dr.zeros(mi.UInt32, n), 1)  # one group: every sample
 
 
 #: Largest per-cluster sum array (float64 entries) summed with a per-thread copy (``dr.ReduceMode.Expand``).

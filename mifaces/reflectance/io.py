@@ -30,7 +30,7 @@ from .. import brdf as brdf_models
 from ..files import (ResultSetError, atomic_write, read_exr, result_set, verify_set, write_exr,
                      write_json, write_png)
 from ..environment import environment_emitter
-from ..render import FaceScene, scene_xml
+from ..render import FaceScene, light_arguments, scene_xml
 
 if TYPE_CHECKING:
     from .estimate import BRDFEstimate
@@ -47,8 +47,8 @@ SPP_PATH = ("sensor", "sampler", "sample_count")
 KIND = "brdf"
 
 
-def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_position, intensity, *,
-                   light_direction=None, envmap=None, force: bool = False) -> dict[str, Path]:
+def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light, *,
+                   force: bool = False) -> dict[str, Path]:
     """Write ``brdf.json``, ``albedo.exr`` (+ ``albedo.png``), ``meshes/*.ply``
     and ``scene.xml`` into folder ``out`` as one result set
     (:func:`mifaces.files.result_set`): all of them or none.
@@ -60,13 +60,10 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
     face : FaceScene
         The geometry the scene shows (world frame, mm).
     camera : mifaces.capture.Camera
-    light_position, intensity : (3,) arrays
-        The point light of the scene (world, mm) and its radiant intensity.
-    light_direction : (3,) array, optional
-        A directional light instead (world frame, towards the light;
-        ``intensity`` is then its irradiance).
-    envmap : (H, W, 3) array, optional
-        An environment map instead (:attr:`mifaces.capture.Light.envmap`),
+    light : mifaces.capture.Light
+        The scene's light (:func:`mifaces.render.light_arguments`), as the
+        estimate was fitted under it (:meth:`BRDFEstimate.fitted_light`: a map
+        the refinement refined is the refined one). An environment map is
         written beside the scene as ``environment.exr``.
     force : bool
         Replace a fitted BRDF that ``out`` holds (else a ``FileExistsError``).
@@ -74,10 +71,12 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light_p
     out = Path(out)
     document = estimate.to_json()
     normals, specular = estimate.normal_texture(), estimate.specular_texture()
+    lamp = light_arguments(estimate.fitted_light(light))
+    envmap = lamp.get("envmap")
     environment = None if envmap is None else environment_emitter(FILES["environment"], camera)
-    scene = face.description(document, camera, light_position, intensity, environment, spp=SCENE_SPP,
-                             albedo=FILES["albedo"],
-                             light_direction=light_direction, normals=None if normals is None else FILES["normals"],
+    scene = face.description(document, camera, lamp.get("light_position"), lamp.get("intensity"), environment,
+                             spp=SCENE_SPP, albedo=FILES["albedo"], light_direction=lamp.get("light_direction"),
+                             normals=None if normals is None else FILES["normals"],
                              specular=None if specular is None else FILES["specular"])
     # (description checks the BRDF and the light before anything is written)
     comment = (f"The face as fitted by mifaces fit-brdf: per-region {estimate.model} BSDFs over the refined albedo "

@@ -357,7 +357,7 @@ class RefineProblem:
             self.variables[ALBEDO] = self.albedo.start()
         if schedule.light_gain_learning_rate is not None and len(self.lights) > 1:
             self.variables[LIGHT_GAIN] = np.zeros(len(self.lights))
-        #: estimated environment light -> (its map's shape, its start's mean log radiance)
+        #: estimated environment light -> :class:`_EnvironmentVariable`
         self.environments = {}
         if schedule.environment_learning_rate is not None:
             for name in self.lights:
@@ -365,7 +365,9 @@ class RefineProblem:
                 if light.environment and light.estimated and light.envmap is not None:
                     envmap = np.asarray(light.envmap, np.float64)
                     log = np.log(np.maximum(envmap, ENVMAP_FLOOR * max(float(envmap.mean()), 1e-30)))
-                    self.environments[name] = (log.shape, float(log.mean()))
+                    self.environments[name] = _EnvironmentVariable(log.shape, float(log.mean()),
+                                                                   _neighbour_pairs(log.shape),
+                                                                   _padded_index(log.shape))
                     self.variables[environment_variable(name)] = log
 
     def _photograph(self, capture, m, vertices, face_model, brdf, albedo, scale, lamp_radius) -> _Photograph:
@@ -389,7 +391,7 @@ class RefineProblem:
             region = names.get(int(label), "skin")
             pixels[region] = pixels.get(region, 0) + int(n)
         held = holdout_pixels(view.mask, self.schedule.holdout, self.schedule.holdout_block, self.rng)
-        envmap_key = next((key for key in view.params.keys() if key == "environment.data"), None)
+        envmap_key = "environment.data" if "environment.data" in view.params else None
         return _Photograph(m.name, view.scene, view.params, view.target, mask_weight(view.mask & ~held),
                            mask_weight(held), view.scale, keys, albedo_keys, pixels, m.light, envmap_key=envmap_key)
 
@@ -413,22 +415,23 @@ class RefineProblem:
             for key in photo.albedo_keys:
                 photo.params[key] = texture
         if photo.light in self.environments and photo.envmap_key is not None:
-            photo.params[photo.envmap_key] = padded_envmap(self.environment_map(photo.light, variables))
+            photo.params[photo.envmap_key] = padded_envmap(self.environment_map(photo.light, variables),
+                                                           self.environments[photo.light].padded)
         photo.params.update()
 
     def environment_map(self, light: str, variables: dict):
         """Estimated environment light ``light``'s map (H, W, 3) as a differentiable TensorXf: exp of
         its log-radiance variable, the mean log held at its start's."""
-        shape, mean = self.environments[light]
+        environment = self.environments[light]
         x = variables[environment_variable(light)]
-        return mi.TensorXf(dr.exp(x.array - dr.mean(x.array) + mean), shape)
+        return mi.TensorXf(dr.exp(x.array - dr.mean(x.array) + environment.mean_log), environment.shape)
 
     def environment_prior(self, variables: dict):
         """The estimated maps' smoothness prior (:attr:`RefineSchedule.environment_smoothness`): mi.Float."""
         total = mi.Float(0.0)
-        for light, (shape, _) in self.environments.items():
+        for light, environment in self.environments.items():
             x = variables[environment_variable(light)].array
-            for a, b in _neighbour_pairs(shape):
+            for a, b in environment.pairs:
                 d = dr.gather(mi.Float, x, a) - dr.gather(mi.Float, x, b)
                 total += dr.mean(d * d)
         return self.schedule.environment_smoothness * total
@@ -508,13 +511,32 @@ def _neighbour_pairs(shape) -> list:
             for group in (pairs[:w * h], pairs[w * h:])]
 
 
-def padded_envmap(envmap: mi.TensorXf) -> mi.TensorXf:
-    """An (H, W, 3) map as Mitsuba's ``envmap`` stores its ``data``: (H, W + 2, 3), the last column
-    before the first and the first after the last (it wraps round in azimuth)."""
-    h, w, c = envmap.shape
+def _padded_index(shape) -> mi.UInt32:
+    """The flat index into an (H, W, 3) map of each element of :func:`padded_envmap`'s (H, W + 2, 3)."""
+    h, w, c = shape
     rows, cols, chans = np.meshgrid(np.arange(h), (np.arange(w + 2) - 1) % w, np.arange(c), indexing="ij")
-    index = mi.UInt32(((rows * w + cols) * c + chans).ravel().astype(np.uint32))
+    return mi.UInt32(((rows * w + cols) * c + chans).ravel().astype(np.uint32))
+
+
+def padded_envmap(envmap: mi.TensorXf, index: mi.UInt32 | None = None) -> mi.TensorXf:
+    """An (H, W, 3) map as Mitsuba's ``envmap`` stores its ``data``: (H, W + 2, 3), the last column
+    before the first and the first after the last (it wraps round in azimuth). ``index``:
+    :func:`_padded_index` of its shape, where it was built once."""
+    h, w, c = envmap.shape
+    index = _padded_index(envmap.shape) if index is None else index
     return mi.TensorXf(dr.gather(mi.Float, envmap.array, index), (h, w + 2, c))
+
+
+@dataclasses.dataclass(frozen=True)
+class _EnvironmentVariable:
+    """An estimated map the refinement fits: its shape, its start's mean log radiance (held), and
+    the index arrays of its smoothness prior (:func:`_neighbour_pairs`) and of Mitsuba's padded
+    layout (:func:`_padded_index`), built once."""
+
+    shape: tuple
+    mean_log: float
+    pairs: list
+    padded: object
 
 
 class _kernel_history:
@@ -645,8 +667,9 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
         "regions": sorted(problem.spaces), "region_pixels": problem.pixels,
         "restarted": bool(problem.restarted),
         "light_gains": problem.light_gains(result if accepted else start),
-        "environment_maps": {light: m.tolist() for light, m in
-                             problem.environment_maps(result if accepted else start).items()},
+        # the refined maps, where the refinement is kept (else the capture's estimates stand)
+        "environment_maps": {light: m.tolist() for light, m in problem.environment_maps(result).items()}
+        if accepted else {},
         "accepted": bool(accepted), "reason": reason,
         "loss_before": before["fit"], "loss_after": after["fit"],
         "heldout_loss_before": before["heldout"], "heldout_loss_after": after["heldout"],

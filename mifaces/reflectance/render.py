@@ -81,11 +81,10 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     if yaw:
         vertices = turn(vertices, yaw, -capture.camera.rotation[1])  # the camera's up direction in the world frame
     lamp = capture.light(next(m.light for m in capture.measurements if m.name == name))
-    if light_position is None and light_direction is None and envmap is None:
-        if lamp.environment:
-            envmap = light_arguments(lamp)["envmap"]
-        else:
-            light_position, light_direction = lamp.position, lamp.direction
+    if light_position is None and light_direction is None and envmap is None:  # the measurement's light
+        given = light_arguments(lamp)
+        light_position, light_direction, envmap = (given.get(key) for key in ("light_position", "light_direction",
+                                                                               "envmap"))
     if intensity is None and (light_position is not None or light_direction is not None):
         intensity = lamp.intensity
     image = FaceScene(face, vertices).render(data, albedo, capture.camera, light_position, intensity, envmap,

@@ -27,8 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..environment import (SKY_SUN_ANGLES, bake_environment, irradiance, map_directions, sky_emitter,
-                           studio_environment)
+from ..environment import SKY_SUN_ANGLES, bake_environment, peak_irradiance, sky_emitter, studio_environment
 
 #: The environments a simulated capture can be lit by.
 ENVIRONMENTS = ("studio", "sky")
@@ -38,9 +37,6 @@ ENVIRONMENT_HEIGHT = 256
 ENVIRONMENT_LEVEL = 0.9
 #: Folder of the environment map inside the capture.
 LIGHTS = "lights"
-#: Surface orientations searched for the brightest direction (a grid of this height, twice as wide:
-#: E(n) is smooth, a 5.6° grid finds its peak to 0.1 %).
-_NORMALS_HEIGHT = 32
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,16 +51,14 @@ class EnvironmentLight:
         Latitude-longitude radiance in pixel value, in the frame of
         :func:`mifaces.environment.environment_emitter`: what the capture states
         and what the photographs are rendered with.
-    exposure : float
-        The factor from the environment's radiance (the studio map's, the sky's in
-        W m⁻² sr⁻¹ nm⁻¹) to ``map``.
     description : dict
-        What the environment was, for the ground truth's description.
+        What the environment was, for the ground truth's description: with ``exposure``, the
+        factor from the environment's radiance (the studio map's, the sky's in
+        W m⁻² sr⁻¹ nm⁻¹) to ``map``.
     """
 
     name: str
     map: np.ndarray
-    exposure: float
     description: dict
 
     @property
@@ -85,24 +79,23 @@ def check_environment(environment) -> str | None:
 
 
 def environment_radiance(name: str, camera) -> tuple[np.ndarray, dict]:
-    """The environment ``name`` as a map of radiance (:data:`ENVIRONMENT_HEIGHT` rows) placed by
-    ``camera``, and its description."""
-    if check_environment(name) == "studio":
+    """The environment ``name`` (one of :data:`ENVIRONMENTS`) as a map of radiance
+    (:data:`ENVIRONMENT_HEIGHT` rows) placed by ``camera``, and its description."""
+    if check_environment(name) is None:
+        raise ValueError(f"environment must be one of {list(ENVIRONMENTS)}, got None")
+    if name == "studio":
         return studio_environment(ENVIRONMENT_HEIGHT), {"environment": "studio"}
-    if name == "sky":
-        sky = sky_emitter(camera)  # the sun at SKY_SUN_ANGLES about the camera
-        return bake_environment(sky, camera, ENVIRONMENT_HEIGHT), {
-            "environment": "sky", "sun_angles_deg": list(SKY_SUN_ANGLES), "turbidity": sky["turbidity"],
-            "ground_albedo": sky["albedo"]}
-    raise ValueError("environment must be 'studio' or 'sky', got None")
+    sky = sky_emitter(camera)  # the sun at SKY_SUN_ANGLES about the camera
+    return bake_environment(sky, camera, ENVIRONMENT_HEIGHT), {
+        "environment": "sky", "sun_angles_deg": list(SKY_SUN_ANGLES), "turbidity": sky["turbidity"],
+        "ground_albedo": sky["albedo"]}
 
 
 def environment_exposure(radiance: np.ndarray) -> float:
     """The exposure at which a white Lambertian surface facing the brightest direction of the map
-    ``radiance`` (the largest irradiance E of any channel) reads :data:`ENVIRONMENT_LEVEL`: level π / E."""
-    h = _NORMALS_HEIGHT
-    normals = map_directions((np.arange(2 * h)[None] + 0.5) / (2 * h), (np.arange(h)[:, None] + 0.5) / h)
-    peak = float(irradiance(radiance, normals.reshape(-1, 3)).max())
+    ``radiance`` (:func:`mifaces.environment.peak_irradiance`; E its largest channel) reads
+    :data:`ENVIRONMENT_LEVEL`: level π / E."""
+    peak = float(peak_irradiance(radiance).max())
     if peak <= 0:
         raise ValueError("the environment map is black: it lights nothing")
     return ENVIRONMENT_LEVEL * np.pi / peak
@@ -113,7 +106,7 @@ def environment_light(name: str, camera) -> EnvironmentLight:
     (:func:`environment_exposure`)."""
     radiance, description = environment_radiance(name, camera)
     exposure = environment_exposure(radiance)
-    description.update({"map": f"{LIGHTS}/{name}.exr", "exposure": round(exposure, 6),
+    light = EnvironmentLight(name, np.ascontiguousarray(radiance * np.float32(exposure), np.float32), description)
+    description.update({"map": light.path, "exposure": round(exposure, 6),
                         "point_lights": "none: every photograph is lit by the environment"})
-    return EnvironmentLight(name, np.ascontiguousarray(radiance * np.float32(exposure), np.float32), exposure,
-                            description)
+    return light

@@ -146,11 +146,13 @@ def set_up_studio(width: int, height: int, head: np.ndarray, measurements: int, 
     the last lights), the lights placed with ``rng``; or, with ``environment``
     (:data:`mifaces.studio.environment_light.ENVIRONMENTS`), one condition, that
     environment, with ``measurements`` head turns (:func:`head_turns`)."""
-    if environment is not None:
-        camera = studio_camera(width, height, head)
-        return Studio(camera=camera, head=head, light_positions=np.zeros((0, 3)),
-                      intensity=np.full(3, np.pi * LIGHT_DISTANCE ** 2), exposure=1.0, per_light=[measurements],
-                      sphere_centers=head + SPHERE_OFFSETS, sensor=mitsuba_sensor(camera, spp),
+    camera = studio_camera(width, height, head)
+    # the steel spheres: around where the head is, all in the field of view, in one plane facing the camera
+    # so that for lights in front (azimuth within 70 degrees) none lies in another's shadow
+    common = dict(camera=camera, head=head, intensity=np.full(3, np.pi * LIGHT_DISTANCE ** 2),
+                  sphere_centers=head + SPHERE_OFFSETS, sensor=mitsuba_sensor(camera, spp))
+    if environment is not None:  # no lamps: the map is in pixel value, the photographs' exposure 1
+        return Studio(**common, light_positions=np.zeros((0, 3)), exposure=1.0, per_light=[measurements],
                       poses=head_turns(measurements, rng), environment=environment_light(environment, camera))
     n_lights = math.ceil(measurements / 3)
     per_light = [3] * n_lights
@@ -158,12 +160,8 @@ def set_up_studio(width: int, height: int, head: np.ndarray, measurements: int, 
         per_light[-1 - i % n_lights] -= 1
     directions = light_directions(n_lights, rng)
     distances = LIGHT_DISTANCE * rng.uniform(0.9, 1.1, n_lights)
-    camera = studio_camera(width, height, head)
-    # the steel spheres: around where the head is, all in the field of view, in one plane facing the camera
-    # so that for lights in front (azimuth within 70 degrees) none lies in another's shadow
-    return Studio(camera=camera, head=head, light_positions=head + directions * distances[:, None],
-                  intensity=np.full(3, np.pi * LIGHT_DISTANCE ** 2), exposure=WHITE_LEVEL, per_light=per_light,
-                  sphere_centers=head + SPHERE_OFFSETS, sensor=mitsuba_sensor(camera, spp))
+    return Studio(**common, light_positions=head + directions * distances[:, None], exposure=WHITE_LEVEL,
+                  per_light=per_light)
 
 
 def white_value(studio: Studio) -> np.ndarray:

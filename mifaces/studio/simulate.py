@@ -76,7 +76,7 @@ from ..render import face_shapes, region_bsdf, region_meshes
 from .photograph import albedo_texture, annotate, photograph_face, photograph_spheres, visible_feature_points
 from . import subsurface as translucent
 from .detail import fine_detail, span_residual
-from .environment_light import ENVIRONMENTS, check_environment
+from .environment_light import check_environment
 from .scene import set_up_studio
 from .subject import head_pose, make_subject, with_detail
 from .truth import DIGITS, brdf_with_overrides
