@@ -18,7 +18,7 @@ if _drjit_came_first:
 from .model import MorphableModel, load_model  # noqa: E402
 from .variant import default_variant, set_variant  # noqa: E402
 
-__version__ = "0.1.0"
+from .version import VERSION as __version__  # noqa: E402,F401
 
 set_variant()
 
@@ -28,5 +28,5 @@ from .reflectance import capture_samples, fit_brdf, render_fitted  # noqa: E402
 from .shape import fit_shape, load_fitted_shapes  # noqa: E402
 from .studio import simulate  # noqa: E402
 
-__all__ = ["MorphableModel", "load_model", "default_variant", "set_variant", "load_capture", "simulate",
+__all__ = ["__version__", "MorphableModel", "load_model", "default_variant", "set_variant", "load_capture", "simulate",
            "fit_shape", "load_fitted_shapes", "capture_samples", "fit_brdf", "render_fitted", "measure"]

@@ -46,6 +46,7 @@ from distributed import Client, KilledWorker, LocalCluster, WorkerPlugin, as_com
 from distributed.comm import get_address_host
 from tqdm import tqdm
 
+from .reflectance import FitOptions
 from .capture.types import MANIFEST
 from .files import write_json
 from .importers.yaleb import import_subject
@@ -177,7 +178,10 @@ def measure_one(name: str, source, out, importer: str | None = None, options: di
             capture = IMPORTERS[importer](source, out / IMPORTED / name, force=True)
         entry["capture"] = str(capture)
         shutil.rmtree(partial, ignore_errors=True)
-        report = measure(partial, capture, progress=False, **(options or {}))
+        kwargs = dict(options or {})
+        if "resolution" in kwargs:  # the record's plain value, a FitOptions for measure
+            kwargs["options"] = FitOptions(resolution=kwargs.pop("resolution"))
+        report = measure(partial, capture, progress=False, **kwargs)
         _replace_folder(partial, final)
         entry.update(status=DONE, measure_seconds=report["seconds"]["total"])
     except Exception as error:  # recorded, and the batch goes on
@@ -259,7 +263,8 @@ def dashboard(client: Client) -> str:
 def measure_batch(inputs, out, workers: int | None = None, scheduler: str | None = None, models=MODELS,
                   resume: bool = False, importer: str | None = None, variant: str | None = None,
                   geometry: str = _MEASURE["geometry"].default,
-                  resolution: int = _MEASURE["resolution"].default, progress: bool = True, echo=None,
+                  resolution: int = inspect.signature(FitOptions).parameters["resolution"].default,
+                  progress: bool = True, echo=None,
                   **options) -> dict:
     """Measure many captures on Dask, each as :func:`mifaces.pipeline.measure` would.
 

@@ -24,13 +24,15 @@ from .files import MAX_IMAGE_PIXELS, check_result_target, check_writable, write_
 from .gallery import render_gallery
 from .importers.diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
 from .importers.yaleb import SPLIT, import_subject
-from .landmarks import NoFaceError, detect_landmarks
+from .capture.detector import NoFaceError, detect_landmarks
 from .model import load_model
 from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
-from .reflectance import fit_brdf as fit_brdf_model, render_fitted
-from .reflectance.io import KIND as BRDF_KIND
-from .reflectance.refine_shape import refine_fits
-from .reflectance.uncertainty import METHODS as UNCERTAINTY_METHODS
+from .geometry import load_geometry
+from .reflectance import FitOptions, fit_brdf as fit_brdf_model, render_fitted
+from .reflectance.fit.uncertainty import METHODS as UNCERTAINTY_METHODS
+from .reflectance.io import KIND as BRDF_KIND, write_fitted
+from .refine import refine_estimate
+from .refine.shape import refine_fits
 from .report import RANKED
 from .shape import fit_shape as fit_shapes
 from .shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
@@ -73,11 +75,13 @@ def main(variant: str | None) -> None:
 
 
 @main.command()
-@click.option("--out", "out_dir", default=default(render_gallery, "out_dir"), show_default=True, type=click.Path(file_okay=False),
+@click.option("--out", "out_dir", default=default(render_gallery, "out_dir"), show_default=True,
+              type=click.Path(file_okay=False),
               help="Folder for gallery.exr and gallery.png.")
 @click.option("--spp", default=default(render_gallery, "spp"), show_default=True, type=click.IntRange(1),
               help="Samples per pixel.")
-@click.option("--size", default=(default(render_gallery, "width"), default(render_gallery, "height")), show_default=True, type=(click.IntRange(8), click.IntRange(8)),
+@click.option("--size", default=(default(render_gallery, "width"), default(render_gallery, "height")),
+              show_default=True, type=(click.IntRange(8), click.IntRange(8)),
               help="Image width and height.")
 def gallery(out_dir: str, spp: int, size: tuple[int, int]) -> None:
     """Render the BSDF gallery: one sphere per plugin (phong, cooktorrance, ward, lafortune)."""
@@ -110,7 +114,8 @@ def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
 @click.option("--subsurface", is_flag=True,
               help="Translucent skin: a rough dielectric boundary over a scattering medium (volumetric path "
                    "tracer: slow, use a small --resolution and --spp).")
-@click.option("--measurements", default=default(simulate_capture, "measurements"), show_default=True, type=click.IntRange(1),
+@click.option("--measurements", default=default(simulate_capture, "measurements"), show_default=True,
+              type=click.IntRange(1),
               help="Number of measurements (three poses per light).")
 @click.option("--resolution", default="{}x{}".format(*default(simulate_capture, "resolution")), show_default=True,
               callback=_width_x_height,
@@ -119,7 +124,8 @@ def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
               help="Seed of everything random.")
 @click.option("--preset", type=click.Choice(sorted(PRESETS)), default=None,
               help="'paper': the paper's 22 measurements (overrides --measurements).")
-@click.option("--spp", default=default(simulate_capture, "spp"), show_default=True, type=click.IntRange(1), help="Samples per pixel.")
+@click.option("--spp", default=default(simulate_capture, "spp"), show_default=True, type=click.IntRange(1),
+              help="Samples per pixel.")
 @click.option("--companion", default=default(simulate_capture, "companion"), show_default=True,
               type=click.Choice(COMPANIONS),
               help="Companion of each point-light photograph.")
@@ -199,19 +205,19 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
               help="Folder for brdf.json, albedo.exr and scene.xml.")
 @click.option("--geometry", default=default(fit_brdf_model, "geometry"), show_default=True,
               help="'ground-truth' (a simulated capture's) or the folder mifaces fit-shape wrote.")
-@click.option("--resolution", default=default(fit_brdf_model, "resolution"), show_default=True,
+@click.option("--resolution", default=default(FitOptions, "resolution"), show_default=True,
               type=click.IntRange(8, MAX_TEXTURE), help="Texture-space resolution R (R x R texels).")
-@click.option("--lobes", default=default(fit_brdf_model, "lobes"), show_default=True, type=click.IntRange(1, MAX_LOBES),
+@click.option("--lobes", default=default(FitOptions, "lobes"), show_default=True, type=click.IntRange(1, MAX_LOBES),
               help="Lafortune lobes.")
 @click.option("--face-model", default=None, help="Face model of the geometry (default: the one it names).")
 @click.option("--force", is_flag=True, help="Replace the fitted BRDF in --out.")
-@click.option("--refine/--no-refine", default=default(fit_brdf_model, "refine"), show_default=True,
+@click.option("--refine/--no-refine", default=default(measure_capture, "refine"), show_default=True,
               help="Refine the fit by differentiable rendering against the photographs.")
-@click.option("--normals/--no-normals", default=default(fit_brdf_model, "normals"), show_default=True,
+@click.option("--normals/--no-normals", default=default(FitOptions, "normals"), show_default=True,
               help="Estimate a normal per texel alternating with the fit (writes normals.exr, used by scene.xml).")
-@click.option("--specular-maps/--no-specular-maps", default=default(fit_brdf_model, "specular_maps"),
+@click.option("--specular-maps/--no-specular-maps", default=default(FitOptions, "specular_maps"),
               show_default=True, help="Estimate the specular reflectance per texel (writes specular.exr).")
-@click.option("--uncertainty", default=default(fit_brdf_model, "uncertainty"), show_default=True,
+@click.option("--uncertainty", default=default(FitOptions, "uncertainty"), show_default=True,
               type=click.Choice(UNCERTAINTY_METHODS + ("none",)),
               help="How the parameters' 95 % intervals are estimated (docs/uncertainty.md); 'none' leaves them out.")
 def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolution: int, lobes: int,
@@ -219,9 +225,17 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolut
              uncertainty: str) -> None:
     """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
     check_result_target(out_dir, BRDF_KIND, force)
-    estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, resolution=resolution, lobes=lobes,
-                   out=out_dir, force=force, refine=refine, normals=normals, specular_maps=specular_maps,
-                   uncertainty=None if uncertainty == "none" else uncertainty)
+    options = FitOptions(resolution=resolution, lobes=lobes, normals=normals, specular_maps=specular_maps,
+                         uncertainty=None if uncertainty == "none" else uncertainty)
+    if not refine:
+        estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, out=out_dir, force=force,
+                                  options=options)
+    else:  # the refinement, the next stage, before the result is written
+        capture = load_capture(capture)
+        face, shapes = load_geometry(capture, geometry, face_model)
+        estimate = refine_estimate(fit_brdf_model(capture, brdf_model, shapes, face_model=face, options=options),
+                                   capture, shapes, face)
+        write_fitted(estimate, out_dir, capture, face, shapes, force=force)
     click.echo(f"fitted {estimate.model} to {estimate.samples} samples of {len(estimate.measurements)} "
                f"photographs in {estimate.seconds['total']:.1f} s")
     for name, fit_ in estimate.fits.items():
@@ -244,29 +258,31 @@ def _short(value) -> str:
               help="Output folder (capture/, shapes/, brdf/<model>/, report.md/json/png).")
 @click.option("--model", "models", multiple=True, type=click.Choice(BRDF_MODELS),
               help="BRDF model(s) to fit (default: all four).")
-@click.option("--geometry", default=default(measure_capture, "geometry"), show_default=True, type=click.Choice(GEOMETRIES),
+@click.option("--geometry", default=default(measure_capture, "geometry"), show_default=True,
+              type=click.Choice(GEOMETRIES),
               help="Fit the face model to each photograph, or use a simulated capture's true shapes.")
-@click.option("--resolution", default=default(measure_capture, "resolution"), show_default=True,
+@click.option("--resolution", default=default(FitOptions, "resolution"), show_default=True,
               type=click.IntRange(8, MAX_TEXTURE), help="Texture resolution R.")
 @click.option("--refine/--no-refine", default=default(measure_capture, "refine"), show_default=True,
               help="Refine each fit by differentiable rendering against the photographs.")
-@click.option("--normals/--no-normals", default=default(measure_capture, "normals"), show_default=True,
+@click.option("--normals/--no-normals", default=default(FitOptions, "normals"), show_default=True,
               help="Estimate a normal per texel alternating with each fit.")
-@click.option("--specular-maps/--no-specular-maps", default=default(measure_capture, "specular_maps"),
+@click.option("--specular-maps/--no-specular-maps", default=default(FitOptions, "specular_maps"),
               show_default=True, help="Estimate the specular reflectance per texel (specular.exr; renders read it).")
 @click.option("--refine-shape/--no-refine-shape", default=default(measure_capture, "refine_shape"), show_default=True,
               help="Refine the fitted faces beyond the model by differentiable rendering (minutes; kept only where "
                    "it lowers the loss on held-out pixels).")
-@click.option("--balance-lights/--no-balance-lights", default=default(measure_capture, "balance_lights"),
+@click.option("--balance-lights/--no-balance-lights", default=default(FitOptions, "balance_lights"),
               show_default=True, help="Correct the given lights' relative intensities by the face's one albedo before "
                                       "the BRDF fits (a lamp a percent off biases the glossy fit).")
 def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int,
             refine: bool, normals: bool, specular_maps: bool, refine_shape: bool, balance_lights: bool) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
     check_writable(out_dir)
-    report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, resolution=resolution,
-                             refine=refine, normals=normals, specular_maps=specular_maps, refine_shape=refine_shape,
-                             balance_lights=balance_lights)
+    report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, refine=refine,
+                             refine_shape=refine_shape,
+                             options=FitOptions(resolution=resolution, normals=normals, specular_maps=specular_maps,
+                                                balance_lights=balance_lights))
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")
@@ -456,9 +472,10 @@ def diligent(object_dir: str, out: str, force: bool) -> None:
 @click.option("--import", "importer", default=None,
               help="'yaleb': INPUTS are raw data (Yale subject folders, or folders of them), imported into OUT/captures "
                    "first (mifaces.batch.IMPORTERS).")
-@click.option("--geometry", default=default(measure_capture, "geometry"), show_default=True, type=click.Choice(GEOMETRIES),
+@click.option("--geometry", default=default(measure_capture, "geometry"), show_default=True,
+              type=click.Choice(GEOMETRIES),
               help="Fit the face model to each photograph, or use a simulated capture's true shapes.")
-@click.option("--resolution", default=default(measure_capture, "resolution"), show_default=True, type=click.IntRange(8),
+@click.option("--resolution", default=default(FitOptions, "resolution"), show_default=True, type=click.IntRange(8),
               help="Texture resolution R.")
 @click.option("--spp", default=default(measure_capture, "spp"), show_default=True, type=click.IntRange(1),
               help="Samples per pixel of the reports' renders.")

@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .version import VERSION
+
 #: Largest image side and pixel count mifaces reads, renders or simulates
 #: (8192² pixels: 0.8 GiB as float32 RGB); checked before any allocation.
 MAX_IMAGE_SIDE = 16384
@@ -476,15 +478,13 @@ def result_set(out: str | os.PathLike, kind: str, *, force: bool = False, info: 
     info : dict, optional
         Inputs and options to record in the manifest.
     """
-    from . import __version__  # here: the package's __init__ imports this module
-
     out = check_result_target(out, kind, force)
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = out.parent / f".{out.name}.new-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     staging.mkdir()
     try:
         yield staging
-        manifest = {"kind": kind, "mifaces": __version__, "info": info or {}, "files": _set_files(staging)}
+        manifest = {"kind": kind, "mifaces": VERSION, "info": info or {}, "files": _set_files(staging)}
         write_json(staging / SET_MANIFEST, manifest)
         _mode = os.umask(0)
         os.umask(_mode)

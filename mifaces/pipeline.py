@@ -14,7 +14,7 @@ its place, their difference, and the fitted face under a novel light;
 intervals (``models.<model>.uncertainty``, docs/uncertainty.md).
 
 For a simulated capture (with ground truth) the report also separates the
-models by what the fit never saw (:mod:`mifaces.validation`):
+models by what the fit never saw (:mod:`mifaces.validation.validator`):
 ``models.<model>.validation`` holds ``brdf_rmse`` per region,
 ``albedo_rmse``, ``heldout_rmse`` and ``environment_rmse``, ``ranking``
 orders the models by the last two, ``report.png`` shows the true face and
@@ -42,11 +42,12 @@ from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, as_given, balance_intensit
                        estimate_environments, estimate_lights, lights_document, refit_lights, write_lights,
                        write_lights_picture)
 from .model import load_model
-from .reflectance import capture_samples, fit_brdf, write_estimate
+from .reflectance import FitOptions, capture_samples, fit_brdf, write_estimate
 from .reflectance.light_balance import balance_given_lights
-from .reflectance.refine_shape import refine_lit, refined_fits
+from .refine import refine_estimate
+from .refine.shape import refine_lit, refined_fits
 from .render import FaceScene, light_arguments
-from .report import (ground_truth_errors, ranking, write_markdown, write_picture, write_uncertainty_picture,
+from .report import (ranking, write_markdown, write_picture, write_uncertainty_picture,
                      write_validation_picture)
 from .report_html import write_html
 from .shape import fit_shape, shapes_in_world
@@ -54,7 +55,8 @@ from .shape.fit import model_source
 from .shape.io import write_fit, write_index
 from .shape_errors import capture_shape_errors
 from .studio import simulate
-from .validation import Validator, coverage, relative_rmse
+from .validation.truth_errors import ground_truth_errors
+from .validation.validator import Validator, coverage, relative_rmse
 
 #: Models ``measure`` fits unless told otherwise.
 MODELS = NAMES
@@ -124,10 +126,9 @@ def novel_point_light(capture, centre: np.ndarray) -> np.ndarray:
     return centre + distance * (capture.camera.rotation.T @ direction)
 
 
-def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resolution: int = 512,
-            shape_iterations: float | None = None, spp: int = 64, face_model="builtin", progress: bool = True,
-            refine: bool = False, normals: bool = False, specular_maps: bool = False,
-            refine_shape: bool = False, balance_lights: bool = False) -> dict:
+def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, options: FitOptions | None = None,
+            refine: bool = False, refine_shape: bool = False, shape_iterations: float | None = None, spp: int = 64,
+            face_model="builtin", progress: bool = True) -> dict:
     """Measure the reflectance of the face in ``capture``, writing everything to ``out``.
 
     The stages hand their results to each other in memory: the face model is
@@ -155,8 +156,12 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     geometry : {'fitted', 'ground-truth'}
         Fit the face model to every photograph (``mifaces fit-shape``), or use
         a simulated capture's true shapes.
-    resolution : int
-        Texture resolution R of the reflectance samples.
+    options : FitOptions, optional
+        How every BRDF model is fitted (:class:`mifaces.reflectance.FitOptions`): the texture
+        resolution R of the reflectance samples, per-texel ``normals`` and ``specular_maps``
+        (the renders show them), ``balance_lights`` (the given lights' relative intensities
+        corrected by the face's one albedo before any BRDF is fitted, the factors in the
+        report's ``light_balance``), ...
     shape_iterations : float, optional
         Scale of the shape fitter's iteration schedule.
     spp : int
@@ -165,26 +170,15 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         The face model fitted to the photographs (``geometry='fitted'``).
     refine : bool
         Refine each fit by differentiable rendering against the photographs
-        (``fit_brdf(..., refine=True)``).
-    normals : bool
-        Estimate a normal per texel alternating with each fit
-        (``fit_brdf(..., normals=True)``); the renders show it.
-    specular_maps : bool
-        Estimate the specular reflectance per texel, shrunk towards each
-        region's (``fit_brdf(..., specular_maps=True)``); the renders show it.
+        (:func:`mifaces.refine.refine_estimate`).
     refine_shape : bool
         Refine the fitted faces beyond the model's span by differentiable
-        rendering (:func:`mifaces.reflectance.refine_shape.refine_shape`): a
+        rendering (:func:`mifaces.refine.shape.refine_shape`): a
         first fit of the first model in ``models`` on the model-fitted shapes
         lights the faces, one displacement along the normals is fitted against
         every photograph, and it is kept only if it lowers the loss on pixels it
         did not fit; the samples are then taken on the refined faces. Off by
         default: it costs minutes (``docs/refine_shape.md``).
-    balance_lights : bool
-        Correct the given lights' relative intensities by the face's one albedo
-        before any BRDF is fitted
-        (:func:`mifaces.reflectance.light_balance.balance_given_lights`; the
-        factors go to the report's ``light_balance``).
 
     Returns
     -------
@@ -212,6 +206,8 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
     """
     t0 = time.perf_counter()
     out = Path(out)
+    options = options or FitOptions()
+    resolution = options.resolution
     if geometry not in GEOMETRIES:
         raise ValueError(f"geometry must be one of {GEOMETRIES}, got {geometry!r}")
     unknown = [m for m in models if m not in MODELS]
@@ -248,7 +244,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         if balanced is not capture:
             capture = balanced
             samples = capture_samples(capture, shapes, face, resolution, progress=progress)
-    if balance_lights:
+    if options.balance_lights:
         capture, samples = balance_given_lights(capture, samples)
         report["light_balance"] = capture.metadata.get("light_balance")
     timings["reflectance_samples"] = time.perf_counter() - t
@@ -273,8 +269,8 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", resoluti
         report["validation"] = validator.summary
     panels, validation_images = [], {}
     for model in models:
-        entry, panel = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, resolution, spp,
-                                  timings, progress, refine, normals, specular_maps)
+        entry, panel = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, spp, timings,
+                                  progress, options, refine)
         if validator is not None:
             t = time.perf_counter()
             entry["validation"], validation_images[model] = validator.validate(panel[-1])
@@ -305,7 +301,7 @@ def _capture(out: Path, capture, timings: dict, progress: bool) -> Capture:
         simulated = simulate(out / "capture", progress=progress, force=True)  # measure's own folder
         timings["simulate"] = simulated.seconds
         capture = out / "capture"
-    return capture if isinstance(capture, Capture) else load_capture(capture)
+    return load_capture(capture)
 
 
 def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iterations, report: dict,
@@ -379,16 +375,18 @@ def _refine_shapes(out: Path, capture: Capture, face, shapes: dict, fits, sample
 
 
 def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, scene: FaceScene, first,
-               novel, resolution: int, spp: int, timings: dict, progress: bool, refine: bool = False,
-               normals: bool = False, specular_maps: bool = False):
+               novel, spp: int, timings: dict, progress: bool, options: FitOptions, refine: bool):
     """Fit one BRDF model, write it, render it in the first photograph's place
     and under the novel light; the report's entry, and its picture row
     followed by the estimate."""
     t = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, samples=samples,
-                            progress=progress, refine=refine, normals=normals, specular_maps=specular_maps)
+        # balanced once above, for every model
+        estimate = fit_brdf(capture, model, shapes, face_model=face, samples=samples, progress=progress,
+                            options=replace(options, balance_lights=False))
+        if refine:
+            estimate = refine_estimate(estimate, capture, shapes, face, seed=options.seed, progress=progress)
     if any(light.estimated for light in capture.lights):
         estimate = replace(estimate, lighting={"lights": "estimated", "reflectance": "relative", "note": RELATIVE_NOTE})
     light = capture.light(first.light)

@@ -266,11 +266,11 @@ class FaceScene:
         normals : str, optional
             A tangent-space normal map's file (texture space as ``albedo``,
             Mitsuba's ``normalmap`` encoding (n + 1) / 2 relative to the
-            mesh's shading frame: :mod:`mifaces.reflectance.texel_normals`):
+            mesh's shading frame: :mod:`mifaces.reflectance.maps.normals`):
             each region's BSDF is then wrapped in a ``normalmap`` BSDF.
         specular : str, optional
             A per-texel specular reflectance map's file (texture space as
-            ``albedo``, linear RGB: :mod:`mifaces.reflectance.specular_maps`),
+            ``albedo``, linear RGB: :mod:`mifaces.reflectance.maps.specular`),
             read by every region's ``specular_reflectance`` in place of the
             region's value (models that have one).
         """

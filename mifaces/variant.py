@@ -12,7 +12,7 @@ import os
 import drjit as dr
 import mitsuba as mi
 
-from . import llvm
+from . import llvm, plugins
 
 _registered: set[str] = set()
 
@@ -51,8 +51,6 @@ def set_variant(variant: str | None = None) -> str:
         raise RuntimeError(llvm.INSTALL_HINT)
     mi.set_variant(variant)
     if variant not in _registered:
-        from . import plugins
-
         plugins.register()
         _registered.add(variant)
     return variant

@@ -10,8 +10,8 @@ import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.geometry import load_geometry
-from mifaces.reflectance import capture_samples, fit_brdf
-from mifaces.reflectance.diffuse import albedo_offsets
+from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
+from mifaces.reflectance.maps.diffuse import albedo_offsets
 
 
 def test_albedo_offsets_are_each_texels_departure_from_its_regions_mean():
@@ -39,8 +39,8 @@ def test_alternating_with_the_texel_albedo_takes_the_skin_lobe_nearer_the_truth(
     for rounds in (0, 3):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, resolution=96, samples=samples,
-                                progress=False, albedo_rounds=rounds)
+            estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, samples=samples, progress=False,
+                                options=FitOptions(resolution=96, albedo_rounds=rounds))
         skin = estimate.fits["skin"]
         errors[rounds] = (abs(np.mean(skin.params["specular_reflectance"]) - truth["specular_reflectance"][0]),
                           abs(skin.params["roughness"] - truth["roughness"]))

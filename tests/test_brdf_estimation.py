@@ -21,8 +21,8 @@ from mifaces.cli import main
 from mifaces.files import read_exr
 from mifaces.geometry import load_geometry
 from mifaces.model.regions import REGIONS, texel_regions_of_mesh
-from mifaces.reflectance import fit_brdf, load_estimate, render_estimate, render_fitted
-from mifaces.reflectance.fitting import SubsetSchedule
+from mifaces.reflectance import FitOptions, fit_brdf, load_estimate, render_estimate, render_fitted
+from mifaces.reflectance.fit.regions import SubsetSchedule
 from mifaces.reflectance.samples import ReflectanceSamples, capture_samples
 from mifaces.render import FaceScene, face_scene, render_face
 from mifaces.studio.truth import brdf_with_overrides
@@ -40,7 +40,7 @@ def estimate(capture_dir, tmp_path_factory):
     out = tmp_path_factory.mktemp("fit") / "fit"
     with warnings.catch_warnings():  # small regions of a small capture warn (few samples, a bound)
         warnings.simplefilter("ignore", UserWarning)
-        result = fit_brdf(capture_dir, "cooktorrance", resolution=256, out=out, progress=False)
+        result = fit_brdf(capture_dir, "cooktorrance", out=out, progress=False, options=FitOptions(resolution=256))
     return result, out
 
 
@@ -114,17 +114,17 @@ def test_other_models_and_lobes(capture_dir, tmp_path):
     for model, lobes in (("phong", 1), ("ward", 1), ("lafortune", 2)):
         with warnings.catch_warnings():  # small regions warn (few samples, a bound)
             warnings.simplefilter("ignore", UserWarning)
-            result = fit_brdf(capture, model, lobes=lobes, resolution=64, samples=samples, schedule=quick,
-                              progress=False)
+            result = fit_brdf(capture, model, samples=samples, progress=False,
+                              options=FitOptions(lobes=lobes, resolution=64, schedule=quick))
         assert result.model == model
         skin = result.fits["skin"]
         assert skin.status != "prior" and np.isfinite(skin.loss)
         assert all(np.all(np.isfinite(v)) for v in skin.params.values())
     assert "exponent_2" in result.fits["skin"].params
     with pytest.raises(ValueError, match="only the lafortune model"):
-        fit_brdf(capture, "ward", lobes=2, samples=samples, resolution=64)
+        fit_brdf(capture, "ward", samples=samples, options=FitOptions(lobes=2, resolution=64))
     with pytest.raises(ValueError, match="resolution 64, not 32"):
-        fit_brdf(capture, "ward", samples=samples, resolution=32)
+        fit_brdf(capture, "ward", samples=samples, options=FitOptions(resolution=32))
 
 
 def test_bad_geometry_is_named(capture_dir, tmp_path):
@@ -143,7 +143,7 @@ def test_bad_geometry_is_named(capture_dir, tmp_path):
     bare = tmp_path / "bare"
     shutil.copytree(capture_dir, bare, ignore=shutil.ignore_patterns("ground_truth"))
     with pytest.raises(FileNotFoundError, match="no ground_truth"):
-        fit_brdf(bare, resolution=32, progress=False)
+        fit_brdf(bare, progress=False, options=FitOptions(resolution=32))
 
 
 def test_cli_fit_brdf(capture_dir, tmp_path):
@@ -294,7 +294,7 @@ def test_samples_carry_their_region(capture_dir, tmp_path):
 
 
 #: Same-family truths (SIMULATED, seed 7, 4 photographs of 192²): per model, the largest skin BRDF error
-#: over the hemisphere (relative, mifaces.validation.brdf_rmse) and the width parameter's largest
+#: over the hemisphere (relative, mifaces.validation.validator.brdf_rmse) and the width parameter's largest
 #: relative error a fit may have. Measured when written: Phong 3.9 % and exponent +19 %, Ward 4.4 %
 #: and α -4 %, Lafortune 18 % (its cz, the lobe's off-specular part, is the least determined by 4 views).
 SAME_FAMILY = {"phong": (0.06, ("exponent", 0.3)), "ward": (0.07, ("alpha", 0.1)), "lafortune": (0.27, None)}
@@ -305,7 +305,7 @@ def test_same_family_truths_are_recovered(small_capture, model):
     """A face rendered with Phong, Ward or Lafortune and fitted with the same model: skin's fitted BRDF
     lies near the truth over the hemisphere, and its lobe width near the true one."""
     from mifaces.capture import read_ground_truth
-    from mifaces.validation import brdf_rmse, region_texels
+    from mifaces.validation.validator import brdf_rmse, region_texels
 
     mifaces.set_variant("llvm_ad_rgb")
     capture = load_capture(small_capture(f"family_{model}", brdf=model, measurements=4, resolution=(192, 192),
@@ -314,7 +314,7 @@ def test_same_family_truths_are_recovered(small_capture, model):
     truth = read_ground_truth(capture)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=96, progress=False)
+        estimate = fit_brdf(capture, model, shapes, face_model=face, progress=False, options=FitOptions(resolution=96))
     skin = estimate.fits["skin"]
     assert skin.status == "converged", skin.reason
     texels = estimate.region_map == REGIONS["skin"]

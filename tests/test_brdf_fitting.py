@@ -1,4 +1,4 @@
-"""Fitting BRDF models to reflectance samples (mifaces.reflectance.fitting)."""
+"""Fitting BRDF models to reflectance samples (mifaces.reflectance.fit.regions)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import scipy.optimize
 
 from mifaces import brdf
 from mifaces.brdf.lafortune import energy_bound
-from mifaces.reflectance.fitting import (FULL_DATA, SPIKE, ParameterSpace, SubsetSchedule, conservative_start,
-                                         fit_region, fit_regions, min_samples)
-from mifaces.reflectance.levenberg_marquardt import CONVERGED, levenberg_marquardt
+from mifaces.reflectance.fit.regions import (FULL_DATA, SPIKE, ParameterSpace, SubsetSchedule, conservative_start,
+                                             fit_region, fit_regions, min_samples)
+from mifaces.reflectance.fit.levenberg_marquardt import CONVERGED, levenberg_marquardt
 from mifaces.status import AT_BOUND, AT_START, DEFAULTS, PRIOR
 
 TRUTH = {
@@ -298,7 +298,8 @@ def test_a_fit_at_the_bound_of_its_range_is_flagged_and_replaced(jit_variant):
             assert fits["lips"].status == AT_BOUND
 
 
-@pytest.mark.parametrize("name, width, sharp, wide", [("ward", "alpha", 1e-3, 0.3), ("cooktorrance", "roughness", 1e-3, 0.3),
+@pytest.mark.parametrize("name, width, sharp, wide",
+                         [("ward", "alpha", 1e-3, 0.3), ("cooktorrance", "roughness", 1e-3, 0.3),
                                                       ("phong", "exponent", 1e5, 30.0)])
 def test_a_lobe_at_the_sharp_end_of_its_width_is_a_spike(name, width, sharp, wide):
     model = brdf.model(name)
@@ -311,7 +312,7 @@ def test_a_lobe_at_the_sharp_end_of_its_width_is_a_spike(name, width, sharp, wid
 def test_a_spike_takes_its_neighbours_glossy_part_whatever_the_region_size(monkeypatch):
     """A large region whose lobe ended as a spike (no photograph resolves one) borrows skin's
     glossy part, keeping its own albedo; a large region merely at a bound keeps its fit."""
-    import mifaces.reflectance.fitting as fitting
+    import mifaces.reflectance.fit.regions as fitting
 
     model = brdf.model("ward")
 
@@ -341,12 +342,12 @@ def test_a_lobe_brighter_than_every_sample_is_a_spike(jit_variant):
     """A small region's fit to a few noisy samples that ends in a narrow, strong lobe (its peak far
     above the brightest sample: it would blow up under a light the photographs did not cover) is a
     spike: the region takes its neighbour's glossy part (as the nostrils of a real Yale subject)."""
-    from mifaces.reflectance.fitting import PEAK_FACTOR, glossy_peak
+    from mifaces.reflectance.fit.regions import PEAK_FACTOR, glossy_peak
 
     model = brdf.model("ward")
     broad = {"diffuse_reflectance": [0.4, 0.3, 0.2], "specular_reflectance": [0.05] * 3, "alpha": 0.3}
     narrow = dict(broad, specular_reflectance=[0.999] * 3, alpha=0.014)
-    import mifaces.reflectance.fitting as fitting
+    import mifaces.reflectance.fit.regions as fitting
 
     real = fitting.fit_region
 

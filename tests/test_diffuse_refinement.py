@@ -1,4 +1,4 @@
-"""Per-texel diffuse refinement (mifaces.reflectance.diffuse)."""
+"""Per-texel diffuse refinement (mifaces.reflectance.maps.diffuse)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mifaces import brdf
-from mifaces.reflectance.diffuse import refine_diffuse, specular_reflectance_factor
+from mifaces.reflectance.maps.diffuse import refine_diffuse, specular_reflectance_factor
 
 REGIONS = {
     1: {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [2.0] * 3, "roughness": 0.3, "eta": 1.38},

@@ -15,7 +15,7 @@ from mifaces import photometric_stereo as ps
 from mifaces.capture.images import read_codes
 from mifaces.cli import main
 from mifaces.importers import diligent
-from mifaces.reflectance import normals as nm
+from mifaces.photometric_stereo import nonlambertian as nm
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 

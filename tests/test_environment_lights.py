@@ -19,8 +19,9 @@ from mifaces.environment import (LUMINANCE, dominant_direction, environment_emit
 from mifaces.files import read_exr, write_exr
 from mifaces.lighting import LIGHTS_FILE, LIGHTS_FOLDER, write_lights, write_lights_picture
 from mifaces.reflectance.environment import equivalent_lights, estimate_map, reduced_map
-from mifaces.reflectance.refine import ENVMAP_FLOOR, padded_envmap
+from mifaces.refine.reflectance import ENVMAP_FLOOR, padded_envmap
 from mifaces.render import mitsuba_sensor
+from mifaces.reflectance import FitOptions
 from test_real_capture import write_directional
 
 #: A camera 1 m along +z looking at the origin (the world's y up is the image's up).
@@ -192,7 +193,8 @@ def test_measure_estimates_a_hidden_map_with_the_face(studio_capture, tmp_path):
     true_map = load_capture(studio_capture, detect=False).lights[0].envmap
     data["lights"] = [{"name": "studio", "unknown": True, "kind": "environment", "size": [16, 8]}]
     (hidden / MANIFEST).write_text(json.dumps(data))
-    report = measure(tmp_path / "m", hidden, models=("phong",), resolution=64, spp=4, refine=True, progress=False)
+    report = measure(tmp_path / "m", hidden, models=("phong",), spp=4, refine=True, progress=False,
+                     options=FitOptions(resolution=64))
     estimate = report["lights"]["estimates"][0]
     assert estimate["kind"] == "environment" and estimate["size"] == [16, 8] and estimate["photographs"] == [
         "m00", "m01", "m02"]
@@ -226,12 +228,12 @@ def test_the_refinement_differentiates_an_estimated_map(studio_capture):
     photographs, its mean is held, and a given map stays fixed."""
     from mifaces.geometry import load_geometry
     from mifaces.reflectance import fit_brdf
-    from mifaces.reflectance.refine import RefineProblem
-    from mifaces.reflectance.refine_schedule import RefineSchedule, environment_variable
+    from mifaces.refine.reflectance import RefineProblem
+    from mifaces.refine.schedule import RefineSchedule, environment_variable
 
     capture = load_capture(studio_capture)
     face, shapes = load_geometry(capture, "ground-truth")
-    estimate = fit_brdf(capture, "phong", "ground-truth", resolution=32, progress=False)
+    estimate = fit_brdf(capture, "phong", "ground-truth", progress=False, options=FitOptions(resolution=32))
     schedule = RefineSchedule(spp=2, evaluation_spp=2)
     given = RefineProblem(estimate, capture, shapes, face, schedule)
     assert given.restarted and given.environments == {} and not any(k.startswith("environment") for k in given.variables)
@@ -257,7 +259,7 @@ def test_held_out_lights_avoid_the_maps_light(studio_capture):
     """Held-out lights of a capture lit by a map alone are directional, of irradiance pi, and none
     comes from where most of the map's light does; beside point lights, the map's direction is
     avoided too."""
-    from mifaces.validation import held_out_lights
+    from mifaces.validation.validator import held_out_lights
 
     capture = load_capture(studio_capture)
     key = dominant_direction(capture.lights[0].envmap, capture.camera)
@@ -280,8 +282,8 @@ def test_a_map_without_the_refinement_is_flagged(studio_capture, tmp_path):
     from mifaces.pipeline import MAP_WITHOUT_REFINE, measure
 
     with pytest.warns(UserWarning, match="read as lit from one direction per texel"):
-        report = measure(tmp_path / "m", studio_capture, models=("phong",), geometry="ground-truth", resolution=32,
-                         spp=2, progress=False)
+        report = measure(tmp_path / "m", studio_capture, models=("phong",), geometry="ground-truth", spp=2,
+                         progress=False, options=FitOptions(resolution=32))
     assert report["environment_note"] == MAP_WITHOUT_REFINE
     assert f"Note: {MAP_WITHOUT_REFINE}." in (tmp_path / "m" / "report.md").read_text()
 
@@ -289,7 +291,7 @@ def test_a_map_without_the_refinement_is_flagged(studio_capture, tmp_path):
 def test_held_out_lights_of_an_estimated_map_are_the_given_maps(studio_capture):
     """The held-out lights avoid the map the simulator rendered with, not the estimate: a run that
     estimated its map is judged under the same lights as one given the map."""
-    from mifaces.validation import held_out_lights, true_lights
+    from mifaces.validation.validator import held_out_lights, true_lights
 
     capture = load_capture(studio_capture)
     truth = read_ground_truth(capture)

@@ -9,6 +9,7 @@ import subprocess
 from pathlib import Path
 
 import mifaces  # isort: skip
+from mifaces.reflectance import FitOptions
 
 import numpy as np
 import pytest
@@ -25,7 +26,7 @@ def measured(small_capture, tmp_path_factory):
     capture = small_capture("export", measurements=2, resolution=(256, 256), spp=8, albedo_resolution=128, seed=4)
     out = tmp_path_factory.mktemp("export") / "m"
     mifaces.set_variant("llvm_ad_rgb")
-    measure(out, capture, geometry="ground-truth", resolution=64, spp=2, progress=False)
+    measure(out, capture, geometry="ground-truth", spp=2, progress=False, options=FitOptions(resolution=64))
     return out
 
 
@@ -48,7 +49,7 @@ def test_gltf_brdf_matches_mitsubas_principled_lobe():
     """glTF's specular layer (GGX, F0 from the index, f90 = 1) against Mitsuba's principled
     BSDF with the same roughness and index and no diffuse: an independent evaluation."""
     from mifaces.export.material import GltfLobe, gltf_brdf, hemisphere_pairs
-    from mifaces.validation import eval_bsdf
+    from mifaces.validation.validator import eval_bsdf
 
     mifaces.set_variant("llvm_ad_rgb")
     wi, wo = hemisphere_pairs(10)
@@ -220,7 +221,7 @@ def test_normal_map_is_converted_to_gltfs_tangent_frame(tmp_path):
     from mifaces.export.gltf import write_gltf
     from mifaces.model import load_model
     from mifaces.model.texture_space import rasterize
-    from mifaces.reflectance.texel_normals import decode, encode, mitsuba_frames
+    from mifaces.reflectance.maps.normals import decode, encode, mitsuba_frames
 
     model = load_model("builtin")
     r = 64

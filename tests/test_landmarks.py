@@ -1,4 +1,4 @@
-"""Automatic 68-point landmarks (mifaces.landmarks) and the ``mifaces landmarks`` command."""
+"""Automatic 68-point landmarks (mifaces.capture.detector) and the ``mifaces landmarks`` command."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("dlib", reason='landmark detection needs pip install "mifaces[landmarks]"')
 
-from mifaces.landmarks import CONTOUR, INNER, NoFaceError, detect_landmarks  # noqa: E402
+from mifaces.capture.detector import CONTOUR, INNER, NoFaceError, detect_landmarks
 
 YALE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "yaleb"
 FRONTAL = YALE / "yaleB01" / "yaleB01_P00A+000E+00.pgm"
@@ -113,7 +113,7 @@ def test_cli_writes_the_faces_found_and_names_the_others(frontal, tmp_path):
 def test_missing_dlib_names_the_extra(monkeypatch):
     import sys
 
-    from mifaces import landmarks
+    from mifaces.capture import detector as landmarks
 
     landmarks._models.cache_clear()
     monkeypatch.setitem(sys.modules, "dlib", None)  # as if not installed

@@ -1,4 +1,4 @@
-"""Normals with a fitted analytic BRDF (mifaces.reflectance.normals)."""
+"""Normals with a fitted analytic BRDF (mifaces.photometric_stereo.nonlambertian)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mifaces import brdf, photometric_stereo as ps
-from mifaces.reflectance import normals as nm
+from mifaces.photometric_stereo import nonlambertian as nm
 
 #: The glossy part of the synthetic sphere: a sharp Cook-Torrance lobe.
 GLOSSY = {"specular_reflectance": [0.4] * 3, "roughness": 0.15, "eta": 1.4}

@@ -1,4 +1,4 @@
-"""Per-texel normals of a face (mifaces.reflectance.texel_normals), the normal map's
+"""Per-texel normals of a face (mifaces.reflectance.maps.normals), the normal map's
 convention against Mitsuba's ``normalmap`` BSDF, and scene.xml with the normal map."""
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ from mifaces.cli import main
 from mifaces.model.geometry import vertex_normals
 from mifaces.model.mesh import mitsuba_mesh
 from mifaces.model.texture_space import rasterize
-from mifaces.reflectance import fit_brdf, load_estimate
-from mifaces.reflectance import texel_normals as tn
-from mifaces.reflectance.fitting import FULL_DATA, fit_regions
+from mifaces.reflectance import FitOptions, fit_brdf, load_estimate
+from mifaces.reflectance.maps import normals as tn
+from mifaces.reflectance.fit.regions import FULL_DATA, fit_regions
 from mifaces.reflectance.samples import texel_geometry
-from mifaces.reflectance.specular_maps import refine_specular
+from mifaces.reflectance.maps.specular import refine_specular
 from mifaces.render import FaceScene, scene_xml
 
 GLOSSY = {"specular_reflectance": [0.6] * 3, "roughness": 0.3, "eta": 1.4}
@@ -141,7 +141,7 @@ def test_specular_maps_move_only_as_far_as_the_samples_justify():
     texel = np.repeat(np.arange(texels), counts)
     light = _unit(rng.normal(size=(len(texel), 3)) * [0.5, 0.5, 0] + [0, 0, 1])
     view = _unit(rng.normal(size=(len(texel), 3)) * [0.5, 0.5, 0] + [0, 0, 1])
-    from mifaces.reflectance.diffuse import specular_reflectance_factor
+    from mifaces.reflectance.maps.diffuse import specular_reflectance_factor
 
     g = specular_reflectance_factor(model, params, light, view, np.ones(len(texel), int))
     albedo = rng.uniform(0.3, 0.5, (texels, 3))
@@ -267,8 +267,9 @@ def test_fit_brdf_with_normals_writes_the_normal_map(capture_dir, tmp_path):
     out = tmp_path / "fit"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # thin regions borrow skin's fit
-        estimate = fit_brdf(capture_dir, resolution=32, out=out, normals=True, normal_options={"rounds": 1},
-                            specular_maps=True, progress=False)
+        estimate = fit_brdf(capture_dir, out=out, progress=False,
+                            options=FitOptions(resolution=32, normals=True, normal_options={"rounds": 1},
+                                               specular_maps=True))
     data = load_estimate(out)
     assert data["normals"].shape == (32, 32, 3) and data["normal_refinement"]["texels"] > 50
     np.testing.assert_allclose(tn.decode(data["normals"]), estimate.normals, atol=1e-5)
@@ -282,7 +283,8 @@ def test_fit_brdf_with_normals_writes_the_normal_map(capture_dir, tmp_path):
     # one measurement: no texel has the samples a normal needs; left out with a message
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        single = fit_brdf(capture_dir, resolution=32, measurements=["m00"], normals=True, progress=False)
+        single = fit_brdf(capture_dir, measurements=["m00"], progress=False,
+                          options=FitOptions(resolution=32, normals=True))
     assert single.normals is None and any("normals left out" in str(w.message) for w in caught)
 
 
@@ -292,7 +294,7 @@ def test_cli_normals_flags_reach_the_api(monkeypatch, tmp_path):
     calls = {}
 
     def fake(*args, **kwargs):
-        calls.update(kwargs)
+        calls.update(vars(kwargs["options"]))  # the flags travel in one FitOptions
         raise SystemExit(0)
 
     monkeypatch.setattr(cli, "fit_brdf_model", fake)

@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 import skimage.io
+from mifaces.reflectance import FitOptions
 
 
 @pytest.fixture(scope="module")
@@ -20,8 +21,8 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
     from mifaces.status import BRDF_STATUSES
 
     mifaces.set_variant("llvm_ad_rgb")
-    report = measure(tmp_path / "m", capture_dir, models=("cooktorrance", "phong"), geometry="ground-truth",
-                     resolution=128, spp=4, progress=False)
+    report = measure(tmp_path / "m", capture_dir, models=("cooktorrance", "phong"), geometry="ground-truth", spp=4,
+                     progress=False, options=FitOptions(resolution=128))
     for name in ("report.json", "report.md", "report.png", "report_training.png", "brdf/cooktorrance/brdf.json",
                  "brdf/phong/scene.xml", "report_uncertainty.png", "brdf/cooktorrance/albedo_std.exr"):
         assert (tmp_path / "m" / name).is_file(), name
@@ -187,7 +188,7 @@ def test_measure_refines_the_shapes_when_asked(capture_dir, tmp_path, monkeypatc
     photographs and the report says whether it was kept and why (a short schedule here)."""
     import mifaces
     import mifaces.pipeline as pipeline
-    from mifaces.reflectance.refine_shape import ShapeRefineSchedule, refine_lit
+    from mifaces.refine.shape import ShapeRefineSchedule, refine_lit
 
     mifaces.set_variant("llvm_ad_rgb")
     calls = []
@@ -198,8 +199,8 @@ def test_measure_refines_the_shapes_when_asked(capture_dir, tmp_path, monkeypatc
                           ShapeRefineSchedule(iterations=2, downsample=4), **kw)
 
     monkeypatch.setattr(pipeline, "refine_lit", short)
-    report = pipeline.measure(tmp_path / "m", capture_dir, models=("phong",), geometry="ground-truth", resolution=64,
-                              spp=2, progress=False, refine_shape=True)
+    report = pipeline.measure(tmp_path / "m", capture_dir, models=("phong",), geometry="ground-truth", spp=2,
+                              progress=False, refine_shape=True, options=FitOptions(resolution=64))
     assert calls == ["phong"]
     refinement = report["shape_refinement"]
     assert isinstance(refinement["accepted"], bool) and refinement["reason"] and refinement["model"] == "phong"
@@ -216,7 +217,7 @@ def test_measure_writes_the_refined_shapes_it_fits_on(capture_dir, tmp_path, mon
     import mifaces.pipeline as pipeline
     from mifaces.capture import load_capture
     from mifaces.geometry import load_geometry
-    from mifaces.reflectance.refine_shape import ShapeRefinement
+    from mifaces.refine.shape import ShapeRefinement
 
     mifaces.set_variant("llvm_ad_rgb")
     lift = np.array([0.0, 0.5, 0.0])
@@ -227,8 +228,8 @@ def test_measure_writes_the_refined_shapes_it_fits_on(capture_dir, tmp_path, mon
 
     monkeypatch.setattr(pipeline, "refine_lit", lifted)
     out = tmp_path / "m"
-    report = pipeline.measure(out, capture_dir, models=("phong",), resolution=48, spp=2, progress=False,
-                              refine_shape=True, shape_iterations=0.25)
+    report = pipeline.measure(out, capture_dir, models=("phong",), spp=2, progress=False, refine_shape=True,
+                              shape_iterations=0.25, options=FitOptions(resolution=48))
     assert report["shape_refinement"]["shapes"] == pipeline.REFINED_SHAPES
     capture = load_capture(capture_dir, detect=False)
     _, fitted = load_geometry(capture, out / pipeline.SHAPES)
@@ -241,8 +242,8 @@ def test_measure_writes_the_refined_shapes_it_fits_on(capture_dir, tmp_path, mon
         return ShapeRefinement(dict(shapes), np.zeros(face.vertex_count, np.float32), False, "no gain (test)")
 
     monkeypatch.setattr(pipeline, "refine_lit", refused)
-    again = pipeline.measure(tmp_path / "n", capture_dir, models=("phong",), resolution=48, spp=2, progress=False,
-                             refine_shape=True, shape_iterations=0.25)
+    again = pipeline.measure(tmp_path / "n", capture_dir, models=("phong",), spp=2, progress=False, refine_shape=True,
+                             shape_iterations=0.25, options=FitOptions(resolution=48))
     assert not again["shape_refinement"]["accepted"] and not (tmp_path / "n" / pipeline.REFINED_SHAPES).exists()
 
 

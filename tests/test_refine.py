@@ -1,4 +1,4 @@
-"""Tests of mifaces.reflectance.refine: the gradient of the render loss
+"""Tests of mifaces.refine.reflectance: the gradient of the render loss
 against finite differences, the albedo correction, and a refinement run on a
 small simulated capture (kernels reused, record written)."""
 
@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 
 from mifaces import brdf as brdf_models
-from mifaces.reflectance.parameters import ParameterSpace
-from mifaces.reflectance.refine import AlbedoCorrection, RefineSchedule, image_loss, refine_estimate
-from mifaces.reflectance.refine_schedule import MAX_RATE_SCALE, IterateAverage
+from mifaces.reflectance.fit.parameters import ParameterSpace
+from mifaces.refine.reflectance import AlbedoCorrection, RefineSchedule, image_loss, refine_estimate
+from mifaces.refine.schedule import MAX_RATE_SCALE, IterateAverage
+from mifaces.reflectance import FitOptions
 
 #: Relative tolerance of the reverse-mode gradient against central differences.
 FD_RTOL = 0.02
@@ -49,7 +50,7 @@ def _sphere_scene(spp: int = 16) -> mi.Scene:
 def _loss(scene, params, space, u, target, weight, seed):
     """The refinement's image loss of the sphere with parameters from the
     unconstrained ``u``; ``target`` is the photograph divided by its mean
-    over the sphere, as :class:`~mifaces.reflectance.refine.RefineProblem` does."""
+    over the sphere, as :class:`~mifaces.refine.reflectance.RefineProblem` does."""
     values = space.drjit_params(u)
     for name in ("specular_reflectance", "roughness"):
         params[f"sphere.bsdf.{name}"] = values[name]
@@ -117,7 +118,8 @@ def fitted(small_capture):
                                          albedo_resolution=64, seed=4))
     face, shapes = load_geometry(capture, "ground-truth")
     with pytest.warns(UserWarning):
-        estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, resolution=64, progress=False)
+        estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, progress=False,
+                            options=FitOptions(resolution=64))
     return capture, face, shapes, estimate
 
 
@@ -166,7 +168,7 @@ def test_a_refinement_that_does_not_lower_the_held_out_loss_is_not_returned(fitt
 
 def test_held_out_pixels_are_blocks_of_the_mask():
     """A fifth of the mask's 4x4 blocks, at random, whole blocks only, inside the mask."""
-    from mifaces.reflectance.refine_schedule import holdout_pixels
+    from mifaces.refine.schedule import holdout_pixels
 
     mask = np.zeros((64, 64), bool)
     mask[4:60, 8:56] = True
@@ -240,7 +242,8 @@ def test_the_lights_gains_take_up_a_light_calibrated_too_weak(small_capture):
                                          albedo_resolution=64, seed=5))
     face, shapes = load_geometry(capture, "ground-truth")
     with pytest.warns(UserWarning):
-        estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, resolution=64, progress=False)
+        estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, progress=False,
+                            options=FitOptions(resolution=64))
     first, second = with_true_lights(capture).lights
     weak = dataclasses.replace(capture, lights=(dataclasses.replace(first, intensity=0.9 * np.asarray(first.intensity)),
                                                 second))
@@ -260,7 +263,7 @@ def test_the_default_schedule_lowers_the_loss_and_the_errors_against_the_truth(f
     """From lobes 60 % too weak, the default schedule (every region free) lowers the image loss on the
     fitted and on the held-out pixels, and brings skin's ρs and the mean ρs error over the refined
     regions closer to the simulator's truth."""
-    from mifaces.report import ground_truth_errors
+    from mifaces.validation.truth_errors import ground_truth_errors
 
     capture, face, shapes, estimate = fitted
     start = _off(estimate)

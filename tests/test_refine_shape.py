@@ -1,4 +1,4 @@
-"""Tests of mifaces.reflectance.refine_shape: the displaced mesh's normals
+"""Tests of mifaces.refine.shape: the displaced mesh's normals
 against the numpy reference, seam copies moving together, the schedule's and
 the inputs' checks, and the recovery of a cheek bump outside the model's span
 from a small simulated capture."""
@@ -16,7 +16,7 @@ import pytest
 
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.model.geometry import vertex_normals, welded_normals
-from mifaces.reflectance.refine_shape import ShapeRefineSchedule, _mesh_normals, refine_shape
+from mifaces.refine.shape import ShapeRefineSchedule, _mesh_normals, refine_shape
 from mifaces.studio.detail import cheek_bump
 from mifaces.studio.simulate import simulate
 

@@ -12,7 +12,7 @@ from mifaces.capture import Camera
 from mifaces.environment import STUDIO_PANELS, camera_frame, environment_emitter, sky_emitter, studio_environment
 from mifaces.model import load_model
 from mifaces.render import FaceScene
-from mifaces.validation import coverage
+from mifaces.validation.validator import coverage
 
 WHITE = {"model": "phong", "options": {}, "regions": {"skin": {"specular_reflectance": 0.0, "exponent": 10.0}}}
 

@@ -1,5 +1,5 @@
 """The report's validation against a simulated capture's ground truth: BRDF error over the hemisphere,
-albedo error, held-out-light and environment-lit image errors in a novel pose (mifaces.validation)."""
+albedo error, held-out-light and environment-lit image errors in a novel pose (mifaces.validation.validator)."""
 
 from __future__ import annotations
 
@@ -13,9 +13,9 @@ import pytest
 
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.geometry import load_geometry
-from mifaces.reflectance import fit_brdf
-from mifaces.validation import (Validator, brdf_rmse, hemisphere_grid, held_out_lights, novel_rotation,
-                                relative_rmse)
+from mifaces.reflectance import FitOptions, fit_brdf
+from mifaces.validation.validator import (Validator, brdf_rmse, hemisphere_grid, held_out_lights, novel_rotation,
+                                          relative_rmse)
 
 MIN_SEPARATION = 10.0  # degrees between anything held out and anything the fit saw
 
@@ -38,7 +38,7 @@ def validator(capture):
 def estimate(capture):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return fit_brdf(capture, "cooktorrance", resolution=64, progress=False)
+        return fit_brdf(capture, "cooktorrance", progress=False, options=FitOptions(resolution=64))
 
 
 def with_params(estimate, change):

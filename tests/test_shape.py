@@ -523,7 +523,7 @@ def yale_capture(subject: Path, lights: int = 8):
     distances, one pose; the frontally lit photograph is every measurement's diffuse companion, and
     its dlib feature points are every measurement's."""
     from mifaces.importers.yaleb import default_split, read_subject
-    from mifaces.landmarks import detect_landmarks
+    from mifaces.capture.detector import detect_landmarks
 
     def image(pixels, name):
         p = np.repeat(pixels[..., None], 3, axis=2).astype(np.float32)

@@ -27,6 +27,7 @@ from mifaces.studio.simulate import simulate
 from mifaces.studio.subsurface import SKIN1, dipole_albedo
 from mifaces.studio.truth import COOK_TORRANCE_REGIONS, brdf_with_overrides, default_brdf
 from mifaces.studio.varying import VARYING, texel_regions, zone_weights
+from mifaces.reflectance import FitOptions
 
 #: Small captures: one measurement, a face about 60 pixels high.
 SMALL = dict(measurements=1, resolution=(128, 128), spp=4, companion="diffuse", albedo_resolution=128, seed=3,
@@ -197,8 +198,8 @@ def test_measure_runs_on_a_truth_outside_the_fit(tmp_path):
     mifaces.set_variant("llvm_ad_rgb")
     capture = tmp_path / "capture"
     simulate(capture, brdf="roughplastic", detail=True, **dict(SMALL, measurements=2))
-    report = measure(tmp_path / "m", capture, models=("cooktorrance",), resolution=64, spp=2, shape_iterations=0.2,
-                     progress=False)
+    report = measure(tmp_path / "m", capture, models=("cooktorrance",), spp=2, shape_iterations=0.2, progress=False,
+                     options=FitOptions(resolution=64))
     entry = report["models"]["cooktorrance"]
     assert entry["ground_truth"]["truth_model"] == "roughplastic"
     assert np.isfinite(entry["ground_truth"]["albedo"]["rmse_sampled"])
@@ -264,7 +265,7 @@ def test_validation_judges_against_the_truth_with_its_maps(captures):
     maps, as the simulator photographed it, not with the region means its brdf.json records: the
     means differ from the truth in images and in BRDF, and agree with a uniform truth exactly."""
     from mifaces.studio.varying import map_textures
-    from mifaces.validation import SEED, Validator, brdf_rmse, region_texels, relative_rmse
+    from mifaces.validation.validator import SEED, Validator, brdf_rmse, region_texels, relative_rmse
 
     path = captures("varying", varying=True)
     truth = read_ground_truth(path)

@@ -1,4 +1,4 @@
-"""Parameter uncertainty of the region fits (mifaces.reflectance.uncertainty): on synthetic samples
+"""Parameter uncertainty of the region fits (mifaces.reflectance.fit.uncertainty): on synthetic samples
 of a known BRDF with known noise, the estimated standard deviations match the spread over repeated
 noise draws, the intervals hold the truth at about the nominal rate, samples that share a texel
 effect need the clustered estimate, and parameters at a bound or fixed are flagged; the per-texel
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from mifaces import brdf as brdf_models
-from mifaces.reflectance.diffuse import AlbedoOffsets, refine_diffuse
-from mifaces.reflectance.fitting import FULL_DATA, fit_region, prior_fit
-from mifaces.reflectance.parameters import ParameterSpace
-from mifaces.reflectance.uncertainty import (TILE_AT_128, _value_jacobian, cluster_index, covariance, offset_sums,
-                                             tile_clusters)
+from mifaces.reflectance.maps.diffuse import AlbedoOffsets, refine_diffuse
+from mifaces.reflectance.fit.regions import FULL_DATA, fit_region, prior_fit
+from mifaces.reflectance.fit.parameters import ParameterSpace
+from mifaces.reflectance.fit.uncertainty import (TILE_AT_128, _value_jacobian, cluster_index, covariance, offset_sums,
+                                                 tile_clusters)
 
 TRUTH = {"diffuse_reflectance": [0.5, 0.35, 0.25], "specular_reflectance": [0.8, 0.8, 0.8], "roughness": 0.5,
          "eta": 1.4}
@@ -174,8 +174,8 @@ def test_covariance_rejects_bad_input():
 def test_cluster_sums_match_the_per_sample_jacobian():
     """The kernel's per-cluster u_g and H_g equal sums of the host-side residuals and Jacobian; they
     add up to the fit's own JᵀJ, and its loss is the fit's."""
-    from mifaces.reflectance.fitting import _Problem
-    from mifaces.reflectance.parameters import ParameterSpace
+    from mifaces.reflectance.fit.regions import _Problem
+    from mifaces.reflectance.fit.parameters import ParameterSpace
 
     rng = np.random.default_rng(7)
     n = 300

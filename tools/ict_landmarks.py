@@ -27,7 +27,7 @@ import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 import numpy as np
 
 from mifaces.capture import Camera
-from mifaces.landmarks import detect_landmarks
+from mifaces.capture.detector import detect_landmarks
 from mifaces.model import load_model
 from mifaces.model.geometry import head_centre, rotation_matrix
 from mifaces.model.ict_convert import ATLAS

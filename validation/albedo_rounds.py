@@ -7,7 +7,7 @@ The captures are those of ``validation/uncertainty.py`` (its image size, photogr
 texture), on its tuning seeds 100-104 (not the seeds it reports on), Cook–Torrance (skin drawn per
 seed, :func:`uncertainty.skin_truth`) and Phong truths by default. The estimates: the jackknife and the
 sandwich over texel tiles (with ``albedo_rounds`` > 0 they re-estimate the offsets in every replicate,
-:mod:`mifaces.reflectance.uncertainty`), Laplace, ``jackknife_known_offsets``: the jackknife with
+:mod:`mifaces.reflectance.fit.uncertainty`), Laplace, ``jackknife_known_offsets``: the jackknife with
 the offsets taken as known (what the intervals were before; the same as ``jackknife`` without rounds),
 and the jackknife over tiles of 16 and 32 texels (at texture 128).
 
@@ -37,14 +37,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import uncertainty as U  # noqa: E402  (the captures and checks of validation/uncertainty.py)
 
 from mifaces.files import write_json  # noqa: E402
-from mifaces.reflectance import capture_samples, fit_brdf  # noqa: E402
-from mifaces.reflectance import fitting  # noqa: E402
+from mifaces.reflectance import FitOptions, capture_samples, fit_brdf  # noqa: E402
+from mifaces.reflectance.fit import regions as fitting
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Seeds of validation/uncertainty.py's tuning captures.
 SEEDS = list(U.TUNING_SEEDS)
 #: Estimates compared: name -> (method of fit_brdf's ``uncertainty``, tile side at texture 128 or None for
-#: the default :data:`mifaces.reflectance.uncertainty.TILE_AT_128`).
+#: the default :data:`mifaces.reflectance.fit.uncertainty.TILE_AT_128`).
 VARIANTS = {"jackknife": ("jackknife", None), "sandwich": ("sandwich", None), "laplace": ("laplace", None),
             "jackknife_known_offsets": ("jackknife", None), "jackknife_tile16": ("jackknife", 16),
             "jackknife_tile32": ("jackknife", 32)}
@@ -53,7 +53,7 @@ CLASSES = {"skin": ("skin",), "small": U.SMALL}
 
 
 def _known_offsets(*args, offsets=None, **kwargs):
-    """:func:`mifaces.reflectance.fitting.region_uncertainty` with the offsets taken as known."""
+    """:func:`mifaces.reflectance.fit.regions.region_uncertainty` with the offsets taken as known."""
     return _REGION_UNCERTAINTY(*args, **kwargs)
 
 
@@ -63,7 +63,7 @@ _SPENT: list = []
 
 
 def _timed(*args, **kwargs):
-    """:func:`mifaces.reflectance.fitting.region_uncertainty`, its time added to :data:`_SPENT`."""
+    """:func:`mifaces.reflectance.fit.regions.region_uncertainty`, its time added to :data:`_SPENT`."""
     t = time.perf_counter()
     out = _REGION_UNCERTAINTY(*args, **kwargs)
     _SPENT.append(time.perf_counter() - t)
@@ -75,8 +75,8 @@ def _fit(capture, face, shapes, samples, model, rounds, method, known_offsets=Fa
             fitting, "region_uncertainty", _known_offsets if known_offsets else _timed), \
             mock.patch.object(U.unc, "TILE_AT_128", U.unc.TILE_AT_128 if tile is None else tile):
         warnings.simplefilter("ignore")
-        return fit_brdf(capture, model, shapes, face_model=face, resolution=texture, samples=samples,
-                        progress=False, albedo_rounds=rounds, uncertainty=method)
+        return fit_brdf(capture, model, shapes, face_model=face, samples=samples, progress=False,
+                        options=FitOptions(resolution=texture, albedo_rounds=rounds, uncertainty=method))
 
 
 def _coverage(records, regions=None, exclude=()) -> dict:
@@ -199,8 +199,8 @@ def exact(model: str, seed: int, rounds: int, work: Path) -> dict:
     standard deviation of every free entry from those replicates, mapped to the parameter's units."""
     from mifaces import brdf as brdf_models
     from mifaces.model.regions import REGIONS
-    from mifaces.reflectance.diffuse import AlbedoOffsets, refine_diffuse
-    from mifaces.reflectance.parameters import ParameterSpace
+    from mifaces.reflectance.maps.diffuse import AlbedoOffsets, refine_diffuse
+    from mifaces.reflectance.fit.parameters import ParameterSpace
 
     params = U.skin_truth(seed) if model == "cooktorrance" else None
     capture, face, shapes, samples = U._simulate(work / f"{model}_{seed}", seed, brdf=model, brdf_params=params)

@@ -40,8 +40,8 @@ import numpy as np
 import scipy.optimize
 
 from mifaces import brdf
-from mifaces.reflectance.fitting import (FULL_DATA, ParameterSpace, SubsetSchedule, _Problem,
-                                         fit_region, linear_start)
+from mifaces.reflectance.fit.regions import (FULL_DATA, ParameterSpace, SubsetSchedule, _Problem, fit_region,
+                                             linear_start)
 from mifaces.files import save_figure, write_json
 
 OUT = Path(__file__).resolve().parent / "results"

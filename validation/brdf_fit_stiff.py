@@ -29,7 +29,7 @@ import mitsuba as mi
 import numpy as np
 
 from mifaces import brdf
-from mifaces.reflectance.fitting import fit_region, fit_regions
+from mifaces.reflectance.fit.regions import fit_region, fit_regions
 from mifaces.files import write_json
 from mifaces.reflectance.samples import unsaturated
 
@@ -108,7 +108,8 @@ def main():
         fit = fit_region(model, light, view, r, sigma)
         finite = all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in fit.params.values())
         rows.append({"case": label, "model": name, "samples": len(sigma), "status": fit.status,
-                     "reason": fit.reason, "finite": finite, "max_relative_error": max_relative_error(fit.params, truth),
+                     "reason": fit.reason, "finite": finite, "max_relative_error": max_relative_error(fit.params,
+                                                                                                      truth),
                      "seconds": fit.seconds, "iterations": fit.iterations, "params": fit.params})
         print(f"{label:<32} {fit.status:<15} finite={finite!s:<5} max rel. error {rows[-1]['max_relative_error']:9.2e}"
               f"  {fit.seconds:6.2f} s  ({fit.reason})", flush=True)

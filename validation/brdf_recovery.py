@@ -35,8 +35,8 @@ from skimage.transform import resize
 
 from mifaces import brdf
 from mifaces.geometry import load_geometry
-from mifaces.reflectance import fit_brdf, render_estimate
-from mifaces.report import ground_truth_errors
+from mifaces.reflectance import FitOptions, fit_brdf, render_estimate
+from mifaces.validation.truth_errors import ground_truth_errors
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.files import write_json
 from mifaces.model.regions import REGIONS
@@ -60,7 +60,7 @@ def same_family(work: Path, args) -> list[dict]:
         truth = read_ground_truth(capture_dir).brdf
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            estimate = fit_brdf(capture_dir, model, resolution=args.resolution, progress=False)
+            estimate = fit_brdf(capture_dir, model, progress=False, options=FitOptions(resolution=args.resolution))
         errors = ground_truth_errors(estimate, capture_dir)
         row = {"model": model, "simulation_seconds": t_sim, "fit_seconds": estimate.seconds,
                "samples": estimate.samples, "albedo": errors["albedo"], "regions": {}}
@@ -150,8 +150,8 @@ def cross_family(work: Path, args) -> list[dict]:
     for model, lobes in [("cooktorrance", 1), ("ward", 1), ("phong", 1), ("lafortune", 1), ("lafortune", 2)]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            estimate = fit_brdf(capture, model, lobes=lobes, resolution=args.resolution, measurements=train,
-                                progress=False)
+            estimate = fit_brdf(capture, model, measurements=train, progress=False,
+                                options=FitOptions(lobes=lobes, resolution=args.resolution))
         skin = estimate.fits["skin"]
         mask = estimate.albedo.samples > 0
         skin_albedo = resize(gt_albedo, estimate.albedo.albedo.shape, anti_aliasing=True, order=1)[

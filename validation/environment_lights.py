@@ -48,6 +48,7 @@ from mifaces.lighting import LIGHTS_FOLDER
 from mifaces.pipeline import measure
 from mifaces.studio import simulate
 from mifaces.studio.environment_light import ENVIRONMENTS
+from mifaces.reflectance import FitOptions
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Target of issue 26: the hidden-light run's held-out error over the given-map run's.
@@ -108,7 +109,8 @@ def one(environment: str, seed: int, out: Path) -> dict:
     runs = {}
     for name, source in (("given", capture), ("estimated", hidden)):
         t = time.perf_counter()
-        report = measure(folder / name, source, models=(MODEL,), resolution=RESOLUTION, refine=True, progress=False)
+        report = measure(folder / name, source, models=(MODEL,), refine=True, progress=False,
+                         options=FitOptions(resolution=RESOLUTION))
         runs[name] = run_summary(report)
         print(f"{environment} seed {seed}, map {name}: held-out {runs[name]['heldout_rmse']:.4f}, skin BRDF "
               f"{runs[name]['skin_brdf_rmse']:.4f} ({time.perf_counter() - t:.0f} s)", flush=True)
@@ -135,7 +137,7 @@ def tuning(environment: str, out: Path) -> dict:
     model's start values; skin's parameters and the held-out pixels' loss of each."""
     from mifaces.capture import read_ground_truth
     from mifaces.reflectance import fit_brdf
-    from mifaces.reflectance.refine_schedule import RefineSchedule
+    from mifaces.refine.schedule import RefineSchedule
 
     capture_dir = out / f"tuning_{environment}" / "capture"
     if capture_dir.parent.exists():
@@ -147,14 +149,17 @@ def tuning(environment: str, out: Path) -> dict:
     rows = {"truth": truth}
     for restart in (False, True):
         t = time.perf_counter()
-        estimate = fit_brdf(capture, MODEL, "ground-truth", resolution=RESOLUTION,
-                            refine=RefineSchedule(restart_under_maps=restart), progress=False)
+        face, shapes = load_geometry(capture, "ground-truth")
+        estimate = refine_estimate(fit_brdf(capture, MODEL, shapes, face_model=face, progress=False,
+                                            options=FitOptions(resolution=RESOLUTION)),
+                                   capture, shapes, face, RefineSchedule(restart_under_maps=restart), progress=False)
         record = estimate.refinement
         rows["restarted" if restart else "from_the_fit"] = {
             "skin": {k: v for k, v in estimate.fits["skin"].params.items() if k in truth},
             "heldout_loss_before": record["heldout_loss_before"], "heldout_loss_after": record["heldout_loss_after"],
             "accepted": record["accepted"], "seconds": time.perf_counter() - t}
-        print(f"tuning {environment}, restart {restart}: {rows['restarted' if restart else 'from_the_fit']}", flush=True)
+        print(f"tuning {environment}, restart {restart}: {rows['restarted' if restart else 'from_the_fit']}",
+              flush=True)
     return rows
 
 

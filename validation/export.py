@@ -34,6 +34,7 @@ from mifaces.model.regions import REGIONS, texel_regions_of_mesh
 from mifaces.pipeline import measure
 from mifaces.reflectance.io import load_estimate
 from mifaces.studio.simulate import simulate
+from mifaces.reflectance import FitOptions
 
 RESULTS = Path(__file__).resolve().parent / "results" / "export.json"
 
@@ -51,7 +52,8 @@ def main() -> None:
     t0 = time.perf_counter()
     simulate(work / "capture", progress=False, measurements=args.measurements,
              resolution=(args.resolution, args.resolution), spp=args.spp, seed=0, force=True)
-    measure(work / "m", work / "capture", geometry="ground-truth", resolution=args.texture, spp=4, progress=False)
+    measure(work / "m", work / "capture", geometry="ground-truth", spp=4, progress=False,
+            options=FitOptions(resolution=args.texture))
     seconds = {"simulate_and_measure": time.perf_counter() - t0}
     models = {}
     for model in mifaces.brdf.NAMES:

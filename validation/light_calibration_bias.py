@@ -34,7 +34,7 @@ import uncertainty as U  # noqa: E402  (the captures and checks of validation/un
 
 from mifaces.capture import with_true_lights  # noqa: E402
 from mifaces.files import write_json  # noqa: E402
-from mifaces.reflectance import fit_brdf  # noqa: E402
+from mifaces.reflectance import FitOptions, fit_brdf  # noqa: E402
 from mifaces.reflectance.light_balance import GIVEN_MAX_HALF_COSINE, log_light_errors  # noqa: E402
 from mifaces.reflectance.samples import capture_samples  # noqa: E402
 
@@ -62,8 +62,8 @@ def run(seed: int, work: Path) -> list[dict]:
                              ("true", true_capture, true_samples)):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            estimate = fit_brdf(cap, "cooktorrance", shapes, face_model=face, resolution=U.TEXTURE, samples=smp,
-                                progress=False, balance_lights=lights == "balanced")
+            estimate = fit_brdf(cap, "cooktorrance", shapes, face_model=face, samples=smp, progress=False,
+                                options=FitOptions(resolution=U.TEXTURE, balance_lights=lights == "balanced"))
         records = U._checks(estimate, truth, U.unc.METHODS[0], {"seed": seed, "lights": lights})
         covered = [r["covered"] for r in records if r["covered"] is not None]
         skin = [r for r in records if r["region"] == "skin"]

@@ -45,7 +45,8 @@ from mifaces.model.regions import REGIONS
 from mifaces.model.texture_space import rasterize
 from mifaces.reflectance.estimate import fit_brdf
 from mifaces.reflectance.samples import texel_geometry
-from mifaces.reflectance.texel_normals import mitsuba_tangent_normals
+from mifaces.reflectance.maps.normals import mitsuba_tangent_normals
+from mifaces.reflectance import FitOptions
 
 OUT = Path(__file__).resolve().parent / "results"
 SFM = Path(__file__).resolve().parents[2] / "shared" / "models" / "sfm_3448" / "sfm_shape_3448.npz"
@@ -91,8 +92,9 @@ def run(capture, model, geometry, options, resolution, truth):
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        estimate = fit_brdf(capture, "cooktorrance", geometry=geometry, face_model=model, resolution=resolution,
-                            progress=False, normals=options is not None, normal_options=options, specular_maps=True)
+        estimate = fit_brdf(capture, "cooktorrance", geometry=geometry, face_model=model, progress=False,
+                            options=FitOptions(resolution=resolution, normals=options is not None,
+                                               normal_options=options, specular_maps=True))
     fit, true = estimate.fits["skin"].params, truth["regions"]["skin"]
     return estimate, {
         "seconds": time.perf_counter() - t0, "samples": estimate.samples,

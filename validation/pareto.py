@@ -7,7 +7,7 @@ simulates a capture of the built-in face (Cook–Torrance truth,
 :func:`mifaces.studio.simulate`) and runs the main job on it
 (:func:`mifaces.pipeline.measure`: fit the face model to each photograph,
 sample reflectance, fit the BRDF models), then reads from its report
-(:mod:`mifaces.validation`):
+(:mod:`mifaces.validation.validator`):
 
 - the BRDF error over the hemisphere (skin, ``brdf_rmse``),
 - the albedo error (``albedo_rmse``),
@@ -46,6 +46,7 @@ import numpy as np
 from mifaces.files import save_figure, write_json
 from mifaces.pipeline import measure
 from mifaces.studio import simulate
+from mifaces.reflectance import FitOptions
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: The full grid: measurements, photograph resolutions (square), samples per pixel of the photographs.
@@ -69,7 +70,7 @@ def point(work: Path, measurements: int, resolution: int, spp: int, args) -> dic
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         report = measure(work / f"measure_{measurements}_{resolution}_{spp}", capture, models=args.models,
-                         geometry=args.geometry, resolution=args.texture, progress=False)
+                         geometry=args.geometry, progress=False, options=FitOptions(resolution=args.texture))
     seconds = report["seconds"]
     validation_s = sum(v for k, v in seconds.items() if k.startswith("validation"))
     models = {}

@@ -3,7 +3,7 @@
 From the training half of the 96 calibrated lights (the fixed split of
 :func:`mifaces.importers.diligent.light_split`: even indices), estimate per
 pixel normals and albedo together with each of the four analytic BRDFs
-(:func:`mifaces.reflectance.normals.fit_normals_and_brdf`, started from
+(:func:`mifaces.photometric_stereo.nonlambertian.fit_normals_and_brdf`, started from
 Lambertian photometric stereo on the same lights), without reading the
 ground-truth normals. Then
 
@@ -41,7 +41,7 @@ from mifaces import photometric_stereo as ps
 from mifaces.brdf import NAMES
 from mifaces.files import atomic_write, write_json
 from mifaces.importers import diligent
-from mifaces.reflectance import normals as nm
+from mifaces.photometric_stereo import nonlambertian as nm
 
 RESULTS = Path(__file__).resolve().parent / "results"
 LAMBERTIAN = "lambertian_ps"

@@ -16,7 +16,7 @@ photographs:
 With ``--refine``, each model is also fitted again on the same shapes and
 samples and refined by differentiable rendering against the same training
 photographs (``fit_brdf(..., refine=True)``, directional lights as the
-capture gives them; :mod:`mifaces.reflectance.refine`), and its held-out
+capture gives them; :mod:`mifaces.refine.reflectance`), and its held-out
 renders are scored beside the unrefined ones (``<model>_refined``): same
 split, same pixels. Results then go to ``real_yaleb[_trainN]_refine.json``
 and ``.png``.
@@ -67,8 +67,10 @@ from mifaces.files import save_figure, write_exr, write_json, write_png
 from mifaces.geometry import load_geometry
 from mifaces.importers.yaleb import default_split, import_subject, read_subject
 from mifaces.pipeline import SHAPES, measure
-from mifaces.reflectance import fit_brdf, load_estimate
+from mifaces.reflectance import FitOptions, fit_brdf, load_estimate
 from mifaces.render import FaceScene
+from mifaces.reflectance.io import write_fitted
+from mifaces.refine import refine_estimate
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Lights farther than this from the camera axis (degrees) count as casting large shadows.
@@ -114,8 +116,9 @@ def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> 
     (image loss before and after, the lights' fitted gains, seconds)."""
     records = {}
     for model in models:
-        estimate = fit_brdf(capture, model, shapes, face_model=face, resolution=resolution, refine=True,
-                            out=out / model, force=True, progress=True)
+        estimate = refine_estimate(fit_brdf(capture, model, shapes, face_model=face, progress=True,
+                                            options=FitOptions(resolution=resolution)), capture, shapes, face)
+        write_fitted(estimate, out / model, capture, face, shapes, force=True)
         record = estimate.refinement
         records[model] = {"loss_before": record["loss_before"], "loss_after": record["loss_after"],
                           "heldout_loss_before": record["heldout_loss_before"],
@@ -142,8 +145,8 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     images = {image.stem: image for image in read_subject(subject_dir)}
     train_images, heldout = default_split(list(images.values()), train)
     t_measure = time.perf_counter()
-    report = measure(out / "measure", capture_dir, models=models, resolution=resolution, progress=True,
-                     normals=normals, refine_shape=refine_shape)
+    report = measure(out / "measure", capture_dir, models=models, progress=True, refine_shape=refine_shape,
+                     options=FitOptions(resolution=resolution, normals=normals))
     seconds = {"import": t_measure - t0, "measure": time.perf_counter() - t_measure}
     capture = load_capture(capture_dir, detect=False)
     # the faces the BRDFs were fitted on: the refined ones where this run kept a refinement

@@ -6,9 +6,9 @@ analysis by synthesis through Mitsuba fix what the texture-space fit misses?
    ``--image`` sets its size, 512 by default) and fit Cook-Torrance in
    texture space (:func:`mifaces.reflectance.fit_brdf`, ground-truth
    geometry); wall time and peak memory.
-2. Refine it (:func:`mifaces.reflectance.refine.refine_estimate`) with each
+2. Refine it (:func:`mifaces.refine.reflectance.refine_estimate`) with each
    sample count of ``--spp``, recording the ground-truth errors
-   (:func:`mifaces.report.ground_truth_errors`) every ``--every`` iterations:
+   (:func:`mifaces.validation.truth_errors.ground_truth_errors`) every ``--every`` iterations:
    error against run time, the measurement the default schedule is chosen
    from.
 3. For the last refinement: each region's errors with and without it, the
@@ -42,10 +42,10 @@ from mifaces.capture import load_capture, read_ground_truth
 from mifaces.files import write_json
 from mifaces.geometry import load_geometry
 from mifaces.pipeline import novel_light
-from mifaces.reflectance import fit_brdf
-from mifaces.reflectance.refine import RefineSchedule, refine_estimate
+from mifaces.reflectance import FitOptions, fit_brdf
+from mifaces.refine.reflectance import RefineSchedule, refine_estimate
 from mifaces.render import FaceScene
-from mifaces.report import ground_truth_errors
+from mifaces.validation.truth_errors import ground_truth_errors
 from mifaces.studio.simulate import simulate
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -146,8 +146,8 @@ def main() -> None:
     t = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, resolution=args.resolution,
-                            progress=False)
+        estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, progress=False,
+                            options=FitOptions(resolution=args.resolution))
     t_fit = time.perf_counter() - t
     memory_fit = peak_memory_mb()
     before = region_errors(estimate, capture)

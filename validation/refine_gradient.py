@@ -1,7 +1,7 @@
 """Why the refinement's loss did not have its minimum at the truth (SIMULATED).
 
 On a simulated capture with the ground-truth geometry, the refinement's image loss
-(:class:`mifaces.reflectance.refine.RefineProblem`) is evaluated at the simulator's true BRDF and
+(:class:`mifaces.refine.reflectance.RefineProblem`) is evaluated at the simulator's true BRDF and
 albedo, and its gradient in each region's unconstrained glossy parameters is averaged over the
 photographs and ``--repeats`` Monte Carlo seeds, at the true value and a step ``--delta`` either
 side. The gradient over the curvature is the offset from the truth to the loss's minimum along
@@ -42,9 +42,9 @@ import numpy as np
 from mifaces.capture import load_capture, read_ground_truth, with_true_lights
 from mifaces.files import write_json
 from mifaces.geometry import load_geometry
-from mifaces.reflectance import fit_brdf
-from mifaces.reflectance.refine import RefineProblem, RefineSchedule
-from mifaces.reflectance.refine_schedule import ALBEDO
+from mifaces.reflectance import FitOptions, fit_brdf
+from mifaces.refine.reflectance import RefineProblem, RefineSchedule
+from mifaces.refine.schedule import ALBEDO
 from mifaces.studio.simulate import simulate
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -60,7 +60,8 @@ def truth_estimate(capture, face, shapes, resolution: int):
     truth = read_ground_truth(capture)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, resolution=resolution, progress=False)
+        estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, progress=False,
+                            options=FitOptions(resolution=resolution))
     fits = {r: dataclasses.replace(f, params={k: truth.brdf["regions"].get(r, {}).get(k, v)
                                               for k, v in f.params.items()})
             for r, f in estimate.fits.items()}

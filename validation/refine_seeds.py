@@ -2,7 +2,7 @@
 
 Each seed simulates the default capture (:func:`mifaces.studio.simulate`: the built-in face,
 6 measurements under 2 lights, Cook–Torrance truth) at ``--image``², fits Cook–Torrance in texture
-space on the ground-truth geometry, and refines it (:func:`mifaces.reflectance.refine.refine_estimate`)
+space on the ground-truth geometry, and refines it (:func:`mifaces.refine.reflectance.refine_estimate`)
 under each variant of the schedule:
 
 * ``gains``: each light's intensity a variable (the light gains), no region held;
@@ -11,10 +11,10 @@ under each variant of the schedule:
 * ``calibrated_skin_held``: both held (the schedule before the light gains);
 * ``gains_eyebrows_held``: the light gains, the eyebrows held.
 
-The rest of the schedule is :class:`~mifaces.reflectance.refine_schedule.RefineSchedule`'s default;
+The rest of the schedule is :class:`~mifaces.refine.schedule.RefineSchedule`'s default;
 the result names the variant that is the default.
 
-Per variant: each region's errors against the truth (:func:`mifaces.report.ground_truth_errors`),
+Per variant: each region's errors against the truth (:func:`mifaces.validation.truth_errors.ground_truth_errors`),
 whether the refinement was kept (held-out pixels), the relative RMSE under a light no photograph
 used, and the fitted light gains against the true ones (the calibrated lights' irradiance error at
 the face: (d_calibrated / d_true)², normalised like the gains).
@@ -46,8 +46,8 @@ import numpy as np
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.files import write_json
 from mifaces.geometry import load_geometry
-from mifaces.reflectance import fit_brdf
-from mifaces.reflectance.refine import RefineSchedule, refine_estimate
+from mifaces.reflectance import FitOptions, fit_brdf
+from mifaces.refine.reflectance import RefineSchedule, refine_estimate
 from mifaces.studio.simulate import simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -85,7 +85,8 @@ def run_seed(seed: int, image: int, resolution: int, variants: list[str], work: 
     face, shapes = load_geometry(capture, "ground-truth")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, resolution=resolution, progress=False)
+        estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, progress=False,
+                            options=FitOptions(resolution=resolution))
     out = {"seed": seed, "simulate_and_fit_seconds": round(time.perf_counter() - t, 1),
            "true_light_gains": true_gains(capture, shapes),
            "texture_space": region_errors(estimate, capture), "variants": {}}

@@ -4,7 +4,7 @@ after, as ``mifaces fit-shape --refine-shape`` runs it.
 
 Simulates the default capture (seed 0, 6 photographs) at ``--resolution`` (256² by default: the
 refinement's cost grows with the pixels), fits the shapes with the defaults
-(:func:`mifaces.shape.fit_shape`), refines them (:func:`mifaces.reflectance.refine_shape.refine_fits`,
+(:func:`mifaces.shape.fit_shape`), refines them (:func:`mifaces.refine.shape.refine_fits`,
 lit by a quick per-region fit) and scores both by :func:`mifaces.shape_errors.capture_shape_errors`.
 
     python validation/refine_shape_default.py [--resolution 256] [--work DIR]
@@ -25,7 +25,7 @@ import mifaces  # first: libLLVM  # isort: skip
 from mifaces.capture import load_capture
 from mifaces.files import write_json
 from mifaces.geometry import load_geometry
-from mifaces.reflectance.refine_shape import refine_fits
+from mifaces.refine.shape import refine_fits
 from mifaces.shape import fit_shape, shapes_in_world
 from mifaces.shape_errors import capture_shape_errors
 from mifaces.studio import simulate

@@ -58,6 +58,7 @@ from mifaces import shape as se
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.files import save_figure, write_json
 from mifaces.model.landmarks import FEATURE_POINTS
+from mifaces.reflectance import FitOptions
 
 OUT = Path(__file__).resolve().parent / "results"
 SFM = Path(__file__).resolve().parents[2] / "shared" / "models" / "sfm_3448"
@@ -301,8 +302,8 @@ def brdf_growth(path: Path, fits: Path, model_source, resolution: int = 256) -> 
         t0 = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            est = fit_brdf(capture, "cooktorrance", geometry=str(geometry), face_model=model,
-                           resolution=resolution, progress=False)
+            est = fit_brdf(capture, "cooktorrance", geometry=str(geometry), face_model=model, progress=False,
+                           options=FitOptions(resolution=resolution))
         truth_map = resize(albedo_truth, (resolution, resolution, 3), anti_aliasing=True, order=1)
         seen = est.albedo.samples > 0
         row = {"seconds": time.perf_counter() - t0, "samples": int(est.samples),

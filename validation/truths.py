@@ -31,7 +31,7 @@ texture 512²):
 
 Records per truth and model the report's numbers (``report.json``): the
 validation that separates the models (``models.<model>.validation``,
-:mod:`mifaces.validation`: BRDF error per region, albedo error, held-out-light
+:mod:`mifaces.validation.validator`: BRDF error per region, albedo error, held-out-light
 and environment-lit image errors of a novel pose, on the fitted and on the
 true shape) and the report's ranking, the relative RMSE of the fitted render
 against the first photograph (a training image, labelled so), the albedo

@@ -11,7 +11,7 @@
    sensor noise at :data:`REFERENCE_SPP` samples per pixel (same seed: same
    face, lights and poses).
 3. **Methods.** Every fit's intervals by each estimate of
-   :mod:`mifaces.reflectance.uncertainty` (the sandwich over texel tiles, over
+   :mod:`mifaces.reflectance.fit.uncertainty` (the sandwich over texel tiles, over
    single texels, the Laplace approximation, the bootstrap). The tile size was
    chosen on the tuning seeds (:data:`TUNING_SEEDS`), which the coverage
    tables leave out.
@@ -42,8 +42,8 @@ import numpy as np
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.files import atomic_write, save_figure, write_json
 from mifaces.geometry import load_geometry
-from mifaces.reflectance import capture_samples, fit_brdf
-from mifaces.reflectance import uncertainty as unc
+from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
+from mifaces.reflectance.fit import uncertainty as unc
 from mifaces.status import PRIOR
 from mifaces.studio import photograph, simulate
 
@@ -104,8 +104,8 @@ def _fit(capture, face, shapes, samples, model, method, tile=None, texture=TEXTU
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return fit_brdf(capture, model, shapes, face_model=face, resolution=texture, samples=samples,
-                            progress=False, uncertainty=method)
+            return fit_brdf(capture, model, shapes, face_model=face, samples=samples, progress=False,
+                            options=FitOptions(resolution=texture, uncertainty=method))
     finally:
         unc.TILE_AT_128 = default
 

@@ -1,11 +1,11 @@
-"""Feature points of a photograph found by the 68-point landmark detector (:mod:`mifaces.landmarks`),
+"""Feature points of a photograph found by the 68-point landmark detector (:mod:`mifaces.capture.detector`),
 for captures whose manifest marks none (:func:`mifaces.capture.load_capture` calls it)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..landmarks import CONTOUR, detect_landmarks
+from .detector import CONTOUR, detect_landmarks
 from ..model.landmarks import FEATURE_POINTS
 from .types import Image
 
@@ -39,13 +39,13 @@ def detect_feature_points(image: Image, box=None, name: str | None = None) -> di
     image : Image
         Best an evenly lit one (a measurement's diffuse companion).
     box : (x0, y0, x1, y1), optional
-        The face box, pixels (see :func:`mifaces.landmarks.detect_landmarks`); None: the detector finds it.
+        The face box, pixels (see :func:`mifaces.capture.detector.detect_landmarks`); None: the detector finds it.
     name : str, optional
         The image's name in errors.
 
     Raises
     ------
-    mifaces.landmarks.NoFaceError
+    mifaces.capture.detector.NoFaceError
         Where no face is found.
     """
     points = detect_landmarks(display_values(image), box=box, name=name or str(image.path)).points

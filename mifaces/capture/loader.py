@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..files import check_image_size, check_name, read_exr, resolve_inside
-from ..landmarks import NoFaceError
+from .detector import NoFaceError
 from ..model.landmarks import FEATURE_POINTS
 from .calibration import CalibrationError, calibrate_light
 from .camera import Camera
@@ -173,14 +173,15 @@ def _face_box(obj: dict, where: str, problems: Problems) -> tuple[float, ...] | 
     return tuple(float(v) for v in box)
 
 
-def load_capture(path: str | os.PathLike, calibrate: bool = True, detect: bool = True,
+def load_capture(path: str | os.PathLike | Capture, calibrate: bool = True, detect: bool = True,
                  allow_outside: bool = False) -> Capture:
     """Load and validate the capture in folder ``path`` (or its ``capture.json``).
 
     Parameters
     ----------
-    path : path
-        The capture folder, or its manifest file.
+    path : path or Capture
+        The capture folder, or its manifest file; a loaded :class:`Capture` is returned
+        as it is, so a function may take either.
     calibrate : bool
         Compute the position of lights given by steel-sphere pictures
         (:func:`mifaces.capture.calibration.calibrate_light`). Without it such lights
@@ -207,7 +208,19 @@ def load_capture(path: str | os.PathLike, calibrate: bool = True, detect: bool =
         lights that cannot be calibrated, faces the detector does not find.
     ImportError
         Where feature points are to be detected without the ``landmarks`` extra.
+
+    Examples
+    --------
+    >>> from mifaces import load_capture
+    >>> capture = load_capture(SHARED / "data" / "yaleb_capture")  # doctest: +SKIP
+    >>> capture = load_capture(tiny_capture)  # a folder mifaces.simulate wrote
+    >>> [light.name for light in capture.lights][:2]
+    ['L0', 'L1']
+    >>> load_capture(capture) is capture
+    True
     """
+    if isinstance(path, Capture):
+        return path
     root, data = _read_manifest(Path(path))
     problems = Problems()
     problems.allow_outside = allow_outside

@@ -198,7 +198,7 @@ class Measurement:
         Feature point name (see :data:`mifaces.model.landmarks.FEATURE_POINTS`)
         -> pixel position (2,) float64. Where the capture gives none,
         :func:`mifaces.capture.load_capture` detects them
-        (:mod:`mifaces.landmarks`); empty only when loaded with ``detect=False``.
+        (:mod:`mifaces.capture.detector`); empty only when loaded with ``detect=False``.
     face_box : (x0, y0, x1, y1) or None
         Where the face is in the photograph (pixels), for the landmark
         detector on tight crops; None: the detector finds it.

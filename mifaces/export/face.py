@@ -33,7 +33,7 @@ from ..files import ResultSetError, verify_set
 from ..model import MorphableModel, load_model
 from ..model.regions import REGION_NAMES, REGIONS, texel_regions_of_mesh
 from ..reflectance.io import FILES, KIND, load_estimate
-from ..reflectance.texel_normals import decode, encode, mitsuba_frames
+from ..reflectance.maps.normals import decode, encode, mitsuba_frames
 from ..shape.io import INDEX as SHAPES_INDEX, file_stem
 from ..status import CONVERGED
 from .material import GltfLobe, gltf_lobe
@@ -131,7 +131,7 @@ def gltf_normals(texture: np.ndarray, face_model: MorphableModel, vertices: np.n
     """A Mitsuba ``normalmap`` texture (R, R, 3, encoded) re-expressed in glTF's
     tangent frame (interpolated vertex normal and tangent, bitangent n × t):
     per covered texel n_glTF = S Mᵀ n_Mitsuba with M, S the two frames' rows
-    (:func:`mifaces.reflectance.texel_normals.mitsuba_frames`); encoded."""
+    (:func:`mifaces.reflectance.maps.normals.mitsuba_frames`); encoded."""
     resolution = texture.shape[0]
     normals = decode(texture).reshape(-1, 3)
     texel, mitsuba, samples = mitsuba_frames(face_model, vertices, resolution)

@@ -3,9 +3,10 @@ samples in texture space, per-region fits by Levenberg-Marquardt, per-texel
 diffuse refinement, the estimate they make together, its files, and renders
 of it in novel poses and lights or on another face."""
 
-from .diffuse import DiffuseMap, refine_diffuse
+from .maps.diffuse import DiffuseMap, refine_diffuse
 from .estimate import BRDFEstimate, fit_brdf
-from .fitting import RegionFit, fit_region, fit_regions
+from .options import FitOptions
+from .fit.regions import RegionFit, fit_region, fit_regions
 from .io import load_estimate, write_estimate
 from .render import render_estimate, render_fitted
 from .samples import ReflectanceSamples, capture_samples

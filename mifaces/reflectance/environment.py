@@ -19,7 +19,7 @@ its block's radiance-weighted mean direction, so a sun keeps its direction.
 directional light (:func:`equivalent_lights`): the irradiance E = Σ_j T_j L_j,
 from the direction of the irradiance vector Σ_j T_j lum(L_j) ω_j. That is exact
 for the diffuse term and approximate for the specular one; the refinement
-(:mod:`mifaces.reflectance.refine`) renders the full map and corrects it.
+(:mod:`mifaces.refine.reflectance`) renders the full map and corrects it.
 
 **Estimation** (:func:`estimate_map`). Under a map L, a texel i of albedo ρ_i in
 photograph k reads R_ki = ρ_i / π Σ_j T_kij L_j (Lambertian). With several

@@ -9,11 +9,11 @@ fit's loss, sample count, time and status under ``"fit"``; the albedo map
 that renders the fitted face with the plugins as the camera saw it in the
 first measurement (meshes in ``meshes/``); with per-texel normals, the
 normal map ``normals.exr`` (Mitsuba's ``normalmap`` encoding, see
-:mod:`mifaces.reflectance.texel_normals`), which ``scene.xml`` wraps every
+:mod:`mifaces.reflectance.maps.normals`), which ``scene.xml`` wraps every
 region's BSDF in; ``albedo_std.exr``, the albedo's posterior standard
-deviation per texel (:attr:`mifaces.reflectance.diffuse.DiffuseMap.std`),
+deviation per texel (:attr:`mifaces.reflectance.maps.diffuse.DiffuseMap.std`),
 when known. ``brdf.json``'s ``"uncertainty"`` holds each region's parameter
-intervals (:mod:`mifaces.reflectance.uncertainty`). The files are one result set
+intervals (:mod:`mifaces.reflectance.fit.uncertainty`). The files are one result set
 (:func:`mifaces.files.result_set`): written together into a sibling folder
 and swapped in, so a killed run leaves the earlier set whole.
 :func:`load_estimate` reads ``brdf.json`` and the albedo map back and refuses
@@ -24,21 +24,14 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from .. import brdf as brdf_models
 from ..files import (ResultSetError, atomic_write, read_exr, result_set, verify_set, write_exr,
                      write_json, write_png)
 from ..environment import environment_emitter
 from ..render import FaceScene, light_arguments, scene_xml
+from .result import FILES, BRDFEstimate
 
-if TYPE_CHECKING:
-    from .estimate import BRDFEstimate
-
-#: The fitted BRDF's files in an output folder.
-FILES = {"brdf": "brdf.json", "albedo": "albedo.exr", "preview": "albedo.png", "scene": "scene.xml",
-         "normals": "normals.exr", "specular": "specular.exr", "albedo_std": "albedo_std.exr",
-         "environment": "environment.exr"}
 #: Samples per pixel of ``scene.xml`` (``mi.load_file(path, spp=N)`` overrides it).
 SCENE_SPP = 64
 #: The key path of the sample count in a scene dict.
@@ -102,6 +95,15 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light, 
     optional = {"normals": normals is not None, "specular": specular is not None,
                 "albedo_std": estimate.albedo.std is not None, "environment": envmap is not None}
     return {key: out / name for key, name in FILES.items() if optional.get(key, True)}
+
+
+def write_fitted(estimate: BRDFEstimate, out, capture, face_model, shapes: dict, *,
+                 force: bool = False) -> dict[str, Path]:
+    """:func:`write_estimate` with the scene of the estimate's first photograph: its face
+    (``shapes[name]``, world vertices of ``face_model``), the capture's camera and its light."""
+    first = next(m for m in capture.measurements if m.name == estimate.measurements[0])
+    return write_estimate(estimate, out, FaceScene(face_model, shapes[first.name]), capture.camera,
+                          capture.light(first.light), force=force)
 
 
 def load_estimate(path) -> dict:

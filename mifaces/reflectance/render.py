@@ -13,7 +13,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..brdf.model import check_numbers
-from ..capture import Capture, load_capture
+from ..capture import load_capture
 from ..files import check_writable
 from ..geometry import load_geometry
 from ..model import MorphableModel
@@ -66,7 +66,7 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     """
     yaw = check_numbers("yaw", yaw)
     check_writable(Path(out).parent)
-    capture = capture if isinstance(capture, Capture) else load_capture(capture)
+    capture = load_capture(capture)
     data = load_estimate(brdf_dir)
     if data["albedo"] is None:
         raise FileNotFoundError(f"{brdf_dir}: no albedo map beside brdf.json")

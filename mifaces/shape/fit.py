@@ -14,13 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..capture import load_capture
 from ..environment import dominant_direction
 from ..model import MorphableModel, load_model
 from ..progress import progress as progress_bar
 from ..status import CONVERGED, DIVERGED, NOT_CONVERGED
 from .energy import DIFFUSE, POINT, lit_key
 from .fitter import Fitter
-from .io import as_capture, write_fit, write_index
+from .io import write_fit, write_index
 from .result import ShapeFit, ShapeFitError, ShapeSchedule, Weights
 from .targets import (eye_distance_px, feature_targets, light_angles, light_direction, normalised,
                       reference_measurement, rotation_centre, start_light_angles)
@@ -30,7 +31,7 @@ from .targets import (eye_distance_px, feature_targets, light_angles, light_dire
 #: the limit is 4 px on the simulator's 512 x 512 captures (eye distance about 152 px), as before.
 MAX_FEATURE_ERROR = 0.02
 #: Default expected RMS error (px) of the feature points themselves: whole-pixel positions, as a
-#: detector (:mod:`mifaces.landmarks`) or a careful click gives them.
+#: detector (:mod:`mifaces.capture.detector`) or a careful click gives them.
 FEATURE_NOISE = 1.0
 #: Default convergence limit of the photometric residual: the RMS difference per channel between the
 #: fitted rendering and the photograph over the face's samples, in units of the photograph's 99th
@@ -354,7 +355,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
         For an unknown measurement name, or missing or misnamed feature points
         (checked for all measurements before any fitting).
     """
-    capture = as_capture(capture)
+    capture = load_capture(capture)
     source = model_source(model)
     model = load_model(model)
     model = model.truncated(model.fit_shape_modes if shape_modes is None else shape_modes)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..capture import Camera, Capture, load_capture
+from ..capture import Camera, load_capture
 from ..files import ResultSetError, atomic_write, check_name, file_sha256, write_json
 from ..status import CONVERGED
 from .result import ShapeFit
@@ -37,11 +37,6 @@ def file_stem(measurement: str) -> str:
         raise ValueError(f"measurement name {measurement!r} is reserved: it ends like a fitted albedo's file "
                          f"(<name>{ALBEDO_SUFFIX}.npy)")
     return measurement
-
-
-def as_capture(capture) -> Capture:
-    """A loaded capture, or the one at the folder ``capture``."""
-    return capture if isinstance(capture, Capture) else load_capture(capture)
 
 
 def write_fit(out, fit: ShapeFit, model) -> None:
@@ -119,7 +114,7 @@ def shapes_in_world(fits: list[ShapeFit], capture) -> dict[str, np.ndarray]:
         Measurement name -> (N, 3) float32 vertices, world frame, mm. Fits that
         did not converge are left out, with a warning.
     """
-    camera = as_capture(capture).camera
+    camera = load_capture(capture).camera
     _warn_left_out([f"{fit.measurement} ({fit.status})" for fit in fits if not fit.converged])
     return {fit.measurement: camera.to_world(fit.vertices_camera.astype(np.float32)).astype(np.float32)
             for fit in fits if fit.converged}
@@ -165,7 +160,7 @@ def load_fitted_shapes(path, capture=None) -> dict[str, np.ndarray]:
         raise FileNotFoundError(f"no {INDEX} in {path}: not a fit-shape output folder")
     index = json.loads(index_path.read_text())
     if capture is not None:
-        camera = as_capture(capture).camera
+        camera = load_capture(capture).camera
     else:
         c = index["camera"]
         camera = Camera(c["width"], c["height"], c["fx"], c["fy"], c["cx"], c["cy"], np.asarray(c["distortion"]),

@@ -97,7 +97,7 @@ def cheek_bump(face_model, neutral: np.ndarray, amplitude_mm: float = 3.5, sigma
     eye corner, halfway down to the mouth corner's height, a third of the way
     in towards the mouth corner). Outside the span of a morphable model's few
     dozen components: a test of shape refinement beyond the model
-    (:mod:`mifaces.reflectance.refine_shape`)."""
+    (:mod:`mifaces.refine.shape`)."""
     if side not in ("right", "left"):
         raise ValueError(f"side must be 'right' or 'left', got {side!r}")
     v = np.asarray(neutral, np.float64)

@@ -14,8 +14,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..brdf.model import DIFFUSE, BRDFModel, Parameter
-from ..arrays import device_array
+from ...brdf.model import DIFFUSE, BRDFModel, Parameter
+from ...arrays import device_array
 
 
 @dataclass(frozen=True)

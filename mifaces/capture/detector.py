@@ -78,13 +78,13 @@ def _as_uint8(image) -> np.ndarray:
     Integer codes keep their top 8 bits; floats are display values in [0, 1] (clipped).
     """
     if isinstance(image, (str, os.PathLike)):
-        from .capture.images import read_codes
+        from .images import read_codes
 
         path = Path(image)
         if not path.is_file():
             raise FileNotFoundError(f"image not found: {path}")
         if path.suffix.lower() == ".exr":
-            from .files import read_exr
+            from ..files import read_exr
 
             image = read_exr(path)
         else:

@@ -2,7 +2,7 @@
 and 95 % intervals that stay inside each parameter's range.
 
 The fit minimises E(x) = ½ Σ_i |ρ_i(x)|² over the unconstrained vector x of
-:class:`~mifaces.reflectance.parameters.ParameterSpace` (ρ_i the weighted RGB
+:class:`~mifaces.reflectance.fit.parameters.ParameterSpace` (ρ_i the weighted RGB
 residual (r_i - π f)/σ_i of sample i). With H = JᵀJ (the Gauss-Newton
 Hessian the LM step already forms) Cov(x̂) is estimated by one of:
 
@@ -32,13 +32,13 @@ Hessian the LM step already forms) Cov(x̂) is estimated by one of:
     but a refit per draw.
 
 The sums u_g and H_g come from one Dr.Jit kernel at the optimum
-(:meth:`mifaces.reflectance.fitting._Problem.cluster_sums`), H and E from the
+(:meth:`mifaces.reflectance.fit.regions._Problem.cluster_sums`), H and E from the
 fit's own; all are model-agnostic: they also hold when the model is not the
 truth's family (they estimate the spread around the model's best fit).
 
 **Albedo offsets** (``fit_brdf(..., albedo_rounds=k)``). The alternated fit
 subtracts from each sample its texel's albedo offset o_i = a_t - ā
-(:class:`~mifaces.reflectance.diffuse.AlbedoOffsets`), estimated from the same
+(:class:`~mifaces.reflectance.maps.diffuse.AlbedoOffsets`), estimated from the same
 samples given the glossy fit: a_t = (Σ_{s ∈ t} ω_s (r_s - π f_s) + λ ρ̄)/(W_t + λ),
 ω = 1/σ², W_t = Σ_{s ∈ t} ω_s, and ā its mean over the region's samples. Taking
 the offsets as known gives intervals far too narrow (the fit no longer sees the
@@ -235,7 +235,7 @@ def offset_sums(texel, cluster, groups: int, weight, jsum, shrinkage, offsets) -
     weight : ndarray (T,)
         W_t = Σ_{i ∈ t} 1/σ_i².
     jsum : ndarray (T, 3, P)
-        S_t = Σ_{i ∈ t} J_i/σ_i per channel (:meth:`mifaces.reflectance.fitting._Problem.texel_sums`).
+        S_t = Σ_{i ∈ t} J_i/σ_i per channel (:meth:`mifaces.reflectance.fit.regions._Problem.texel_sums`).
     shrinkage : ndarray (N, 3)
         λ of each sample's region per channel.
     offsets : ndarray (N, 3)

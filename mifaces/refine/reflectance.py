@@ -27,10 +27,10 @@ dominate). Gradients come from Dr.Jit's reverse mode through Mitsuba's path
 replay backpropagation (``prb``; Vicini et al., "Path Replay
 Backpropagation", SIGGRAPH 2021); the steps are Adam's, one photograph per
 step in turn, and the result is the mean of the last iterates
-(Polyak-Ruppert averaging, :class:`~mifaces.reflectance.refine_schedule.IterateAverage`).
+(Polyak-Ruppert averaging, :class:`~mifaces.refine.schedule.IterateAverage`).
 Parameters stay inside their ranges (``Parameter.lower`` and
 ``upper``) by the reparameterisation of the texture-space fit
-(:class:`~mifaces.reflectance.parameters.ParameterSpace`, a sigmoid or its
+(:class:`~mifaces.reflectance.fit.parameters.ParameterSpace`, a sigmoid or its
 logarithmic form); the albedo, optionally a variable too, by a smooth
 multiplicative correction (:class:`AlbedoCorrection`).
 
@@ -59,7 +59,6 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import drjit as dr
 import mitsuba as mi
@@ -71,13 +70,11 @@ from ..model.regions import REGIONS
 from ..progress import progress as progress_bar
 from ..render import FaceScene, light_arguments, mitsuba_sensor
 from .albedo_correction import AlbedoCorrection
-from .environment import neighbour_pairs
-from .parameters import ParameterSpace
-from .refine_schedule import (ALBEDO, LIGHT_GAIN, IterateAverage, RefineSchedule, environment_variable,
-                              holdout_pixels)
+from ..reflectance.environment import neighbour_pairs
+from ..reflectance.fit.parameters import ParameterSpace
+from ..reflectance.result import BRDFEstimate
+from .schedule import ALBEDO, LIGHT_GAIN, IterateAverage, RefineSchedule, environment_variable, holdout_pixels
 
-if TYPE_CHECKING:
-    from .estimate import BRDFEstimate
 
 #: Key of a capture's ``metadata`` that gives the lamp's radius (mm).
 LAMP_RADIUS_KEY = "lamp_radius_mm"
@@ -686,9 +683,11 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
                     if len(history) > first else None,
                     "loss_after": t_end - t_iterate, "total": t_end - t0},
     }
-    if not accepted:
-        return dataclasses.replace(estimate, refinement=refinement)
-    return problem.estimate_of(result, refinement)
+    refined = (dataclasses.replace(estimate, refinement=refinement) if not accepted
+               else problem.estimate_of(result, refinement))
+    # the fit's time with its refinement's, as the estimate's total
+    refined.seconds = {**estimate.seconds, "total": estimate.seconds.get("total", 0.0) + t_end - t0}
+    return refined
 
 
 __all__ = ["LAMP_RADIUS_KEY", "RefineSchedule", "RefineProblem", "PhotographView", "image_loss", "coverage",

@@ -5,7 +5,7 @@ degrees off, and the region BRDF fit reads those errors as a wrong gloss
 (issue 13: on the simulated Surrey capture with fitted shapes, skin ρ_s off
 by a third). With every light and pose, each texel has several samples, and
 they hold its normal: the non-Lambertian photometric stereo of
-:mod:`mifaces.reflectance.normals`, run in texture space.
+:mod:`mifaces.photometric_stereo.nonlambertian`, run in texture space.
 
 **Frame.** A sample's l̂ and v̂ are in its measurement's local shading frame at
 the texel (:func:`mifaces.reflectance.samples.measurement_samples`: tangent
@@ -18,7 +18,7 @@ map.
 **Normal step.** Per region, with the region's glossy parameters θ fixed, the
 texel's normal n_p and albedo ρ_p minimise
 E = Σ_k w_kp |I_kp - (ρ_p + π f_s(l̂', v̂'; θ)) max(0, n_p·l_kp)|² + λ |n_p - ẑ|²
-(:func:`mifaces.reflectance.normals.refine_normals`), with I = r cos θ_l the
+(:func:`mifaces.photometric_stereo.nonlambertian.refine_normals`), with I = r cos θ_l the
 sample's reflectance times its cosine at the model's normal (radiance per unit
 irradiance, up to π), l̂', v̂' the directions in the frame of n_p, and w the
 image-space weight of eq. 10's σ, w = 1 / (σ cos θ_l)² (the BRDF fit's residual
@@ -37,7 +37,7 @@ caller's fit, the same as without normals), until E improves by less than
 ``tol`` (relative). Two choices make the refit see the gloss rather than the
 albedo's texture: each sample's r has its texel's albedo offset ρ_p - ρ̄
 subtracted (ρ_p the normal step's closed form, ρ̄ the region's mean), as
-:func:`mifaces.reflectance.normals.brdf_samples` does per pixel, and a region
+:func:`mifaces.photometric_stereo.nonlambertian.brdf_samples` does per pixel, and a region
 with refined texels is fitted on their samples only (elsewhere neither the
 normal nor the albedo offset is known). On the simulated Surrey capture with
 fitted shapes (``validation/normals_faces.py``) the offsets alone take skin
@@ -58,17 +58,17 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.ndimage
 
-from ..model.texture_space import rasterize
+from ...model.texture_space import rasterize
 from .diffuse import albedo_offsets
-from .normals import NormalFit, refine_normals
-from .samples import MIN_COSINE, texel_geometry
+from .normal_fit import NormalFit, refine_normals
+from ..samples import MIN_COSINE, texel_geometry
 
 #: Default weight of the model's normal in a texel's normal step, in observations of mean weight.
 PRIOR_WEIGHT = 0.5
 #: Texels with fewer samples keep the model's normal.
 MIN_OBSERVATIONS = 3
 #: The start search of the normal step (radius, step, levels in degrees; see
-#: :func:`mifaces.reflectance.normals.search_start`): fitted shapes are off by a few degrees.
+#: :func:`mifaces.photometric_stereo.nonlambertian.search_start`): fitted shapes are off by a few degrees.
 SEARCH = (9.0, 3.0, 3)
 
 

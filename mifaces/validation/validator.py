@@ -26,7 +26,7 @@ Four numbers per fitted model (:meth:`Validator.validate`):
 ``albedo_rmse``
     RMSE of the fitted albedo map against the truth's (resized to the fit's
     resolution), on texels with samples (linear reflectance units;
-    :func:`mifaces.report.ground_truth_errors`).
+    :func:`mifaces.validation.truth_errors.ground_truth_errors`).
 ``heldout_rmse``
     Image error under :data:`HELD_OUT_LIGHTS` point lights none of the
     photographs used (:func:`held_out_lights`), in a novel pose
@@ -70,20 +70,20 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from skimage.transform import resize
 
-from .capture import Camera, read_ground_truth
-from .capture.types import RELATIVE_IRRADIANCE
-from .environment import (LUMINANCE, SKY_SUN_ANGLES, camera_frame, dominant_direction, sky_emitter,
-                          studio_environment)
-from .files import read_exr
-from .geometry import load_geometry
-from .model.regions import REGIONS
-from .model.mesh import mitsuba_mesh
-from .render import ALBEDO, FaceScene, mitsuba_sensor, region_bsdf, rgb
-from .shape_errors import front_of_face
-from .studio import subsurface as translucent
-from .studio.photograph import albedo_texture
-from .studio.simulate import true_face_shapes
-from .studio.varying import map_textures
+from ..capture import Camera, read_ground_truth
+from ..capture.types import RELATIVE_IRRADIANCE
+from ..environment import LUMINANCE, SKY_SUN_ANGLES, camera_frame, dominant_direction, sky_emitter, studio_environment
+from ..files import read_exr
+from ..geometry import load_geometry
+from ..model.regions import REGIONS
+from ..model.mesh import mitsuba_mesh
+from ..render import ALBEDO, FaceScene, mitsuba_sensor, region_bsdf, rgb
+from ..shape_errors import front_of_face
+from ..studio import subsurface as translucent
+from ..studio.photograph import albedo_texture
+from ..studio.simulate import true_face_shapes
+from ..studio.varying import map_textures
+from .truth_errors import ground_truth_errors
 
 #: Directions per axis of the hemisphere grid: GRID² directions, GRID⁴ (ωi, ωo) pairs.
 GRID = 12
@@ -484,8 +484,6 @@ class Validator:
         images : dict
             Condition name -> the fitted face's image (H, W, 3).
         """
-        from .report import ground_truth_errors  # here: mifaces.report imports this module
-
         t = time.perf_counter()
         fit, albedo = estimate.to_json(), estimate.albedo.albedo
         maps = {"normals": estimate.normal_texture(), "specular": estimate.specular_texture()}

@@ -1,5 +1,5 @@
 """Pixels under many lights on the Dr.Jit side, for the per-pixel normal step
-of :mod:`mifaces.reflectance.normals`: the shading of each observation by
+of :mod:`mifaces.photometric_stereo.nonlambertian`: the shading of each observation by
 an analytic BRDF and its derivatives with respect to the normal."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..brdf.model import BRDFModel
+from ...brdf.model import BRDFModel
 
 
 def tangents(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -89,7 +89,7 @@ class Observations:
     def losses(self, normals: np.ndarray, albedo: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Each pixel's data term Σ_k w |I - ρ s - g|² (P,) and its ρ (P, 3): ``albedo``, or
         where None the closed form ρ_c = Σ_k w s (I_c - g_c) / Σ_k w s² (0 where no usable
-        observation is lit), as :mod:`mifaces.reflectance.diffuse` does per texel."""
+        observation is lit), as :mod:`mifaces.reflectance.maps.diffuse` does per texel."""
         s, g = self._terms(self._expand(normals))
         rho = self._albedo(s, g) if albedo is None else mi.Color3f(vectors(albedo))
         r = self.value - dr.gather(mi.Color3f, rho, self.pixel) * s - g

@@ -1,5 +1,5 @@
 """The albedo as a variable of the refinement by differentiable rendering
-(:mod:`mifaces.reflectance.refine`): a smooth multiplicative correction of
+(:mod:`mifaces.refine.reflectance`): a smooth multiplicative correction of
 the texture-space albedo on a coarse grid."""
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ frame, mm, one per measurement k) and the fitted BRDF, and minimises
 
     E(h) = Σ_k 1/|M_k| Σ_{p ∈ M_k} Σ_c ψ_ε((I_k(W_k + h N_k)[p, c] - s J_k[p, c]) / μ_k),
 
-the image loss of :mod:`mifaces.reflectance.refine` (Charbonnier penalty ψ_ε,
+the image loss of :mod:`mifaces.refine.reflectance` (Charbonnier penalty ψ_ε,
 photograph J_k in the renderer's units, μ_k its mean over the face's pixels
 M_k) over one scalar field ``h`` on the model's mesh: the displacement of
 each vertex along its normal, shared by all photographs (``N_k``, the welded
@@ -54,14 +54,15 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..reflectance import FitOptions
 from ..progress import progress as progress_bar
 from ..render import FaceScene
 from ..model.geometry import welded_normals
 from ..shape import shapes_in_world
-from .estimate import fit_brdf
-from .samples import capture_samples
-from .refine import LAMP_RADIUS_KEY, _kernel_history, _kernels, image_loss, mask_weight, photograph_view
-from .refine_schedule import HOLDOUT, HOLDOUT_BLOCK, holdout_pixels
+from ..reflectance.estimate import fit_brdf
+from ..reflectance.samples import capture_samples
+from .reflectance import LAMP_RADIUS_KEY, _kernel_history, _kernels, image_loss, mask_weight, photograph_view
+from .schedule import HOLDOUT, HOLDOUT_BLOCK, holdout_pixels
 
 
 @dataclass(frozen=True)
@@ -201,7 +202,7 @@ class _View:
 
 
 def _appearance(estimate) -> dict:
-    """The fitted BRDF as :func:`~mifaces.reflectance.refine.photograph_view` takes it."""
+    """The fitted BRDF as :func:`~mifaces.refine.reflectance.photograph_view` takes it."""
     return {"brdf": estimate.to_json(), "albedo": estimate.albedo.albedo, "normals": estimate.normal_texture(),
             "specular": estimate.specular_texture()}
 
@@ -420,8 +421,8 @@ def refine_lit(capture, shapes: dict, face_model, samples, brdf: str = FIT_SHAPE
     fitted reflectance is at hand yet (``measure`` and ``fit-shape`` with ``--refine-shape``)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the quick fit's warnings are the final fits' too
-        estimate = fit_brdf(capture, brdf, shapes, face_model=face_model, resolution=resolution, samples=samples,
-                            progress=False)
+        estimate = fit_brdf(capture, brdf, shapes, face_model=face_model, samples=samples, progress=False,
+                            options=FitOptions(resolution=resolution))
     return refine_shape(capture, shapes, face_model, estimate, schedule, progress=progress)
 
 

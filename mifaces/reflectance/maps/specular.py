@@ -15,7 +15,7 @@ weighted least squares (w = 1/σ², eq. 10) for one texel, ρ_d eliminated, is
 with bars the texel's weighted means: only the variation of g over the
 texel's samples (its highlight seen or not) tells k. A texel whose samples
 all see the same g says nothing, and one seen twice says little; so, as for
-the albedo (:mod:`mifaces.reflectance.diffuse`), the texel scales of a region
+the albedo (:mod:`mifaces.reflectance.maps.diffuse`), the texel scales of a region
 are taken as drawn around 1 with variance τ², and k̂ as k plus noise of
 variance s₀²/S: the posterior mean is
 

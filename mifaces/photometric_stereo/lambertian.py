@@ -135,3 +135,6 @@ def angular_error(normals, reference, mask) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         cos = np.sum(a * r, axis=1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(r, axis=1))
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+__all__ = ["MIN_SPREAD", "SHADOW_FRACTION", "angular_error", "fit", "observation_weights", "predict"]

@@ -1,5 +1,5 @@
 """The schedule of the refinement by differentiable rendering
-(:mod:`mifaces.reflectance.refine`): iterations, samples, learning rates per
+(:mod:`mifaces.refine.reflectance`): iterations, samples, learning rates per
 variable, and the average of the last iterates that the result is taken from.
 """
 
@@ -54,7 +54,7 @@ class RefineSchedule:
         per step of a parameter in logarithmic form).
     albedo_learning_rate : float or None
         With a number, the albedo is a variable too
-        (:class:`~mifaces.reflectance.albedo_correction.AlbedoCorrection`),
+        (:class:`~mifaces.refine.albedo_correction.AlbedoCorrection`),
         with this step (about the relative change per step); None keeps the
         texture-space albedo.
     albedo_cell : int

@@ -10,8 +10,8 @@ r = 1 (so the model predicts π f; f without cosine, see
 evaluated by the same Dr.Jit functions the plugins use; its Jacobian comes
 from Dr.Jit's forward mode (a tangent per free parameter), and the normal
 equations are summed in the same kernel, one pass over the samples per step
-(:class:`_Problem`); the steps are Levenberg-Marquardt (:mod:`mifaces.reflectance.levenberg_marquardt`) on random subsets
-of growing size, each stage starting from the previous result (the paper's
+(:class:`_Problem`); the steps are Levenberg-Marquardt
+(:mod:`mifaces.reflectance.fit.levenberg_marquardt`) on random subsets of growing size, each stage starting from the previous result (the paper's
 hierarchy). Parameters are kept in their valid ranges by reparameterisation:
 p = lo + (hi - lo)·sigmoid(x), or its logarithmic form for parameters that
 span decades (roughness, α, exponents).
@@ -28,12 +28,12 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .. import brdf as brdf_models
-from ..brdf.model import BRDFModel
-from ..progress import progress as progress_bar
-from ..arrays import device_array
-from ..status import AT_BOUND, AT_START, CONVERGED, DEFAULTS, PRIOR
-from .diffuse import AlbedoOffsets
+from ... import brdf as brdf_models
+from ...brdf.model import BRDFModel
+from ...progress import progress as progress_bar
+from ...arrays import device_array
+from ...status import AT_BOUND, AT_START, CONVERGED, DEFAULTS, PRIOR
+from ..maps.diffuse import AlbedoOffsets
 from .levenberg_marquardt import levenberg_marquardt
 from .parameters import ParameterSpace, conservative_start, linear_start
 from .uncertainty import (BOOTSTRAP_DRAWS, METHODS, NOT_IDENTIFIED, PRUNED, Covariance, cluster_index, covariance,
@@ -82,7 +82,7 @@ class RegionFit:
     #: stage's subset scaled to the full set, and the subset's size
     history: list = field(default_factory=list)
     #: parameter -> ``{"std", "interval95"}`` or ``{"status"}``
-    #: (:func:`mifaces.reflectance.uncertainty.parameter_intervals`); empty if not estimated
+    #: (:func:`mifaces.reflectance.fit.uncertainty.parameter_intervals`); empty if not estimated
     uncertainty: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
@@ -145,7 +145,7 @@ class _Problem:
         (G, P, P), summed over the colour channels, and the loss ½ Σ |ρ|², at ``x``; ``cluster``
         (N,) numbers the clusters 0 … ``groups`` - 1 (JᵀJ = Σ_g H_g). One kernel (frozen per
         parameter space as :meth:`system`'s is), whose sums stay on the Dr.Jit side: for the
-        covariance (:mod:`mifaces.reflectance.uncertainty`), once per fit."""
+        covariance (:mod:`mifaces.reflectance.fit.uncertainty`), once per fit."""
         p = len(x)
         sums = self._group_sums("clusters", _cluster_sums, x, cluster, groups, 1 + p + p * (p + 1) // 2)
         hg = np.zeros((groups, p, p))
@@ -157,7 +157,7 @@ class _Problem:
     def texel_sums(self, x, texel: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray]:
         """Per texel t, W_t = Σ_{i ∈ t} 1/σ_i² (T,) and S_t = Σ_{i ∈ t} J_i/σ_i per colour channel
         (T, 3, P), at ``x``; ``texel`` (N,) numbers the texels 0 … ``groups`` - 1. What the
-        offsets' part of the uncertainty needs (:func:`mifaces.reflectance.uncertainty.offset_sums`):
+        offsets' part of the uncertainty needs (:func:`mifaces.reflectance.fit.uncertainty.offset_sums`):
         one kernel as :meth:`cluster_sums`'s, once per fit with ``albedo_rounds``."""
         p = len(x)
         sums = self._group_sums("texels", _texel_sums, x, texel, groups, 1 + 3 * p)
@@ -325,15 +325,15 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         step, for reports that evaluate the full-data loss along the way.
     cluster : ndarray (N,), optional
         Cluster of each sample for the sandwich and bootstrap covariance (e.g.
-        :func:`~mifaces.reflectance.uncertainty.tile_clusters`); default: the
-        samples independent (:func:`~mifaces.reflectance.uncertainty.independent_clusters`).
+        :func:`~mifaces.reflectance.fit.uncertainty.tile_clusters`); default: the
+        samples independent (:func:`~mifaces.reflectance.fit.uncertainty.independent_clusters`).
     uncertainty : str or None
         How :attr:`RegionFit.uncertainty` is estimated at the optimum, one of
-        :data:`~mifaces.reflectance.uncertainty.METHODS`; None leaves it out.
+        :data:`~mifaces.reflectance.fit.uncertainty.METHODS`; None leaves it out.
     offsets : AlbedoOffsets, optional
         The per-texel albedo offsets ``reflectance`` was corrected by (``fit_brdf(...,
         albedo_rounds=k)``): the jackknife and the sandwich then re-estimate them with
-        each cluster left out (:func:`~mifaces.reflectance.uncertainty.offset_sums`;
+        each cluster left out (:func:`~mifaces.reflectance.fit.uncertainty.offset_sums`;
         every texel's samples must lie in one cluster); Laplace and the bootstrap
         take them as known.
 
@@ -405,7 +405,7 @@ def region_uncertainty(space: ParameterSpace, problem: _Problem, params: dict, p
                        method: str, data: tuple, seed: int = 0, offsets: AlbedoOffsets | None = None) -> dict:
     """The parameters' uncertainty at the optimum ``params`` of ``problem`` (all
     the region's samples), by ``method``
-    (:mod:`mifaces.reflectance.uncertainty`): the clusters' sums (and JᵀJ, E) from
+    (:mod:`mifaces.reflectance.fit.uncertainty`): the clusters' sums (and JᵀJ, E) from
     one kernel pass at the optimum; the bootstrap refits instead.
     ``pruned`` lobes' scales and exponents get the status ``pruned``; ``data``
     is the region's (light, view, reflectance, sigma), for the bootstrap; ``offsets``

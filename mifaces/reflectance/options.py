@@ -1,0 +1,93 @@
+"""How :func:`mifaces.reflectance.fit_brdf` fits: one value that travels from the CLI and
+:func:`mifaces.measure` to the fit, instead of a dozen forwarded flags."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .fit.regions import SubsetSchedule
+from .fit.uncertainty import METHODS
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Options of the BRDF fit.
+
+    Attributes
+    ----------
+    resolution : int
+        R of the R × R texture space (the paper used 1000).
+    lobes : int
+        Lafortune lobes.
+    model_options : dict
+        Further options of the BRDF model (``fresnel=``, ``normalization=``, …).
+    fixed : dict, optional
+        Parameters held fixed in every region (default: the model's
+        ``fixed_in_region``, e.g. Cook-Torrance's η at each region's published
+        value, :data:`mifaces.brdf.materials.REFRACTIVE_INDEX`).
+    schedule : SubsetSchedule, optional
+        The Levenberg-Marquardt subset hierarchy.
+    seed : int
+        Seed of the subset draws.
+    normals : bool
+        Estimate a normal per texel from its samples, alternating with the
+        region fit (:func:`mifaces.reflectance.maps.normals.refine_texel_normals`):
+        for fitted shapes, whose normals are a few degrees off. Left out, with
+        a warning, when no texel has the samples it needs.
+    normal_options : dict, optional
+        Keyword arguments of ``refine_texel_normals`` (``prior_weight``, ``rounds``, ``tol``).
+    specular_maps : bool
+        Estimate the specular reflectance per texel, shrunk towards each
+        region's (:func:`mifaces.reflectance.maps.specular.refine_specular`;
+        models with a ``specular_reflectance``). The region fits stay the summary.
+    uncertainty : str or None
+        How each region fit's parameter uncertainty is estimated
+        (:data:`mifaces.reflectance.fit.uncertainty.METHODS`; the jackknife over
+        texel tiles by default, see ``docs/uncertainty.md``), or None. Not
+        estimated with ``normals`` (whose fits see texels through their normals
+        too): those fits get empty ``uncertainty``.
+    albedo_rounds : int
+        Alternations of the region fit with the per-texel albedo: each refits the
+        regions on the reflectance less each sample's albedo offset from its
+        region's mean (:func:`mifaces.reflectance.maps.diffuse.albedo_offsets`), the
+        albedo map refitted with the last round's glossy parts. 0: the paper's
+        one region fit. (With ``normals``, whose rounds do the same, ignored.)
+        The offsets are each texel's mean (not shrunk); the last round's intervals
+        re-estimate them in every jackknife or sandwich replicate
+        (:mod:`mifaces.reflectance.fit.uncertainty`), and still hold the truth less often
+        than they say on simulated faces (``docs/uncertainty.md``): off by default.
+    balance_lights : bool
+        Correct the given lights' relative intensities by the face's one albedo before
+        fitting (:func:`mifaces.reflectance.light_balance.balance_given_lights`; the mean
+        kept): a calibrated lamp a percent off in distance biases the glossy fit
+        (``docs/uncertainty.md``).
+    """
+
+    resolution: int = 512
+    lobes: int = 1
+    model_options: dict = field(default_factory=dict)
+    fixed: dict | None = None
+    schedule: SubsetSchedule | None = None
+    seed: int = 0
+    normals: bool = False
+    normal_options: dict | None = None
+    specular_maps: bool = False
+    uncertainty: str | None = METHODS[0]
+    albedo_rounds: int = 0
+    balance_lights: bool = False
+
+    def __post_init__(self):
+        if self.uncertainty is not None and self.uncertainty not in METHODS:
+            raise ValueError(f"uncertainty must be one of {METHODS} or None, got {self.uncertainty!r}")
+        if int(self.resolution) < 1:
+            raise ValueError(f"resolution must be a positive number of texels, got {self.resolution!r}")
+
+    def brdf_options(self) -> dict:
+        """The BRDF model's options, with ``lobes`` where it is not 1."""
+        options = dict(self.model_options)
+        if self.lobes != 1:
+            options["lobes"] = int(self.lobes)  # brdf.model refuses it for a model with one lobe
+        return options
+
+
+__all__ = ["FitOptions"]
