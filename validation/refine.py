@@ -43,7 +43,7 @@ from mifaces.files import write_json
 from mifaces.geometry import load_geometry
 from mifaces.pipeline import novel_light
 from mifaces.reflectance import FitOptions, fit_brdf
-from mifaces.refine.reflectance import RefineSchedule, refine_estimate
+from mifaces.refine import RefineSchedule, refine_estimate
 from mifaces.render import FaceScene
 from mifaces.validation.truth_errors import ground_truth_errors
 from mifaces.studio.simulate import simulate
