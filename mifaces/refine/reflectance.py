@@ -95,6 +95,30 @@ def _optimizer(problem: RefineProblem, schedule: RefineSchedule):
     return opt
 
 
+def _iterate(problem: RefineProblem, opt, schedule: RefineSchedule, seed: int, progress: bool, callback,
+             t0: float) -> tuple[list, IterateAverage]:
+    """Adam's steps, one photograph per step in turn: each step's record (seconds, photograph, loss,
+    kernel launches: :func:`~mifaces.refine.kernels.kernel_counts`) and the average of the last
+    iterates. ``callback`` as :func:`refine_estimate` calls it (``t0`` its start)."""
+    history, average = [], IterateAverage(problem.variables, schedule)
+    bar = progress_bar(range(schedule.iterations), desc="refining", unit="it", enabled=progress)
+    with kernel_history():
+        for it in bar:
+            t = time.perf_counter()
+            photo = problem.photographs[it % len(problem.photographs)]
+            loss = problem.loss(photo, opt, schedule.spp, seed=seed * 7919 + 2 * it)
+            dr.backward(loss)
+            opt.step()
+            opt.set_learning_rate(_rates(problem, schedule, it + 1))
+            dr.eval()
+            average.add(it, opt)
+            history.append([round(time.perf_counter() - t, 4), photo.name, float(loss[0]), *kernel_counts()])
+            bar.set_postfix_str(f"loss {float(loss[0]):.4g}")
+            if callback is not None:
+                callback(it + 1, time.perf_counter() - t0, lambda: problem.estimate_of(average.mean(opt), None))
+    return history, average
+
+
 def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedule: RefineSchedule | None = None, *,
                     lamp_radius: float | None = None, measurements=None, seed: int = 0, progress: bool = True,
                     callback=None) -> BRDFEstimate:
@@ -150,22 +174,7 @@ def refine_estimate(estimate: BRDFEstimate, capture, shapes, face_model, schedul
     before = problem.total_loss({**start, **{k: mi.Float(v) for k, v in problem.fitted.items()}},
                                 schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
     t_before = time.perf_counter()
-    history, average = [], IterateAverage(problem.variables, schedule)
-    bar = progress_bar(range(schedule.iterations), desc="refining", unit="it", enabled=progress)
-    with kernel_history():
-        for it in bar:
-            t = time.perf_counter()
-            photo = problem.photographs[it % len(problem.photographs)]
-            loss = problem.loss(photo, opt, schedule.spp, seed=seed * 7919 + 2 * it)
-            dr.backward(loss)
-            opt.step()
-            opt.set_learning_rate(_rates(problem, schedule, it + 1))
-            dr.eval()
-            average.add(it, opt)
-            history.append([round(time.perf_counter() - t, 4), photo.name, float(loss[0]), *kernel_counts()])
-            bar.set_postfix_str(f"loss {float(loss[0]):.4g}")
-            if callback is not None:
-                callback(it + 1, time.perf_counter() - t0, lambda: problem.estimate_of(average.mean(opt), None))
+    history, average = _iterate(problem, opt, schedule, seed, progress, callback, t0)
     t_iterate = time.perf_counter()
     result = average.mean(opt)
     after = problem.total_loss(result, schedule.evaluation_spp, seed=seed * 7919 + (1 << 20))
