@@ -1,7 +1,7 @@
 """The pixels of a camera's image that a face covers: the one test, for the refinement's masks
 and region labels (:func:`mifaces.refine.photograph.photograph_view`), the training error of
-``mifaces measure`` (:mod:`mifaces.pipeline`) and the validation's masks
-(:mod:`mifaces.validation.validator`).
+``mifaces measure`` (:mod:`mifaces.pipeline`), and the validation's masks
+(:mod:`mifaces.validation.validator`: :func:`front_of_face_pixels`, the front of the face only).
 
 Two footprints of a pixel, for two uses:
 
@@ -19,7 +19,9 @@ from __future__ import annotations
 import mitsuba as mi
 import numpy as np
 
+from .model.mesh import mitsuba_mesh
 from .render import FaceScene, mitsuba_sensor
+from .shape_errors import front_of_face
 
 #: Samples per pixel of the filtered footprint (:func:`face_pixels`).
 FOOTPRINT_SPP = 4
@@ -78,4 +80,23 @@ def face_pixels(scene: FaceScene, camera, spp: int | None = FOOTPRINT_SPP, regio
     return labels.reshape(camera.height, camera.width)
 
 
-__all__ = ["FOOTPRINT_SPP", "depth_image", "face_pixels"]
+def front_of_face_pixels(face_model, vertices: np.ndarray, camera, spp: int = FOOTPRINT_SPP) -> np.ndarray:
+    """Pixels of ``camera``'s image where the front of the face (:func:`mifaces.shape_errors.front_of_face`
+    on the model's mean shape: the vertices that look forward, from the chin up, outside the hair)
+    is the surface seen: (H, W) bool. The back of the head, the ears, the neck and the scalp are left
+    out: no photograph of a capture sees them well, so their albedo is not measured, and an error
+    there says nothing about the reflectance. Pixels of the filtered footprint of
+    :func:`face_pixels` (a depth render of the front against one of the whole face)."""
+    front = front_of_face(face_model)
+    triangles = np.asarray(face_model.triangles)
+    on_face = triangles[np.all(front[triangles], axis=1)]
+
+    def depth(tris):
+        return depth_image(camera, {"face": mitsuba_mesh(np.asarray(vertices, np.float32), tris,
+                                                         bsdf={"type": "diffuse"})}, spp)
+
+    whole, face = depth(triangles), depth(on_face)
+    return (face > 0) & (np.abs(face - whole) <= 1e-3 * np.maximum(whole, 1.0))
+
+
+__all__ = ["FOOTPRINT_SPP", "depth_image", "face_pixels", "front_of_face_pixels"]

@@ -73,13 +73,11 @@ from skimage.transform import resize
 from ..capture import Camera, read_ground_truth
 from ..capture.types import RELATIVE_IRRADIANCE
 from ..environment import LUMINANCE, SKY_SUN_ANGLES, camera_frame, dominant_direction, sky_emitter, studio_environment
-from ..face_pixels import FOOTPRINT_SPP, depth_image
+from ..face_pixels import front_of_face_pixels
 from ..files import read_exr
 from ..geometry import load_geometry
 from ..model.regions import REGIONS
-from ..model.mesh import mitsuba_mesh
 from ..render import ALBEDO, FaceScene, region_bsdf, rgb
-from ..shape_errors import front_of_face
 from ..studio import subsurface as translucent
 from ..studio.photograph import albedo_texture
 from ..studio.simulate import true_face_shapes
@@ -279,25 +277,6 @@ def face_camera(camera, vertices: np.ndarray, size: int = RENDER_SIZE, margin: f
                   (camera.cy - lo[1]) * scale - 0.5, np.zeros(0), camera.rotation, camera.translation)
 
 
-def front_of_face_pixels(face_model, vertices: np.ndarray, camera, spp: int = FOOTPRINT_SPP) -> np.ndarray:
-    """Pixels of ``camera``'s image where the front of the face (:func:`mifaces.shape_errors.front_of_face`
-    on the model's mean shape: the vertices that look forward, from the chin up, outside the hair)
-    is the surface seen: (H, W) bool. The back of the head, the ears, the neck and the scalp are left
-    out: no photograph of a capture sees them well, so their albedo is not measured, and an error
-    there says nothing about the reflectance. Pixels of the filtered footprint of
-    :func:`mifaces.face_pixels.face_pixels` (a depth render of the front against one of the whole face)."""
-    front = front_of_face(face_model)
-    triangles = np.asarray(face_model.triangles)
-    on_face = triangles[np.all(front[triangles], axis=1)]
-
-    def depth(tris):
-        return depth_image(camera, {"face": mitsuba_mesh(np.asarray(vertices, np.float32), tris,
-                                                         bsdf={"type": "diffuse"})}, spp)
-
-    whole, face = depth(triangles), depth(on_face)
-    return (face > 0) & (np.abs(face - whole) <= 1e-3 * np.maximum(whole, 1.0))
-
-
 def relative_rmse(image: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
     """sqrt(mean (image − truth)²) / mean truth over the pixels of ``mask`` and the channels."""
     error = np.asarray(image, np.float64)[mask] - np.asarray(truth, np.float64)[mask]
@@ -346,7 +325,7 @@ class Validator:
         Name -> the true face's image (H, W, 3).
     mask, truth_mask : (H, W) bool
         The pixels compared: where the front of either face is seen; where the true face's is
-        (:func:`front_of_face_pixels`).
+        (:func:`mifaces.face_pixels.front_of_face_pixels`).
     summary : dict
         What was compared, for the report (pose, lights, environments, shape floor, sizes, seconds).
     """
@@ -516,5 +495,4 @@ class Validator:
 
 __all__ = ["GRID", "UV_SAMPLES", "NOVEL_POSE", "HELD_OUT_LIGHTS", "RENDER_SIZE", "SPP", "LIGHT_CANDIDATES",
            "TRUE_SHAPE", "hemisphere_grid", "eval_bsdf", "region_texels", "brdf_rmse", "novel_rotation", "turned",
-           "true_lights", "held_out_lights", "face_camera", "front_of_face_pixels", "relative_rmse", "pose_angle",
-           "Validator"]
+           "true_lights", "held_out_lights", "face_camera", "relative_rmse", "pose_angle", "Validator"]
