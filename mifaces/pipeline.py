@@ -402,6 +402,6 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
     rendered = scene.render(brdf, albedo, capture.camera, spp=spp, **lamp, **maps)
     relit = scene.render(brdf, albedo, capture.camera, spp=spp, **novel, **maps)
     photo = first.image.pixels
-    face = face_pixels(scene, capture.camera)  # the fitted face's pixels, whatever the background shows
-    entry["training_rmse"] = relative_rmse(rendered, photo, face)
+    on_face = face_pixels(scene, capture.camera)  # the fitted face's pixels, whatever the background shows
+    entry["training_rmse"] = relative_rmse(rendered, photo, on_face)
     return entry, (model, photo, rendered, relit, estimate)
