@@ -239,12 +239,12 @@ ESTIMATE_RESOLUTION = 96
 ESTIMATE_MIN_COSINE = 0.3
 
 
-def photograph_transport(camera, pixels, saturated, vertices, triangles, uv, coverage, size) -> tuple:
+def photograph_transport(camera, pixels, saturated, vertices, triangles, uv, raster, size) -> tuple:
     """What one photograph says about a map of ``size`` (width, height): its radiance (N, 3) at the
-    texels (N,) of ``coverage`` it sees well (visible, at least :data:`ESTIMATE_MIN_COSINE` from
+    texels (N,) of ``raster`` it sees well (visible, at least :data:`ESTIMATE_MIN_COSINE` from
     grazing, unsaturated, inside the image) and their transport matrix (N, J) on the face
     ``vertices`` (world, mm), for :func:`estimate_map`."""
-    geo = texel_geometry(vertices, triangles, uv, coverage)
+    geo = texel_geometry(vertices, triangles, uv, raster)
     p, n = geo.position, geo.normal
     extent = float(np.ptp(np.asarray(vertices), axis=0).max())
     offset = 1e-4 * extent
@@ -289,7 +289,7 @@ def estimate_environments(capture: Capture, shapes, face_model, resolution: int 
     todo = [light for light in capture.unknown_lights if light.environment]
     if not todo:
         return capture
-    coverage = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
+    raster = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
     maps, info = {}, dict(capture.metadata.get("estimated_lights", {}))
     for light in progress_bar(todo, desc="environment maps", unit="map", enabled=progress):
         used = [m for m in capture.measurements if m.light == light.name and m.name in shapes]
@@ -297,7 +297,7 @@ def estimate_environments(capture: Capture, shapes, face_model, resolution: int 
             raise UnknownLightError(f"unknown light {light.name!r}: no photograph under it has a fitted face "
                                     "to estimate the map on")
         parts = [photograph_transport(capture.camera, m.image.pixels, m.image.saturated, shapes[m.name],
-                                      face_model.triangles, face_model.uv, coverage, light.envmap_size)
+                                      face_model.triangles, face_model.uv, raster, light.envmap_size)
                  for m in used]
         envmap, fit = estimate_map(*zip(*parts), size=light.envmap_size)
         maps[light.name] = envmap

@@ -36,6 +36,7 @@ from .capture import Capture, load_capture, read_ground_truth
 from .capture.types import RELATIVE_IRRADIANCE
 from .environment import dominant_direction
 from .export import export_face
+from .face_pixels import face_pixels
 from .files import write_json
 from .geometry import load_geometry
 from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, as_given, balance_intensities, check_estimable,
@@ -56,7 +57,7 @@ from .shape.io import write_fit, write_index
 from .shape_errors import capture_shape_errors
 from .studio import simulate
 from .validation.truth_errors import ground_truth_errors
-from .validation.validator import Validator, coverage, relative_rmse
+from .validation.validator import Validator, relative_rmse
 
 #: Models ``measure`` fits unless told otherwise.
 MODELS = NAMES
@@ -401,6 +402,6 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
     rendered = scene.render(brdf, albedo, capture.camera, spp=spp, **lamp, **maps)
     relit = scene.render(brdf, albedo, capture.camera, spp=spp, **novel, **maps)
     photo = first.image.pixels
-    face_pixels = coverage(scene, capture.camera)  # the fitted face's pixels, whatever the background shows
-    entry["training_rmse"] = relative_rmse(rendered, photo, face_pixels)
+    on_face = face_pixels(scene, capture.camera)  # the fitted face's pixels, whatever the background shows
+    entry["training_rmse"] = relative_rmse(rendered, photo, on_face)
     return entry, (model, photo, rendered, relit, estimate)

@@ -231,6 +231,12 @@ class FaceScene:
         """The file of mesh ``key``, relative to the scene's folder."""
         return f"{MESH_FOLDER}/{key}.ply"
 
+    def region_of_key(self, key: str) -> tuple[str, str] | None:
+        """The region and the BSDF parameter (``roughness.value``, ``diffuse_reflectance.data``) of a key of
+        ``mi.traverse`` of a scene of this face (meshes keyed as :attr:`meshes`); None for other keys."""
+        mesh, _, parameter = key.partition(".bsdf.")
+        return (self.meshes[mesh].region, parameter) if mesh in self.meshes and parameter else None
+
     def description(self, brdf: dict, camera, light_position=None, intensity=None, envmap=None,
                     envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, albedo: str = "albedo.exr", *,
                     light_direction=None, normals: str | None = None, specular: str | None = None) -> dict:

@@ -19,7 +19,7 @@ from mifaces.environment import (LUMINANCE, dominant_direction, environment_emit
 from mifaces.files import read_exr, write_exr
 from mifaces.lighting import LIGHTS_FILE, LIGHTS_FOLDER, write_lights, write_lights_picture
 from mifaces.reflectance.environment import equivalent_lights, estimate_map, reduced_map
-from mifaces.refine.reflectance import ENVMAP_FLOOR, padded_envmap
+from mifaces.refine.environment import ENVMAP_FLOOR, padded_envmap
 from mifaces.render import mitsuba_sensor
 from mifaces.reflectance import FitOptions
 from test_real_capture import write_directional
@@ -228,7 +228,7 @@ def test_the_refinement_differentiates_an_estimated_map(studio_capture):
     photographs, its mean is held, and a given map stays fixed."""
     from mifaces.geometry import load_geometry
     from mifaces.reflectance import fit_brdf
-    from mifaces.refine.reflectance import RefineProblem
+    from mifaces.refine.problem import RefineProblem
     from mifaces.refine.schedule import RefineSchedule, environment_variable
 
     capture = load_capture(studio_capture)

@@ -253,9 +253,9 @@ def test_normal_map_is_converted_to_gltfs_tangent_frame(tmp_path):
 
     png = np.asarray(Image.open(io.BytesIO(blob[view.byteOffset:view.byteOffset + view.byteLength])), np.float64)
     texture = decode(png / 255.0).reshape(-1, 3)
-    coverage = rasterize(model.uv, model.triangles, (r, r))
-    tri = model.triangles[coverage.triangle.ravel()[texel]]
-    bary = coverage.barycentric.reshape(-1, 3)[texel]
+    raster = rasterize(model.uv, model.triangles, (r, r))
+    tri = model.triangles[raster.triangle.ravel()[texel]]
+    bary = raster.barycentric.reshape(-1, 3)[texel]
     n = np.einsum("mk,mkc->mc", bary, n_file[tri])
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     t = np.einsum("mk,mkc->mc", bary, t_file[tri][:, :, :3])

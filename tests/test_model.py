@@ -137,22 +137,22 @@ def test_tangent_frames_orthonormal_and_follow_u(model):
 
 def test_uv_in_unit_square_and_injective(model):
     assert model.uv.min() >= 0.0 and model.uv.max() <= 1.0
-    coverage = rasterize(model.uv, model.triangles, (700, 700))
+    raster = rasterize(model.uv, model.triangles, (700, 700))
     # Texture-space area covered by the triangles equals the sum of their areas
     # only if none overlap; the rasterizer counts overlaps texel by texel.
-    assert coverage.count.max() == 1, f"{np.sum(coverage.count > 1)} texels covered twice"
+    assert raster.count.max() == 1, f"{np.sum(raster.count > 1)} texels covered twice"
     uv = model.uv.astype(np.float64)
     e1 = uv[model.triangles[:, 1]] - uv[model.triangles[:, 0]]
     e2 = uv[model.triangles[:, 2]] - uv[model.triangles[:, 0]]
     area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
-    assert coverage.covered.mean() == pytest.approx(area, rel=0.02)
+    assert raster.covered.mean() == pytest.approx(area, rel=0.02)
 
 
 def test_rasterize_barycentrics_reproduce_uv(builtin):
-    cov = rasterize(builtin.uv, builtin.triangles, (128, 96))
-    rows, cols = np.nonzero(cov.covered)
-    tri = builtin.triangles[cov.triangle[rows, cols]]
-    uv = np.einsum("mk,mkc->mc", cov.barycentric[rows, cols], builtin.uv[tri])
+    raster = rasterize(builtin.uv, builtin.triangles, (128, 96))
+    rows, cols = np.nonzero(raster.covered)
+    tri = builtin.triangles[raster.triangle[rows, cols]]
+    uv = np.einsum("mk,mkc->mc", raster.barycentric[rows, cols], builtin.uv[tri])
     np.testing.assert_allclose(uv[:, 0], (cols + 0.5) / 96, atol=1e-5)
     np.testing.assert_allclose(uv[:, 1], (rows + 0.5) / 128, atol=1e-5)
 

@@ -15,7 +15,9 @@ import pytest
 
 from mifaces import brdf as brdf_models
 from mifaces.reflectance.fit.parameters import ParameterSpace
-from mifaces.refine.reflectance import AlbedoCorrection, RefineSchedule, image_loss, refine_estimate
+from mifaces.refine import RefineSchedule, refine_estimate
+from mifaces.refine.albedo_correction import AlbedoCorrection
+from mifaces.refine.photograph import image_loss
 from mifaces.refine.schedule import MAX_RATE_SCALE, IterateAverage
 from mifaces.reflectance import FitOptions
 
@@ -50,7 +52,7 @@ def _sphere_scene(spp: int = 16) -> mi.Scene:
 def _loss(scene, params, space, u, target, weight, seed):
     """The refinement's image loss of the sphere with parameters from the
     unconstrained ``u``; ``target`` is the photograph divided by its mean
-    over the sphere, as :class:`~mifaces.refine.reflectance.RefineProblem` does."""
+    over the sphere, as :class:`~mifaces.refine.problem.RefineProblem` does."""
     values = space.drjit_params(u)
     for name in ("specular_reflectance", "roughness"):
         params[f"sphere.bsdf.{name}"] = values[name]

@@ -9,7 +9,6 @@ import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 
 import dataclasses
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest

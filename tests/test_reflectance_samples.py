@@ -132,8 +132,8 @@ def test_resampled_reflectance_matches_the_brdf(jit_variant):
     bsdf = {"type": "cooktorrance", "diffuse_reflectance": {"type": "rgb", "value": params["diffuse_reflectance"]},
             "specular_reflectance": 1.5, "roughness": 0.35}
     photo = render_photo(camera, vertices, triangles, uv, light, intensity, bsdf)
-    coverage = rasterize(uv, triangles, (128, 128))
-    samples = measurement_samples(camera, light, intensity, photo, vertices, triangles, uv, coverage, name="m0")
+    raster = rasterize(uv, triangles, (128, 128))
+    samples = measurement_samples(camera, light, intensity, photo, vertices, triangles, uv, raster, name="m0")
     assert len(samples) > 0.5 * 128 * 128
     assert np.all(np.isfinite(samples.sigma)) and np.all(samples.sigma >= 1)
     assert np.all(samples.light[:, 2] > 0.17) and np.all(samples.view[:, 2] > 0.17)
@@ -157,8 +157,8 @@ def test_directional_light_reflectance_matches_the_brdf(jit_variant):
     bsdf = {"type": "cooktorrance", "diffuse_reflectance": {"type": "rgb", "value": [0.5, 0.35, 0.3]},
             "specular_reflectance": 1.5, "roughness": 0.35}
     photo = render_photo(camera, vertices, triangles, uv, towards, irradiance, bsdf, directional=True)
-    coverage = rasterize(uv, triangles, (128, 128))
-    samples = measurement_samples(camera, None, irradiance, photo, vertices, triangles, uv, coverage, name="m0",
+    raster = rasterize(uv, triangles, (128, 128))
+    samples = measurement_samples(camera, None, irradiance, photo, vertices, triangles, uv, raster, name="m0",
                                   light_direction=towards)
     assert len(samples) > 0.4 * 128 * 128
     model = brdf.model("cooktorrance")
@@ -175,29 +175,29 @@ def test_shadowed_and_hidden_texels_give_no_sample(jit_variant):
     give nothing either."""
     camera = Camera(width=64, height=64, fx=60.0, fy=60.0, cx=31.5, cy=31.5)
     vertices, triangles, uv = spherical_cap(n=40)
-    coverage = rasterize(uv, triangles, (48, 48))
+    raster = rasterize(uv, triangles, (48, 48))
     photo = np.full((64, 64, 3), 0.1, np.float32)
     behind = measurement_samples(camera, np.array([0.0, 0.0, 600.0]), np.ones(3), photo, vertices, triangles, uv,
-                                 coverage)
+                                 raster)
     assert len(behind) == 0
     narrow = Camera(width=64, height=64, fx=400.0, fy=400.0, cx=31.5, cy=31.5)  # sees only the middle
     middle = measurement_samples(narrow, np.array([0.0, -50.0, 0.0]), np.ones(3), photo, vertices, triangles, uv,
-                                 coverage)
+                                 raster)
     full = measurement_samples(camera, np.array([0.0, -50.0, 0.0]), np.ones(3), photo, vertices, triangles, uv,
-                               coverage)
+                               raster)
     assert 0 < len(middle) < 0.5 * len(full)
 
 
 def test_bad_photographs_are_named(jit_variant):
     camera = Camera(width=64, height=64, fx=60.0, fy=60.0, cx=31.5, cy=31.5)
     vertices, triangles, uv = spherical_cap(n=20)
-    coverage = rasterize(uv, triangles, (16, 16))
+    raster = rasterize(uv, triangles, (16, 16))
     with pytest.raises(ValueError, match="does not match the camera"):
-        measurement_samples(camera, np.zeros(3), np.ones(3), np.zeros((32, 64, 3)), vertices, triangles, uv, coverage)
+        measurement_samples(camera, np.zeros(3), np.ones(3), np.zeros((32, 64, 3)), vertices, triangles, uv, raster)
     photo = np.zeros((64, 64, 3), np.float32)
     photo[3, 4, 1] = np.nan
     with pytest.raises(ValueError, match="1 NaN"):
-        measurement_samples(camera, np.zeros(3), np.ones(3), photo, vertices, triangles, uv, coverage)
+        measurement_samples(camera, np.zeros(3), np.ones(3), photo, vertices, triangles, uv, raster)
 
 
 def test_samples_round_trip_and_concatenate(tmp_path):

@@ -82,6 +82,19 @@ def test_region_meshes_cover_the_face_once(face):
         assert part.triangles.max() == len(part.vertices) - 1
 
 
+def test_region_of_key_names_a_traversed_parameters_region(face):
+    _, scene = face
+    shapes = {key: part.mesh({"type": "diffuse"}) for key, part in scene.meshes.items()}
+    params = mi.traverse(mi.load_dict({"type": "scene", **shapes}))
+    bsdf_keys = [key for key in params.keys() if ".bsdf." in key]
+    assert len(bsdf_keys) == len(scene.meshes)
+    for key in params.keys():
+        mesh = key.split(".")[0]
+        expected = (scene.meshes[mesh].region, "reflectance.value") if key in bsdf_keys else None
+        assert scene.region_of_key(key) == expected
+    assert scene.region_of_key("environment.data") is None
+
+
 def test_face_scene_description_names_files_and_loads_in_memory(face, tmp_path):
     model, scene = face
     brdf = {"model": "ward", "options": {}, "regions": {"skin": {"specular_reflectance": 0.05, "alpha": 0.3}}}

@@ -10,9 +10,9 @@ from click.testing import CliRunner
 
 from mifaces.capture import Camera
 from mifaces.environment import STUDIO_PANELS, camera_frame, environment_emitter, sky_emitter, studio_environment
+from mifaces.face_pixels import face_pixels
 from mifaces.model import load_model
 from mifaces.render import FaceScene
-from mifaces.validation.validator import coverage
 
 WHITE = {"model": "phong", "options": {}, "regions": {"skin": {"specular_reflectance": 0.0, "exponent": 10.0}}}
 
@@ -32,7 +32,7 @@ def scene():
 
 def halves(image: np.ndarray, scene) -> tuple[float, float]:
     """Mean brightness of the face in the image's left and right halves."""
-    luminance, face = image.mean(axis=2), coverage(scene, camera())
+    luminance, face = image.mean(axis=2), face_pixels(scene, camera())
     return float(luminance[:, :24][face[:, :24]].mean()), float(luminance[:, 24:][face[:, 24:]].mean())
 
 

@@ -41,14 +41,16 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 
 import numpy as np
 
-from mifaces.capture import MANIFEST, load_capture
+from mifaces.capture import MANIFEST, load_capture, read_ground_truth
 from mifaces.environment import LUMINANCE, irradiance, texel_directions
 from mifaces.files import read_exr, save_figure, write_json
+from mifaces.geometry import load_geometry
 from mifaces.lighting import LIGHTS_FOLDER
 from mifaces.pipeline import measure
 from mifaces.studio import simulate
 from mifaces.studio.environment_light import ENVIRONMENTS
-from mifaces.reflectance import FitOptions
+from mifaces.reflectance import FitOptions, fit_brdf
+from mifaces.refine import RefineSchedule, refine_estimate
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Target of issue 26: the hidden-light run's held-out error over the given-map run's.
@@ -135,10 +137,6 @@ def tuning(environment: str, out: Path) -> dict:
     """The choice of ``RefineSchedule.restart_under_maps`` on the tuning seed: the given map, the
     true faces, the refinement started from the texture-space fit's glossy parameters and from the
     model's start values; skin's parameters and the held-out pixels' loss of each."""
-    from mifaces.capture import read_ground_truth
-    from mifaces.reflectance import fit_brdf
-    from mifaces.refine.schedule import RefineSchedule
-
     capture_dir = out / f"tuning_{environment}" / "capture"
     if capture_dir.parent.exists():
         shutil.rmtree(capture_dir.parent)

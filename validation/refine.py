@@ -43,7 +43,7 @@ from mifaces.files import write_json
 from mifaces.geometry import load_geometry
 from mifaces.pipeline import novel_light
 from mifaces.reflectance import FitOptions, fit_brdf
-from mifaces.refine.reflectance import RefineSchedule, refine_estimate
+from mifaces.refine import RefineSchedule, refine_estimate
 from mifaces.render import FaceScene
 from mifaces.validation.truth_errors import ground_truth_errors
 from mifaces.studio.simulate import simulate
@@ -66,20 +66,20 @@ def region_errors(estimate, capture) -> dict:
 
 
 def novel_light_errors(estimates: dict, capture, face, shapes, spp: int) -> tuple[dict, dict]:
-    """Relative RMSE, on the face's pixels, of each estimate's render under a
-    light no photograph used against the ground truth's render (same scene,
-    same samples); the images."""
+    """Relative RMSE, on the pixels the light lights (the truth's render brighter than 2 % of its
+    brightest pixel: not :func:`mifaces.face_pixels.face_pixels`, whose mask takes in the face's
+    shadowed pixels too), of each estimate's render under a light no photograph used against the
+    ground truth's render (same scene, same samples); the images."""
     truth = read_ground_truth(capture)
     first = capture.measurements[0].name
     scene = FaceScene(face, shapes[first])
     light = novel_light(capture, np.asarray(shapes[first]).mean(axis=0))
     reference = scene.render(truth.brdf, truth.albedo, capture.camera, spp=spp, seed=5, **light)
-    face_pixels = reference.mean(axis=2) > 0.02 * reference.max()
+    lit = reference.mean(axis=2) > 0.02 * reference.max()
     out, images = {}, {"truth": reference}
     for name, estimate in estimates.items():
         image = scene.render(estimate.to_json(), estimate.albedo.albedo, capture.camera, spp=spp, seed=5, **light)
-        out[name] = float(np.sqrt(np.mean((image[face_pixels] - reference[face_pixels]) ** 2))
-                          / np.mean(reference[face_pixels]))
+        out[name] = float(np.sqrt(np.mean((image[lit] - reference[lit]) ** 2)) / np.mean(reference[lit]))
         images[name] = image
     return out, images
 

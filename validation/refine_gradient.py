@@ -1,7 +1,7 @@
 """Why the refinement's loss did not have its minimum at the truth (SIMULATED).
 
 On a simulated capture with the ground-truth geometry, the refinement's image loss
-(:class:`mifaces.refine.reflectance.RefineProblem`) is evaluated at the simulator's true BRDF and
+(:class:`mifaces.refine.problem.RefineProblem`) is evaluated at the simulator's true BRDF and
 albedo, and its gradient in each region's unconstrained glossy parameters is averaged over the
 photographs and ``--repeats`` Monte Carlo seeds, at the true value and a step ``--delta`` either
 side. The gradient over the curvature is the offset from the truth to the loss's minimum along
@@ -43,7 +43,8 @@ from mifaces.capture import load_capture, read_ground_truth, with_true_lights
 from mifaces.files import write_json
 from mifaces.geometry import load_geometry
 from mifaces.reflectance import FitOptions, fit_brdf
-from mifaces.refine.reflectance import RefineProblem, RefineSchedule
+from mifaces.refine import RefineSchedule
+from mifaces.refine.problem import RefineProblem
 from mifaces.refine.schedule import ALBEDO
 from mifaces.studio.simulate import simulate
 

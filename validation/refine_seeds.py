@@ -47,7 +47,7 @@ from mifaces.capture import load_capture, read_ground_truth
 from mifaces.files import write_json
 from mifaces.geometry import load_geometry
 from mifaces.reflectance import FitOptions, fit_brdf
-from mifaces.refine.reflectance import RefineSchedule, refine_estimate
+from mifaces.refine import RefineSchedule, refine_estimate
 from mifaces.studio.simulate import simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -130,7 +130,7 @@ def landmark_error(points: dict, project, vertices, ibug) -> float:
 
 
 def nearest_metrics(truth_model, truth_world, mask, mesh_vertices, mesh_normals, landmark_pairs,
-                    coverage=None) -> tuple[dict, np.ndarray]:
+                    covered=None) -> tuple[dict, np.ndarray]:
     """Metrics of a fit on another mesh: rigid alignment (landmarks, then ICP), nearest vertex."""
     src = np.array([mesh_vertices[a] for a, _ in landmark_pairs])
     dst = np.array([truth_world[b] for _, b in landmark_pairs])
@@ -144,7 +144,7 @@ def nearest_metrics(truth_model, truth_world, mask, mesh_vertices, mesh_normals,
         r, t = kabsch(mesh_vertices[keep], target[i[keep]])
     moved = mesh_vertices @ r.T + t
     d, j = cKDTree(moved).query(truth_world)
-    covered = mask & (d < 5.0) if coverage is None else coverage
+    covered = mask & (d < 5.0) if covered is None else covered
     nt = truth_model.vertex_normals(truth_world)
     return ({"vertex_rms_aligned_nn_mm": float(np.sqrt(np.mean(d[covered] ** 2))),
              "normal_aligned_nn_deg": float(angles(mesh_normals[j] @ r.T, nt)[covered].mean()),
@@ -239,11 +239,11 @@ def run_capture(label: str, path: Path, model_source, eos: Eos, iterations, out_
                                                 gt_normals_camera)[covered].mean())
         pairs_ours = [(v, v) for v in ibug.values()]
         ours.update(nearest_metrics(model, gt, mask, fit.vertices_world.astype(np.float64),
-                                    model.vertex_normals(fit.vertices_world), pairs_ours, coverage=covered)[0])
+                                    model.vertex_normals(fit.vertices_world), pairs_ours, covered=covered)[0])
         ours["normal_deg_covered"] = float(angles(model.vertex_normals(fit.vertices_world),
                                                   model.vertex_normals(gt))[covered].mean())
         mean_face.update(nearest_metrics(model, gt, mask, mean_world, model.vertex_normals(mean_world),
-                                         pairs_ours, coverage=covered)[0])
+                                         pairs_ours, covered=covered)[0])
         rows[m.name] = {"mifaces": ours, "eos": theirs, "mean_face": mean_face}
         print(f"  {label} {m.name}: mifaces {fit.status} {fit.seconds:.1f}s lm {ours['landmark_px']:.2f}px "
               f"normal {ours['normal_deg']:.2f} deg (nn {ours['normal_aligned_nn_deg']:.2f}) "

@@ -143,10 +143,10 @@ def _region_map(uv: np.ndarray, triangles: np.ndarray, triangle_label: np.ndarra
     """The a-priori region map: each part's label, the back of the head's scalp as hair and its
     neck as skin, and the features (lips, eyebrows, nostrils) outlined by the landmarks on the face."""
     size = (REGION_MAP_SIZE, REGION_MAP_SIZE)
-    coverage = rasterize(uv, triangles, size)
+    raster = rasterize(uv, triangles, size)
     image = np.zeros(size, np.uint8)
-    covered = coverage.covered
-    image[covered] = triangle_label[coverage.triangle[covered]]
+    covered = raster.covered
+    image[covered] = triangle_label[raster.triangle[covered]]
     features = region_map_from_landmarks(uv, face_triangles, landmarks, size)
     beard = [landmarks[i] for i in BEARD_OUTLINE]
     _fill_polygon(image, REGIONS["beard"], uv[beard], image == REGIONS["skin"])
@@ -265,9 +265,9 @@ def _neck_and_scalp(region_map, uv, triangles, vertices, triangle_part) -> np.nd
     centre = vertices[triangles].mean(axis=1)
     neck = back & (centre[:, 1] < -40.0)
     size = region_map.shape
-    coverage = rasterize(uv, triangles[neck], size)
+    raster = rasterize(uv, triangles[neck], size)
     out = region_map.copy()
-    out[coverage.covered] = REGIONS["skin"]
+    out[raster.covered] = REGIONS["skin"]
     return out
 
 

@@ -154,13 +154,13 @@ def triangle_regions(region_map: np.ndarray, uv: np.ndarray, triangles: np.ndarr
 
 
 def texel_regions_of_mesh(region_map: np.ndarray, uv: np.ndarray, triangles: np.ndarray, resolution: int,
-                          coverage=None) -> np.ndarray:
+                          raster=None) -> np.ndarray:
     """Like :func:`texel_regions`, but each texel a triangle covers takes that
     triangle's label (:func:`triangle_regions`), so samples are grouped exactly
     as the rendered face assigns materials; uncovered texels keep the map's
-    label. ``coverage``: the mesh's :func:`rasterize` at that resolution, if at hand."""
+    label. ``raster``: the mesh's :func:`rasterize` at that resolution, if at hand."""
     labels = texel_regions(region_map, resolution)
-    coverage = rasterize(uv, triangles, (resolution, resolution)) if coverage is None else coverage
-    covered = coverage.triangle >= 0
-    labels[covered] = triangle_regions(region_map, uv, triangles)[coverage.triangle[covered]]
+    raster = rasterize(uv, triangles, (resolution, resolution)) if raster is None else raster
+    covered = raster.triangle >= 0
+    labels[covered] = triangle_regions(region_map, uv, triangles)[raster.triangle[covered]]
     return labels

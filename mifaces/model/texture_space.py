@@ -19,7 +19,7 @@ import scipy.ndimage as ndi
 
 
 @dataclass(frozen=True)
-class TexelCoverage:
+class TextureRaster:
     """Which triangle covers each texel of a texture-space image.
 
     Attributes
@@ -46,7 +46,7 @@ class TexelCoverage:
 
 
 def rasterize(uv: np.ndarray, triangles: np.ndarray, shape: tuple[int, int], chunk: int = 4_000_000
-              ) -> TexelCoverage:
+              ) -> TextureRaster:
     """Rasterize the triangles of a mesh in texture space.
 
     A texel belongs to a triangle when its centre lies inside the triangle or
@@ -67,7 +67,7 @@ def rasterize(uv: np.ndarray, triangles: np.ndarray, shape: tuple[int, int], chu
 
     Returns
     -------
-    TexelCoverage
+    TextureRaster
     """
     height, width = int(shape[0]), int(shape[1])
     if height < 1 or width < 1:
@@ -132,21 +132,21 @@ def rasterize(uv: np.ndarray, triangles: np.ndarray, shape: tuple[int, int], chu
         np.add.at(count, texel, 1)
         triangle[texel] = t_id[inside]
         bary[texel] = w[inside]
-    return TexelCoverage(triangle.reshape(height, width), bary.reshape(height, width, 3),
+    return TextureRaster(triangle.reshape(height, width), bary.reshape(height, width, 3),
                          count.reshape(height, width).astype(np.int32))
 
 
 def bake(uv: np.ndarray, triangles: np.ndarray, values: np.ndarray, size: int,
-         coverage: TexelCoverage | None = None) -> np.ndarray:
+         raster: TextureRaster | None = None) -> np.ndarray:
     """Per-vertex ``values`` (N, C) interpolated over the triangles into a ``size`` x ``size`` texture
     (float64, (size, size, C)); texels no triangle covers take the nearest covered texel's value, so
-    that bilinear lookups at an island's border never see a gap. ``coverage``: the mesh's
+    that bilinear lookups at an island's border never see a gap. ``raster``: the mesh's
     :func:`rasterize` at that size, if at hand."""
-    coverage = rasterize(uv, triangles, (size, size)) if coverage is None else coverage
-    covered = coverage.covered
+    raster = rasterize(uv, triangles, (size, size)) if raster is None else raster
+    covered = raster.covered
     values = np.asarray(values, np.float64)
-    tri = np.asarray(triangles)[coverage.triangle[covered]]
+    tri = np.asarray(triangles)[raster.triangle[covered]]
     image = np.zeros((size, size, values.shape[1]))
-    image[covered] = np.einsum("nk,nkc->nc", coverage.barycentric[covered], values[tri])
+    image[covered] = np.einsum("nk,nkc->nc", raster.barycentric[covered], values[tri])
     _, (rows, cols) = ndi.distance_transform_edt(~covered, return_indices=True)
     return image[rows, cols]

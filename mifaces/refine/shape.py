@@ -8,7 +8,7 @@ frame, mm, one per measurement k) and the fitted BRDF, and minimises
 
     E(h) = Σ_k 1/|M_k| Σ_{p ∈ M_k} Σ_c ψ_ε((I_k(W_k + h N_k)[p, c] - s J_k[p, c]) / μ_k),
 
-the image loss of :mod:`mifaces.refine.reflectance` (Charbonnier penalty ψ_ε,
+the image loss of :mod:`mifaces.refine.photograph` (Charbonnier penalty ψ_ε,
 photograph J_k in the renderer's units, μ_k its mean over the face's pixels
 M_k) over one scalar field ``h`` on the model's mesh: the displacement of
 each vertex along its normal, shared by all photographs (``N_k``, the welded
@@ -61,7 +61,8 @@ from ..model.geometry import welded_normals
 from ..shape import shapes_in_world
 from ..reflectance.estimate import fit_brdf
 from ..reflectance.samples import capture_samples
-from .reflectance import LAMP_RADIUS_KEY, _kernel_history, _kernels, image_loss, mask_weight, photograph_view
+from .kernels import kernel_counts, kernel_history
+from .photograph import LAMP_RADIUS_KEY, image_loss, mask_weight, photograph_view
 from .schedule import HOLDOUT, HOLDOUT_BLOCK, holdout_pixels
 
 
@@ -202,7 +203,7 @@ class _View:
 
 
 def _appearance(estimate) -> dict:
-    """The fitted BRDF as :func:`~mifaces.refine.reflectance.photograph_view` takes it."""
+    """The fitted BRDF as :func:`~mifaces.refine.photograph.photograph_view` takes it."""
     return {"brdf": estimate.to_json(), "albedo": estimate.albedo.albedo, "normals": estimate.normal_texture(),
             "specular": estimate.specular_texture()}
 
@@ -365,7 +366,7 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
     t_before = time.perf_counter()
     history = []
     bar = progress_bar(range(schedule.iterations), desc="refining shape", unit="it", enabled=progress)
-    with _kernel_history():
+    with kernel_history():
         for it in bar:
             t = time.perf_counter()
             total = 0.0
@@ -377,7 +378,7 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
             opt.step()
             opt.set_learning_rate(schedule.rate(it + 1))
             dr.eval(opt["u"])
-            history.append([round(time.perf_counter() - t, 4), total / len(problem.views), *_kernels()])
+            history.append([round(time.perf_counter() - t, 4), total / len(problem.views), *kernel_counts()])
             bar.set_postfix_str(f"loss {total / len(problem.views):.4g}")
     t_iterate = time.perf_counter()
     with dr.suspend_grad():

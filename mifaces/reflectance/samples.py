@@ -237,16 +237,16 @@ class TexelGeometry:
     normal: np.ndarray
 
 
-def texel_geometry(vertices, triangles, uv, coverage) -> TexelGeometry:
+def texel_geometry(vertices, triangles, uv, raster) -> TexelGeometry:
     """Interpolate positions and the per-vertex shading frames of
     :func:`mifaces.model.geometry.tangent_frames` at the texel centres that
-    ``coverage`` (:func:`mifaces.model.texture_space.rasterize`) finds."""
+    ``raster`` (:func:`mifaces.model.texture_space.rasterize`) finds."""
     vertices = np.asarray(vertices, np.float64)
     triangles = np.asarray(triangles, np.int64)
     tangent, _, normal = (np.asarray(a, np.float64) for a in tangent_frames(vertices, triangles, uv))
-    texel = np.flatnonzero(coverage.triangle.ravel() >= 0)
-    tri = triangles[coverage.triangle.ravel()[texel]]
-    bary = coverage.barycentric.reshape(-1, 3)[texel].astype(np.float64)
+    texel = np.flatnonzero(raster.triangle.ravel() >= 0)
+    tri = triangles[raster.triangle.ravel()[texel]]
+    bary = raster.barycentric.reshape(-1, 3)[texel].astype(np.float64)
 
     def interpolate(a):
         return np.einsum("mk,mkc->mc", bary, a[tri])
@@ -292,7 +292,7 @@ def read_photograph(camera, pixels, saturated, points) -> tuple[np.ndarray, np.n
     return radiance, ok
 
 
-def measurement_samples(camera, light_position, intensity, pixels, vertices, triangles, uv, coverage, *,
+def measurement_samples(camera, light_position, intensity, pixels, vertices, triangles, uv, raster, *,
                         saturated=None, scale: float = np.pi, erosion: int = 1, min_cosine: float = MIN_COSINE,
                         name: str = "", offset: float | None = None, light_direction=None,
                         envmap=None) -> ReflectanceSamples:
@@ -309,7 +309,7 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
     pixels : (H, W, 3) linear radiance image.
     vertices : (V, 3) the face in world coordinates for this measurement.
     triangles, uv : the model's triangles and texture coordinates.
-    coverage : :class:`mifaces.model.texture_space.TexelCoverage` of ``uv`` at R × R.
+    raster : :class:`mifaces.model.texture_space.TextureRaster` of ``uv`` at R × R.
     saturated : (H, W) bool, optional; saturated pixels give no sample.
     scale : float
         Scale of eq. 4 (π: a white Lambertian target has r = 1).
@@ -335,8 +335,8 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
                          f"{camera.height}x{camera.width}x3")
     if not np.all(np.isfinite(pixels)):
         raise ValueError(f"image contains {np.count_nonzero(~np.isfinite(pixels))} NaN or infinite values")
-    resolution = coverage.triangle.shape[0]
-    geo = texel_geometry(vertices, triangles, uv, coverage)
+    resolution = raster.triangle.shape[0]
+    geo = texel_geometry(vertices, triangles, uv, raster)
     p, n = geo.position, geo.normal
     size = float(np.ptp(np.asarray(vertices), axis=0).max())
     offset = 1e-4 * size if offset is None else offset
@@ -445,9 +445,9 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
                              f"face model {face_model.name!r} has {shape[0]} vertices: geometry of another model?")
         if not np.all(np.isfinite(geometry[name])):
             raise ValueError(f"geometry of measurement {name!r} has NaN or infinite vertices")
-    coverage = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
+    raster = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
     region_map = texel_regions_of_mesh(face_model.region_map, face_model.uv, face_model.triangles, resolution,
-                                       coverage)
+                                       raster)
     # without a white target the scale is π: r is then the albedo relative to the lights' stated intensities
     scale = capture.white_target.reflectance_scale() if capture.white_target is not None else np.pi
     parts = []
@@ -461,7 +461,7 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
             raise ValueError(f"measurement {m.name!r}: light {light.name!r} has no position "
                              "(load the capture with calibrate=True)")
         parts.append(measurement_samples(capture.camera, light.position, light.intensity, m.image.pixels,
-                                         geometry[m.name], face_model.triangles, face_model.uv, coverage,
+                                         geometry[m.name], face_model.triangles, face_model.uv, raster,
                                          saturated=m.image.saturated, scale=scale, erosion=erosion,
                                          min_cosine=min_cosine, name=m.name, light_direction=light.direction,
                                          envmap=light.envmap))

@@ -71,10 +71,10 @@ def paint_skin(model, rng: np.random.Generator, size: int = 1024, male: bool | N
     (size, size, 3) float32 array
         Texels no triangle covers take the nearest covered texel's colour.
     """
-    coverage = rasterize(model.uv, model.triangles, (size, size))
-    positions = bake(model.uv, model.triangles, model.shape_mean, size, coverage)
-    _, (ri, ci) = ndi.distance_transform_edt(~coverage.covered, return_indices=True)
-    labels = texel_regions_of_mesh(model.region_map, model.uv, model.triangles, size, coverage)[ri, ci]
+    raster = rasterize(model.uv, model.triangles, (size, size))
+    positions = bake(model.uv, model.triangles, model.shape_mean, size, raster)
+    _, (ri, ci) = ndi.distance_transform_edt(~raster.covered, return_indices=True)
+    labels = texel_regions_of_mesh(model.region_map, model.uv, model.triangles, size, raster)[ri, ci]
     lm = {i: np.asarray(p, np.float64) for i, p in model.landmark_positions().items()}
     male = bool(rng.random() < 0.5) if male is None else male
     shape = (size, size)

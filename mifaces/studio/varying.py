@@ -42,16 +42,16 @@ def _sigmoid(x: np.ndarray) -> np.ndarray:
     return 0.5 * (1.0 + np.tanh(x / EDGE_MM))
 
 
-def zone_weights(face_model, neutral: np.ndarray, cov) -> tuple[np.ndarray, np.ndarray]:
+def zone_weights(face_model, neutral: np.ndarray, raster) -> tuple[np.ndarray, np.ndarray]:
     """T-zone and cheek weights in [0, 1] per texel (size, size) of
-    ``face_model``'s texture space (its coverage ``cov`` by
+    ``face_model``'s texture space (its rasterization ``raster`` by
     :func:`mifaces.model.texture_space.rasterize`), from the texels' positions on the
     ``neutral`` face (model frame: x across, y up, mm) relative to its
     eyebrows, eyes and nose tip. Texels no triangle covers take the
     nearest covered texel's weights."""
-    size = cov.covered.shape[0]
-    tri = face_model.triangles[cov.triangle[cov.covered]]
-    points = np.einsum("nk,nkc->nc", cov.barycentric[cov.covered], neutral[tri].astype(np.float64))
+    size = raster.covered.shape[0]
+    tri = face_model.triangles[raster.triangle[raster.covered]]
+    points = np.einsum("nk,nkc->nc", raster.barycentric[raster.covered], neutral[tri].astype(np.float64))
     lm = face_model.landmark_positions(neutral)
     at = lambda name: np.asarray(lm[FEATURE_POINTS[name]], np.float64)  # noqa: E731
     brows = np.mean([at(n) for n in ("right_eyebrow_outer", "right_eyebrow_inner", "left_eyebrow_inner",
@@ -68,18 +68,18 @@ def zone_weights(face_model, neutral: np.ndarray, cov) -> tuple[np.ndarray, np.n
     out = []
     for values in (tzone, cheeks):
         image = np.zeros((size, size))
-        image[cov.covered] = values
+        image[raster.covered] = values
         out.append(image)
-    _, (ri, ci) = ndi.distance_transform_edt(~cov.covered, return_indices=True)
+    _, (ri, ci) = ndi.distance_transform_edt(~raster.covered, return_indices=True)
     return out[0][ri, ci], out[1][ri, ci]
 
 
-def texel_regions(face_model, size: int, cov=None) -> np.ndarray:
+def texel_regions(face_model, size: int, raster=None) -> np.ndarray:
     """Region label per texel (size, size), as the rendered face assigns materials
-    (:func:`mifaces.model.regions.texel_regions_of_mesh`; ``cov`` the mesh's coverage
+    (:func:`mifaces.model.regions.texel_regions_of_mesh`; ``raster`` the mesh's rasterization
     if at hand), background counted as skin."""
     labels = texel_regions_of_mesh(face_model.region_map, face_model.uv, face_model.triangles, size,
-                                   cov).astype(np.int32)
+                                   raster).astype(np.int32)
     return np.where(labels == REGIONS["background"], REGIONS["skin"], labels)
 
 
@@ -92,9 +92,9 @@ def varying_maps(face_model, neutral: np.ndarray, truth: dict, rng: np.random.Ge
         raise ValueError(f"a spatially varying ground truth takes a model with a lobe scale and width map: "
                          f"{sorted(VARYING)}; got {truth['model']!r}")
     scale_name, width_name = VARYING[truth["model"]]
-    cov = rasterize(face_model.uv, face_model.triangles, (size, size))
-    labels = texel_regions(face_model, size, cov)
-    tzone, cheeks = zone_weights(face_model, neutral, cov)
+    raster = rasterize(face_model.uv, face_model.triangles, (size, size))
+    labels = texel_regions(face_model, size, raster)
+    tzone, cheeks = zone_weights(face_model, neutral, raster)
     mm_per_texel = (neutral.max(axis=0)[0] - neutral.min(axis=0)[0]) / size  # roughly: the face spans the map
     texture = [ndi.gaussian_filter(rng.standard_normal((size, size)), MODULATION["texture_mm"] / mm_per_texel)
                for _ in range(2)]

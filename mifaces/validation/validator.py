@@ -73,12 +73,11 @@ from skimage.transform import resize
 from ..capture import Camera, read_ground_truth
 from ..capture.types import RELATIVE_IRRADIANCE
 from ..environment import LUMINANCE, SKY_SUN_ANGLES, camera_frame, dominant_direction, sky_emitter, studio_environment
+from ..face_pixels import front_of_face_pixels
 from ..files import read_exr
 from ..geometry import load_geometry
 from ..model.regions import REGIONS
-from ..model.mesh import mitsuba_mesh
-from ..render import ALBEDO, FaceScene, mitsuba_sensor, region_bsdf, rgb
-from ..shape_errors import front_of_face
+from ..render import ALBEDO, FaceScene, region_bsdf, rgb
 from ..studio import subsurface as translucent
 from ..studio.photograph import albedo_texture
 from ..studio.simulate import true_face_shapes
@@ -278,35 +277,6 @@ def face_camera(camera, vertices: np.ndarray, size: int = RENDER_SIZE, margin: f
                   (camera.cy - lo[1]) * scale - 0.5, np.zeros(0), camera.rotation, camera.translation)
 
 
-def coverage(scene: FaceScene, camera, spp: int = 4) -> np.ndarray:
-    """Pixels of ``camera``'s image where the face of ``scene`` is seen (bool (H, W))."""
-    description = {"type": "scene", "integrator": {"type": "aov", "aovs": "depth:depth"},
-                   "sensor": mitsuba_sensor(camera, spp),
-                   **{key: part.mesh({"type": "diffuse"}) for key, part in scene.meshes.items()}}
-    depth = np.array(mi.render(mi.load_dict(description), spp=spp), np.float32)
-    return depth[..., 0] > 0
-
-
-def face_coverage(face_model, vertices: np.ndarray, camera, spp: int = 4) -> np.ndarray:
-    """Pixels of ``camera``'s image where the front of the face (:func:`mifaces.shape_errors.front_of_face`
-    on the model's mean shape: the vertices that look forward, from the chin up, outside the hair)
-    is the surface seen: (H, W) bool. The back of the head, the ears, the neck and the scalp are left
-    out: no photograph of a capture sees them well, so their albedo is not measured, and an error
-    there says nothing about the reflectance."""
-    front = front_of_face(face_model)
-    triangles = np.asarray(face_model.triangles)
-    on_face = triangles[np.all(front[triangles], axis=1)]
-
-    def depth(tris):
-        description = {"type": "scene", "integrator": {"type": "aov", "aovs": "depth:depth"},
-                       "sensor": mitsuba_sensor(camera, spp),
-                       "face": mitsuba_mesh(np.asarray(vertices, np.float32), tris, bsdf={"type": "diffuse"})}
-        return np.array(mi.render(mi.load_dict(description), spp=spp), np.float32)[..., 0]
-
-    whole, face = depth(triangles), depth(on_face)
-    return (face > 0) & (np.abs(face - whole) <= 1e-3 * np.maximum(whole, 1.0))
-
-
 def relative_rmse(image: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
     """sqrt(mean (image − truth)²) / mean truth over the pixels of ``mask`` and the channels."""
     error = np.asarray(image, np.float64)[mask] - np.asarray(truth, np.float64)[mask]
@@ -355,7 +325,7 @@ class Validator:
         Name -> the true face's image (H, W, 3).
     mask, truth_mask : (H, W) bool
         The pixels compared: where the front of either face is seen; where the true face's is
-        (:func:`face_coverage`).
+        (:func:`mifaces.face_pixels.front_of_face_pixels`).
     summary : dict
         What was compared, for the report (pose, lights, environments, shape floor, sizes, seconds).
     """
@@ -386,8 +356,9 @@ class Validator:
             environments = {"studio": studio_environment(), "sky": sky_emitter(self.camera)}
         self.environments = tuple(environments)
         self.conditions.update({name: {"envmap": value} for name, value in environments.items()})
-        self.truth_mask = face_coverage(truth_model, turned(true_vertices, rotation, centre), self.camera)
-        self.mask = self.truth_mask | face_coverage(face_model, turned(fit_vertices, rotation, centre), self.camera)
+        self.truth_mask = front_of_face_pixels(truth_model, turned(true_vertices, rotation, centre), self.camera)
+        self.mask = self.truth_mask | front_of_face_pixels(face_model, turned(fit_vertices, rotation, centre),
+                                                           self.camera)
         truth = self.ground_truth.brdf
         true_shapes = self._true_face(truth_model, self.truth_scene, turned(true_vertices, rotation, centre))
         self.truth = {name: self._render_truth(true_shapes, light) for name, light in self.conditions.items()}
@@ -524,4 +495,4 @@ class Validator:
 
 __all__ = ["GRID", "UV_SAMPLES", "NOVEL_POSE", "HELD_OUT_LIGHTS", "RENDER_SIZE", "SPP", "LIGHT_CANDIDATES",
            "TRUE_SHAPE", "hemisphere_grid", "eval_bsdf", "region_texels", "brdf_rmse", "novel_rotation", "turned",
-           "true_lights", "held_out_lights", "face_camera", "coverage", "relative_rmse", "pose_angle", "Validator"]
+           "true_lights", "held_out_lights", "face_camera", "relative_rmse", "pose_angle", "Validator"]

@@ -318,10 +318,10 @@ def mitsuba_frames(face_model, vertices, resolution: int):
     mitsuba, samples : ndarray (M, 3, 3)
         Rows (s, t, n) and (tangent, bitangent, normal), world frame.
     """
-    coverage = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
+    raster = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
     vertices = np.asarray(vertices, np.float64)
-    geo = texel_geometry(vertices, face_model.triangles, face_model.uv, coverage)
-    tri = np.asarray(face_model.triangles, np.int64)[coverage.triangle.ravel()[geo.texel]]
+    geo = texel_geometry(vertices, face_model.triangles, face_model.uv, raster)
+    tri = np.asarray(face_model.triangles, np.int64)[raster.triangle.ravel()[geo.texel]]
     p, uv = vertices[tri], np.asarray(face_model.uv, np.float64)[tri]
     e1, e2, d1, d2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]

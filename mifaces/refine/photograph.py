@@ -1,0 +1,172 @@
+"""A photograph set against the differentiable render of the fitted face, shared by the
+refinements of the reflectance (:mod:`mifaces.refine.reflectance`) and of the shape
+(:mod:`mifaces.refine.shape`): the scene of its measurement cropped to the face
+(:func:`photograph_view`), its pixels M_k, and the robust image loss E_k over them
+(:func:`image_loss`, :func:`mask_weight`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+from scipy.ndimage import binary_erosion
+
+from ..face_pixels import face_pixels
+from ..render import FaceScene, light_arguments, mitsuba_sensor
+
+#: Key of a capture's ``metadata`` that gives the lamp's radius (mm).
+LAMP_RADIUS_KEY = "lamp_radius_mm"
+
+
+def image_loss(image, target, weight, epsilon: float):
+    """The robust image loss of one photograph (the module docstring's E_k).
+
+    Parameters
+    ----------
+    image, target : mi.TensorXf (H, W, 3)
+        Render and photograph, both divided by the photograph's mean μ_k over
+        the mask (the residual is relative).
+    weight : mi.TensorXf (H, W, 3)
+        1/|M_k| on the masked pixels, 0 elsewhere.
+    epsilon : float
+        ε of ψ_ε(r) = sqrt(r² + ε²) - ε.
+
+    Returns
+    -------
+    mi.Float
+        Σ weight · ψ_ε(image - target), differentiable in ``image``.
+    """
+    r = image - target
+    return dr.sum(weight * (dr.sqrt(r * r + epsilon * epsilon) - epsilon), axis=None).array
+
+
+def _box_mean(a: np.ndarray, k: int) -> np.ndarray:
+    """``a`` (H, W, ...) averaged over k × k blocks (H, W cut to multiples of k)."""
+    h, w = a.shape[0] // k * k, a.shape[1] // k * k
+    a = a[:h, :w]
+    return a.reshape(h // k, k, w // k, k, *a.shape[2:]).mean(axis=(1, 3))
+
+
+def _light(capture, measurement, lamp_radius: float | None) -> tuple[dict, dict | None]:
+    """The keyword arguments of :meth:`FaceScene.scene` for the measurement's
+    light, and the sphere lamp that replaces its point light (or None)."""
+    light = capture.light(measurement.light)
+    kwargs = light_arguments(light)
+    if "light_position" not in kwargs or not lamp_radius:
+        return kwargs, None
+    radiance = np.asarray(light.intensity, np.float64) / (np.pi * lamp_radius ** 2)  # same intensity, I = L π r²
+    return kwargs, {"type": "sphere", "center": [float(x) for x in light.position], "radius": float(lamp_radius),
+                    "emitter": {"type": "area", "radiance": {"type": "rgb", "value": radiance.tolist()}}}
+
+
+@dataclass(eq=False)
+class PhotographView:
+    """One measurement's photograph and its differentiable render, at the
+    render resolution, cropped to the face.
+
+    Attributes
+    ----------
+    scene : mi.Scene
+        The face (:meth:`FaceScene.scene`) under the measurement's light, with
+        the given integrator and a film cropped to ``mask``'s bounding box.
+    params : mi.SceneParameters
+    target : mi.TensorXf (H, W, 3)
+        The photograph in the renderer's units divided by its mean over the mask (μ_k).
+    mask : (H, W) bool
+        Pixels whose every photograph pixel the face covers (eroded by one
+        pixel at silhouettes), none saturated.
+    labels : (H, W) int
+        Region label at each pixel (:func:`mifaces.face_pixels.face_pixels` of the pixel centres,
+        sampled at the render resolution).
+    scale : float
+        1/μ_k: multiplies a render to compare it with ``target``.
+    light_kind : str
+        ``'point'``, ``'directional'``, ``'sphere'`` or ``'environment'``.
+    """
+
+    scene: mi.Scene
+    params: mi.SceneParameters
+    target: mi.TensorXf
+    mask: np.ndarray
+    labels: np.ndarray
+    scale: float
+    light_kind: str
+
+
+def mask_weight(mask: np.ndarray) -> mi.TensorXf:
+    """The weight of :func:`image_loss`: 1/|M_k| on the (H, W) ``mask``'s pixels (each channel a third), 0 elsewhere."""
+    weight = np.repeat(mask[..., None], 3, axis=2) / (3.0 * max(int(mask.sum()), 1))
+    return mi.TensorXf(np.ascontiguousarray(weight, np.float32))
+
+
+def photograph_view(capture, m, face: FaceScene, brdf: dict, albedo: np.ndarray, region_map: np.ndarray,
+                    scale: np.ndarray, lamp_radius: float | None, downsample: int, spp: int, integrator: dict, *,
+                    normals: np.ndarray | None = None, specular: np.ndarray | None = None,
+                    sample_border: bool = False) -> PhotographView:
+    """The render of measurement ``m`` of ``capture`` set against its photograph.
+
+    Parameters
+    ----------
+    capture : Capture
+    m : Measurement
+    face : FaceScene
+        The face's meshes in ``m``'s pose (world frame, mm).
+    brdf, albedo : dict, (R, R, 3) array
+        The ``brdf.json`` layout and the albedo map (:meth:`FaceScene.scene`).
+    region_map : (R', R') uint8
+        Region labels in texture space (the pixels' labels).
+    scale : (3,) array
+        Photograph value -> renderer units (s_white/π, eq. 4).
+    lamp_radius : float or None
+        Radius (mm) of a spherical lamp in place of a point light.
+    downsample : int
+        Render at 1/``downsample`` of the camera's resolution against the
+        photograph averaged over blocks.
+    spp : int
+    integrator : dict
+        The Mitsuba integrator (``prb``, ``direct_projective``, ...).
+    normals, specular : arrays, optional
+        Per-texel normal and specular maps (:meth:`FaceScene.scene`).
+    sample_border : bool
+        The film's ``sample_border``: samples beyond the crop, for a projective
+        integrator's gradients of geometry crossing the film's edge.
+
+    Returns
+    -------
+    PhotographView
+    """
+    k = downsample
+    camera = capture.camera
+    kwargs, lamp = _light(capture, m, lamp_radius)
+    kind = ("sphere" if lamp is not None else "directional" if "light_direction" in kwargs
+            else "environment" if "envmap" in kwargs else "point")
+    description = face.scene(brdf, albedo, camera, normals=normals, specular=specular, **kwargs)
+    labels = face_pixels(face, camera, spp=None, region_map=region_map)
+    covered = binary_erosion(labels > 0, iterations=1) & ~m.image.saturated
+    # the render's pixels: those whose every photograph pixel is covered
+    low_mask = _box_mean(covered.astype(np.float64), k) > 0.999
+    if not low_mask.any():
+        raise ValueError(f"measurement {m.name!r}: the face covers no unsaturated pixel")
+    rows, cols = np.nonzero(low_mask)
+    r0, r1, c0, c1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+    target = _box_mean(m.image.pixels * scale, k)[r0:r1, c0:c1]
+    mask = low_mask[r0:r1, c0:c1]
+    mean = float(target[mask].mean())
+    sensor = mitsuba_sensor(camera, spp)
+    sensor["film"] = dict(sensor["film"], width=camera.width // k, height=camera.height // k,
+                          crop_offset_x=int(c0), crop_offset_y=int(r0), crop_width=int(c1 - c0),
+                          crop_height=int(r1 - r0), rfilter={"type": "gaussian", "stddev": 0.5 / k}
+                          if k == 1 else {"type": "box"}, sample_border=bool(sample_border))
+    description["sensor"] = sensor
+    description["integrator"] = integrator
+    if lamp is not None:
+        description["light"] = lamp
+    scene = mi.load_dict(description)
+    low_labels = labels[: labels.shape[0] // k * k, : labels.shape[1] // k * k][::k, ::k][r0:r1, c0:c1]
+    return PhotographView(scene, mi.traverse(scene), mi.TensorXf(np.ascontiguousarray(target / mean, np.float32)),
+                          mask, low_labels, 1.0 / mean, kind)
+
+
+__all__ = ["LAMP_RADIUS_KEY", "PhotographView", "image_loss", "mask_weight", "photograph_view"]
