@@ -10,8 +10,10 @@ import scipy.optimize
 
 from mifaces import brdf
 from mifaces.brdf.lafortune import energy_bound
-from mifaces.reflectance.fit.regions import (FULL_DATA, SPIKE, ParameterSpace, SubsetSchedule, conservative_start,
-                                             fit_region, fit_regions, min_samples)
+from mifaces.reflectance.fit.lobes import SPIKE
+from mifaces.reflectance.fit.parameters import ParameterSpace, conservative_start
+from mifaces.reflectance.fit.region_fit import FULL_DATA, SubsetSchedule, fit_region, min_samples
+from mifaces.reflectance.fit.regions import fit_regions
 from mifaces.reflectance.fit.levenberg_marquardt import CONVERGED, levenberg_marquardt
 from mifaces.status import AT_BOUND, AT_START, DEFAULTS, PRIOR
 
@@ -342,7 +344,7 @@ def test_a_lobe_brighter_than_every_sample_is_a_spike(jit_variant):
     """A small region's fit to a few noisy samples that ends in a narrow, strong lobe (its peak far
     above the brightest sample: it would blow up under a light the photographs did not cover) is a
     spike: the region takes its neighbour's glossy part (as the nostrils of a real Yale subject)."""
-    from mifaces.reflectance.fit.regions import PEAK_FACTOR, glossy_peak
+    from mifaces.reflectance.fit.lobes import PEAK_FACTOR, glossy_peak
 
     model = brdf.model("ward")
     broad = {"diffuse_reflectance": [0.4, 0.3, 0.2], "specular_reflectance": [0.05] * 3, "alpha": 0.3}

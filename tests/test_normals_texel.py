@@ -20,7 +20,8 @@ from mifaces.model.mesh import mitsuba_mesh
 from mifaces.model.texture_space import rasterize
 from mifaces.reflectance import FitOptions, fit_brdf, load_estimate
 from mifaces.reflectance.maps import normals as tn
-from mifaces.reflectance.fit.regions import FULL_DATA, fit_regions
+from mifaces.reflectance.fit.region_fit import FULL_DATA
+from mifaces.reflectance.fit.regions import fit_regions
 from mifaces.reflectance.samples import texel_geometry
 from mifaces.reflectance.maps.specular import refine_specular
 from mifaces.render import FaceScene, scene_xml

@@ -15,10 +15,12 @@ import pytest
 
 from mifaces import brdf as brdf_models
 from mifaces.reflectance.maps.diffuse import AlbedoOffsets, refine_diffuse
-from mifaces.reflectance.fit.regions import FULL_DATA, fit_region, prior_fit
+from mifaces.reflectance.fit.intervals import _value_jacobian
+from mifaces.reflectance.fit.offset_uncertainty import offset_sums
 from mifaces.reflectance.fit.parameters import ParameterSpace
-from mifaces.reflectance.fit.uncertainty import (TILE_AT_128, _value_jacobian, cluster_index, covariance, offset_sums,
-                                                 tile_clusters)
+from mifaces.reflectance.fit.region_fit import FULL_DATA, fit_region
+from mifaces.reflectance.fit.regions import prior_fit
+from mifaces.reflectance.fit.uncertainty import TILE_AT_128, cluster_index, covariance, tile_clusters
 
 TRUTH = {"diffuse_reflectance": [0.5, 0.35, 0.25], "specular_reflectance": [0.8, 0.8, 0.8], "roughness": 0.5,
          "eta": 1.4}
@@ -174,7 +176,7 @@ def test_covariance_rejects_bad_input():
 def test_cluster_sums_match_the_per_sample_jacobian():
     """The kernel's per-cluster u_g and H_g equal sums of the host-side residuals and Jacobian; they
     add up to the fit's own JᵀJ, and its loss is the fit's."""
-    from mifaces.reflectance.fit.regions import _Problem
+    from mifaces.reflectance.fit.problem import Problem
     from mifaces.reflectance.fit.parameters import ParameterSpace
 
     rng = np.random.default_rng(7)
@@ -182,7 +184,7 @@ def test_cluster_sums_match_the_per_sample_jacobian():
     light, view = directions(rng, n), directions(rng, n)
     r = reflectance(TRUTH, light, view) + 0.02 * rng.normal(size=(n, 3))
     space = ParameterSpace(brdf_models.model("cooktorrance"), FIXED)
-    problem = _Problem(space.model, space, light.astype(np.float32), view.astype(np.float32), r.astype(np.float32),
+    problem = Problem(space.model, space, light.astype(np.float32), view.astype(np.float32), r.astype(np.float32),
                        np.full(n, 0.5, np.float32))
     x = space.vector(TRUTH) + 0.1
     index, groups = cluster_index(rng.integers(0, 40, n) * 3)

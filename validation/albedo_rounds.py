@@ -38,7 +38,8 @@ import uncertainty as U  # noqa: E402  (the captures and checks of validation/un
 
 from mifaces.files import write_json  # noqa: E402
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf  # noqa: E402
-from mifaces.reflectance.fit import regions as fitting
+from mifaces.reflectance.fit import region_fit as fitting  # noqa: E402
+from mifaces.reflectance.fit.intervals import _value_jacobian  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Seeds of validation/uncertainty.py's tuning captures.
@@ -53,7 +54,7 @@ CLASSES = {"skin": ("skin",), "small": U.SMALL}
 
 
 def _known_offsets(*args, offsets=None, **kwargs):
-    """:func:`mifaces.reflectance.fit.regions.region_uncertainty` with the offsets taken as known."""
+    """:func:`mifaces.reflectance.fit.uncertainty.region_uncertainty` with the offsets taken as known."""
     return _REGION_UNCERTAINTY(*args, **kwargs)
 
 
@@ -63,7 +64,7 @@ _SPENT: list = []
 
 
 def _timed(*args, **kwargs):
-    """:func:`mifaces.reflectance.fit.regions.region_uncertainty`, its time added to :data:`_SPENT`."""
+    """:func:`mifaces.reflectance.fit.uncertainty.region_uncertainty`, its time added to :data:`_SPENT`."""
     t = time.perf_counter()
     out = _REGION_UNCERTAINTY(*args, **kwargs)
     _SPENT.append(time.perf_counter() - t)
@@ -234,7 +235,7 @@ def exact(model: str, seed: int, rounds: int, work: Path) -> dict:
     tiles = np.unique(cluster)
     steps = np.array([space.vector(alternate(cluster != g, None).params) - x for g in tiles])
     g = len(tiles)
-    jac = U.unc._value_jacobian(space, x)
+    jac = _value_jacobian(space, x)
     std = np.sqrt(np.diag(jac @ ((g - 1) / g * steps.T @ steps) @ jac.T))
     entries = []
     for k, f in enumerate(space.free):

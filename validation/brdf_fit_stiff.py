@@ -29,7 +29,8 @@ import mitsuba as mi
 import numpy as np
 
 from mifaces import brdf
-from mifaces.reflectance.fit.regions import fit_region, fit_regions
+from mifaces.reflectance.fit.region_fit import fit_region
+from mifaces.reflectance.fit.regions import fit_regions
 from mifaces.files import write_json
 from mifaces.reflectance.samples import unsaturated
 

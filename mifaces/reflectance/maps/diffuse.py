@@ -33,7 +33,7 @@ shrinkage, s₀² / Σ_s w_s. A texel without samples has its region's spread τ
 a region whose noise cannot be estimated (fewer than two texels with two
 samples) has NaN; texels outside the face 0. It leaves out the uncertainty of
 the region's glossy part and of ρ_R, which are shared by all texels of a
-region (:attr:`mifaces.reflectance.fit.regions.RegionFit.uncertainty`).
+region (:attr:`mifaces.reflectance.fit.region_fit.RegionFit.uncertainty`).
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ class AlbedoOffsets:
     Each offset o_i = a_t - ā is its texel t's refined albedo (the posterior mean
     of the module docstring, shrunk with λ) less its region's mean over the
     samples: a function of the samples of texel t and of the glossy fit.
-    :func:`mifaces.reflectance.fit.uncertainty.offset_sums` uses that to make the
+    :func:`mifaces.reflectance.fit.offset_uncertainty.offset_sums` uses that to make the
     intervals of the fit re-estimate the offsets when a tile is left out.
 
     Attributes
