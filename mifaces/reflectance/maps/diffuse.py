@@ -20,7 +20,7 @@ plus noise of variance s₀² σ_s², the posterior mean is
 
 with s₀² estimated from the scatter of the samples within texels and τ² from
 the scatter of the texel means beyond that noise (empirical Bayes, per region
-and channel). Well-sampled texels keep their own value (Σ w ≫ λ); with
+and channel: :func:`mifaces.reflectance.maps.shrinkage.empirical_bayes`). Well-sampled texels keep their own value (Σ w ≫ λ); with
 noise-free samples s₀ = 0 and the closed form above is unchanged.
 
 **Posterior standard deviation** (:attr:`DiffuseMap.std`). Under the same
@@ -45,6 +45,7 @@ import mitsuba as mi
 import numpy as np
 
 from ... import brdf as brdf_models
+from .shrinkage import empirical_bayes
 
 
 @dataclass
@@ -142,19 +143,14 @@ def specular_reflectance_factor(model, params_by_region: dict[int, dict], light,
     return np.pi * np.array(model.eval(wi, wo, params, diffuse=False)).T
 
 
-def shrinkage_weights(residual, w, texel, region, mean, total, counts, labels) -> dict:
-    """λ = s₀²/τ² per region label and channel (see the module docstring).
-
-    ``residual`` (N, 3) are the samples' x_s, ``mean`` (T, 3) the texels'
-    weighted means, ``total`` (T,) their Σ w, ``counts`` (T,) their sample
-    counts; all texel arrays are flat over the texture."""
-    return {label: lam for label, (lam, _, _) in noise_and_spread(residual, w, texel, region, mean, total, counts,
-                                                                   labels).items()}
-
-
 def noise_and_spread(residual, w, texel, region, mean, total, counts, labels) -> dict:
-    """Per region label, (λ, s₀², τ²) per channel (module docstring; arguments as
-    :func:`shrinkage_weights`); s₀² and τ² NaN where they cannot be estimated (λ = 0)."""
+    """Per region label, (λ, s₀², τ²) per channel (module docstring;
+    :func:`~mifaces.reflectance.maps.shrinkage.empirical_bayes`); s₀² and τ² NaN where they cannot
+    be estimated (λ = 0).
+
+    ``residual`` (N, 3) are the samples' x_s, ``mean`` (T, 3) the texels' weighted means,
+    ``total`` (T,) their Σ w, ``counts`` (T,) their sample counts; all texel arrays are flat
+    over the texture."""
     out = {}
     deviation = residual - mean[texel]
     for label in labels:
@@ -165,10 +161,9 @@ def noise_and_spread(residual, w, texel, region, mean, total, counts, labels) ->
         if dof < 2 or len(multi) < 2:
             out[label] = (np.zeros(3), np.full(3, np.nan), np.full(3, np.nan))  # no noise estimate: no shrinkage
             continue
-        s0 = np.sum(w[in_region, None] * np.square(deviation[in_region]), axis=0) / dof
-        between = np.var(mean[multi], axis=0) - s0 * np.mean(1.0 / total[multi])
-        tau = np.maximum(between, 1e-6 * np.maximum(np.mean(mean[multi], axis=0) ** 2, 1e-12))
-        out[label] = (s0 / tau, s0, tau)
+        squares = np.sum(w[in_region, None] * np.square(deviation[in_region]), axis=0)
+        floor = 1e-6 * np.maximum(np.mean(mean[multi], axis=0) ** 2, 1e-12)
+        out[label] = empirical_bayes(squares, dof, mean[multi], total[multi], floor)
     return out
 
 

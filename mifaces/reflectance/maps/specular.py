@@ -22,7 +22,8 @@ variance s₀²/S: the posterior mean is
     k = (S k̂ + λ) / (S + λ),   λ = s₀² / τ²,
 
 with s₀² the residual variance of the samples about their texel's fit and τ²
-the scatter of k̂ beyond that noise (empirical Bayes, per region). A texel
+the scatter of k̂ beyond that noise (empirical Bayes, per region:
+:func:`mifaces.reflectance.maps.shrinkage.empirical_bayes`). A texel
 moves away from its region only as far as its samples justify. Roughness
 stays the region's: one texel's few samples rarely pin a lobe's width.
 """
@@ -34,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .diffuse import specular_reflectance_factor
+from .shrinkage import empirical_bayes
 
 #: Texels with fewer samples keep the region's specular reflectance.
 MIN_SAMPLES = 3
@@ -106,9 +108,8 @@ def refine_specular(model, params_by_region: dict[int, dict], light, view, refle
         dof = int(np.sum(3 * counts[t] - 4))  # three channels per sample; ρ_d (3) and k per texel
         if len(t) < 2 or dof < 2:
             continue
-        s0 = float(np.sum(w[in_region, None] * np.square(residual[in_region])) / dof)
-        tau = max(float(np.var(k_hat[t]) - np.mean(s0 / information[t])), 1e-6)
-        lam[int(label)] = s0 / tau
+        squares = np.sum(w[in_region, None] * np.square(residual[in_region]))
+        lam[int(label)] = float(empirical_bayes(squares, dof, k_hat[t], information[t], 1e-6)[0])
         scale[t] = (information[t] * k_hat[t] + lam[int(label)]) / (information[t] + lam[int(label)])
     scale = np.maximum(scale, 0.0)
     specular = np.zeros((size, 3))
