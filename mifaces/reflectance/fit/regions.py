@@ -35,12 +35,12 @@ NEIGHBOURS = {"lips": ["skin"], "nostrils": ["skin"], "beard": ["skin"], "eyes":
               "eyebrows": ["hair", "beard"], "hair": ["eyebrows", "beard"]}
 
 
-def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region, region_names: dict,
+def fit_regions(model: BRDFModel | str, samples: ReflectanceSamples, region_names: dict,
                 neighbours: dict | None = None, progress: bool = False, fixed_by_region: dict | None = None,
                 cluster=None, offsets: AlbedoOffsets | None = None, **options) -> dict[str, RegionFit]:
     """Fit ``model`` separately in every region (paper sec. 4.4, 5.2).
 
-    ``region`` gives each sample's label, ``region_names`` label -> name.
+    ``samples.label`` gives each sample's region label, ``region_names`` label -> name.
     A region with fewer than :func:`min_samples` samples gets a warning and
     the parameters of its first fitted neighbour in ``neighbours`` (name ->
     names; default :data:`NEIGHBOURS`), else of ``skin``, else the model's
@@ -57,11 +57,13 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
     its neighbour's glossy part (status ``'prior'``, the reason says so) and
     lends nothing. ``cluster`` (N,) is each sample's cluster for the
     uncertainty, ``offsets`` the albedo offsets the reflectance was corrected by
-    (:func:`fit_region`).
+    (:func:`~mifaces.reflectance.fit.region_fit.fit_region`).
     """
+    if samples.label is None:
+        raise ValueError("the samples have no region labels (samples.label; ReflectanceSamples.region)")
     model = brdf_models.model(model) if isinstance(model, str) else model
     neighbours = NEIGHBOURS if neighbours is None else neighbours
-    region = np.asarray(region)
+    region = np.asarray(samples.label)
     fixed = options.get("fixed")
     needed = min_samples(model, model.fixed_defaults() if fixed is None else fixed)
     counts = {name: int(np.count_nonzero(region == label)) for label, name in region_names.items()}
@@ -76,11 +78,12 @@ def fit_regions(model: BRDFModel | str, light, view, reflectance, sigma, region,
         held[name] = model.fixed_defaults() if fixed is None else fixed
         if fixed_by_region and name in fixed_by_region:
             held[name] = region_options["fixed"] = {**held[name], **fixed_by_region[name]}
-        fits[name] = fit_region(model, light[mask], view[mask], reflectance[mask], sigma[mask],
+        part = samples.select(mask)
+        fits[name] = fit_region(model, part.light, part.view, part.reflectance, part.sigma,
                                 cluster=None if cluster is None else np.asarray(cluster)[mask],
                                 offsets=None if offsets is None else offsets[mask], **region_options)
         peak = glossy_peak(model, fits[name].params)
-        seen = float(np.max(reflectance[mask])) if mask.any() else 0.0
+        seen = float(np.max(part.reflectance)) if mask.any() else 0.0
         if fits[name].status in (CONVERGED, AT_BOUND) and SPIKE not in fits[name].reason \
                 and peak > PEAK_FACTOR * max(seen, 1e-6):
             # a lobe brighter than anything the photographs showed: fitted to a few samples' noise

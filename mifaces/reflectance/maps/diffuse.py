@@ -20,8 +20,9 @@ plus noise of variance s₀² σ_s², the posterior mean is
 
 with s₀² estimated from the scatter of the samples within texels and τ² from
 the scatter of the texel means beyond that noise (empirical Bayes, per region
-and channel: :func:`mifaces.reflectance.maps.shrinkage.empirical_bayes`). Well-sampled texels keep their own value (Σ w ≫ λ); with
-noise-free samples s₀ = 0 and the closed form above is unchanged.
+and channel: :func:`mifaces.reflectance.maps.shrinkage.empirical_bayes`).
+Well-sampled texels keep their own value (Σ w ≫ λ); with noise-free samples
+s₀ = 0 and the closed form above is unchanged.
 
 **Posterior standard deviation** (:attr:`DiffuseMap.std`). Under the same
 model the texel's posterior variance is
@@ -45,6 +46,7 @@ import mitsuba as mi
 import numpy as np
 
 from ... import brdf as brdf_models
+from ..samples import ReflectanceSamples
 from .shrinkage import empirical_bayes
 
 
@@ -182,8 +184,8 @@ def albedo_offsets(albedo, texel, label, where=None) -> np.ndarray:
     return offsets.astype(np.float32)
 
 
-def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflectance, sigma, texel, region,
-                   region_map: np.ndarray, shrinkage: bool = True) -> DiffuseMap:
+def refine_diffuse(model, params_by_region: dict[int, dict], samples: ReflectanceSamples, region_map: np.ndarray,
+                   shrinkage: bool = True) -> DiffuseMap:
     """Refit ρ_d per texel with each region's glossy part fixed (sec. 5.3).
 
     Parameters
@@ -191,13 +193,8 @@ def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflec
     model : BRDFModel or str
     params_by_region : dict
         Region label -> fitted parameters (as in ``RegionFit.params``).
-    light, view, reflectance : ndarray (N, 3)
-    sigma : ndarray (N,)
-        Confidence of eq. 10 (or 9).
-    texel : ndarray (N,)
-        Flat texel index (row · R + column) of each sample.
-    region : ndarray (N,)
-        Region label of each sample.
+    samples : ReflectanceSamples
+        The samples, with their region labels (``label``); σ the confidence of eq. 10 (or 9).
     region_map : ndarray (R, R)
         Region label of every texel, for filling texels without samples.
     shrinkage : bool
@@ -212,20 +209,21 @@ def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflec
     region_map = np.asarray(region_map)
     if region_map.ndim != 2 or region_map.shape[0] != region_map.shape[1]:
         raise ValueError(f"region_map must be a square (R, R) label image, got shape {region_map.shape}")
+    if samples.label is None:
+        raise ValueError("the samples have no region labels (samples.label; ReflectanceSamples.region)")
     size = region_map.size
-    texel = np.asarray(texel)
+    texel, region = np.asarray(samples.texel), np.asarray(samples.label)
     if texel.size and (texel.min() < 0 or texel.max() >= size):
         raise ValueError(f"texel indices must lie in [0, {size}) for a {region_map.shape} region map")
-    specular = specular_reflectance_factor(model, params_by_region, light, view, region) if len(texel) else \
-        np.zeros((0, 3))
-    w = 1.0 / np.square(np.asarray(sigma, np.float64))
+    specular = (specular_reflectance_factor(model, params_by_region, samples.light, samples.view, region)
+                if len(texel) else np.zeros((0, 3)))
+    w = 1.0 / np.square(np.asarray(samples.sigma, np.float64))
     total = np.bincount(texel, weights=w, minlength=size)
     albedo = np.empty((size, 3))
-    residual = np.asarray(reflectance, np.float64) - specular
+    residual = np.asarray(samples.reflectance, np.float64) - specular
     for c in range(3):
         albedo[:, c] = np.bincount(texel, weights=w * residual[:, c], minlength=size) / np.maximum(total, 1e-300)
     counts = np.bincount(texel, minlength=size)
-    region = np.asarray(region)
     labels = region_map.ravel()
     # NaN (not known) on the texels of the regions with a BRDF until estimated, 0 outside the face
     variance = np.where(np.isin(labels, list(params_by_region))[:, None], np.nan, 0.0) * np.ones(3)

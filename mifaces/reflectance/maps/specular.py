@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..samples import ReflectanceSamples
 from .diffuse import specular_reflectance_factor
 from .shrinkage import empirical_bayes
 
@@ -63,7 +64,7 @@ class SpecularMap:
     shrinkage: dict
 
 
-def refine_specular(model, params_by_region: dict[int, dict], light, view, reflectance, sigma, texel, region,
+def refine_specular(model, params_by_region: dict[int, dict], samples: ReflectanceSamples,
                     region_map: np.ndarray) -> SpecularMap:
     """k per texel by shrunk least squares (module docstring).
 
@@ -73,10 +74,8 @@ def refine_specular(model, params_by_region: dict[int, dict], light, view, refle
         A model with a ``specular_reflectance`` parameter.
     params_by_region : dict
         Region label -> fitted parameters (``RegionFit.params``).
-    light, view, reflectance : ndarray (N, 3)
-    sigma : ndarray (N,)
-    texel, region : ndarray (N,)
-        Flat texel index and region label of each sample.
+    samples : ReflectanceSamples
+        The samples, with their region labels (``label``).
     region_map : ndarray (R, R)
 
     Returns
@@ -84,10 +83,12 @@ def refine_specular(model, params_by_region: dict[int, dict], light, view, refle
     SpecularMap
     """
     size = np.asarray(region_map).size
-    texel, region = np.asarray(texel), np.asarray(region)
-    g = specular_reflectance_factor(model, params_by_region, light, view, region)
-    r = np.asarray(reflectance, np.float64)
-    w = 1.0 / np.square(np.asarray(sigma, np.float64))
+    if samples.label is None:
+        raise ValueError("the samples have no region labels (samples.label; ReflectanceSamples.region)")
+    texel, region = np.asarray(samples.texel), np.asarray(samples.label)
+    g = specular_reflectance_factor(model, params_by_region, samples.light, samples.view, region)
+    r = np.asarray(samples.reflectance, np.float64)
+    w = 1.0 / np.square(np.asarray(samples.sigma, np.float64))
     total = np.bincount(texel, weights=w, minlength=size)
     safe = np.maximum(total, 1e-300)
     mean_r = np.stack([np.bincount(texel, weights=w * r[:, c], minlength=size) for c in range(3)], 1) / safe[:, None]
