@@ -52,9 +52,8 @@ encoded (x + 1) / 2 per channel (:func:`encode`).
 
 from __future__ import annotations
 
-import dataclasses
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.ndimage
@@ -254,7 +253,7 @@ def refine_texel_normals(model, fit, fits: dict, samples: ReflectanceSamples, na
         rotated = _rotated(samples, normals[texel])
         use = _fitted_samples(refined, rotated.texel, rotated.label)
         offsets = albedo_offsets(albedo, rotated.texel, rotated.label, where=refined[rotated.texel])
-        fits = fit(dataclasses.replace(rotated, reflectance=rotated.reflectance - offsets).select(use))
+        fits = fit(replace(rotated, reflectance=rotated.reflectance - offsets).select(use))
         tilt = np.degrees(np.arccos(np.clip(normals[refined, 2], -1.0, 1.0)))
         history.append({"round": round_, "loss": loss, "seconds": time.perf_counter() - t0,
                         "texels": int(refined.sum()), "mean_tilt_deg": float(tilt.mean()) if tilt.size else 0.0})
@@ -276,7 +275,7 @@ def _rotated(samples: ReflectanceSamples, normals) -> ReflectanceSamples:
     the samples it keeps with their texel, measurement and label."""
     light, view, reflectance, sigma, keep = rotate_samples(samples.light, samples.view, samples.reflectance,
                                                            samples.sigma, normals)
-    return dataclasses.replace(samples.select(keep), light=light, view=view, reflectance=reflectance, sigma=sigma)
+    return replace(samples.select(keep), light=light, view=view, reflectance=reflectance, sigma=sigma)
 
 
 def _evaluate(model, regions, fits, names, normals, prior_weight):
