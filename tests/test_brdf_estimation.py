@@ -22,7 +22,7 @@ from mifaces.files import read_exr
 from mifaces.geometry import load_geometry
 from mifaces.model.regions import REGIONS, texel_regions_of_mesh
 from mifaces.reflectance import FitOptions, fit_brdf, load_estimate, render_estimate, render_fitted
-from mifaces.reflectance.fit.regions import SubsetSchedule
+from mifaces.reflectance.fit.region_fit import SubsetSchedule
 from mifaces.reflectance.samples import ReflectanceSamples, capture_samples
 from mifaces.render import FaceScene, face_scene, render_face
 from mifaces.studio.truth import brdf_with_overrides

@@ -10,8 +10,11 @@ import scipy.optimize
 
 from mifaces import brdf
 from mifaces.brdf.lafortune import energy_bound
-from mifaces.reflectance.fit.regions import (FULL_DATA, SPIKE, ParameterSpace, SubsetSchedule, conservative_start,
-                                             fit_region, fit_regions, min_samples)
+from mifaces.reflectance.fit.lobes import SPIKE
+from mifaces.reflectance.fit.parameters import ParameterSpace, conservative_start
+from mifaces.reflectance.fit.region_fit import FULL_DATA, SubsetSchedule, fit_region, min_samples
+from mifaces.reflectance.fit.regions import fit_regions
+from mifaces.reflectance.samples import ReflectanceSamples
 from mifaces.reflectance.fit.levenberg_marquardt import CONVERGED, levenberg_marquardt
 from mifaces.status import AT_BOUND, AT_START, DEFAULTS, PRIOR
 
@@ -173,6 +176,13 @@ def test_levenberg_marquardt_reports_a_broken_problem():
     assert result.status != CONVERGED
 
 
+def labelled(light, view, reflectance, sigma, label) -> ReflectanceSamples:
+    """The arrays as samples with region labels ``label``, all on one texel of one measurement."""
+    n = len(sigma)
+    return ReflectanceSamples(light, view, reflectance, sigma, np.zeros(n, np.int32), np.zeros(n, np.int16), 1,
+                              label=label)
+
+
 def test_regions_with_too_few_samples_take_a_neighbours_fit(jit_variant):
     model = brdf.model("ward")
     light, view, r, sigma = synthetic_samples(model, TRUTH["ward"][1], 6000, seed=4)
@@ -180,7 +190,7 @@ def test_regions_with_too_few_samples_take_a_neighbours_fit(jit_variant):
     region[:20] = 1  # lips: 20 samples
     names = {0: "skin", 1: "lips", 2: "eyebrows"}  # eyebrows: none
     with pytest.warns(UserWarning, match="region 'lips': 20 samples"):
-        fits = fit_regions(model, light, view, r, sigma, region, names, neighbours={"lips": ["skin"]},
+        fits = fit_regions(model, labelled(light, view, r, sigma, region), names, neighbours={"lips": ["skin"]},
                            schedule=FULL_DATA)
     assert fits["skin"].status == CONVERGED
     assert fits["lips"].status == "prior" and fits["lips"].params == fits["skin"].params
@@ -286,9 +296,9 @@ def test_a_fit_at_the_bound_of_its_range_is_flagged_and_replaced(jit_variant):
         l2, v2, r2, s2 = hot_samples(n, 7)
         region = np.repeat([1, 2], [4000, n])
         with pytest.warns(UserWarning, match="at the bound"):
-            fits = fit_regions(model, np.concatenate([light, l2]), np.concatenate([view, v2]),
-                               np.concatenate([r, r2]), np.concatenate([sigma, s2]), region, {1: "skin", 2: "lips"},
-                               schedule=FULL_DATA)
+            fits = fit_regions(model, labelled(np.concatenate([light, l2]), np.concatenate([view, v2]),
+                                               np.concatenate([r, r2]), np.concatenate([sigma, s2]), region),
+                               {1: "skin", 2: "lips"}, schedule=FULL_DATA)
         assert fits["skin"].status == "converged"
         if replaced:
             assert fits["lips"].status == "prior"
@@ -331,8 +341,8 @@ def test_a_spike_takes_its_neighbours_glossy_part_whatever_the_region_size(monke
     labels = np.repeat([1, 6, 4], [5000, 3000, 2000])
     n = len(labels)
     with pytest.warns(UserWarning, match="spike"):
-        fits = fitting.fit_regions(model, np.zeros((n, 3)), np.zeros((n, 3)), np.full((n, 3), 0.5), np.ones(n),
-                                   labels, {1: "skin", 6: "beard", 4: "eyebrows"})
+        fits = fitting.fit_regions(model, labelled(np.zeros((n, 3)), np.zeros((n, 3)), np.full((n, 3), 0.5), np.ones(n),
+                                                   labels), {1: "skin", 6: "beard", 4: "eyebrows"})
     assert fits["beard"].status == "prior" and fits["beard"].params["alpha"] == 0.3
     assert fits["beard"].params["specular_reflectance"] == [0.05] * 3
     assert fits["eyebrows"].status == fitting.AT_BOUND and fits["eyebrows"].params["alpha"] == 1.0
@@ -342,7 +352,7 @@ def test_a_lobe_brighter_than_every_sample_is_a_spike(jit_variant):
     """A small region's fit to a few noisy samples that ends in a narrow, strong lobe (its peak far
     above the brightest sample: it would blow up under a light the photographs did not cover) is a
     spike: the region takes its neighbour's glossy part (as the nostrils of a real Yale subject)."""
-    from mifaces.reflectance.fit.regions import PEAK_FACTOR, glossy_peak
+    from mifaces.reflectance.fit.lobes import PEAK_FACTOR, glossy_peak
 
     model = brdf.model("ward")
     broad = {"diffuse_reflectance": [0.4, 0.3, 0.2], "specular_reflectance": [0.05] * 3, "alpha": 0.3}
@@ -364,7 +374,7 @@ def test_a_lobe_brighter_than_every_sample_is_a_spike(jit_variant):
     import unittest.mock
 
     with unittest.mock.patch.object(fitting, "fit_region", fit), pytest.warns(UserWarning, match="spike"):
-        fits = fitting.fit_regions(model, light, view, r, sigma, labels, {1: "skin", 5: "nostrils"},
+        fits = fitting.fit_regions(model, labelled(light, view, r, sigma, labels), {1: "skin", 5: "nostrils"},
                                    schedule=FULL_DATA)
     assert fits["skin"].status == CONVERGED
     assert fits["nostrils"].status == PRIOR and "brightest sample" in fits["nostrils"].reason
@@ -382,8 +392,8 @@ def test_a_lobe_brighter_than_every_sample_is_a_spike(jit_variant):
     light, view, r, sigma = synthetic_samples(model, broad, 3000 + 2000, seed=1)
     labels = np.repeat([1, 4], [3000, 2000])
     with unittest.mock.patch.object(fitting, "fit_region", at_bound), pytest.warns(UserWarning, match="spike"):
-        fits = fitting.fit_regions(model, light, view, r, sigma, labels, {1: "skin", 4: "eyebrows", 7: "hair"},
-                                   schedule=FULL_DATA)
+        fits = fitting.fit_regions(model, labelled(light, view, r, sigma, labels),
+                                   {1: "skin", 4: "eyebrows", 7: "hair"}, schedule=FULL_DATA)
     assert fits["eyebrows"].status == PRIOR and "brightest sample" in fits["eyebrows"].reason
     assert fits["hair"].params["alpha"] == pytest.approx(fits["skin"].params["alpha"])
 
@@ -424,7 +434,7 @@ def test_a_real_fit_whose_lobe_runs_to_the_sharp_end_is_flagged(jit_variant):
     few = min_samples(model) - 1
     region = np.repeat([1, 2], [len(sigma) - few, few])
     with pytest.warns(UserWarning, match="spike"):
-        fits = fit_regions(model, light, view, r, sigma, region, {1: "skin", 2: "lips"}, schedule=FULL_DATA)
+        fits = fit_regions(model, labelled(light, view, r, sigma, region), {1: "skin", 2: "lips"}, schedule=FULL_DATA)
     skin = fits["skin"]
     assert skin.status == DEFAULTS and SPIKE.split(" at ")[0] in skin.reason and "no glossy part" in skin.reason
     # no highlight is invented: the lobe's scale is zero (the width is the model's default)
@@ -449,7 +459,7 @@ def test_a_fit_that_never_sees_its_lobe_ends_at_start(jit_variant):
     np.testing.assert_allclose(fit.params["diffuse_reflectance"], [0.4, 0.3, 0.2], rtol=1e-3)
     region = np.repeat([1, 2], [n - 5, 5])
     with pytest.warns(UserWarning, match="start values"):
-        fits = fit_regions(model, light, light, r, sigma, region, {1: "skin", 2: "lips"}, schedule=FULL_DATA)
+        fits = fit_regions(model, labelled(light, light, r, sigma, region), {1: "skin", 2: "lips"}, schedule=FULL_DATA)
     assert fits["skin"].status == DEFAULTS and "start values" in fits["skin"].reason  # no region to borrow from
     assert fits["lips"].status == DEFAULTS
     for name in ("skin", "lips"):  # no glossy part, rather than an invented one
@@ -462,7 +472,7 @@ def test_a_fit_that_never_sees_its_lobe_ends_at_start(jit_variant):
     labels = np.repeat([1, 2], [3000, n])
     both = [np.concatenate([a, b]) for a, b in zip(good, (light, light, r, sigma))]
     with pytest.warns(UserWarning, match="start values"):
-        fits = fit_regions(model, *both, labels, {1: "skin", 2: "lips"}, schedule=FULL_DATA)
+        fits = fit_regions(model, labelled(*both, labels), {1: "skin", 2: "lips"}, schedule=FULL_DATA)
     assert fits["skin"].status == CONVERGED
     assert fits["lips"].status == PRIOR and "start values" in fits["lips"].reason
     assert fits["lips"].params["exponent"] == fits["skin"].params["exponent"]

@@ -8,11 +8,18 @@ import pytest
 
 from mifaces import brdf
 from mifaces.reflectance.maps.diffuse import refine_diffuse, specular_reflectance_factor
+from mifaces.reflectance.samples import ReflectanceSamples
 
 REGIONS = {
     1: {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [2.0] * 3, "roughness": 0.3, "eta": 1.38},
     2: {"diffuse_reflectance": [0.6, 0.2, 0.2], "specular_reflectance": [4.0] * 3, "roughness": 0.15, "eta": 1.38},
 }
+
+
+def labelled(light, view, reflectance, sigma, texel, label, resolution=16) -> ReflectanceSamples:
+    """The arrays as samples of one measurement with region labels ``label``."""
+    return ReflectanceSamples(light, view, reflectance, sigma, texel, np.zeros(len(sigma), np.int16), resolution,
+                              label=label)
 
 
 def samples_on_a_map(resolution=16, per_texel=6, seed=0):
@@ -39,7 +46,7 @@ def samples_on_a_map(resolution=16, per_texel=6, seed=0):
 
 def test_refinement_recovers_a_known_albedo_map(jit_variant):
     model, region_map, albedo, observed, light, view, r, sigma, texel, region = samples_on_a_map()
-    result = refine_diffuse(model, REGIONS, light, view, r, sigma, texel, region, region_map)
+    result = refine_diffuse(model, REGIONS, labelled(light, view, r, sigma, texel, region), region_map)
     flat = result.albedo.reshape(-1, 3)
     np.testing.assert_allclose(flat[observed], albedo.reshape(-1, 3)[observed], atol=2e-5)
     # face texels without samples take their region's albedo; outside the face is 0
@@ -65,11 +72,11 @@ def test_specular_factor_matches_the_array_api_per_region(jit_variant):
 def test_bad_inputs_are_named(jit_variant):
     model, region_map, albedo, observed, light, view, r, sigma, texel, region = samples_on_a_map()
     with pytest.raises(ValueError, match="square"):
-        refine_diffuse(model, REGIONS, light, view, r, sigma, texel, region, region_map[:, :5])
+        refine_diffuse(model, REGIONS, labelled(light, view, r, sigma, texel, region), region_map[:, :5])
     with pytest.raises(ValueError, match=r"region label\(s\) \[7\]"):
-        refine_diffuse(model, REGIONS, light, view, r, sigma, texel, np.full_like(region, 7), region_map)
+        refine_diffuse(model, REGIONS, labelled(light, view, r, sigma, texel, np.full_like(region, 7)), region_map)
     with pytest.raises(ValueError, match="texel indices"):
-        refine_diffuse(model, REGIONS, light, view, r, sigma, texel + 10_000, region, region_map)
+        refine_diffuse(model, REGIONS, labelled(light, view, r, sigma, texel + 10_000, region), region_map)
 
 
 def test_shrinkage_lowers_the_error_of_sparsely_sampled_texels(jit_variant):
@@ -93,8 +100,8 @@ def test_shrinkage_lowers_the_error_of_sparsely_sampled_texels(jit_variant):
     sigma = 1.0 / (light[:, 2] ** 2 * view[:, 2])
     spec = specular_reflectance_factor(model, REGIONS, light, view, region)
     r = true[texel] + spec + rng.normal(0, 0.05, (texel.size, 3)) * sigma[:, None] / sigma.mean()
-    plain = refine_diffuse(model, REGIONS, light, view, r, sigma, texel, region, region_map, shrinkage=False)
-    shrunk = refine_diffuse(model, REGIONS, light, view, r, sigma, texel, region, region_map)
+    plain = refine_diffuse(model, REGIONS, labelled(light, view, r, sigma, texel, region), region_map, shrinkage=False)
+    shrunk = refine_diffuse(model, REGIONS, labelled(light, view, r, sigma, texel, region), region_map)
     once = np.setdiff1d(observed, many)
 
     def rmse(result, where):

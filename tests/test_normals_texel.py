@@ -20,7 +20,9 @@ from mifaces.model.mesh import mitsuba_mesh
 from mifaces.model.texture_space import rasterize
 from mifaces.reflectance import FitOptions, fit_brdf, load_estimate
 from mifaces.reflectance.maps import normals as tn
-from mifaces.reflectance.fit.regions import FULL_DATA, fit_regions
+from mifaces.reflectance.fit.region_fit import FULL_DATA
+from mifaces.reflectance.fit.regions import fit_regions
+from mifaces.reflectance.samples import ReflectanceSamples
 from mifaces.reflectance.samples import texel_geometry
 from mifaces.reflectance.maps.specular import refine_specular
 from mifaces.render import FaceScene, scene_xml
@@ -90,12 +92,12 @@ def test_texel_normals_recover_tilted_normals_and_the_gloss():
     label = np.ones(len(texel), np.uint8)
     fixed = {**model.fixed_defaults(), "eta": GLOSSY["eta"]}
 
-    def fit(light, view, r, sigma, label):
-        return fit_regions(model, light, view, r, sigma, label, {1: "skin"}, fixed=fixed, schedule=FULL_DATA)
+    def fit(samples):
+        return fit_regions(model, samples, {1: "skin"}, fixed=fixed, schedule=FULL_DATA)
 
-    start = fit(light, view, r, sigma, label)
-    result = tn.refine_texel_normals(model, fit, start, light, view, r, sigma, texel, measurement, label, {1: "skin"},
-                                     resolution=11, rounds=6, prior_weight=0.05)
+    samples = ReflectanceSamples(light, view, r, sigma, texel, measurement, 11, label=label)
+    start = fit(samples)
+    result = tn.refine_texel_normals(model, fit, start, samples, {1: "skin"}, rounds=6, prior_weight=0.05)
     found = result.normals.reshape(-1, 3)[:len(true)]
     assert result.refined.reshape(-1)[:len(true)].all() and not result.refined.reshape(-1)[len(true):].any()
     assert _angle(found, true).mean() < 1.0  # from 4 degrees at the model's normals
@@ -110,8 +112,7 @@ def test_texel_normals_recover_tilted_normals_and_the_gloss():
     assert after[0] < before[0] / 2 and after[1] < before[1] / 2
     # texels with fewer than MIN_OBSERVATIONS samples keep the model's normal
     few = measurement < tn.MIN_OBSERVATIONS - 1
-    sparse = tn.refine_texel_normals(model, fit, start, light[few], view[few], r[few], sigma[few], texel[few],
-                                     measurement[few], label[few], {1: "skin"}, resolution=11, rounds=1)
+    sparse = tn.refine_texel_normals(model, fit, start, samples.select(few), {1: "skin"}, rounds=1)
     assert not sparse.refined.any() and np.all(sparse.normals[..., 2] == 1.0)
 
 
@@ -148,7 +149,11 @@ def test_specular_maps_move_only_as_far_as_the_samples_justify():
     r = albedo[texel] + true_k[texel, None] * g + rng.normal(scale=0.01, size=g.shape)
     sigma = np.ones(len(texel))
     region_map = np.ones((side, side), np.uint8)
-    result = refine_specular(model, params, light, view, r, sigma, texel, np.ones(len(texel), np.uint8), region_map)
+    def labelled(r):
+        return ReflectanceSamples(light, view, r, sigma, texel, np.zeros(len(texel), np.int16), side,
+                                  label=np.ones(len(texel), np.uint8))
+
+    result = refine_specular(model, params, labelled(r), region_map)
     k = result.scale.ravel()[:texels]
     many, few = np.arange(texels) < 150, np.arange(texels) >= 150
     assert np.median(np.abs(k[many] - true_k[many])) < 0.1
@@ -157,8 +162,8 @@ def test_specular_maps_move_only_as_far_as_the_samples_justify():
                                rtol=1e-5)
     assert np.all(result.scale.ravel()[texels:] == 1.0)  # texels without samples: the region's
     # one gloss: the texels stay at the region's (k near 1 everywhere)
-    uniform = refine_specular(model, params, light, view, albedo[texel] + g + rng.normal(scale=0.01, size=g.shape),
-                              sigma, texel, np.ones(len(texel), np.uint8), region_map)
+    uniform = refine_specular(model, params, labelled(albedo[texel] + g + rng.normal(scale=0.01, size=g.shape)),
+                              region_map)
     assert np.abs(uniform.scale.ravel()[:texels] - 1.0).max() < 0.1
 
 

@@ -15,10 +15,13 @@ import pytest
 
 from mifaces import brdf as brdf_models
 from mifaces.reflectance.maps.diffuse import AlbedoOffsets, refine_diffuse
-from mifaces.reflectance.fit.regions import FULL_DATA, fit_region, prior_fit
+from mifaces.reflectance.fit.intervals import _value_jacobian
+from mifaces.reflectance.fit.offset_uncertainty import offset_sums
 from mifaces.reflectance.fit.parameters import ParameterSpace
-from mifaces.reflectance.fit.uncertainty import (TILE_AT_128, _value_jacobian, cluster_index, covariance, offset_sums,
-                                                 tile_clusters)
+from mifaces.reflectance.fit.region_fit import FULL_DATA, fit_region
+from mifaces.reflectance.fit.regions import prior_fit
+from mifaces.reflectance.fit.uncertainty import TILE_AT_128, cluster_index, covariance, tile_clusters
+from mifaces.reflectance.samples import ReflectanceSamples
 
 TRUTH = {"diffuse_reflectance": [0.5, 0.35, 0.25], "specular_reflectance": [0.8, 0.8, 0.8], "roughness": 0.5,
          "eta": 1.4}
@@ -174,7 +177,7 @@ def test_covariance_rejects_bad_input():
 def test_cluster_sums_match_the_per_sample_jacobian():
     """The kernel's per-cluster u_g and H_g equal sums of the host-side residuals and Jacobian; they
     add up to the fit's own JᵀJ, and its loss is the fit's."""
-    from mifaces.reflectance.fit.regions import _Problem
+    from mifaces.reflectance.fit.problem import Problem
     from mifaces.reflectance.fit.parameters import ParameterSpace
 
     rng = np.random.default_rng(7)
@@ -182,7 +185,7 @@ def test_cluster_sums_match_the_per_sample_jacobian():
     light, view = directions(rng, n), directions(rng, n)
     r = reflectance(TRUTH, light, view) + 0.02 * rng.normal(size=(n, 3))
     space = ParameterSpace(brdf_models.model("cooktorrance"), FIXED)
-    problem = _Problem(space.model, space, light.astype(np.float32), view.astype(np.float32), r.astype(np.float32),
+    problem = Problem(space.model, space, light.astype(np.float32), view.astype(np.float32), r.astype(np.float32),
                        np.full(n, 0.5, np.float32))
     x = space.vector(TRUTH) + 0.1
     index, groups = cluster_index(rng.integers(0, 40, n) * 3)
@@ -223,8 +226,9 @@ def test_albedo_posterior_std_matches_its_error():
     params = {1: {**TRUTH, "diffuse_reflectance": [0.4] * 3}}
     spec = reflectance({**params[1], "diffuse_reflectance": [0.0] * 3}, light, view)
     obs = true[texel] + spec + 0.08 * rng.normal(size=(n, 3))
-    diffuse = refine_diffuse("cooktorrance", params, light, view, obs, np.ones(n), texel, np.ones(n, np.uint8),
-                             np.ones((r, r), np.uint8))
+    samples = ReflectanceSamples(light, view, obs, np.ones(n), texel, np.zeros(n, np.int16), r,
+                                 label=np.ones(n, np.uint8))
+    diffuse = refine_diffuse("cooktorrance", params, samples, np.ones((r, r), np.uint8))
     err = diffuse.albedo.reshape(-1, 3) - true
     std = diffuse.std.reshape(-1, 3)
     seen = per > 0
@@ -243,8 +247,8 @@ def _alternated(light, view, r, texel, cluster, rounds=6, aware=True, method="ja
     fit = fit_region("cooktorrance", light, view, r, sigma, fixed=FIXED, schedule=FULL_DATA, cluster=cluster,
                      uncertainty=method if rounds == 0 else None, start=start)
     for k in range(rounds):
-        albedo = refine_diffuse("cooktorrance", {1: fit.params}, light, view, r, sigma, texel, label,
-                                np.ones((side, side), int), shrinkage=False)
+        samples = ReflectanceSamples(light, view, r, sigma, texel, np.zeros(n, np.int16), side, label=label)
+        albedo = refine_diffuse("cooktorrance", {1: fit.params}, samples, np.ones((side, side), int), shrinkage=False)
         offsets = AlbedoOffsets.of(albedo, texel, label)
         last = k == rounds - 1
         fit = fit_region("cooktorrance", light, view, r - offsets.offsets, sigma, fixed=FIXED, schedule=FULL_DATA,

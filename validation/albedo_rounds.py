@@ -22,6 +22,7 @@ Writes ``validation/results/albedo_rounds.json`` (``--cost``: ``albedo_rounds_co
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import tempfile
 import time
@@ -38,7 +39,8 @@ import uncertainty as U  # noqa: E402  (the captures and checks of validation/un
 
 from mifaces.files import write_json  # noqa: E402
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf  # noqa: E402
-from mifaces.reflectance.fit import regions as fitting
+from mifaces.reflectance.fit import region_fit as fitting  # noqa: E402
+from mifaces.reflectance.fit.intervals import _value_jacobian  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Seeds of validation/uncertainty.py's tuning captures.
@@ -53,7 +55,7 @@ CLASSES = {"skin": ("skin",), "small": U.SMALL}
 
 
 def _known_offsets(*args, offsets=None, **kwargs):
-    """:func:`mifaces.reflectance.fit.regions.region_uncertainty` with the offsets taken as known."""
+    """:func:`mifaces.reflectance.fit.uncertainty.region_uncertainty` with the offsets taken as known."""
     return _REGION_UNCERTAINTY(*args, **kwargs)
 
 
@@ -63,7 +65,7 @@ _SPENT: list = []
 
 
 def _timed(*args, **kwargs):
-    """:func:`mifaces.reflectance.fit.regions.region_uncertainty`, its time added to :data:`_SPENT`."""
+    """:func:`mifaces.reflectance.fit.uncertainty.region_uncertainty`, its time added to :data:`_SPENT`."""
     t = time.perf_counter()
     out = _REGION_UNCERTAINTY(*args, **kwargs)
     _SPENT.append(time.perf_counter() - t)
@@ -206,35 +208,33 @@ def exact(model: str, seed: int, rounds: int, work: Path) -> dict:
     capture, face, shapes, samples = U._simulate(work / f"{model}_{seed}", seed, brdf=model, brdf_params=params)
     truth = U._truth_of(capture, model)["skin"]
     label = samples.label if samples.label is not None else samples.region(samples.region_map)
-    skin = label == REGIONS["skin"]
-    light, view, r, sigma, texel = (a[skin] for a in (samples.light, samples.view, samples.reflectance,
-                                                      samples.sigma, samples.texel))
-    cluster = U.unc.tile_clusters(texel, U.TEXTURE)
+    # skin's samples as region 1 of a one-region map
+    skin = dataclasses.replace(samples, label=np.ones(len(samples), int)).select(label == REGIONS["skin"])
+    cluster = U.unc.tile_clusters(skin.texel, U.TEXTURE)
     brdf = brdf_models.model(model)
     fixed = {**brdf.fixed_defaults(), **brdf.fixed_in_region("skin")}
-    one = np.ones(len(r), int)
     region_map = np.ones((U.TEXTURE, U.TEXTURE), int)
 
     def alternate(keep, method):
-        arrays = [a[keep] for a in (light, view, r, sigma, texel, cluster, one)]
-        l, v, rr, sg, tx, cl, lab = arrays
+        part, cl = skin.select(keep), cluster[keep]
+        l, v, rr, sg = part.light, part.view, part.reflectance, part.sigma
         fit = fitting.fit_region(brdf, l, v, rr, sg, fixed=fixed, cluster=cl, uncertainty=None)
         for k in range(rounds):
-            offsets = AlbedoOffsets.of(refine_diffuse(brdf, {1: fit.params}, l, v, rr, sg, tx, lab, region_map,
-                                                      shrinkage=False), tx, lab)
+            offsets = AlbedoOffsets.of(refine_diffuse(brdf, {1: fit.params}, part, region_map, shrinkage=False),
+                                       part.texel, part.label)
             last = k == rounds - 1
             fit = fitting.fit_region(brdf, l, v, rr - offsets.offsets, sg, fixed=fixed, cluster=cl,
                                      uncertainty=method if last else None, offsets=offsets if last else None)
         return fit
 
     t = time.perf_counter()
-    full = alternate(np.ones(len(r), bool), U.unc.METHODS[0])
+    full = alternate(np.ones(len(skin), bool), U.unc.METHODS[0])
     space = ParameterSpace(brdf, fixed)
     x = space.vector(full.params)
     tiles = np.unique(cluster)
     steps = np.array([space.vector(alternate(cluster != g, None).params) - x for g in tiles])
     g = len(tiles)
-    jac = U.unc._value_jacobian(space, x)
+    jac = _value_jacobian(space, x)
     std = np.sqrt(np.diag(jac @ ((g - 1) / g * steps.T @ steps) @ jac.T))
     entries = []
     for k, f in enumerate(space.free):
@@ -248,7 +248,7 @@ def exact(model: str, seed: int, rounds: int, work: Path) -> dict:
                         "std_exact": float(std[k])})
         print(entries[-1], flush=True)
     return {"model": model, "seed": seed, "albedo_rounds": rounds, "region": "skin", "tiles": int(g),
-            "samples": int(len(r)), "seconds": time.perf_counter() - t, "entries": entries}
+            "samples": len(skin), "seconds": time.perf_counter() - t, "entries": entries}
 
 
 def main(argv=None) -> int:

@@ -12,7 +12,7 @@ mifaces uses. Every run starts from the same start (mifaces' lobe-width grid
 search, which each run's time includes).
 
 How far each of mifaces' fits is from the physical limit, one pass over the
-samples per Jacobian: every pass the fit makes (:meth:`_Problem.system`, which
+samples per Jacobian: every pass the fit makes (:meth:`Problem.system`, which
 computes the residuals, their Jacobian and the normal equations in one kernel)
 is counted with its number of samples, giving the equivalent number of
 full-data passes; the limit is that number times the wall time of one
@@ -40,8 +40,9 @@ import numpy as np
 import scipy.optimize
 
 from mifaces import brdf
-from mifaces.reflectance.fit.regions import (FULL_DATA, ParameterSpace, SubsetSchedule, _Problem, fit_region,
-                                             linear_start)
+from mifaces.reflectance.fit.parameters import ParameterSpace, linear_start
+from mifaces.reflectance.fit.problem import Problem
+from mifaces.reflectance.fit.region_fit import FULL_DATA, SubsetSchedule, fit_region
 from mifaces.files import save_figure, write_json
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -73,11 +74,11 @@ def samples(model, truth, n, seed=0, noise=0.03):
 
 
 class PassCounter:
-    """Counts the passes of :meth:`_Problem.system` (samples per call) while it is installed."""
+    """Counts the passes of :meth:`Problem.system` (samples per call) while it is installed."""
 
     def __init__(self):
         self.sizes = []
-        self.original = _Problem.system
+        self.original = Problem.system
 
     def __enter__(self):
         counter = self
@@ -86,11 +87,11 @@ class PassCounter:
             counter.sizes.append(problem.n)
             return counter.original(problem, x)
 
-        _Problem.system = system
+        Problem.system = system
         return self
 
     def __exit__(self, *exc):
-        _Problem.system = self.original
+        Problem.system = self.original
 
     def full_passes(self, n: int) -> float:
         return sum(self.sizes) / n
@@ -115,7 +116,7 @@ def one_pass(problem, x, repeats: int = 5) -> tuple[float, float]:
 
 def scipy_fit(model, light, view, r, sigma, jacobian: str):
     space = ParameterSpace(model, model.fixed_defaults())
-    problem = _Problem(model, space, light, view, r, sigma)
+    problem = Problem(model, space, light, view, r, sigma)
     trace, t0 = [], time.perf_counter()
 
     def residuals(x):
@@ -156,7 +157,7 @@ def main():
         fit_region(model, light[:1000], view[:1000], r[:1000], sigma[:1000], schedule=FULL_DATA)
         runs = {}
         space = ParameterSpace(model, model.fixed_defaults())
-        full = _Problem(model, space, light, view, r, sigma)
+        full = Problem(model, space, light, view, r, sigma)
         for label, schedule in [("hierarchical LM", SubsetSchedule()), ("full-data LM", FULL_DATA)]:
             trace = []
             with PassCounter() as passes:

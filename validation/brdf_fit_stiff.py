@@ -29,9 +29,10 @@ import mitsuba as mi
 import numpy as np
 
 from mifaces import brdf
-from mifaces.reflectance.fit.regions import fit_region, fit_regions
+from mifaces.reflectance.fit.region_fit import fit_region
+from mifaces.reflectance.fit.regions import fit_regions
 from mifaces.files import write_json
-from mifaces.reflectance.samples import unsaturated
+from mifaces.reflectance.samples import ReflectanceSamples, unsaturated
 
 OUT = Path(__file__).resolve().parent / "results"
 SKIN = [0.52, 0.36, 0.29]
@@ -121,7 +122,9 @@ def main():
     region[:20] = 1
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        fits = fit_regions(model, light, view, r, sigma, region, {0: "skin", 1: "lips"}, neighbours={"lips": ["skin"]})
+        labelled = ReflectanceSamples(light, view, r, sigma, np.zeros(len(sigma), np.int32),
+                                      np.zeros(len(sigma), np.int16), 1, label=region)
+        fits = fit_regions(model, labelled, {0: "skin", 1: "lips"}, neighbours={"lips": ["skin"]})
     lips = fits["lips"]
     rows.append({"case": "20 samples (lips beside skin)", "model": "cooktorrance", "samples": 20,
                  "status": lips.status, "reason": lips.reason, "finite": True, "warning": str(caught[0].message)

@@ -43,6 +43,7 @@ from mifaces.capture import load_capture, read_ground_truth
 from mifaces.files import atomic_write, save_figure, write_json
 from mifaces.geometry import load_geometry
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
+from mifaces.reflectance.fit import intervals
 from mifaces.reflectance.fit import uncertainty as unc
 from mifaces.status import PRIOR
 from mifaces.studio import photograph, simulate
@@ -118,7 +119,7 @@ def _checks(estimate, truth: dict, variant: str, meta: dict) -> list[dict]:
             continue
         for name, value in truth[region].items():
             entry = fit.uncertainty.get(name, {})
-            if entry.get("status") == unc.FIXED:
+            if entry.get("status") == intervals.FIXED:
                 continue
             channels = range(3) if np.ndim(value) else [None]
             for c in channels:
@@ -126,7 +127,7 @@ def _checks(estimate, truth: dict, variant: str, meta: dict) -> list[dict]:
                 fitted = float(fit.params[name][c] if c is not None else fit.params[name])
                 status = entry.get("status")
                 status = status[c] if isinstance(status, list) else status
-                if "interval95" in entry and status in (None, unc.ESTIMATED):
+                if "interval95" in entry and status in (None, intervals.ESTIMATED):
                     lo, hi = entry["interval95"]
                     lo, hi = (lo[c], hi[c]) if c is not None else (lo, hi)
                     covered = bool(lo <= true <= hi)
@@ -135,7 +136,7 @@ def _checks(estimate, truth: dict, variant: str, meta: dict) -> list[dict]:
                     covered = None
                 out.append({**meta, "variant": variant, "region": region, "parameter": name, "channel": c,
                             "samples": fit.samples, "truth": true, "fitted": fitted, "lo": lo, "hi": hi,
-                            "status": status or unc.ESTIMATED, "covered": covered})
+                            "status": status or intervals.ESTIMATED, "covered": covered})
     return out
 
 

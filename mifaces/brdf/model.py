@@ -107,7 +107,7 @@ class Parameter:
 DIFFUSE = Parameter("diffuse_reflectance", "rgb", 0.5, 0.0, 1.0,
                     "albedo of the Lambertian term ρ_d/π")
 
-#: Grids of lobe widths :func:`mifaces.reflectance.fit.regions.linear_start`
+#: Grids of lobe widths :func:`mifaces.reflectance.fit.parameters.linear_start`
 #: searches: RMS slopes (Beckmann roughness, Ward's α) and cosine-lobe
 #: exponents, each from a near-mirror to a near-diffuse lobe.
 SLOPE_GRID = np.geomspace(0.01, 1.0, 15)
@@ -218,7 +218,7 @@ class BRDFModel:
     #: Options of the instance the plugin documentation shows.
     EXAMPLE_OPTIONS: ClassVar[Mapping] = {}
     #: (parameter, grid): the parameter that sets the lobe's width and the
-    #: values :func:`~mifaces.reflectance.fit.regions.linear_start` tries; None:
+    #: values :func:`~mifaces.reflectance.fit.parameters.linear_start` tries; None:
     #: the model has no such parameter and a fit starts from :meth:`start_values`.
     WIDTH_GRID: ClassVar[tuple[str, np.ndarray] | None] = None
     #: The end of the width parameter's range where the lobe becomes a spike
@@ -339,7 +339,7 @@ class BRDFModel:
     def unit_lobe(self) -> dict:
         """Glossy parameters that make the lobe's scale 1, given every
         parameter's default and the width on :attr:`WIDTH_GRID`: the lobe g
-        of r ≈ ρ_d + b·g in :func:`~mifaces.reflectance.fit.regions.linear_start`."""
+        of r ≈ ρ_d + b·g in :func:`~mifaces.reflectance.fit.parameters.linear_start`."""
         return {"specular_reflectance": 1.0}
 
     def scaled_lobe(self, scales: Sequence[float], width: float) -> dict:

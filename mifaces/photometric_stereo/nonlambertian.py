@@ -20,7 +20,7 @@ shadowed or saturated observation) and n̄_p a prior normal.
 The prior and the normal step are :mod:`mifaces.reflectance.maps.normal_fit`'s.
 
 **The alternation** (:func:`fit_normals_and_brdf`): from Lambertian
-photometric stereo, fit θ with :func:`~mifaces.reflectance.fit.regions.fit_region`
+photometric stereo, fit θ with :func:`~mifaces.reflectance.fit.region_fit.fit_region`
 on all pixels' samples in their current local frames (r = I / cos θ_i,
 σ = 1 / (cos θ_i √w), so eq. 8's residuals are the image residuals above;
 each sample's pixel albedo offset ρ_p - ρ̄ subtracted, so one region albedo
@@ -42,7 +42,7 @@ import numpy as np
 
 from .. import brdf as brdf_models
 from ..brdf.model import BRDFModel
-from ..reflectance.fit.regions import RegionFit, fit_region
+from ..reflectance.fit.region_fit import RegionFit, fit_region
 from ..reflectance.maps.normal_fit import (PRIOR_WEIGHT, NormalFit, _check, _unit, loss, predict,
                                            refine_normals)
 from ..reflectance.maps.observations import Observations, tangents
@@ -89,7 +89,7 @@ def observation_weights(values, saturated=None, shadow: float = lambertian.SHADO
 
 def brdf_samples(values, directions, weights, normals, albedo, view=(0.0, 0.0, 1.0),
                  max_samples: int | None = 200_000, seed: int = 0):
-    """The observations as reflectance samples for :func:`~mifaces.reflectance.fit.regions.fit_region`.
+    """The observations as reflectance samples for :func:`~mifaces.reflectance.fit.region_fit.fit_region`.
 
     Each usable observation with cos θ_i >= :data:`MIN_COSINE` gives l̂ and v̂
     in its pixel's local frame (z = n_p), r = I / cos θ_i - (ρ_p - ρ̄) and

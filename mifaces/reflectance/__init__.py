@@ -6,7 +6,8 @@ of it in novel poses and lights or on another face."""
 from .maps.diffuse import DiffuseMap, refine_diffuse
 from .estimate import BRDFEstimate, fit_brdf
 from .options import FitOptions
-from .fit.regions import RegionFit, fit_region, fit_regions
+from .fit.region_fit import RegionFit, fit_region
+from .fit.regions import fit_regions
 from .io import load_estimate, write_estimate
 from .render import render_estimate, render_fitted
 from .samples import ReflectanceSamples, capture_samples

@@ -28,6 +28,7 @@ or any mapping from measurement name to world-space vertices.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 
@@ -111,50 +112,45 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
                   else texel_regions_of_mesh(face.region_map, face.uv, face.triangles, resolution))
     label = samples.label if samples.label is not None else samples.region(region_map)
     names = {REGIONS[n]: n for n in regions_present(face.region_map)}
-    on_face = np.isin(label, list(names))
-    light, view, r, sigma, texel, label, measurement = (
-        a[on_face] for a in (samples.light, samples.view, samples.reflectance, samples.sigma, samples.texel, label,
-                             samples.measurement))
+    on_face = dataclasses.replace(samples, label=label).select(np.isin(label, list(names)))
     # parameters with a published value per region (Cook-Torrance's η) are fixed at it unless given
     per_region = {name: {k: v for k, v in brdf.fixed_in_region(name).items() if fixed is None or k not in fixed}
                   for name in names.values()}
     rounds = 0 if normals else int(options.albedo_rounds)
     region_fit = dict(progress=progress, fixed=fixed, fixed_by_region=per_region, schedule=schedule, seed=seed,
-                      cluster=tile_clusters(texel, resolution))
-    fits = fit_regions(brdf, light, view, r, sigma, label, names, **region_fit,
-                       uncertainty=None if normals or rounds else uncertainty)
+                      cluster=tile_clusters(on_face.texel, resolution))
+    fits = fit_regions(brdf, on_face, names, **region_fit, uncertainty=None if normals or rounds else uncertainty)
     for round_ in range(rounds):
         by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
         # unshrunk: the texel means (a texel effect per texel, consistent for the glossy part); shrunk
         # towards the region's albedo they leave part of the texture in, and bias skin's lobe
-        offsets = AlbedoOffsets.of(refine_diffuse(brdf, by_label, light, view, r, sigma, texel, label, region_map,
-                                                  shrinkage=False), texel, label)
+        offsets = AlbedoOffsets.of(refine_diffuse(brdf, by_label, on_face, region_map, shrinkage=False),
+                                   on_face.texel, on_face.label)
+        corrected = dataclasses.replace(on_face, reflectance=on_face.reflectance - offsets.offsets)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the first fit has warned already
             last = round_ == rounds - 1  # its intervals re-estimate the offsets per replicate
-            fits = fit_regions(brdf, light, view, r - offsets.offsets, sigma, label, names, **region_fit,
-                               uncertainty=uncertainty if last else None, offsets=offsets if last else None)
+            fits = fit_regions(brdf, corrected, names, **region_fit, uncertainty=uncertainty if last else None,
+                               offsets=offsets if last else None)
     texel_normals = None
     if normals:
-        texel_normals = _refine_normals(brdf, fits, (light, view, r, sigma, texel, measurement, label), names,
-                                        resolution, options.normal_options, progress,
+        texel_normals = _refine_normals(brdf, fits, on_face, names, options.normal_options, progress,
                                         dict(fixed=fixed, fixed_by_region=per_region, schedule=schedule, seed=seed,
                                              uncertainty=None))
         if texel_normals is not None:
-            light, view, r, sigma, keep = texel_normals.samples
-            texel, label, fits = texel[keep], label[keep], texel_normals.fits
+            on_face, fits = texel_normals.samples, texel_normals.fits
     t_fit = time.perf_counter()
     by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
-    albedo = refine_diffuse(brdf, by_label, light, view, r, sigma, texel, label, region_map)
+    albedo = refine_diffuse(brdf, by_label, on_face, region_map)
     specular = None
     if options.specular_maps:
         if any(p.name == "specular_reflectance" for p in brdf.specular_parameters()):
-            specular = refine_specular(brdf, by_label, light, view, r, sigma, texel, label, region_map)
+            specular = refine_specular(brdf, by_label, on_face, region_map)
         else:
             warnings.warn(f"specular maps left out: {brdf.name} has no specular_reflectance", stacklevel=2)
     t_end = time.perf_counter()
     estimate = BRDFEstimate(model=brdf.name, options=options.brdf_options(), fits=fits, albedo=albedo,
-                            region_map=region_map, samples=int(len(texel)), specular=specular,
+                            region_map=region_map, samples=len(on_face), specular=specular,
                             measurements=tuple(samples.measurement_names),
                             seconds={"samples": t_samples - t0, "fit": t_fit - t_samples, "refine": t_end - t_fit,
                                      "total": t_end - t0}, light_balance=light_balance)
@@ -167,23 +163,22 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     return estimate
 
 
-def _refine_normals(brdf, fits, arrays, names, resolution, options, progress, fit_options):
-    """:func:`refine_texel_normals` on the face's samples, the region fit as :func:`fit_brdf`'s
+def _refine_normals(brdf, fits, samples, names, options, progress, fit_options):
+    """:func:`refine_texel_normals` on the face's ``samples``, the region fit as :func:`fit_brdf`'s
     (``fit_options`` of :func:`fit_regions`), or None (with a warning) where no texel has
     :data:`MIN_OBSERVATIONS` samples (one light per texel: nothing to tell a normal from)."""
-    def fit(*samples):
+    def fit(rotated):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the fit at the model's normals has warned already
-            return fit_regions(brdf, *samples, names, **fit_options)
+            return fit_regions(brdf, rotated, names, **fit_options)
 
-    texel = arrays[4]
-    if not np.any(np.bincount(texel) >= MIN_OBSERVATIONS):
+    if not np.any(np.bincount(samples.texel) >= MIN_OBSERVATIONS):
         warnings.warn(f"per-texel normals left out: no texel has the {MIN_OBSERVATIONS} samples (lights and "
                       "poses) a normal needs", stacklevel=3)
         return None
     report = (lambda e: print(f"normals round {e['round']}: E {e['loss']:.6g}, {e['texels']} texels, "
                               f"mean tilt {e['mean_tilt_deg']:.2f} deg", flush=True)) if progress else None
-    return refine_texel_normals(brdf, fit, fits, *arrays, names, resolution, progress=report, **(options or {}))
+    return refine_texel_normals(brdf, fit, fits, samples, names, progress=report, **(options or {}))
 
 
 __all__ = ["BRDFEstimate", "FitOptions", "fit_brdf"]

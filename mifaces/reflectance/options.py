@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .fit.regions import SubsetSchedule
+from .fit.region_fit import SubsetSchedule
 from .fit.uncertainty import METHODS
 
 

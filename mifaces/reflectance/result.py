@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..model.regions import REGIONS
-from .fit.regions import RegionFit
+from .fit.region_fit import RegionFit
 from .maps.diffuse import DiffuseMap
 from .maps.normals import encode
 from .maps.specular import SpecularMap
@@ -33,7 +33,7 @@ class BRDFEstimate:
     options : dict
         The model's options (e.g. ``{"lobes": 2}`` for Lafortune).
     fits : dict
-        Region name -> :class:`~mifaces.reflectance.fit.regions.RegionFit`.
+        Region name -> :class:`~mifaces.reflectance.fit.region_fit.RegionFit`.
     albedo : DiffuseMap
         Per-texel diffuse albedo after refinement (sec. 5.3).
     region_map : (R, R) uint8

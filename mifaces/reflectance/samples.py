@@ -21,7 +21,7 @@ compare r with π f(l̂, v̂).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import drjit as dr
 import mitsuba as mi
@@ -177,6 +177,25 @@ class ReflectanceSamples:
 
     def __len__(self) -> int:
         return len(self.sigma)
+
+    def select(self, mask) -> ReflectanceSamples:
+        """The samples ``mask`` selects, as a new set.
+
+        Parameters
+        ----------
+        mask : ndarray (N,) of bool, or of indices
+            Which samples to keep.
+
+        Returns
+        -------
+        ReflectanceSamples
+            Every per-sample array (``light``, ``view``, ``reflectance``, ``sigma``, ``texel``,
+            ``measurement`` and ``label`` where present) indexed by ``mask``; ``resolution``,
+            ``measurement_names`` and ``region_map`` kept.
+        """
+        return replace(self, light=self.light[mask], view=self.view[mask], reflectance=self.reflectance[mask],
+                       sigma=self.sigma[mask], texel=self.texel[mask], measurement=self.measurement[mask],
+                       label=None if self.label is None else self.label[mask])
 
     def region(self, region_map: np.ndarray) -> np.ndarray:
         """Region label of each sample from an (R, R) region map."""

@@ -32,7 +32,7 @@ Hessian the LM step already forms) Cov(x̂) is estimated by one of:
     but a refit per draw.
 
 The sums u_g and H_g come from one Dr.Jit kernel at the optimum
-(:meth:`mifaces.reflectance.fit.regions._Problem.cluster_sums`), H and E from the
+(:meth:`mifaces.reflectance.fit.problem.Problem.cluster_sums`), H and E from the
 fit's own; all are model-agnostic: they also hold when the model is not the
 truth's family (they estimate the spread around the model's best fit).
 
@@ -87,17 +87,17 @@ held there while the others' covariance is computed.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
-import scipy.stats
 
+from ..maps.diffuse import AlbedoOffsets
+from .intervals import NOT_IDENTIFIED, PRUNED, Covariance, held_entries, parameter_intervals
+from .levenberg_marquardt import levenberg_marquardt
+from .offset_uncertainty import OffsetSums, offset_sums
 from .parameters import ParameterSpace
+from .problem import Problem
 
 #: The estimates of the covariance, the default first.
 METHODS = ("jackknife", "sandwich", "laplace", "bootstrap")
-#: The intervals' coverage.
-LEVEL = 0.95
 #: Side, in texels at texture resolution 128, of the clusters (scaled with the resolution). With the
 #: method, chosen on tuning captures the coverage tables leave out (validation/results/
 #: uncertainty_tuning.json: the jackknife over single texels covers 54-59 %, over tiles of 4 86-92 %,
@@ -107,10 +107,6 @@ TILE_AT_128 = 8
 MAX_CLUSTERS = 4096
 #: Draws of the bootstrap.
 BOOTSTRAP_DRAWS = 50
-#: Statuses of parameters without an interval.
-FIXED, AT_BOUND, PRUNED, PRIOR, ESTIMATED = "fixed", "at_bound", "pruned", "prior", "estimated"
-#: Status of a parameter the samples do not constrain (JᵀJ singular in its direction).
-NOT_IDENTIFIED = "not_identified"
 
 
 def tile_clusters(texel: np.ndarray, resolution: int, tile: int | None = None) -> np.ndarray:
@@ -126,34 +122,6 @@ def tile_clusters(texel: np.ndarray, resolution: int, tile: int | None = None) -
     row, col = texel // resolution, texel % resolution
     tiles = -(-resolution // tile)
     return (row // tile) * tiles + col // tile
-
-
-@dataclass
-class Covariance:
-    """The covariance of the free variables x at the optimum.
-
-    Attributes
-    ----------
-    x : ndarray (P,)
-        The optimum.
-    covariance : ndarray (P, P)
-        Cov(x̂); rows and columns of held entries are 0.
-    held : ndarray (P,) of bool
-        Entries at a bound or pruned, held where they are.
-    dof : float
-        Degrees of freedom of the t quantile.
-    method : str
-    """
-
-    x: np.ndarray
-    covariance: np.ndarray
-    held: np.ndarray
-    dof: float
-    method: str
-
-    def quantile(self, level: float = LEVEL) -> float:
-        """Two-sided ``level`` quantile of Student's t with :attr:`dof`."""
-        return float(scipy.stats.t.ppf(0.5 + level / 2, max(self.dof, 1.0)))
 
 
 def _inverse(h: np.ndarray) -> np.ndarray:
@@ -190,87 +158,6 @@ def cluster_index(cluster) -> tuple[np.ndarray, int]:
     used = np.bincount(cluster) > 0
     lookup = np.cumsum(used) - 1
     return lookup[cluster], int(used.sum())
-
-
-@dataclass
-class OffsetSums:
-    """Per cluster g, the sums over its texels that the albedo offsets' share of the
-    jackknife and the sandwich needs (module docstring; :func:`offset_sums`).
-
-    Attributes
-    ----------
-    counts : ndarray (G,)
-        N_g, samples.
-    cross : ndarray (G, P, P)
-        Σ_{t ∈ g} Σ_c S_t,cᵀ B_t,c.
-    jsum : ndarray (G, 3, P)
-        Σ_{t ∈ g} S_t.
-    scaled : ndarray (G, 3, P)
-        Σ_{t ∈ g} N_t B_t.
-    offsets : ndarray (G, 3)
-        Σ_{i ∈ g} o_i.
-    """
-
-    counts: np.ndarray
-    cross: np.ndarray
-    jsum: np.ndarray
-    scaled: np.ndarray
-    offsets: np.ndarray
-
-    def free(self, free: np.ndarray) -> "OffsetSums":
-        """The sums of the free entries ``free`` (P,) only."""
-        return OffsetSums(self.counts, self.cross[:, free][:, :, free], self.jsum[:, :, free],
-                          self.scaled[:, :, free], self.offsets)
-
-
-def offset_sums(texel, cluster, groups: int, weight, jsum, shrinkage, offsets) -> OffsetSums:
-    """The :class:`OffsetSums` of G = ``groups`` clusters.
-
-    Parameters
-    ----------
-    texel : ndarray (N,)
-        Each sample's texel, numbered 0 … T - 1.
-    cluster : ndarray (N,)
-        Each sample's cluster, numbered 0 … G - 1; a texel's samples must share one.
-    weight : ndarray (T,)
-        W_t = Σ_{i ∈ t} 1/σ_i².
-    jsum : ndarray (T, 3, P)
-        S_t = Σ_{i ∈ t} J_i/σ_i per channel (:meth:`mifaces.reflectance.fit.regions._Problem.texel_sums`).
-    shrinkage : ndarray (N, 3)
-        λ of each sample's region per channel.
-    offsets : ndarray (N, 3)
-        o_i.
-    """
-    texel, cluster = np.asarray(texel, np.int64), np.asarray(cluster, np.int64)
-    t = len(weight)
-    home = np.zeros(t, np.int64)
-    home[texel] = cluster
-    if np.any(home[texel] != cluster):
-        raise ValueError("the albedo offsets' uncertainty needs every texel's samples in one cluster")
-    lam = np.zeros((t, 3))
-    lam[texel] = np.asarray(shrinkage, np.float64)
-    # the texels sorted by cluster: cluster g's are the rows ends[g]:ends[g + 1]
-    order = np.argsort(home, kind="stable")
-    ends = np.searchsorted(home[order], np.arange(groups + 1))
-    empty = ends[:-1] == ends[1:]
-    jsum = np.asarray(jsum, np.float64)[order]
-    p = jsum.shape[2]
-    inverse = 1.0 / (np.asarray(weight, np.float64)[order, None] + lam[order])  # 1/(W_t + λ_c), (T, 3)
-    n_t = np.bincount(texel, minlength=t)[order].astype(np.float64)
-
-    def per_cluster(values):  # (T, ...) in cluster order, summed over each cluster's texels
-        sums = np.add.reduceat(values.reshape(t, -1), np.minimum(ends[:-1], t - 1), axis=0)
-        sums[empty] = 0.0
-        return sums.reshape((groups,) + values.shape[1:])
-
-    # Σ_{t ∈ g} Σ_c S_t,cᵀ B_t,c = VᵀV over the rows V = S_t,c / √(W_t + λ_c) of cluster g's texels
-    rows = (jsum * np.sqrt(inverse)[:, :, None]).reshape(-1, p)
-    cross = np.stack([rows[3 * a:3 * b].T @ rows[3 * a:3 * b] for a, b in zip(ends[:-1], ends[1:])])
-    o = np.asarray(offsets, np.float64)
-    return OffsetSums(counts=np.bincount(cluster, minlength=groups).astype(np.float64), cross=cross,
-                      jsum=per_cluster(jsum), scaled=per_cluster(jsum * (n_t[:, None] * inverse)[:, :, None]),
-                      offsets=np.stack([np.bincount(cluster, weights=o[:, c], minlength=groups) for c in range(3)],
-                                       axis=1))
 
 
 def covariance(x, jtj, loss: float, samples: int, scores: np.ndarray | None, hessians: np.ndarray | None, held,
@@ -399,111 +286,79 @@ def _jackknife(h: np.ndarray, hg: np.ndarray, u: np.ndarray) -> np.ndarray:
     return block
 
 
-def parameter_intervals(space: ParameterSpace, cov: Covariance, statuses: dict | None = None,
-                        level: float = LEVEL) -> dict:
-    """Per parameter of the model, ``{"std", "interval95"}`` or ``{"status"}``.
-
-    ``std`` and the interval's ends are floats, or lists per channel for RGB
-    parameters (``interval95`` is then ``[[lo_r, lo_g, lo_b], [hi_r, hi_g, hi_b]]``,
-    with ``None`` and a per-channel ``status`` list where only some channels
-    are held). ``statuses`` names a status for held entries (free-vector
-    index -> status; default ``at_bound``). The diffuse reflectance is
-    included; fixed parameters are ``{"status": "fixed"}``.
-    """
-    statuses = statuses or {}
-    x, var = cov.x, np.diag(cov.covariance)
-    q = cov.quantile(level)
-    values = space.values(x)
-    jac = _value_jacobian(space, x)
-    out: dict = {name: {"status": FIXED} for name in space.fixed}
-    entries: dict = {}
+def region_uncertainty(space: ParameterSpace, problem: Problem, params: dict, pruned: list, cluster,
+                       method: str, data: tuple, seed: int = 0, offsets: AlbedoOffsets | None = None) -> dict:
+    """The parameters' uncertainty at the optimum ``params`` of ``problem`` (all
+    the region's samples), by ``method``
+    (:mod:`mifaces.reflectance.fit.uncertainty`): the clusters' sums (and JᵀJ, E) from
+    one kernel pass at the optimum; the bootstrap refits instead.
+    ``pruned`` lobes' scales and exponents get the status ``pruned``; ``data``
+    is the region's (light, view, reflectance, sigma), for the bootstrap; ``offsets``
+    the albedo offsets the reflectance was corrected by (:func:`fit_region`)."""
+    x = space.vector(params)
+    held = held_entries(space, x)
+    model, statuses = space.model, {}
+    names = {s for j in pruned for s in model.lobe_scales()[j]}
+    names |= {space.coupled[s] for s in names if s in space.coupled}
     for k, f in enumerate(space.free):
-        if cov.held[k]:
-            entry = (statuses.get(k, AT_BOUND), None, None, None)
-        else:
-            std = _std(jac[k], cov.covariance)
-            if np.isfinite(std):
-                lo, hi = _interval(space, x, k, f, q * np.sqrt(var[k]), std, q, values)
-                entry = (ESTIMATED, std, lo, hi)
-            else:
-                entry = (NOT_IDENTIFIED, None, None, None)
-        entries.setdefault(f.name, {})[f.channel] = entry
-    for name, channels in entries.items():
-        if None in channels:
-            status, std, lo, hi = channels[None]
-            out[name] = {"status": status} if status != ESTIMATED else {"std": std, "interval95": [lo, hi]}
-            continue
-        parts = [channels[c] for c in range(3)]
-        kinds = {p[0] for p in parts}
-        if kinds != {ESTIMATED} and len(kinds) == 1:
-            out[name] = {"status": parts[0][0]}
-            continue
-        out[name] = {"std": [p[1] for p in parts], "interval95": [[p[2] for p in parts], [p[3] for p in parts]]}
-        if kinds != {ESTIMATED}:
-            out[name]["status"] = [p[0] for p in parts]
-    return out
+        if f.name in names:
+            held[k], statuses[k] = True, PRUNED
+    # a lobe whose every scale sits at 0 has no width to measure
+    t = 0.5 * (1.0 + np.tanh(0.5 * x))
+    for j, scales in model.lobe_scales().items():
+        entries = [k for k, f in enumerate(space.free) if f.name in scales]
+        width = _lobe_width(space, j, scales)
+        if entries and all(held[k] and t[k] < 0.5 for k in entries) and width is not None:
+            for k, f in enumerate(space.free):
+                if f.name == width and not held[k]:
+                    held[k], statuses[k] = True, NOT_IDENTIFIED
+    if method == "bootstrap":
+        cov = bootstrap_covariance(space, x, held, cluster, data, seed=seed)
+    else:
+        index, groups = cluster_index(independent_clusters(problem.n) if cluster is None else cluster)
+        u, hg, loss = problem.cluster_sums(x, index, groups)  # one pass: JᵀJ = Σ_g H_g
+        terms = None
+        if offsets is not None and method != "laplace":
+            texel, texels = cluster_index(offsets.texel)
+            weight, jsum = problem.texel_sums(x, texel, texels)
+            terms = offset_sums(texel, index, groups, weight, jsum, offsets.shrinkage, offsets.offsets)
+        cov = covariance(x, hg.sum(axis=0), loss, problem.n, u, hg, held, method, offsets=terms)
+    return parameter_intervals(space, cov, statuses)
 
 
-def _std(row: np.ndarray, cov: np.ndarray) -> float:
-    """√(row Cov rowᵀ), the delta-method standard deviation; inf where an entry it needs is."""
-    idx = np.flatnonzero(row != 0)
-    block = cov[np.ix_(idx, idx)]
-    if not np.all(np.isfinite(block)):
-        return float("inf")  # it depends on an entry the samples do not constrain
-    return float(np.sqrt(max(float(row[idx] @ block @ row[idx]), 0.0)))
+def _lobe_width(space: ParameterSpace, lobe: int, scales: tuple) -> str | None:
+    """The parameter that sets lobe ``lobe``'s width: its scales' exponent (Lafortune), or the
+    model's :attr:`~mifaces.brdf.model.BRDFModel.WIDTH_GRID` parameter for the first lobe."""
+    for name in scales:
+        if name in space.coupled:
+            return space.coupled[name]
+    grid = space.model.WIDTH_GRID
+    return grid[0] if lobe == 1 and grid is not None else None
 
 
-def _interval(space: ParameterSpace, x, k: int, f, half_x: float, std: float, q: float, values: dict):
-    """Ends of the interval of free entry ``k``: x ± ``half_x`` mapped back, or for an
-    energy-coupled coefficient the value ± q·std clipped to its bound."""
-    if f.name in space.coupled:
-        value = values[f.name][f.channel] if f.channel is not None else values[f.name]
-        bound = float(space.model.coefficient_bound(float(values[space.coupled[f.name]]), np.log, np.exp))
-        return max(value - q * std, -bound), min(value + q * std, bound)
-    return space.entry_value(f, x[k] - half_x), space.entry_value(f, x[k] + half_x)
+def bootstrap_covariance(space: ParameterSpace, x, held, cluster, data: tuple, draws: int = BOOTSTRAP_DRAWS,
+                         iterations: int = 10, seed: int = 0) -> Covariance:
+    """Cov(x̂) from ``draws`` refits on clusters drawn with replacement (a
+    cluster drawn m times weighs m times: σ/√m), each started at ``x`` with at
+    most ``iterations`` LM steps; ``held`` entries are left out."""
+    light, view, reflectance, sigma = data
+    cluster = independent_clusters(len(sigma)) if cluster is None else np.asarray(cluster)
+    index, g = cluster_index(cluster)
+    rng = np.random.default_rng(seed)
+    xs = []
+    for _ in range(draws):
+        m = np.bincount(rng.integers(0, g, g), minlength=g)[index]
+        keep = m > 0
+        problem = Problem(space.model, space, light[keep], view[keep], reflectance[keep],
+                           sigma[keep] / np.sqrt(m[keep]))
+        xs.append(levenberg_marquardt(None, None, x, system=problem.system, max_iterations=iterations,
+                                      ftol=1e-6).x)
+    free = ~np.asarray(held, bool)
+    cov = np.zeros((len(x), len(x)))
+    if free.any():
+        cov[np.ix_(free, free)] = np.atleast_2d(np.cov(np.array(xs)[:, free], rowvar=False))
+    return Covariance(x=np.asarray(x, np.float64), covariance=cov, held=np.asarray(held, bool), dof=float(g - 1),
+                      method="bootstrap")
 
-
-def _value_jacobian(space: ParameterSpace, x, h: float = 1e-6) -> np.ndarray:
-    """d value / d x: row k is the derivative of free entry k's parameter value (its channel)
-    with respect to every entry of x, by central differences: of the entry's own map for the
-    parameters that depend on their entry alone, of all values for energy-coupled ones."""
-    x = np.asarray(x, np.float64)
-    p = len(x)
-    jac = np.zeros((p, p))
-    for k, f in enumerate(space.free):
-        if f.name not in space.coupled:
-            jac[k, k] = (space.entry_value(f, x[k] + h) - space.entry_value(f, x[k] - h)) / (2 * h)
-    coupled = [k for k, f in enumerate(space.free) if f.name in space.coupled]
-    if coupled:
-        def flat(v):
-            return np.array([float(v[space.free[k].name][space.free[k].channel] if space.free[k].channel is not None
-                                   else v[space.free[k].name]) for k in coupled])
-
-        for j in range(p):
-            step = np.zeros(p)
-            step[j] = h
-            jac[coupled, j] = (flat(space.values(x + step)) - flat(space.values(x - step))) / (2 * h)
-    return jac
-
-
-def held_entries(space: ParameterSpace, x, margin: float = 1e-3) -> np.ndarray:
-    """Free entries at either end of their range (within ``margin`` of it in
-    the reparameterised scale), or energy-coupled coefficients whose lobe is at
-    its energy bound (:meth:`ParameterSpace.at_bounds`)."""
-    t = 0.5 * (1.0 + np.tanh(0.5 * np.asarray(x, np.float64)))
-    upper = set(space.at_bounds(x, margin))
-    held = np.zeros(len(space.free), bool)
-    for k, (f, tk) in enumerate(zip(space.free, t)):
-        label = f.name if f.channel is None else f"{f.name}[{f.channel}]"
-        held[k] = label in upper or (f.name not in space.coupled and tk < margin)
-    return held
-
-
-def prior_intervals(params: dict) -> dict:
-    """``{"status": "prior"}`` for every parameter of a borrowed fit."""
-    return {name: {"status": PRIOR} for name in params}
-
-
-__all__ = ["METHODS", "LEVEL", "TILE_AT_128", "MAX_CLUSTERS", "BOOTSTRAP_DRAWS", "Covariance", "covariance",
-           "OffsetSums", "offset_sums", "cluster_index", "independent_clusters", "parameter_intervals",
-           "held_entries", "prior_intervals", "tile_clusters"]
+__all__ = ["METHODS", "TILE_AT_128", "MAX_CLUSTERS", "BOOTSTRAP_DRAWS", "covariance", "cluster_index",
+           "independent_clusters", "tile_clusters", "region_uncertainty", "bootstrap_covariance"]

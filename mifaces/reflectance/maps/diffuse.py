@@ -20,8 +20,9 @@ plus noise of variance s₀² σ_s², the posterior mean is
 
 with s₀² estimated from the scatter of the samples within texels and τ² from
 the scatter of the texel means beyond that noise (empirical Bayes, per region
-and channel). Well-sampled texels keep their own value (Σ w ≫ λ); with
-noise-free samples s₀ = 0 and the closed form above is unchanged.
+and channel: :func:`mifaces.reflectance.maps.shrinkage.empirical_bayes`).
+Well-sampled texels keep their own value (Σ w ≫ λ); with noise-free samples
+s₀ = 0 and the closed form above is unchanged.
 
 **Posterior standard deviation** (:attr:`DiffuseMap.std`). Under the same
 model the texel's posterior variance is
@@ -33,7 +34,7 @@ shrinkage, s₀² / Σ_s w_s. A texel without samples has its region's spread τ
 a region whose noise cannot be estimated (fewer than two texels with two
 samples) has NaN; texels outside the face 0. It leaves out the uncertainty of
 the region's glossy part and of ρ_R, which are shared by all texels of a
-region (:attr:`mifaces.reflectance.fit.regions.RegionFit.uncertainty`).
+region (:attr:`mifaces.reflectance.fit.region_fit.RegionFit.uncertainty`).
 """
 
 from __future__ import annotations
@@ -45,6 +46,8 @@ import mitsuba as mi
 import numpy as np
 
 from ... import brdf as brdf_models
+from ..samples import ReflectanceSamples
+from .shrinkage import empirical_bayes
 
 
 @dataclass
@@ -82,7 +85,7 @@ class AlbedoOffsets:
     Each offset o_i = a_t - ā is its texel t's refined albedo (the posterior mean
     of the module docstring, shrunk with λ) less its region's mean over the
     samples: a function of the samples of texel t and of the glossy fit.
-    :func:`mifaces.reflectance.fit.uncertainty.offset_sums` uses that to make the
+    :func:`mifaces.reflectance.fit.offset_uncertainty.offset_sums` uses that to make the
     intervals of the fit re-estimate the offsets when a tile is left out.
 
     Attributes
@@ -142,19 +145,14 @@ def specular_reflectance_factor(model, params_by_region: dict[int, dict], light,
     return np.pi * np.array(model.eval(wi, wo, params, diffuse=False)).T
 
 
-def shrinkage_weights(residual, w, texel, region, mean, total, counts, labels) -> dict:
-    """λ = s₀²/τ² per region label and channel (see the module docstring).
-
-    ``residual`` (N, 3) are the samples' x_s, ``mean`` (T, 3) the texels'
-    weighted means, ``total`` (T,) their Σ w, ``counts`` (T,) their sample
-    counts; all texel arrays are flat over the texture."""
-    return {label: lam for label, (lam, _, _) in noise_and_spread(residual, w, texel, region, mean, total, counts,
-                                                                   labels).items()}
-
-
 def noise_and_spread(residual, w, texel, region, mean, total, counts, labels) -> dict:
-    """Per region label, (λ, s₀², τ²) per channel (module docstring; arguments as
-    :func:`shrinkage_weights`); s₀² and τ² NaN where they cannot be estimated (λ = 0)."""
+    """Per region label, (λ, s₀², τ²) per channel (module docstring;
+    :func:`~mifaces.reflectance.maps.shrinkage.empirical_bayes`); s₀² and τ² NaN where they cannot
+    be estimated (λ = 0).
+
+    ``residual`` (N, 3) are the samples' x_s, ``mean`` (T, 3) the texels' weighted means,
+    ``total`` (T,) their Σ w, ``counts`` (T,) their sample counts; all texel arrays are flat
+    over the texture."""
     out = {}
     deviation = residual - mean[texel]
     for label in labels:
@@ -165,10 +163,9 @@ def noise_and_spread(residual, w, texel, region, mean, total, counts, labels) ->
         if dof < 2 or len(multi) < 2:
             out[label] = (np.zeros(3), np.full(3, np.nan), np.full(3, np.nan))  # no noise estimate: no shrinkage
             continue
-        s0 = np.sum(w[in_region, None] * np.square(deviation[in_region]), axis=0) / dof
-        between = np.var(mean[multi], axis=0) - s0 * np.mean(1.0 / total[multi])
-        tau = np.maximum(between, 1e-6 * np.maximum(np.mean(mean[multi], axis=0) ** 2, 1e-12))
-        out[label] = (s0 / tau, s0, tau)
+        squares = np.sum(w[in_region, None] * np.square(deviation[in_region]), axis=0)
+        floor = 1e-6 * np.maximum(np.mean(mean[multi], axis=0) ** 2, 1e-12)
+        out[label] = empirical_bayes(squares, dof, mean[multi], total[multi], floor)
     return out
 
 
@@ -187,8 +184,8 @@ def albedo_offsets(albedo, texel, label, where=None) -> np.ndarray:
     return offsets.astype(np.float32)
 
 
-def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflectance, sigma, texel, region,
-                   region_map: np.ndarray, shrinkage: bool = True) -> DiffuseMap:
+def refine_diffuse(model, params_by_region: dict[int, dict], samples: ReflectanceSamples, region_map: np.ndarray,
+                   shrinkage: bool = True) -> DiffuseMap:
     """Refit ρ_d per texel with each region's glossy part fixed (sec. 5.3).
 
     Parameters
@@ -196,13 +193,8 @@ def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflec
     model : BRDFModel or str
     params_by_region : dict
         Region label -> fitted parameters (as in ``RegionFit.params``).
-    light, view, reflectance : ndarray (N, 3)
-    sigma : ndarray (N,)
-        Confidence of eq. 10 (or 9).
-    texel : ndarray (N,)
-        Flat texel index (row · R + column) of each sample.
-    region : ndarray (N,)
-        Region label of each sample.
+    samples : ReflectanceSamples
+        The samples, with their region labels (``label``); σ the confidence of eq. 10 (or 9).
     region_map : ndarray (R, R)
         Region label of every texel, for filling texels without samples.
     shrinkage : bool
@@ -217,20 +209,21 @@ def refine_diffuse(model, params_by_region: dict[int, dict], light, view, reflec
     region_map = np.asarray(region_map)
     if region_map.ndim != 2 or region_map.shape[0] != region_map.shape[1]:
         raise ValueError(f"region_map must be a square (R, R) label image, got shape {region_map.shape}")
+    if samples.label is None:
+        raise ValueError("the samples have no region labels (samples.label; ReflectanceSamples.region)")
     size = region_map.size
-    texel = np.asarray(texel)
+    texel, region = np.asarray(samples.texel), np.asarray(samples.label)
     if texel.size and (texel.min() < 0 or texel.max() >= size):
         raise ValueError(f"texel indices must lie in [0, {size}) for a {region_map.shape} region map")
-    specular = specular_reflectance_factor(model, params_by_region, light, view, region) if len(texel) else \
-        np.zeros((0, 3))
-    w = 1.0 / np.square(np.asarray(sigma, np.float64))
+    specular = (specular_reflectance_factor(model, params_by_region, samples.light, samples.view, region)
+                if len(texel) else np.zeros((0, 3)))
+    w = 1.0 / np.square(np.asarray(samples.sigma, np.float64))
     total = np.bincount(texel, weights=w, minlength=size)
     albedo = np.empty((size, 3))
-    residual = np.asarray(reflectance, np.float64) - specular
+    residual = np.asarray(samples.reflectance, np.float64) - specular
     for c in range(3):
         albedo[:, c] = np.bincount(texel, weights=w * residual[:, c], minlength=size) / np.maximum(total, 1e-300)
     counts = np.bincount(texel, minlength=size)
-    region = np.asarray(region)
     labels = region_map.ravel()
     # NaN (not known) on the texels of the regions with a BRDF until estimated, 0 outside the face
     variance = np.where(np.isin(labels, list(params_by_region))[:, None], np.nan, 0.0) * np.ones(3)

@@ -53,7 +53,7 @@ encoded (x + 1) / 2 per channel (:func:`encode`).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.ndimage
@@ -61,7 +61,7 @@ import scipy.ndimage
 from ...model.texture_space import rasterize
 from .diffuse import albedo_offsets
 from .normal_fit import NormalFit, refine_normals
-from ..samples import MIN_COSINE, texel_geometry
+from ..samples import MIN_COSINE, ReflectanceSamples, texel_geometry
 
 #: Default weight of the model's normal in a texel's normal step, in observations of mean weight.
 PRIOR_WEIGHT = 0.5
@@ -85,9 +85,9 @@ class TexelNormals:
         Texels whose normal was estimated (at least :data:`MIN_OBSERVATIONS` samples).
     fits : dict
         Region name -> RegionFit, fitted on the samples in the refined frames.
-    samples : tuple
-        (light, view, reflectance, sigma, keep): the samples in the refined
-        frames, and which of the input samples they are (bool (N,)).
+    samples : ReflectanceSamples
+        The samples in the refined frames (:func:`rotate_samples`): those of the input
+        still seen and lit above the grazing limit in them.
     loss : float
         E (module docstring) of the returned state, all regions.
     history : list of dict
@@ -97,7 +97,7 @@ class TexelNormals:
     normals: np.ndarray
     refined: np.ndarray
     fits: dict
-    samples: tuple
+    samples: ReflectanceSamples
     loss: float
     history: list = field(default_factory=list)
 
@@ -171,12 +171,13 @@ def rotate_samples(light, view, reflectance, sigma, normals, min_cosine: float =
 class _Region:
     """One region's texels with enough samples, as the normal step's (K, P) arrays."""
 
-    def __init__(self, light, view, reflectance, sigma, texel, measurement, select):
-        self.texels, index = texel_table(texel, measurement, select)
+    def __init__(self, samples: ReflectanceSamples, select):
+        self.texels, index = texel_table(samples.texel, samples.measurement, select)
         count = (index >= 0).sum(axis=0)
         enough = count >= MIN_OBSERVATIONS
         self.texels, index = self.texels[enough], index[:, enough]
-        self.light, self.view, self.values, self.weights = _observations(light, view, reflectance, sigma, index)
+        self.light, self.view, self.values, self.weights = _observations(samples.light, samples.view,
+                                                                         samples.reflectance, samples.sigma, index)
 
     def step(self, model, params, normals, prior_weight, search, iterations=30):
         """The normal step from ``normals`` (P, 3), a NormalFit; with ``iterations=0`` and no search,
@@ -188,25 +189,23 @@ class _Region:
                              search=search, iterations=iterations)
 
 
-def refine_texel_normals(model, fit, fits: dict, light, view, reflectance, sigma, texel, measurement, label,
-                         names: dict, resolution: int, *, prior_weight: float = PRIOR_WEIGHT, rounds: int = 8,
-                         tol: float = 1e-3, search=SEARCH, smooth: float = 0.0, progress=None) -> TexelNormals:
+def refine_texel_normals(model, fit, fits: dict, samples: ReflectanceSamples, names: dict, *,
+                         prior_weight: float = PRIOR_WEIGHT, rounds: int = 8, tol: float = 1e-3, search=SEARCH,
+                         smooth: float = 0.0, progress=None) -> TexelNormals:
     """Alternate the per-texel normal step with the region BRDF fit (module docstring).
 
     Parameters
     ----------
     model : BRDFModel
     fit : callable
-        ``fit(light, view, reflectance, sigma, label) -> {region name: RegionFit}``: the region fit of
+        ``fit(samples) -> {region name: RegionFit}``: the region fit of
         :func:`mifaces.reflectance.estimate.fit_brdf`, called on the samples in the refined frames.
     fits : dict
         Region name -> RegionFit at the model's normals (the fit without refinement).
-    light, view, reflectance, sigma, texel, measurement, label : ndarray (N, ...)
-        The face's samples (:class:`~mifaces.reflectance.samples.ReflectanceSamples` fields, region labels).
+    samples : ReflectanceSamples
+        The face's samples, with their region labels (``label``).
     names : dict
         Region label -> name, of the regions fitted.
-    resolution : int
-        R of the R × R texture.
     prior_weight : float
         Weight of the model's normal, in observations.
     rounds : int
@@ -227,8 +226,10 @@ def refine_texel_normals(model, fit, fits: dict, light, view, reflectance, sigma
         The best round's state (lowest E).
     """
     t0 = time.perf_counter()
-    texel, label = np.asarray(texel), np.asarray(label)
-    regions = {lab: _Region(light, view, reflectance, sigma, texel, measurement, label == lab) for lab in names}
+    if samples.label is None:
+        raise ValueError("the samples have no region labels (samples.label; ReflectanceSamples.region)")
+    texel, label, resolution = np.asarray(samples.texel), np.asarray(samples.label), samples.resolution
+    regions = {lab: _Region(samples, label == lab) for lab in names}
     size = resolution * resolution
     normals = np.zeros((size, 3))
     normals[:, 2] = 1.0
@@ -239,7 +240,7 @@ def refine_texel_normals(model, fit, fits: dict, light, view, reflectance, sigma
     history = [{"round": 0, "loss": loss, "seconds": time.perf_counter() - t0, "texels": 0, "mean_tilt_deg": 0.0}]
     if progress is not None:
         progress(history[-1])
-    best = (loss, normals.copy(), fits, (light, view, reflectance, sigma, np.ones(len(texel), bool)))
+    best = (loss, normals.copy(), fits, samples)
     for round_ in range(1, rounds + 1):
         t0 = time.perf_counter()
         for lab, region in regions.items():
@@ -249,11 +250,10 @@ def refine_texel_normals(model, fit, fits: dict, light, view, reflectance, sigma
             normals = smooth_normals(normals.reshape(resolution, resolution, 3),
                                      refined.reshape(resolution, resolution), smooth).reshape(-1, 3)
         loss, albedo = _evaluate(model, regions, fits, names, normals, prior_weight)
-        rotated = rotate_samples(light, view, reflectance, sigma, normals[texel])
-        kept_texel, kept_label = texel[rotated[4]], label[rotated[4]]
-        use = _fitted_samples(refined, kept_texel, kept_label)
-        offsets = albedo_offsets(albedo, kept_texel, kept_label, where=refined[kept_texel])
-        fits = fit(rotated[0][use], rotated[1][use], (rotated[2] - offsets)[use], rotated[3][use], kept_label[use])
+        rotated = _rotated(samples, normals[texel])
+        use = _fitted_samples(refined, rotated.texel, rotated.label)
+        offsets = albedo_offsets(albedo, rotated.texel, rotated.label, where=refined[rotated.texel])
+        fits = fit(replace(rotated, reflectance=rotated.reflectance - offsets).select(use))
         tilt = np.degrees(np.arccos(np.clip(normals[refined, 2], -1.0, 1.0)))
         history.append({"round": round_, "loss": loss, "seconds": time.perf_counter() - t0,
                         "texels": int(refined.sum()), "mean_tilt_deg": float(tilt.mean()) if tilt.size else 0.0})
@@ -268,6 +268,14 @@ def refine_texel_normals(model, fit, fits: dict, light, view, reflectance, sigma
     return TexelNormals(normals=normals.reshape(resolution, resolution, 3),
                         refined=refined.reshape(resolution, resolution), fits=fits, samples=rotated, loss=loss,
                         history=history)
+
+
+def _rotated(samples: ReflectanceSamples, normals) -> ReflectanceSamples:
+    """``samples`` in the frames of their texel's normal ``normals`` (N, 3): :func:`rotate_samples`,
+    the samples it keeps with their texel, measurement and label."""
+    light, view, reflectance, sigma, keep = rotate_samples(samples.light, samples.view, samples.reflectance,
+                                                           samples.sigma, normals)
+    return replace(samples.select(keep), light=light, view=view, reflectance=reflectance, sigma=sigma)
 
 
 def _evaluate(model, regions, fits, names, normals, prior_weight):

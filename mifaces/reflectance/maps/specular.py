@@ -22,7 +22,8 @@ variance s₀²/S: the posterior mean is
     k = (S k̂ + λ) / (S + λ),   λ = s₀² / τ²,
 
 with s₀² the residual variance of the samples about their texel's fit and τ²
-the scatter of k̂ beyond that noise (empirical Bayes, per region). A texel
+the scatter of k̂ beyond that noise (empirical Bayes, per region:
+:func:`mifaces.reflectance.maps.shrinkage.empirical_bayes`). A texel
 moves away from its region only as far as its samples justify. Roughness
 stays the region's: one texel's few samples rarely pin a lobe's width.
 """
@@ -33,7 +34,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..samples import ReflectanceSamples
 from .diffuse import specular_reflectance_factor
+from .shrinkage import empirical_bayes
 
 #: Texels with fewer samples keep the region's specular reflectance.
 MIN_SAMPLES = 3
@@ -61,7 +64,7 @@ class SpecularMap:
     shrinkage: dict
 
 
-def refine_specular(model, params_by_region: dict[int, dict], light, view, reflectance, sigma, texel, region,
+def refine_specular(model, params_by_region: dict[int, dict], samples: ReflectanceSamples,
                     region_map: np.ndarray) -> SpecularMap:
     """k per texel by shrunk least squares (module docstring).
 
@@ -71,10 +74,8 @@ def refine_specular(model, params_by_region: dict[int, dict], light, view, refle
         A model with a ``specular_reflectance`` parameter.
     params_by_region : dict
         Region label -> fitted parameters (``RegionFit.params``).
-    light, view, reflectance : ndarray (N, 3)
-    sigma : ndarray (N,)
-    texel, region : ndarray (N,)
-        Flat texel index and region label of each sample.
+    samples : ReflectanceSamples
+        The samples, with their region labels (``label``).
     region_map : ndarray (R, R)
 
     Returns
@@ -82,10 +83,12 @@ def refine_specular(model, params_by_region: dict[int, dict], light, view, refle
     SpecularMap
     """
     size = np.asarray(region_map).size
-    texel, region = np.asarray(texel), np.asarray(region)
-    g = specular_reflectance_factor(model, params_by_region, light, view, region)
-    r = np.asarray(reflectance, np.float64)
-    w = 1.0 / np.square(np.asarray(sigma, np.float64))
+    if samples.label is None:
+        raise ValueError("the samples have no region labels (samples.label; ReflectanceSamples.region)")
+    texel, region = np.asarray(samples.texel), np.asarray(samples.label)
+    g = specular_reflectance_factor(model, params_by_region, samples.light, samples.view, region)
+    r = np.asarray(samples.reflectance, np.float64)
+    w = 1.0 / np.square(np.asarray(samples.sigma, np.float64))
     total = np.bincount(texel, weights=w, minlength=size)
     safe = np.maximum(total, 1e-300)
     mean_r = np.stack([np.bincount(texel, weights=w * r[:, c], minlength=size) for c in range(3)], 1) / safe[:, None]
@@ -106,9 +109,8 @@ def refine_specular(model, params_by_region: dict[int, dict], light, view, refle
         dof = int(np.sum(3 * counts[t] - 4))  # three channels per sample; ρ_d (3) and k per texel
         if len(t) < 2 or dof < 2:
             continue
-        s0 = float(np.sum(w[in_region, None] * np.square(residual[in_region])) / dof)
-        tau = max(float(np.var(k_hat[t]) - np.mean(s0 / information[t])), 1e-6)
-        lam[int(label)] = s0 / tau
+        squares = np.sum(w[in_region, None] * np.square(residual[in_region]))
+        lam[int(label)] = float(empirical_bayes(squares, dof, k_hat[t], information[t], 1e-6)[0])
         scale[t] = (information[t] * k_hat[t] + lam[int(label)]) / (information[t] + lam[int(label)])
     scale = np.maximum(scale, 0.0)
     specular = np.zeros((size, 3))

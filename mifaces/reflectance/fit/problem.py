@@ -1,0 +1,208 @@
+"""The frozen Levenberg-Marquardt problem of a region fit: the weighted residuals (r - π f)/σ of
+one set of samples and the sums the solver and the uncertainty need, each one Dr.Jit kernel over the
+samples (:class:`Problem`).
+
+The model is evaluated by the same Dr.Jit functions the plugins use; its Jacobian comes from
+Dr.Jit's forward mode (a tangent per free parameter), and the normal equations are summed in the
+same kernel, one pass over the samples per step, accumulated in float64 (:func:`_sums`), frozen per
+model, parameter space and sample count (``dr.freeze``).
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ...arrays import device_array
+from .parameters import ParameterSpace
+
+
+class Problem:
+    """Residuals (r - π f)/σ of one set of samples, evaluated with Dr.Jit.
+
+    :meth:`system` and :meth:`loss` are one kernel each over the samples: the
+    model, its derivatives by forward mode (one tangent per free parameter, all
+    in the same kernel) and the sums of the normal equations, accumulated in
+    float64 (:func:`_sums`), frozen per model, parameter space and sample count
+    (``dr.freeze``), so a step replays the kernel instead of tracing the model again.
+    """
+
+    def __init__(self, model, space, light, view, reflectance, sigma):
+        self.model, self.space = model, space
+        # in Dr.Jit's own memory (device_array): a mapped NumPy array's alignment would enter the kernels
+        self.wi = mi.Vector3f(*(device_array(np.float32, light[:, k]) for k in range(3)))
+        self.wo = mi.Vector3f(*(device_array(np.float32, view[:, k]) for k in range(3)))
+        self.r = mi.Color3f(*(device_array(np.float32, reflectance[:, k]) for k in range(3)))
+        self.w = device_array(np.float32, 1.0 / np.asarray(sigma, np.float32))
+        self.n = len(sigma)
+        key = _signature(space)
+        if key not in _FROZEN:
+            def sums(arrays, u, jacobian):
+                return _sums(space, arrays, u, jacobian)
+
+            _FROZEN[key] = dr.freeze(sums, warn_after=1000,  # one recording per sample count
+                                     state_fn=lambda arrays, u, jacobian: (dr.width(arrays["w"]), jacobian))
+        self._sums = _FROZEN[key]
+
+    def _residuals(self, u):
+        params = self.space.drjit_params(u)
+        return (self.r - dr.pi * self.model.eval(self.wi, self.wo, params)) * self.w
+
+    def _run(self, x, jacobian: bool) -> np.ndarray:
+        arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w}
+        # opaque scalars: the kernel does not depend on the parameters' values
+        return np.asarray(self._sums(arrays, [dr.opaque(mi.Float, float(v)) for v in x], jacobian), np.float64)
+
+    def loss(self, x) -> float:
+        """½ Σ r², accumulated in float64."""
+        return float(self._run(x, False)[0])
+
+    def system(self, x):
+        """``(JᵀJ, Jᵀr, ½ Σ r²)`` (float64) at ``x``, in one pass over the samples."""
+        values, p = self._run(x, True), len(x)
+        jtj = np.zeros((p, p))
+        rows, cols = np.triu_indices(p)
+        jtj[rows, cols] = values[1:1 + len(rows)]
+        jtj[cols, rows] = values[1:1 + len(rows)]
+        return jtj, values[1 + len(rows):], float(values[0])
+
+    def cluster_sums(self, x, cluster: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray, float]:
+        """Per cluster g, the score u_g = Σ_{i ∈ g} J_iᵀ ρ_i (G, P) and H_g = Σ_{i ∈ g} J_iᵀ J_i
+        (G, P, P), summed over the colour channels, and the loss ½ Σ |ρ|², at ``x``; ``cluster``
+        (N,) numbers the clusters 0 … ``groups`` - 1 (JᵀJ = Σ_g H_g). One kernel (frozen per
+        parameter space as :meth:`system`'s is), whose sums stay on the Dr.Jit side: for the
+        covariance (:mod:`mifaces.reflectance.fit.uncertainty`), once per fit."""
+        p = len(x)
+        sums = self._group_sums("clusters", _cluster_sums, x, cluster, groups, 1 + p + p * (p + 1) // 2)
+        hg = np.zeros((groups, p, p))
+        rows, cols = np.triu_indices(p)
+        hg[:, rows, cols] = sums[:, 1 + p:]
+        hg[:, cols, rows] = sums[:, 1 + p:]
+        return sums[:, 1:1 + p], hg, 0.5 * float(sums[:, 0].sum())
+
+    def texel_sums(self, x, texel: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per texel t, W_t = Σ_{i ∈ t} 1/σ_i² (T,) and S_t = Σ_{i ∈ t} J_i/σ_i per colour channel
+        (T, 3, P), at ``x``; ``texel`` (N,) numbers the texels 0 … ``groups`` - 1. What the
+        offsets' part of the uncertainty needs (:func:`mifaces.reflectance.fit.offset_uncertainty.offset_sums`):
+        one kernel as :meth:`cluster_sums`'s, once per fit with ``albedo_rounds``."""
+        p = len(x)
+        sums = self._group_sums("texels", _texel_sums, x, texel, groups, 1 + 3 * p)
+        return sums[:, 0], sums[:, 1:].reshape(groups, 3, p)
+
+    def _group_sums(self, name: str, kernel, x, group: np.ndarray, groups: int, width: int) -> np.ndarray:
+        """``kernel(space, arrays, u, groups)``'s per-group sums at ``x`` for the samples' ``group``
+        (N,) numbers 0 … ``groups`` - 1, as a (groups, width) float64 array: one kernel, frozen per
+        parameter space and ``name``."""
+        key = (name,) + _signature(self.space)
+        if key not in _FROZEN:
+            space = self.space
+            _FROZEN[key] = dr.freeze(lambda arrays, u, g: kernel(space, arrays, u, g), warn_after=1000,
+                                     state_fn=lambda arrays, u, g: (dr.width(arrays["w"]), g))
+        arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w,
+                  "c": device_array(np.uint32, np.asarray(group, np.uint32))}
+        sums = _FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x], int(groups))
+        return np.asarray(sums, np.float64).reshape(groups, width)
+
+    def residuals_and_jacobian(self, x):
+        """The residuals (M,) and their Jacobian (M, P), float32, on the host (for solvers that
+        want them; :meth:`system` is what the fits use)."""
+        u = [dr.opaque(mi.Float, float(v)) for v in x]
+        dr.enable_grad(u)
+        res = self._residuals(u)
+        dr.eval(res)
+        r = np.array(dr.detach(res)).ravel()
+        jac = np.empty((r.size, len(u)), dtype=np.float32)
+        for k, uk in enumerate(u):
+            dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
+            jac[:, k] = np.array(dr.grad(res)).ravel()
+            dr.clear_grad(res)
+        return r, jac
+
+
+#: The frozen :func:`_sums` per parameter space (:func:`_signature`).
+_FROZEN: dict = {}
+
+
+def _signature(space: ParameterSpace) -> tuple:
+    """What the kernel of a parameter space depends on: the model and its options, the fixed
+    values (literals of the code) and the free parameters with their ranges."""
+    return (mi.variant(), space.model.name, repr(sorted(dict(space.model.options).items())),
+            repr(sorted(space.fixed.items())),
+            tuple((f.name, f.channel, f.lower, f.upper, f.log) for f in space.free))
+
+
+def _sums(space: ParameterSpace, arrays: dict, u: list, jacobian: bool):
+    """``[½ Σ r², (JᵀJ)_ab for a <= b (row-major upper triangle), (Jᵀr)_a]`` as one float64
+    array, summed over the samples and colour channels of the residuals
+    ``(r - π f)/σ`` of ``arrays`` (``wi``, ``wo``, ``r``, ``w``) at the free variables ``u``;
+    without ``jacobian`` only the first entry. One kernel: the derivatives are forward-mode
+    tangents of the same expression, the sums scatter-adds into a small array (per-thread
+    copies on the LLVM backend, ``dr.ReduceMode.Expand``)."""
+    n, p = dr.width(arrays["w"]), len(u)
+    r, d = _residual_tangents(space, arrays, u, tangents=jacobian)
+    sums = [0.5 * (r[0] * r[0] + r[1] * r[1] + r[2] * r[2])]
+    if jacobian:
+        sums += [d[a][0] * d[b][0] + d[a][1] * d[b][1] + d[a][2] * d[b][2] for a in range(p) for b in range(a, p)]
+        sums += [d[a][0] * r[0] + d[a][1] * r[1] + d[a][2] * r[2] for a in range(p)]
+    return _group_scatter(sums, dr.zeros(mi.UInt32, n), 1)  # one group: every sample
+
+
+#: Largest per-cluster sum array (float64 entries) summed with a per-thread copy (``dr.ReduceMode.Expand``).
+EXPAND_LIMIT = 1 << 16
+
+
+def _residual_tangents(space: ParameterSpace, arrays: dict, u: list, tangents: bool = True) -> tuple[list, list]:
+    """The residuals ``(r - π f)/σ`` of ``arrays`` (``wi``, ``wo``, ``r``, ``w``; three float64
+    channels) and, with ``tangents``, their forward-mode tangents along each unconstrained
+    parameter ``u[a]`` (``d[a][c]``; else none)."""
+    if tangents:
+        dr.enable_grad(u)
+    res = (arrays["r"] - dr.pi * space.model.eval(arrays["wi"], arrays["wo"], space.drjit_params(u))) * arrays["w"]
+    r = [mi.Float64(c) for c in dr.detach(res)]
+    d = []
+    for uk in u if tangents else ():
+        dr.forward_from(uk, flags=dr.ADFlag.ClearVertices)
+        d.append([mi.Float64(c) for c in dr.grad(res)])
+        dr.clear_grad(res)
+    return r, d
+
+
+def _group_scatter(terms: list, group, groups: int):
+    """``terms`` (per-sample float64 arrays) summed per group ``group`` into one array of ``groups``
+    rows of ``len(terms)``. Neighbouring samples share a group: per-thread copies of a small array,
+    else atomics reduced per packet. One kernel."""
+    k = len(terms)
+    acc = dr.zeros(mi.Float64, groups * k)
+    base = group * k
+    mode = dr.ReduceMode.Expand if groups * k <= EXPAND_LIMIT else dr.ReduceMode.Local
+    for j, value in enumerate(terms):
+        dr.scatter_add(acc, value, base + j, mode=mode)
+    dr.eval(acc)
+    return acc
+
+
+def _cluster_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
+    """``[Σ |ρ|², u_g (P entries), H_g (upper triangle, row-major)]`` per cluster ``arrays["c"]`` as one
+    float64 array of ``groups`` rows: the residuals ``(r - π f)/σ`` and their forward-mode
+    tangents (as in :func:`_sums`), scatter-added per cluster. One kernel."""
+    r, d = _residual_tangents(space, arrays, u)
+    p = len(u)
+    terms = [r[0] * r[0] + r[1] * r[1] + r[2] * r[2]]
+    terms += [d[a][0] * r[0] + d[a][1] * r[1] + d[a][2] * r[2] for a in range(p)]
+    terms += [d[a][0] * d[b][0] + d[a][1] * d[b][1] + d[a][2] * d[b][2] for a in range(p) for b in range(a, p)]
+    return _group_scatter(terms, arrays["c"], groups)
+
+
+def _texel_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
+    """``[Σ 1/σ², Σ J_c/σ for channel c and free entry a (row-major)]`` per texel ``arrays["c"]``
+    as one float64 array of ``groups`` rows (J the forward-mode tangents of the residuals
+    ``(r - π f)/σ``, as in :func:`_cluster_sums`). One kernel."""
+    _, d = _residual_tangents(space, arrays, u)
+    w = mi.Float64(arrays["w"])
+    terms = [w * w] + [w * d[a][c] for c in range(3) for a in range(len(u))]
+    return _group_scatter(terms, arrays["c"], groups)
+
+
+
+__all__ = ["Problem", "EXPAND_LIMIT"]

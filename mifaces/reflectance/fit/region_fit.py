@@ -1,0 +1,214 @@
+"""Fitting an analytic BRDF model to one set of reflectance samples, given as arrays (paper
+sec. 5.1-5.2): one face region's, or any other surface's.
+
+For one region, minimise the weighted error of eq. 8,
+
+    E(a) = ½ Σ_s |r_s - π f_a(l̂_s, v̂_s)|² / σ_s²,
+
+where r is the reflectance scaled so that a white Lambertian target has
+r = 1 (so the model predicts π f; f without cosine, see
+:mod:`mifaces.brdf.model`) and σ the confidence of eq. 9/10. The model is
+evaluated by the same Dr.Jit functions the plugins use; its Jacobian comes
+from Dr.Jit's forward mode (a tangent per free parameter), and the normal
+equations are summed in the same kernel, one pass over the samples per step
+(:class:`~mifaces.reflectance.fit.problem.Problem`); the steps are
+Levenberg-Marquardt (:mod:`mifaces.reflectance.fit.levenberg_marquardt`) on
+random subsets of growing size, each stage starting from the previous result
+(the paper's hierarchy). Parameters are kept in their valid ranges by reparameterisation:
+p = lo + (hi - lo)·sigmoid(x), or its logarithmic form for parameters that
+span decades (roughness, α, exponents).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ... import brdf as brdf_models
+from ...brdf.model import BRDFModel
+from ...status import AT_BOUND, AT_START, CONVERGED
+from ..maps.diffuse import AlbedoOffsets
+from .levenberg_marquardt import levenberg_marquardt
+from .lobes import SPIKE, prune_lobes
+from .parameters import ParameterSpace, linear_start
+from .problem import Problem
+from .uncertainty import METHODS, region_uncertainty
+
+
+@dataclass
+class SubsetSchedule:
+    """The hierarchy of random subsets: ``first`` samples, then ``growth``
+    times more per stage until all are used; at most ``iterations`` LM
+    iterations per stage and ``final_iterations`` on the full set."""
+
+    first: int = 2000
+    growth: int = 4
+    iterations: int = 20
+    final_iterations: int = 100
+    #: relative loss decrease that ends a stage before the last
+    stage_ftol: float = 1e-4
+
+    def sizes(self, n: int) -> list[int]:
+        sizes, k = [], max(1, self.first)
+        while k < n:
+            sizes.append(k)
+            k *= self.growth
+        return sizes + [n]
+
+
+#: One LM stage over all samples.
+FULL_DATA = SubsetSchedule(first=1 << 62)
+
+
+@dataclass
+class RegionFit:
+    """The fitted BRDF of one region, and how the fit went."""
+
+    model: str
+    options: dict
+    params: dict
+    loss: float
+    samples: int
+    seconds: float
+    status: str
+    reason: str
+    iterations: int
+    #: (seconds, loss, samples): after each accepted step, the loss on the
+    #: stage's subset scaled to the full set, and the subset's size
+    history: list = field(default_factory=list)
+    #: parameter -> ``{"std", "interval95"}`` or ``{"status"}``
+    #: (:func:`mifaces.reflectance.fit.intervals.parameter_intervals`); empty if not estimated
+    uncertainty: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["history"] = [[round(t, 6), float(e), int(n)] for t, e, n in self.history]
+        return d
+
+def validate_samples(light, view, reflectance, sigma) -> None:
+    """Shapes agree and nothing is NaN; raises ValueError naming the array."""
+    n = len(sigma)
+    for name, a, shape in [("light", light, (n, 3)), ("view", view, (n, 3)),
+                           ("reflectance", reflectance, (n, 3)), ("sigma", sigma, (n,))]:
+        if np.shape(a) != shape:
+            raise ValueError(f"{name} must have shape {shape}, got {np.shape(a)}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} contains {np.count_nonzero(~np.isfinite(a))} NaN or infinite values")
+    if np.any(sigma <= 0):
+        raise ValueError("sigma must be positive (it is a confidence scale, 1/weight)")
+
+
+def min_samples(model: BRDFModel, fixed: dict | None = None) -> int:
+    """Fewest samples a region needs for its own fit: 10 per free parameter."""
+    return 10 * len(ParameterSpace(model, fixed))
+
+
+def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start: dict | None = None,
+               fixed: dict | None = None, bounds: dict | None = None, schedule: SubsetSchedule | None = None,
+               seed: int = 0, ftol: float = 1e-7, trace: list | None = None, cluster=None,
+               uncertainty: str | None = METHODS[0], offsets: AlbedoOffsets | None = None) -> RegionFit:
+    """Fit ``model`` to one region's samples by hierarchical Levenberg-Marquardt.
+
+    Parameters
+    ----------
+    model : BRDFModel or str
+        A model from :mod:`mifaces.brdf`, or its name with default options.
+    light, view : ndarray (N, 3)
+        l̂ and v̂ in the local shading frame (z = normal).
+    reflectance : ndarray (N, 3)
+        r, scaled so that a white Lambertian target is 1 (r = π f).
+    sigma : ndarray (N,)
+        Confidence σ of each sample (eq. 9/10); weights are 1/σ².
+    start : dict, optional
+        Initial values; the rest come from :func:`linear_start`.
+    fixed, bounds : dict, optional
+        See :class:`ParameterSpace`; ``fixed`` defaults to the model's
+        :meth:`~mifaces.brdf.model.BRDFModel.fixed_defaults`.
+    schedule : SubsetSchedule, optional
+        The subset hierarchy; :data:`FULL_DATA` fits all samples at once.
+    seed : int
+        Seed of the random subsets.
+    trace : list, optional
+        If given, receives (seconds, parameter values) after every accepted
+        step, for reports that evaluate the full-data loss along the way.
+    cluster : ndarray (N,), optional
+        Cluster of each sample for the sandwich and bootstrap covariance (e.g.
+        :func:`~mifaces.reflectance.fit.uncertainty.tile_clusters`); default: the
+        samples independent (:func:`~mifaces.reflectance.fit.uncertainty.independent_clusters`).
+    uncertainty : str or None
+        How :attr:`RegionFit.uncertainty` is estimated at the optimum, one of
+        :data:`~mifaces.reflectance.fit.uncertainty.METHODS`; None leaves it out.
+    offsets : AlbedoOffsets, optional
+        The per-texel albedo offsets ``reflectance`` was corrected by (``fit_brdf(...,
+        albedo_rounds=k)``): the jackknife and the sandwich then re-estimate them with
+        each cluster left out (:func:`~mifaces.reflectance.fit.offset_uncertainty.offset_sums`;
+        every texel's samples must lie in one cluster); Laplace and the bootstrap
+        take them as known.
+
+    Returns
+    -------
+    RegionFit
+        Parameters, the loss E of eq. 8 on all samples, status, history and
+        the parameters' uncertainty.
+    """
+    t0 = time.perf_counter()
+    model = brdf_models.model(model) if isinstance(model, str) else model
+    light, view = np.asarray(light, np.float32), np.asarray(view, np.float32)
+    reflectance, sigma = np.asarray(reflectance, np.float32), np.asarray(sigma, np.float32)
+    validate_samples(light, view, reflectance, sigma)
+    if uncertainty is not None and uncertainty not in METHODS:
+        raise ValueError(f"uncertainty must be one of {METHODS} or None, got {uncertainty!r}")
+    if cluster is not None and np.shape(cluster) != np.shape(sigma):
+        raise ValueError(f"cluster must have shape {np.shape(sigma)}, got {np.shape(cluster)}")
+    fixed = model.fixed_defaults() if fixed is None else fixed
+    space = ParameterSpace(model, fixed, bounds)
+    if len(sigma) < len(space):
+        raise ValueError(f"{model.name} has {len(space)} free parameters but only {len(sigma)} samples were given")
+    start = {**linear_start(model, light, view, reflectance, sigma, fixed, seed=seed), **(start or {})}
+    x = x_start = space.vector(start)
+    schedule = schedule or SubsetSchedule()
+    order = np.random.default_rng(seed).permutation(len(sigma))
+    history, iterations, result = [], 0, None
+    sizes = schedule.sizes(len(sigma))
+    for stage, size in enumerate(sizes):
+        idx = np.sort(order[:size])
+        problem = Problem(model, space, light[idx], view[idx], reflectance[idx], sigma[idx])
+        last = stage == len(sizes) - 1
+        result = levenberg_marquardt(None, None, x, system=problem.system,
+                                     max_iterations=schedule.final_iterations if last else schedule.iterations,
+                                     ftol=ftol if last else max(ftol, schedule.stage_ftol), clock_start=t0)
+        x = result.x
+        iterations += result.iterations
+        history += [(t, e * len(sigma) / size, size) for t, e, _ in result.history]
+        if trace is not None:
+            trace += [(t, space.values(xs)) for t, _, xs in result.history]
+    params, loss, reason, status = space.values(x), result.loss, result.reason, result.status
+    bounded = space.at_bounds(x)
+    if bounded and status == CONVERGED:
+        # the best fit lies outside the valid range: the samples do not support this model there
+        status, reason = AT_BOUND, f"{reason}; at the bound of its range: {', '.join(bounded)}"
+    elif space.glossy_unchanged(x_start, x):
+        # the solver never moved the glossy part: its values are the start's, not a measurement
+        status, reason = AT_START, f"{reason}; the glossy parameters stayed at their start values"
+    pruned = []
+    if len(model.lobe_scales()) > 1:
+        params, loss, pruned = prune_lobes(model, space, problem, params, loss)
+        if pruned:
+            reason += f"; lobe(s) {pruned} explained no sample and were set to zero"
+    # the lobe whose width the model names (its first), if it still reflects anything, as a spike
+    first = model.lobe_scales().get(1, ())
+    if any(np.any(np.asarray(params.get(s, 0.0)) != 0) for s in first) and space.at_spike(x):
+        status, reason = AT_BOUND, f"{reason}; {SPIKE}"
+    intervals = {}
+    if uncertainty is not None:
+        data = (light, view, reflectance, sigma)
+        intervals = region_uncertainty(space, problem, params, pruned, cluster, uncertainty, data, seed,
+                                       offsets=offsets)
+    return RegionFit(model=model.name, options=dict(model.options), params=params, loss=loss,
+                     samples=len(sigma), seconds=time.perf_counter() - t0, status=status,
+                     reason=reason, iterations=iterations, history=history, uncertainty=intervals)
+
+
+__all__ = ["SubsetSchedule", "FULL_DATA", "RegionFit", "validate_samples", "min_samples", "fit_region"]
