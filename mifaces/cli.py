@@ -1,10 +1,17 @@
 """The ``mifaces`` command line: a thin layer over the Python API.
 
-Each command is one API call that a script could make.
+Each command is one API call that a script could make. An option means the
+same in every command: ``--face-model`` names the face model (``simulate``,
+``fit-shape``, ``fit-brdf``, ``export``) and ``--brdf`` the BRDF model
+(``simulate``'s ground truth, the model ``fit-brdf`` fits, the models
+``measure`` and ``batch`` fit). ``--model``, which named the one or the
+other, still works for one release with a deprecation message
+(:func:`renamed`).
 """
 
 from __future__ import annotations
 
+import functools
 import inspect
 import json
 import math
@@ -33,7 +40,7 @@ from .reflectance.fit.uncertainty import METHODS as UNCERTAINTY_METHODS
 from .reflectance.io import KIND as BRDF_KIND, write_fitted
 from .refine import refine_estimate
 from .refine.shape import refine_fits
-from .report import RANKED
+from .report import RANKED, format_value
 from .shape import fit_shape as fit_shapes
 from .shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
 from .status import CONVERGED
@@ -47,6 +54,32 @@ MAX_TEXTURE = math.isqrt(MAX_IMAGE_PIXELS)
 def default(function, name: str):
     """The default of parameter ``name`` of API ``function``: the CLI states no default of its own."""
     return inspect.signature(function).parameters[name].default
+
+
+def renamed(old: str, new: str, name: str, **attrs):
+    """A decorator of a command: the hidden option ``old``, the spelling of
+    option ``new`` (parameter ``name``) before it was renamed, still sets
+    ``name`` for one release, with a deprecation message on stderr naming
+    ``new``. ``attrs`` are the option's (its type, ``multiple``); giving
+    both spellings is a usage error. Put it right below the command's
+    ``@main.command``."""
+    hidden = f"_{name}_as_{old.lstrip('-').replace('-', '_')}"
+
+    def decorate(command):
+        @functools.wraps(command)
+        def wrapper(*args, **kwargs):
+            value = kwargs.pop(hidden)
+            if value is not None and value != ():
+                ctx = click.get_current_context()
+                if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE:
+                    raise click.UsageError(f"give {new}, not both {new} and {old} (its deprecated spelling)")
+                click.echo(f"warning: {old} is deprecated and goes in the next release: use {new}", err=True)
+                kwargs[name] = value
+            return command(*args, **kwargs)
+
+        return click.option(old, hidden, hidden=True, default=None, **attrs)(wrapper)
+
+    return decorate
 
 
 class Commands(click.Group):
@@ -99,8 +132,9 @@ def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
 
 
 @main.command()
+@renamed("--model", "--face-model", "face_model")
 @click.argument("out", type=click.Path(file_okay=False))
-@click.option("--model", "face_model", default=default(simulate_capture, "model"), show_default=True,
+@click.option("--face-model", default=default(simulate_capture, "model"), show_default=True,
               help="Face model: 'builtin' or a model file (see mifaces.load_model).")
 @click.option("--brdf", "brdf_model", default=default(simulate_capture, "brdf"), show_default=True,
               type=click.Choice(BRDF_MODELS + BUILTIN_NAMES),
@@ -157,10 +191,11 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
 
 
 @main.command("fit-shape")
+@renamed("--model", "--face-model", "face_model")
 @click.argument("capture", type=click.Path(exists=True))
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Folder for <measurement>.npy/.json and shapes.json.")
-@click.option("--model", "face_model", default=default(fit_shapes, "model"), show_default=True,
+@click.option("--face-model", default=default(fit_shapes, "model"), show_default=True,
               help="Face model: 'builtin' or a model file (Surrey npz/bin, Basel mat/h5).")
 @click.option("--measurements", multiple=True, help="Fit only these measurements (repeatable; default: all).")
 @click.option("--iterations", default=None, type=click.FloatRange(min=0.01),
@@ -198,8 +233,9 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
 
 
 @main.command("fit-brdf")
+@renamed("--model", "--brdf", "brdf_model", type=click.Choice(BRDF_MODELS))
 @click.argument("capture", type=click.Path(exists=True))
-@click.option("--model", "brdf_model", default=default(fit_brdf_model, "model"), show_default=True,
+@click.option("--brdf", "brdf_model", default=default(fit_brdf_model, "model"), show_default=True,
               type=click.Choice(BRDF_MODELS), help="BRDF model to fit per region.")
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Folder for brdf.json, albedo.exr and scene.xml.")
@@ -239,25 +275,21 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolut
     click.echo(f"fitted {estimate.model} to {estimate.samples} samples of {len(estimate.measurements)} "
                f"photographs in {estimate.seconds['total']:.1f} s")
     for name, fit_ in estimate.fits.items():
-        params = ", ".join(f"{k}={_short(v)}" for k, v in fit_.params.items() if k != "diffuse_reflectance")
+        params = ", ".join(f"{k}={format_value(v, list_digits=4)}" for k, v in fit_.params.items()
+                           if k != "diffuse_reflectance")
         click.echo(f"  {name:9s} {fit_.samples:8d} samples  {fit_.status:10s} {params}")
     maps = "".join(f"{name}.exr, " for name, value in (("normals", estimate.normals), ("specular", estimate.specular))
                    if value is not None)
     click.echo(f"wrote {out_dir}/brdf.json, albedo.exr, {maps}scene.xml")
 
 
-def _short(value) -> str:
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
-    return f"{value:.4g}"
-
-
 @main.command()
+@renamed("--model", "--brdf", "models", multiple=True, type=click.Choice(BRDF_MODELS))
 @click.argument("capture", required=False, type=click.Path(exists=True))
 @click.option("--out", "out_dir", default="out/measure", show_default=True, type=click.Path(file_okay=False),
               help="Output folder (capture/, shapes/, brdf/<model>/, report.md/json/png).")
-@click.option("--model", "models", multiple=True, type=click.Choice(BRDF_MODELS),
-              help="BRDF model(s) to fit (default: all four).")
+@click.option("--brdf", "models", multiple=True, type=click.Choice(BRDF_MODELS),
+              help="BRDF model(s) to fit, repeatable (default: all four).")
 @click.option("--geometry", default=default(measure_capture, "geometry"), show_default=True,
               type=click.Choice(GEOMETRIES),
               help="Fit the face model to each photograph, or use a simulated capture's true shapes.")
@@ -287,7 +319,8 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")
         errors = f"  (vs ground truth: {', '.join(f'{k} {100 * v:.1f}%' for k, v in truth.items())})" if truth else ""
-        click.echo(f"{model:13s} skin: {', '.join(f'{k}={_short(v)}' for k, v in skin.items())}{errors}")
+        values = ", ".join(f"{k}={format_value(v, list_digits=4)}" for k, v in skin.items())
+        click.echo(f"{model:13s} skin: {values}{errors}")
     face = report.get("face_model") or {}
     if "truth_shape_modes" in face:
         errors = report.get("shape_errors") or {}
@@ -459,6 +492,7 @@ def diligent(object_dir: str, out: str, force: bool) -> None:
 
 
 @main.command()
+@renamed("--model", "--brdf", "models", multiple=True, type=click.Choice(BRDF_MODELS))
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(exists=True, file_okay=False))
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Batch folder: <name>/ per capture (as mifaces measure writes it), batch.json, population.md/json/png.")
@@ -466,8 +500,8 @@ def diligent(object_dir: str, out: str, force: bool) -> None:
               help="Worker processes of the local Dask cluster (default: one per core, at most one per capture).")
 @click.option("--scheduler", default=None,
               help="Address (tcp://host:port) or scheduler file of a running Dask scheduler, instead of a local cluster.")
-@click.option("--model", "models", multiple=True, type=click.Choice(BRDF_MODELS),
-              help="BRDF model(s) to fit (default: all four).")
+@click.option("--brdf", "models", multiple=True, type=click.Choice(BRDF_MODELS),
+              help="BRDF model(s) to fit, repeatable (default: all four).")
 @click.option("--resume", is_flag=True, help="Skip captures whose results in --out are complete.")
 @click.option("--import", "importer", default=None,
               help="'yaleb': INPUTS are raw data (Yale subject folders, or folders of them), imported into OUT/captures "

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -42,13 +42,12 @@ from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, as_given, balance_intensit
                        estimate_environments, estimate_lights, lights_document, refit_lights, write_lights,
                        write_lights_picture)
 from .model import load_model
-from .reflectance import FitOptions, capture_samples, fit_brdf, write_estimate
+from .reflectance import BRDFEstimate, FitOptions, capture_samples, fit_brdf, write_estimate
 from .reflectance.light_balance import balance_given_lights
 from .refine import refine_estimate
 from .refine.shape import refine_lit, refined_fits
 from .render import FaceScene, light_arguments
-from .report import (ranking, write_markdown, write_picture, write_uncertainty_picture,
-                     write_validation_picture)
+from .report import ranking, write_fit_picture, write_markdown, write_uncertainty_picture, write_validation_picture
 from .report_html import write_html
 from .shape import fit_shape, shapes_in_world
 from .shape.fit import model_source
@@ -76,6 +75,32 @@ MAP_WITHOUT_REFINE = ("photographs lit by an environment map are read as lit fro
 
 class NoUsableShapeError(ValueError):
     """No photograph of a capture got a shape fit that the next stages can use."""
+
+
+@dataclass(frozen=True)
+class FittedModel:
+    """One BRDF model fitted by :func:`measure`: its estimate and its row of
+    the report's picture (:func:`mifaces.report.write_fit_picture`).
+
+    Attributes
+    ----------
+    model : str
+        The BRDF model's name.
+    photo : (H, W, 3) array
+        The first photograph, linear.
+    rendered : (H, W, 3) array
+        The fitted face rendered in its place, under its light.
+    relit : (H, W, 3) array
+        The fitted face under the novel light (:func:`novel_light`).
+    estimate : BRDFEstimate
+        The fit (refined where asked), which the validation measures.
+    """
+
+    model: str
+    photo: np.ndarray
+    rendered: np.ndarray
+    relit: np.ndarray
+    estimate: BRDFEstimate
 
 
 def novel_light(capture, centre: np.ndarray) -> dict:
@@ -267,16 +292,16 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
         validator = Validator(capture, face, shapes[first.name], first.name)
         timings["validation_truth"] = time.perf_counter() - t
         report["validation"] = validator.summary
-    panels, validation_images = [], {}
+    fitted, validation_images = [], {}
     for model in models:
-        entry, panel = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, spp, timings,
-                                  progress, options, refine)
+        entry, result = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, spp, timings,
+                                   progress, options, refine)
         if validator is not None:
             t = time.perf_counter()
-            entry["validation"], validation_images[model] = validator.validate(panel[-1])
+            entry["validation"], validation_images[model] = validator.validate(result.estimate)
             timings[f"validation_{model}"] = time.perf_counter() - t
         report["models"][model] = entry
-        panels.append(panel[:-1])
+        fitted.append(result)
     timings["total"] = time.perf_counter() - t0
     report["seconds"] = timings
     report["novel_light"] = {key: np.asarray(value).tolist() for key, value in novel.items()}
@@ -285,7 +310,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
     write_json(out / "report.json", report)
     if validator is not None:
         write_validation_picture(out / "report.png", validator.truth, validation_images, report)
-    write_picture(out / ("report.png" if validator is None else "report_training.png"), panels, first.name)
+    write_fit_picture(out / ("report.png" if validator is None else "report_training.png"), fitted, first.name)
     write_uncertainty_picture(out / "report_uncertainty.png", report)
     write_markdown(out / "report.md", report, first.name)
     best = report.get("ranking", {}).get("heldout_rmse", list(models))[0]
@@ -375,10 +400,10 @@ def _refine_shapes(out: Path, capture: Capture, face, shapes: dict, fits, sample
 
 
 def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, scene: FaceScene, first,
-               novel, spp: int, timings: dict, progress: bool, options: FitOptions, refine: bool):
+               novel, spp: int, timings: dict, progress: bool, options: FitOptions,
+               refine: bool) -> tuple[dict, FittedModel]:
     """Fit one BRDF model, write it, render it in the first photograph's place
-    and under the novel light; the report's entry, and its picture row
-    followed by the estimate."""
+    and under the novel light; the report's entry, and the fitted model."""
     t = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -403,4 +428,4 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
     photo = first.image.pixels
     face_pixels = coverage(scene, capture.camera)  # the fitted face's pixels, whatever the background shows
     entry["training_rmse"] = relative_rmse(rendered, photo, face_pixels)
-    return entry, (model, photo, rendered, relit, estimate)
+    return entry, FittedModel(model, photo, rendered, relit, estimate)

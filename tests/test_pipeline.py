@@ -91,7 +91,7 @@ def test_cli_measure_prints_skin_and_errors(capture_dir, tmp_path):
 
     out = tmp_path / "cli"
     result = CliRunner().invoke(main, ["--variant", "llvm_ad_rgb", "measure", str(capture_dir), "--out", str(out),
-                                       "--model", "ward", "--geometry", "ground-truth", "--resolution", "64"])
+                                       "--brdf", "ward", "--geometry", "ground-truth", "--resolution", "64"])
     assert result.exit_code == 0, result.output
     line = next(line for line in result.output.splitlines() if line.startswith("ward"))
     assert "skin:" in line and "alpha=" in line and "specular_reflectance=[" in line
@@ -150,7 +150,7 @@ def test_cli_fit_shape_then_fit_brdf_on_the_fitted_shape(capture_dir, tmp_path):
     assert "m00: converged" in result.output
     index = json.loads((shapes / "shapes.json").read_text())
     assert index["model_source"] == "builtin"
-    result = runner.invoke(main, ["--variant", "llvm_ad_rgb", "fit-brdf", str(capture_dir), "--model", "ward",
+    result = runner.invoke(main, ["--variant", "llvm_ad_rgb", "fit-brdf", str(capture_dir), "--brdf", "ward",
                                   "--geometry", str(shapes), "--out", str(tmp_path / "brdf"), "--resolution", "48"])
     assert result.exit_code == 0, result.output
     data = json.loads((tmp_path / "brdf" / "brdf.json").read_text())
