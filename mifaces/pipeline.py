@@ -33,8 +33,6 @@ import numpy as np
 
 from .brdf import NAMES
 from .capture import Capture, load_capture, read_ground_truth
-from .capture.types import RELATIVE_IRRADIANCE
-from .environment import dominant_direction
 from .export import export_face
 from .files import write_json
 from .geometry import load_geometry
@@ -55,6 +53,7 @@ from .shape.io import write_fit, write_index
 from .shape_errors import capture_shape_errors
 from .studio import simulate
 from .validation.truth_errors import ground_truth_errors
+from .validation.held_out import novel_light
 from .validation.validator import Validator, coverage, relative_rmse
 
 #: Models ``measure`` fits unless told otherwise.
@@ -101,54 +100,6 @@ class FittedModel:
     rendered: np.ndarray
     relit: np.ndarray
     estimate: BRDFEstimate
-
-
-def novel_light(capture, centre: np.ndarray) -> dict:
-    """A light none of the measurements used, as keyword arguments of
-    :meth:`mifaces.render.FaceScene.render`: :func:`novel_point_light` for
-    point lights, :func:`novel_direction` for directional ones; for an environment map a
-    directional light of irradiance :data:`RELATIVE_IRRADIANCE` mirrored from the map's
-    :func:`~mifaces.environment.dominant_direction`."""
-    first = next((light for light in capture.lights if not light.environment), capture.lights[0])
-    if first.environment:  # a directional light from the other side of where most of the map's light comes
-        towards = capture.camera.rotation @ dominant_direction(first.envmap, capture.camera)
-        return {"light_direction": capture.camera.rotation.T @ _mirrored(towards),
-                "intensity": np.full(3, RELATIVE_IRRADIANCE)}
-    if first.directional:
-        return {"light_direction": novel_direction(capture), "intensity": first.intensity}
-    return {"light_position": novel_point_light(capture, centre), "intensity": first.intensity}
-
-
-def novel_direction(capture) -> np.ndarray:
-    """A light direction none of the measurements used: the mean of the
-    capture's directions mirrored left-right in the camera's view (or
-    turned 40° sideways where it is frontal)."""
-    mean = np.mean([light.direction for light in capture.lights if light.directional], axis=0)
-    return capture.camera.rotation.T @ _mirrored(capture.camera.rotation @ (mean / np.linalg.norm(mean)))
-
-
-def _mirrored(direction: np.ndarray) -> np.ndarray:
-    """``direction`` (camera frame, unit) mirrored left-right, or turned 40°
-    sideways where it is nearly frontal."""
-    direction = np.array(direction, np.float64)
-    if abs(direction[0]) > 0.15:
-        direction[0] = -direction[0]
-        return direction
-    angle = np.radians(40.0)
-    return np.array([direction[0] * np.cos(angle) + direction[2] * np.sin(angle), direction[1],
-                     -direction[0] * np.sin(angle) + direction[2] * np.cos(angle)])
-
-
-def novel_point_light(capture, centre: np.ndarray) -> np.ndarray:
-    """A light position none of the measurements used: the mean direction of
-    the capture's lights from ``centre`` (the head, world frame) mirrored
-    left-right in the camera's view (or turned 40° sideways where it is
-    frontal), at their mean distance."""
-    offsets = np.array([light.position for light in capture.lights if light.position is not None]) - centre
-    distance = float(np.mean(np.linalg.norm(offsets, axis=1)))
-    direction = capture.camera.rotation @ offsets.mean(axis=0)  # camera frame: x right
-    direction = _mirrored(direction / np.linalg.norm(direction))
-    return centre + distance * (capture.camera.rotation.T @ direction)
 
 
 def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, options: FitOptions | None = None,

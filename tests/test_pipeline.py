@@ -103,7 +103,7 @@ def test_cli_measure_prints_skin_and_errors(capture_dir, tmp_path):
 
 def test_novel_light_is_not_a_capture_light(capture_dir):
     from mifaces.capture import load_capture
-    from mifaces.pipeline import novel_light
+    from mifaces.validation.held_out import novel_light
 
     capture = load_capture(capture_dir)
     centre = np.zeros(3)
@@ -122,7 +122,7 @@ def test_novel_direction_for_directional_lights(capture_dir):
     import dataclasses
 
     from mifaces.capture import load_capture
-    from mifaces.pipeline import novel_light
+    from mifaces.validation.held_out import novel_light
 
     capture = load_capture(capture_dir)
     lights = tuple(dataclasses.replace(lamp, position=None, direction=lamp.position / np.linalg.norm(lamp.position))

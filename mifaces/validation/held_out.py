@@ -1,7 +1,9 @@
 """The conditions a fit never saw, under which the validation renders the
 true and the fitted faces: a novel pose (:func:`novel_rotation`) and
 held-out lights (:func:`held_out_lights`) chosen away from the lights the
-simulator placed (:func:`true_lights`)."""
+simulator placed (:func:`true_lights`). :func:`held_out_lights` is the one
+choice of a light the capture did not use: the report's novel light
+(:func:`novel_light`) is its first."""
 
 from __future__ import annotations
 
@@ -111,5 +113,14 @@ def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -
     return out
 
 
+def novel_light(capture, centre: np.ndarray) -> dict:
+    """The light none of the measurements used that :func:`mifaces.pipeline.measure`
+    renders each fit under beside its photograph: the first of :func:`held_out_lights`
+    (of ``capture``'s lights, seen from ``centre``), as keyword arguments of
+    :meth:`mifaces.render.FaceScene.render`."""
+    light = held_out_lights(capture, centre, 1)[0]
+    return {key: value for key, value in light.items() if key != "angle_to_capture"}
+
+
 __all__ = ["NOVEL_POSE", "HELD_OUT_LIGHTS", "LIGHT_CANDIDATES", "novel_rotation", "turned", "true_lights",
-           "held_out_lights"]
+           "held_out_lights", "novel_light"]
