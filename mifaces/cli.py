@@ -6,13 +6,11 @@ same in every command: ``--face-model`` names the face model (``simulate``,
 (``simulate``'s ground truth, the model ``fit-brdf`` fits, the models
 ``measure`` and ``batch`` fit). ``--model``, which named the one or the
 other, still works for one release with a deprecation message
-(:func:`renamed`).
+(:func:`mifaces.cli_options.renamed`).
 """
 
 from __future__ import annotations
 
-import functools
-import inspect
 import json
 import math
 import warnings
@@ -32,6 +30,7 @@ from .gallery import render_gallery
 from .importers.diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
 from .importers.yaleb import SPLIT, import_subject
 from .capture.detector import NoFaceError, detect_landmarks
+from .cli_options import default, renamed, width_x_height
 from .model import load_model
 from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
 from .geometry import load_geometry
@@ -49,37 +48,6 @@ from .studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
 
 #: Largest texture resolution R the commands take (R x R texels).
 MAX_TEXTURE = math.isqrt(MAX_IMAGE_PIXELS)
-
-
-def default(function, name: str):
-    """The default of parameter ``name`` of API ``function``: the CLI states no default of its own."""
-    return inspect.signature(function).parameters[name].default
-
-
-def renamed(old: str, new: str, name: str, **attrs):
-    """A decorator of a command: the hidden option ``old``, the spelling of
-    option ``new`` (parameter ``name``) before it was renamed, still sets
-    ``name`` for one release, with a deprecation message on stderr naming
-    ``new``. ``attrs`` are the option's (its type, ``multiple``); giving
-    both spellings is a usage error. Put it right below the command's
-    ``@main.command``."""
-    hidden = f"_{name}_as_{old.lstrip('-').replace('-', '_')}"
-
-    def decorate(command):
-        @functools.wraps(command)
-        def wrapper(*args, **kwargs):
-            value = kwargs.pop(hidden)
-            if value is not None and value != ():
-                ctx = click.get_current_context()
-                if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE:
-                    raise click.UsageError(f"give {new}, not both {new} and {old} (its deprecated spelling)")
-                click.echo(f"warning: {old} is deprecated and goes in the next release: use {new}", err=True)
-                kwargs[name] = value
-            return command(*args, **kwargs)
-
-        return click.option(old, hidden, hidden=True, default=None, **attrs)(wrapper)
-
-    return decorate
 
 
 class Commands(click.Group):
@@ -123,14 +91,6 @@ def gallery(out_dir: str, spp: int, size: tuple[int, int]) -> None:
     click.echo(f"  {result['exr']}\n  {result['png']}")
 
 
-def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in value.lower().split("x"))
-    except ValueError:
-        raise click.BadParameter(f"must be WxH, e.g. 512x512, got {value!r}") from None
-    return width, height
-
-
 @main.command()
 @renamed("--model", "--face-model", "face_model")
 @click.argument("out", type=click.Path(file_okay=False))
@@ -152,7 +112,7 @@ def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
               type=click.IntRange(1),
               help="Number of measurements (three poses per light).")
 @click.option("--resolution", default="{}x{}".format(*default(simulate_capture, "resolution")), show_default=True,
-              callback=_width_x_height,
+              callback=width_x_height,
               help="Image size WxH.")
 @click.option("--seed", default=default(simulate_capture, "seed"), show_default=True, type=click.IntRange(0),
               help="Seed of everything random.")

@@ -208,8 +208,13 @@ class BRDFModel:
     :meth:`scaled_lobe`), which parameters a fit holds
     (:meth:`fixed_defaults`, :meth:`fixed_in_region`), how coefficients are
     kept energy-bounded (:meth:`energy_coupled`, :meth:`coefficient_bound`),
-    which lobes can be dropped (:meth:`lobe_scales`, :meth:`only_lobes`)
-    and how it is derived from a generic glossy lobe (:meth:`from_lobe`).
+    which lobes can be dropped (:meth:`lobe_scales`, :meth:`only_lobes`),
+    how it is derived from a generic glossy lobe (:meth:`from_lobe`,
+    :meth:`from_cook_torrance`) and how a ``brdf.json`` document of it is
+    checked and becomes a region's plugin (:meth:`validate_document`,
+    :meth:`region_plugin`, :meth:`merge_overrides`, :meth:`check_complete`),
+    as a Mitsuba built-in ground truth
+    (:class:`~mifaces.brdf.builtin.BuiltinBSDF`) does.
     The defaults here fit a model with one lobe scaled by
     ``specular_reflectance``.
     """
