@@ -26,8 +26,8 @@ import sys
 import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 import numpy as np
 
-from mifaces.capture import Camera
 from mifaces.brdf.model import rgb
+from mifaces.capture import Camera
 from mifaces.capture.detector import detect_landmarks
 from mifaces.model import load_model
 from mifaces.model.geometry import head_centre, rotation_matrix
