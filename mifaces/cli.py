@@ -1,11 +1,16 @@
 """The ``mifaces`` command line: a thin layer over the Python API.
 
-Each command is one API call that a script could make.
+Each command is one API call that a script could make. An option means the
+same in every command: ``--face-model`` names the face model (``simulate``,
+``fit-shape``, ``fit-brdf``, ``export``) and ``--brdf`` the BRDF model
+(``simulate``'s ground truth, the model ``fit-brdf`` fits, the models
+``measure`` and ``batch`` fit). ``--model``, which named the one or the
+other, still works for one release with a deprecation message
+(:func:`mifaces.cli_options.renamed`).
 """
 
 from __future__ import annotations
 
-import inspect
 import json
 import math
 import warnings
@@ -25,6 +30,7 @@ from .gallery import render_gallery
 from .importers.diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
 from .importers.yaleb import SPLIT, import_subject
 from .capture.detector import NoFaceError, detect_landmarks
+from .cli_options import default, renamed, width_x_height
 from .model import load_model
 from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
 from .geometry import load_geometry
@@ -33,7 +39,7 @@ from .reflectance.fit.uncertainty import METHODS as UNCERTAINTY_METHODS
 from .reflectance.io import KIND as BRDF_KIND, write_fitted
 from .refine import refine_estimate
 from .refine.shape import refine_fits
-from .report import RANKED
+from .report import RANKED, format_value
 from .shape import fit_shape as fit_shapes
 from .shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
 from .status import CONVERGED
@@ -42,11 +48,6 @@ from .studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
 
 #: Largest texture resolution R the commands take (R x R texels).
 MAX_TEXTURE = math.isqrt(MAX_IMAGE_PIXELS)
-
-
-def default(function, name: str):
-    """The default of parameter ``name`` of API ``function``: the CLI states no default of its own."""
-    return inspect.signature(function).parameters[name].default
 
 
 class Commands(click.Group):
@@ -90,17 +91,10 @@ def gallery(out_dir: str, spp: int, size: tuple[int, int]) -> None:
     click.echo(f"  {result['exr']}\n  {result['png']}")
 
 
-def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in value.lower().split("x"))
-    except ValueError:
-        raise click.BadParameter(f"must be WxH, e.g. 512x512, got {value!r}") from None
-    return width, height
-
-
 @main.command()
+@renamed("--model", "--face-model", "face_model")
 @click.argument("out", type=click.Path(file_okay=False))
-@click.option("--model", "face_model", default=default(simulate_capture, "model"), show_default=True,
+@click.option("--face-model", default=default(simulate_capture, "model"), show_default=True,
               help="Face model: 'builtin' or a model file (see mifaces.load_model).")
 @click.option("--brdf", "brdf_model", default=default(simulate_capture, "brdf"), show_default=True,
               type=click.Choice(BRDF_MODELS + BUILTIN_NAMES),
@@ -118,7 +112,7 @@ def _width_x_height(ctx, param, value: str) -> tuple[int, int]:
               type=click.IntRange(1),
               help="Number of measurements (three poses per light).")
 @click.option("--resolution", default="{}x{}".format(*default(simulate_capture, "resolution")), show_default=True,
-              callback=_width_x_height,
+              callback=width_x_height,
               help="Image size WxH.")
 @click.option("--seed", default=default(simulate_capture, "seed"), show_default=True, type=click.IntRange(0),
               help="Seed of everything random.")
@@ -157,10 +151,11 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
 
 
 @main.command("fit-shape")
+@renamed("--model", "--face-model", "face_model")
 @click.argument("capture", type=click.Path(exists=True))
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Folder for <measurement>.npy/.json and shapes.json.")
-@click.option("--model", "face_model", default=default(fit_shapes, "model"), show_default=True,
+@click.option("--face-model", default=default(fit_shapes, "model"), show_default=True,
               help="Face model: 'builtin' or a model file (Surrey npz/bin, Basel mat/h5).")
 @click.option("--measurements", multiple=True, help="Fit only these measurements (repeatable; default: all).")
 @click.option("--iterations", default=None, type=click.FloatRange(min=0.01),
@@ -198,8 +193,9 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
 
 
 @main.command("fit-brdf")
+@renamed("--model", "--brdf", "brdf_model", type=click.Choice(BRDF_MODELS))
 @click.argument("capture", type=click.Path(exists=True))
-@click.option("--model", "brdf_model", default=default(fit_brdf_model, "model"), show_default=True,
+@click.option("--brdf", "brdf_model", default=default(fit_brdf_model, "model"), show_default=True,
               type=click.Choice(BRDF_MODELS), help="BRDF model to fit per region.")
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Folder for brdf.json, albedo.exr and scene.xml.")
@@ -239,25 +235,21 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolut
     click.echo(f"fitted {estimate.model} to {estimate.samples} samples of {len(estimate.measurements)} "
                f"photographs in {estimate.seconds['total']:.1f} s")
     for name, fit_ in estimate.fits.items():
-        params = ", ".join(f"{k}={_short(v)}" for k, v in fit_.params.items() if k != "diffuse_reflectance")
+        params = ", ".join(f"{k}={format_value(v, list_digits=4)}" for k, v in fit_.params.items()
+                           if k != "diffuse_reflectance")
         click.echo(f"  {name:9s} {fit_.samples:8d} samples  {fit_.status:10s} {params}")
     maps = "".join(f"{name}.exr, " for name, value in (("normals", estimate.normals), ("specular", estimate.specular))
                    if value is not None)
     click.echo(f"wrote {out_dir}/brdf.json, albedo.exr, {maps}scene.xml")
 
 
-def _short(value) -> str:
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
-    return f"{value:.4g}"
-
-
 @main.command()
+@renamed("--model", "--brdf", "models", multiple=True, type=click.Choice(BRDF_MODELS))
 @click.argument("capture", required=False, type=click.Path(exists=True))
 @click.option("--out", "out_dir", default="out/measure", show_default=True, type=click.Path(file_okay=False),
               help="Output folder (capture/, shapes/, brdf/<model>/, report.md/json/png).")
-@click.option("--model", "models", multiple=True, type=click.Choice(BRDF_MODELS),
-              help="BRDF model(s) to fit (default: all four).")
+@click.option("--brdf", "models", multiple=True, type=click.Choice(BRDF_MODELS),
+              help="BRDF model(s) to fit, repeatable (default: all four).")
 @click.option("--geometry", default=default(measure_capture, "geometry"), show_default=True,
               type=click.Choice(GEOMETRIES),
               help="Fit the face model to each photograph, or use a simulated capture's true shapes.")
@@ -287,7 +279,8 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")
         errors = f"  (vs ground truth: {', '.join(f'{k} {100 * v:.1f}%' for k, v in truth.items())})" if truth else ""
-        click.echo(f"{model:13s} skin: {', '.join(f'{k}={_short(v)}' for k, v in skin.items())}{errors}")
+        values = ", ".join(f"{k}={format_value(v, list_digits=4)}" for k, v in skin.items())
+        click.echo(f"{model:13s} skin: {values}{errors}")
     face = report.get("face_model") or {}
     if "truth_shape_modes" in face:
         errors = report.get("shape_errors") or {}
@@ -459,6 +452,7 @@ def diligent(object_dir: str, out: str, force: bool) -> None:
 
 
 @main.command()
+@renamed("--model", "--brdf", "models", multiple=True, type=click.Choice(BRDF_MODELS))
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(exists=True, file_okay=False))
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Batch folder: <name>/ per capture (as mifaces measure writes it), batch.json, population.md/json/png.")
@@ -466,8 +460,8 @@ def diligent(object_dir: str, out: str, force: bool) -> None:
               help="Worker processes of the local Dask cluster (default: one per core, at most one per capture).")
 @click.option("--scheduler", default=None,
               help="Address (tcp://host:port) or scheduler file of a running Dask scheduler, instead of a local cluster.")
-@click.option("--model", "models", multiple=True, type=click.Choice(BRDF_MODELS),
-              help="BRDF model(s) to fit (default: all four).")
+@click.option("--brdf", "models", multiple=True, type=click.Choice(BRDF_MODELS),
+              help="BRDF model(s) to fit, repeatable (default: all four).")
 @click.option("--resume", is_flag=True, help="Skip captures whose results in --out are complete.")
 @click.option("--import", "importer", default=None,
               help="'yaleb': INPUTS are raw data (Yale subject folders, or folders of them), imported into OUT/captures "

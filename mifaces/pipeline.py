@@ -26,15 +26,13 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from .brdf import NAMES
 from .capture import Capture, load_capture, read_ground_truth
-from .capture.types import RELATIVE_IRRADIANCE
-from .environment import dominant_direction
 from .export import export_face
 from .face_pixels import face_pixels
 from .files import write_json
@@ -43,13 +41,12 @@ from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, as_given, balance_intensit
                        estimate_environments, estimate_lights, lights_document, refit_lights, write_lights,
                        write_lights_picture)
 from .model import load_model
-from .reflectance import FitOptions, capture_samples, fit_brdf, write_estimate
+from .reflectance import BRDFEstimate, FitOptions, capture_samples, fit_brdf, write_estimate
 from .reflectance.light_balance import balance_given_lights
 from .refine import refine_estimate
 from .refine.shape import refine_lit, refined_fits
 from .render import FaceScene, light_arguments
-from .report import (ranking, write_markdown, write_picture, write_uncertainty_picture,
-                     write_validation_picture)
+from .report import ranking, write_fit_picture, write_markdown, write_uncertainty_picture, write_validation_picture
 from .report_html import write_html
 from .shape import fit_shape, shapes_in_world
 from .shape.fit import model_source
@@ -57,6 +54,7 @@ from .shape.io import write_fit, write_index
 from .shape_errors import capture_shape_errors
 from .studio import simulate
 from .validation.truth_errors import ground_truth_errors
+from .validation.held_out import novel_light
 from .validation.validator import Validator, relative_rmse
 
 #: Models ``measure`` fits unless told otherwise.
@@ -79,52 +77,30 @@ class NoUsableShapeError(ValueError):
     """No photograph of a capture got a shape fit that the next stages can use."""
 
 
-def novel_light(capture, centre: np.ndarray) -> dict:
-    """A light none of the measurements used, as keyword arguments of
-    :meth:`mifaces.render.FaceScene.render`: :func:`novel_point_light` for
-    point lights, :func:`novel_direction` for directional ones; for an environment map a
-    directional light of irradiance :data:`RELATIVE_IRRADIANCE` mirrored from the map's
-    :func:`~mifaces.environment.dominant_direction`."""
-    first = next((light for light in capture.lights if not light.environment), capture.lights[0])
-    if first.environment:  # a directional light from the other side of where most of the map's light comes
-        towards = capture.camera.rotation @ dominant_direction(first.envmap, capture.camera)
-        return {"light_direction": capture.camera.rotation.T @ _mirrored(towards),
-                "intensity": np.full(3, RELATIVE_IRRADIANCE)}
-    if first.directional:
-        return {"light_direction": novel_direction(capture), "intensity": first.intensity}
-    return {"light_position": novel_point_light(capture, centre), "intensity": first.intensity}
+@dataclass(frozen=True)
+class FittedModel:
+    """One BRDF model fitted by :func:`measure`: its estimate and its row of
+    the report's picture (:func:`mifaces.report.write_fit_picture`).
 
+    Attributes
+    ----------
+    model : str
+        The BRDF model's name.
+    photo : (H, W, 3) array
+        The first photograph, linear.
+    rendered : (H, W, 3) array
+        The fitted face rendered in its place, under its light.
+    relit : (H, W, 3) array
+        The fitted face under the novel light (:func:`novel_light`).
+    estimate : BRDFEstimate
+        The fit (refined where asked), which the validation measures.
+    """
 
-def novel_direction(capture) -> np.ndarray:
-    """A light direction none of the measurements used: the mean of the
-    capture's directions mirrored left-right in the camera's view (or
-    turned 40° sideways where it is frontal)."""
-    mean = np.mean([light.direction for light in capture.lights if light.directional], axis=0)
-    return capture.camera.rotation.T @ _mirrored(capture.camera.rotation @ (mean / np.linalg.norm(mean)))
-
-
-def _mirrored(direction: np.ndarray) -> np.ndarray:
-    """``direction`` (camera frame, unit) mirrored left-right, or turned 40°
-    sideways where it is nearly frontal."""
-    direction = np.array(direction, np.float64)
-    if abs(direction[0]) > 0.15:
-        direction[0] = -direction[0]
-        return direction
-    angle = np.radians(40.0)
-    return np.array([direction[0] * np.cos(angle) + direction[2] * np.sin(angle), direction[1],
-                     -direction[0] * np.sin(angle) + direction[2] * np.cos(angle)])
-
-
-def novel_point_light(capture, centre: np.ndarray) -> np.ndarray:
-    """A light position none of the measurements used: the mean direction of
-    the capture's lights from ``centre`` (the head, world frame) mirrored
-    left-right in the camera's view (or turned 40° sideways where it is
-    frontal), at their mean distance."""
-    offsets = np.array([light.position for light in capture.lights if light.position is not None]) - centre
-    distance = float(np.mean(np.linalg.norm(offsets, axis=1)))
-    direction = capture.camera.rotation @ offsets.mean(axis=0)  # camera frame: x right
-    direction = _mirrored(direction / np.linalg.norm(direction))
-    return centre + distance * (capture.camera.rotation.T @ direction)
+    model: str
+    photo: np.ndarray
+    rendered: np.ndarray
+    relit: np.ndarray
+    estimate: BRDFEstimate
 
 
 def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, options: FitOptions | None = None,
@@ -268,16 +244,16 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
         validator = Validator(capture, face, shapes[first.name], first.name)
         timings["validation_truth"] = time.perf_counter() - t
         report["validation"] = validator.summary
-    panels, validation_images = [], {}
+    fitted, validation_images = [], {}
     for model in models:
-        entry, panel = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, spp, timings,
-                                  progress, options, refine)
+        entry, result = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, spp, timings,
+                                   progress, options, refine)
         if validator is not None:
             t = time.perf_counter()
-            entry["validation"], validation_images[model] = validator.validate(panel[-1])
+            entry["validation"], validation_images[model] = validator.validate(result.estimate)
             timings[f"validation_{model}"] = time.perf_counter() - t
         report["models"][model] = entry
-        panels.append(panel[:-1])
+        fitted.append(result)
     timings["total"] = time.perf_counter() - t0
     report["seconds"] = timings
     report["novel_light"] = {key: np.asarray(value).tolist() for key, value in novel.items()}
@@ -286,7 +262,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
     write_json(out / "report.json", report)
     if validator is not None:
         write_validation_picture(out / "report.png", validator.truth, validation_images, report)
-    write_picture(out / ("report.png" if validator is None else "report_training.png"), panels, first.name)
+    write_fit_picture(out / ("report.png" if validator is None else "report_training.png"), fitted, first.name)
     write_uncertainty_picture(out / "report_uncertainty.png", report)
     write_markdown(out / "report.md", report, first.name)
     best = report.get("ranking", {}).get("heldout_rmse", list(models))[0]
@@ -376,10 +352,10 @@ def _refine_shapes(out: Path, capture: Capture, face, shapes: dict, fits, sample
 
 
 def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, scene: FaceScene, first,
-               novel, spp: int, timings: dict, progress: bool, options: FitOptions, refine: bool):
+               novel, spp: int, timings: dict, progress: bool, options: FitOptions,
+               refine: bool) -> tuple[dict, FittedModel]:
     """Fit one BRDF model, write it, render it in the first photograph's place
-    and under the novel light; the report's entry, and its picture row
-    followed by the estimate."""
+    and under the novel light; the report's entry, and the fitted model."""
     t = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -404,4 +380,4 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
     photo = first.image.pixels
     on_face = face_pixels(scene, capture.camera)  # the fitted face's pixels, whatever the background shows
     entry["training_rmse"] = relative_rmse(rendered, photo, on_face)
-    return entry, (model, photo, rendered, relit, estimate)
+    return entry, FittedModel(model, photo, rendered, relit, estimate)

@@ -172,7 +172,7 @@ def write_population(out, reports: dict, record: dict | None = None) -> dict:
     write_json(paths["json"], stats)
     with atomic_write(paths["md"], "w") as f:
         f.write(markdown(stats))
-    write_picture(paths["png"], stats)
+    write_population_picture(paths["png"], stats)
     return {kind: str(path) for kind, path in paths.items()}
 
 
@@ -217,7 +217,7 @@ def markdown(stats: dict) -> str:
     return "\n".join(lines)
 
 
-def write_picture(path, stats: dict) -> None:
+def write_population_picture(path, stats: dict) -> None:
     """Strip plots: per model and parameter, each region's value per subject
     (outliers in red, the median as a bar), and the time per capture."""
     import matplotlib
@@ -248,4 +248,5 @@ def write_picture(path, stats: dict) -> None:
     save_figure(fig, path, dpi=100)
 
 
-__all__ = ["population", "write_population", "robust_summary", "components", "markdown", "write_picture"]
+__all__ = ["population", "write_population", "robust_summary", "components", "markdown",
+           "write_population_picture"]

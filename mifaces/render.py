@@ -24,8 +24,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import brdf as brdf_models
-from .brdf.builtin import region_bsdf as builtin_region_bsdf
-from .brdf.model import check_numbers
+from .brdf.model import check_numbers, rgb
 from .environment import environment_emitter
 from .files import atomic_path, check_render_size, write_exr, write_png
 from .progress import progress
@@ -90,12 +89,6 @@ def mitsuba_sensor(camera, spp: int) -> dict:
             "sampler": {"type": "independent", "sample_count": spp}}
 
 
-def rgb(value) -> dict:
-    """A Mitsuba ``rgb`` spectrum dict from a number or an RGB triple."""
-    v = np.broadcast_to(np.asarray(value, np.float64), 3)
-    return {"type": "rgb", "value": [float(x) for x in v]}
-
-
 def region_bsdf(truth: dict, region: str, texture, *, maps: Mapping | None = None) -> dict:
     """The Mitsuba BSDF dict of one region of a ``brdf.json`` document: its
     parameters over ``texture`` (a texture dict, a loaded texture, a reference,
@@ -107,23 +100,12 @@ def region_bsdf(truth: dict, region: str, texture, *, maps: Mapping | None = Non
     (:data:`mifaces.brdf.MODELS`) or a Mitsuba built-in
     (:data:`mifaces.brdf.BUILTINS`: ``roughplastic``, ``principled``), whose
     albedo property (``diffuse_reflectance``, ``base_color``) takes
-    ``texture``. ``maps`` (parameter name -> texture) puts spatially varying
-    parameters in place of the region's values (a spatially varying ground
-    truth, :mod:`mifaces.studio.varying`)."""
+    ``texture``: :func:`mifaces.brdf.bsdf`'s ``region_plugin`` builds it.
+    ``maps`` (parameter name -> texture) puts spatially varying parameters in
+    place of the region's values (a spatially varying ground truth,
+    :mod:`mifaces.studio.varying`)."""
     model = truth["model"]
-    if model in brdf_models.BUILTINS:
-        d = builtin_region_bsdf(truth, region, texture)
-    else:
-        options = dict(truth["options"])
-        instance = brdf_models.model(model, **options)
-        params = truth["regions"].get(region, truth["regions"]["skin"])
-        d = {"type": model} if texture is None else {"type": model, "diffuse_reflectance": texture}
-        for k, v in options.items():
-            if k != "lobes":
-                d[k] = v
-        kinds = {p.name: p.kind for p in instance.specular_parameters()}
-        for k, v in params.items():
-            d[k] = rgb(v) if kinds.get(k) == "rgb" else float(v)
+    d = brdf_models.bsdf(model, **truth.get("options", {})).region_plugin(truth, region, texture)
     for k, value in (maps or {}).items():
         if k not in d:
             raise ValueError(f"a {model} BSDF has no parameter {k!r} to take a map")
@@ -501,6 +483,6 @@ def scene_xml(scene: dict, parameters: Mapping[str, tuple[str, ...]] | None = No
     return header + ET.tostring(root, encoding="unicode") + "\n"
 
 
-__all__ = ["ALBEDO", "ALBEDO_REF", "NORMALS", "SPECULAR", "MESH_FOLDER", "render_passes", "save_image", "mitsuba_sensor", "rgb",
+__all__ = ["ALBEDO", "ALBEDO_REF", "NORMALS", "SPECULAR", "MESH_FOLDER", "render_passes", "save_image", "mitsuba_sensor",
            "region_bsdf",
            "RegionMesh", "region_meshes", "face_shapes", "FaceScene", "face_scene", "render_face", "scene_xml"]

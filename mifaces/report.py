@@ -3,14 +3,13 @@ and the report's picture and Markdown text."""
 
 from __future__ import annotations
 
+import numbers
 from pathlib import Path
 
 import numpy as np
 
-from .capture import read_ground_truth
 from .files import atomic_write, save_figure
-from .model.regions import REGIONS
-from .status import CONVERGED, NOT_FITTED
+from .status import CONVERGED
 from .validation.validator import TRUE_SHAPE
 
 
@@ -66,20 +65,26 @@ def write_validation_picture(path: Path, truth: dict, images: dict, report: dict
     save_figure(fig, path, dpi=90)
 
 
-def write_picture(path: Path, panels, photo_name: str) -> None:
+def write_fit_picture(path: Path, fitted, photo_name: str) -> None:
+    """The fits against the photograph (``report.png``, or ``report_training.png``
+    beside a validation): per fitted model (``fitted``, each a
+    :class:`mifaces.pipeline.FittedModel`) a row of the photograph
+    ``photo_name``, the fitted face under its light, their difference and the
+    fitted face under the novel light."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     show = _show
-    fig, axes = plt.subplots(len(panels), 4, figsize=(12, 3 * len(panels)), squeeze=False)
-    for row, (model, photo, rendered, relit) in zip(axes, panels):
+    fig, axes = plt.subplots(len(fitted), 4, figsize=(12, 3 * len(fitted)), squeeze=False)
+    for row, fit in zip(axes, fitted):
+        photo, rendered = fit.photo, fit.rendered
         scale = 0.8 / max(np.percentile(photo, 99.5), 1e-12)
         show(row[0], photo, f"photograph {photo_name}", scale)
-        show(row[1], rendered, f"{model}: fitted, same light", scale)
+        show(row[1], rendered, f"{fit.model}: fitted, same light", scale)
         show(row[2], 4 * np.abs(rendered - photo), "|difference| x 4", scale)
-        show(row[3], relit, f"{model}: novel light", scale)
+        show(row[3], fit.relit, f"{fit.model}: novel light", scale)
     fig.tight_layout()
     save_figure(fig, path, dpi=90)
 
@@ -101,7 +106,7 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
             err = (truth.get("regions") or {}).get(region)
             err_text = ", ".join(f"{k} {100 * v:.1f}%" for k, v in err.items()) if err else ""
             lines.append(f"| {model} | {region} | {fit['samples']} | {fit['status']} | {text} | "
-                         f"{_fmt(fit['loss'])} | {err_text} |")
+                         f"{format_value(fit['loss'])} | {err_text} |")
     lines += fit_notes(report)
     if "environment_note" in report:
         lines += ["", f"Note: {report['environment_note']}."]
@@ -249,9 +254,9 @@ def _with_interval(value, entry: dict | None) -> str:
     """``value ± half-width`` (per channel for RGB), or the value and its status."""
     half = half_width(value, entry)
     if half is None:
-        return _fmt(value)
+        return format_value(value)
     if isinstance(half, str):
-        return f"{_fmt(value)} ({half.replace('_', ' ')})"
+        return f"{format_value(value)} ({half.replace('_', ' ')})"
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(f"{v:.3g}" + ("" if h is None else f" ± {h:.2g}") for v, h in zip(value, half)) + "]"
     return f"{value:.4g} ± {half:.2g}"
@@ -297,9 +302,14 @@ def write_uncertainty_picture(path: Path, report: dict) -> None:
     save_figure(fig, path, dpi=90)
 
 
-def _fmt(value) -> str:
+def format_value(value, digits: int = 4, list_digits: int = 3) -> str:
+    """A parameter value, loss or status for a person to read: a number to
+    ``digits`` significant digits, a list of numbers (an RGB value) to
+    ``list_digits`` each, anything else (a status, None) as text. The
+    report's Markdown and the command line's summaries write values so;
+    :func:`mifaces.render.scene_xml` writes them in full, for Mitsuba."""
     if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(f"{v:.3g}" for v in value) + "]"
-    if isinstance(value, float):
-        return f"{value:.4g}"
+        return "[" + ", ".join(f"{v:.{list_digits}g}" for v in value) + "]"
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+        return f"{value:.{digits}g}"
     return str(value)

@@ -28,7 +28,7 @@ from mifaces.status import NOT_FITTED
 pytestmark = pytest.mark.slow
 
 #: Options of every batch here: the cheapest measurement that runs every stage.
-OPTIONS = ["--model", "phong", "--geometry", "ground-truth", "--resolution", "32", "--spp", "2"]
+OPTIONS = ["--brdf", "phong", "--geometry", "ground-truth", "--resolution", "32", "--spp", "2"]
 GOOD = ["s0", "s1", "s2", "s3"]
 #: Seconds any one wait for a subprocess may take.
 TIMEOUT = 240

@@ -148,7 +148,7 @@ def test_bad_geometry_is_named(capture_dir, tmp_path):
 
 def test_cli_fit_brdf(capture_dir, tmp_path):
     out = tmp_path / "cli"
-    result = CliRunner().invoke(main, ["--variant", "llvm_ad_rgb", "fit-brdf", str(capture_dir), "--model", "ward",
+    result = CliRunner().invoke(main, ["--variant", "llvm_ad_rgb", "fit-brdf", str(capture_dir), "--brdf", "ward",
                                        "--out", str(out), "--resolution", "48"])
     assert result.exit_code == 0, result.output
     assert "fitted ward to" in result.output and "skin" in result.output
@@ -157,7 +157,7 @@ def test_cli_fit_brdf(capture_dir, tmp_path):
     assert "std" in data["uncertainty"]["skin"]["diffuse_reflectance"]  # the default: intervals
     assert (out / "albedo_std.exr").is_file()
     quiet = tmp_path / "quiet"
-    result = CliRunner().invoke(main, ["--variant", "llvm_ad_rgb", "fit-brdf", str(capture_dir), "--model", "ward",
+    result = CliRunner().invoke(main, ["--variant", "llvm_ad_rgb", "fit-brdf", str(capture_dir), "--brdf", "ward",
                                        "--out", str(quiet), "--resolution", "48", "--uncertainty", "none"])
     assert result.exit_code == 0, result.output
     quiet_data = json.loads((quiet / "brdf.json").read_text())
@@ -294,7 +294,7 @@ def test_samples_carry_their_region(capture_dir, tmp_path):
 
 
 #: Same-family truths (SIMULATED, seed 7, 4 photographs of 192²): per model, the largest skin BRDF error
-#: over the hemisphere (relative, mifaces.validation.validator.brdf_rmse) and the width parameter's largest
+#: over the hemisphere (relative, mifaces.validation.brdf_error.brdf_rmse) and the width parameter's largest
 #: relative error a fit may have. Measured when written: Phong 3.9 % and exponent +19 %, Ward 4.4 %
 #: and α -4 %, Lafortune 18 % (its cz, the lobe's off-specular part, is the least determined by 4 views).
 SAME_FAMILY = {"phong": (0.06, ("exponent", 0.3)), "ward": (0.07, ("alpha", 0.1)), "lafortune": (0.27, None)}
@@ -305,7 +305,7 @@ def test_same_family_truths_are_recovered(small_capture, model):
     """A face rendered with Phong, Ward or Lafortune and fitted with the same model: skin's fitted BRDF
     lies near the truth over the hemisphere, and its lobe width near the true one."""
     from mifaces.capture import read_ground_truth
-    from mifaces.validation.validator import brdf_rmse, region_texels
+    from mifaces.validation.brdf_error import brdf_rmse, region_texels
 
     mifaces.set_variant("llvm_ad_rgb")
     capture = load_capture(small_capture(f"family_{model}", brdf=model, measurements=4, resolution=(192, 192),

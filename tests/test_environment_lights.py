@@ -259,7 +259,7 @@ def test_held_out_lights_avoid_the_maps_light(studio_capture):
     """Held-out lights of a capture lit by a map alone are directional, of irradiance pi, and none
     comes from where most of the map's light does; beside point lights, the map's direction is
     avoided too."""
-    from mifaces.validation.validator import held_out_lights
+    from mifaces.validation.held_out import held_out_lights
 
     capture = load_capture(studio_capture)
     key = dominant_direction(capture.lights[0].envmap, capture.camera)
@@ -291,7 +291,7 @@ def test_a_map_without_the_refinement_is_flagged(studio_capture, tmp_path):
 def test_held_out_lights_of_an_estimated_map_are_the_given_maps(studio_capture):
     """The held-out lights avoid the map the simulator rendered with, not the estimate: a run that
     estimated its map is judged under the same lights as one given the map."""
-    from mifaces.validation.validator import held_out_lights, true_lights
+    from mifaces.validation.held_out import held_out_lights, true_lights
 
     capture = load_capture(studio_capture)
     truth = read_ground_truth(capture)

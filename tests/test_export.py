@@ -49,7 +49,7 @@ def test_gltf_brdf_matches_mitsubas_principled_lobe():
     """glTF's specular layer (GGX, F0 from the index, f90 = 1) against Mitsuba's principled
     BSDF with the same roughness and index and no diffuse: an independent evaluation."""
     from mifaces.export.material import GltfLobe, gltf_brdf, hemisphere_pairs
-    from mifaces.validation.validator import eval_bsdf
+    from mifaces.validation.brdf_error import eval_bsdf
 
     mifaces.set_variant("llvm_ad_rgb")
     wi, wo = hemisphere_pairs(10)

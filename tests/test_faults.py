@@ -215,7 +215,7 @@ def test_3_fit_brdf_killed_inside_the_write_window(capture, tmp_path, points):
     previous set moved aside, the folder is absent (no reader sees part of a set). Either way the next run
     tidies up and leaves one whole set: the previous one, or the complete new one."""
     out = tmp_path / "brdf"
-    fit = ["fit-brdf", str(capture), "--out", str(out), "--model", "phong"]
+    fit = ["fit-brdf", str(capture), "--out", str(out), "--brdf", "phong"]
     assert _run(*fit, "--resolution", "16").exit_code == 0
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     _kill_in_write_window([str(Path(sys.executable).parent / "mifaces"), "--variant", "llvm_ad_rgb", *fit,
@@ -425,7 +425,7 @@ def test_9_lafortune_lobes_are_bounded():
         brdf.model("lafortune", lobes=50)
     with pytest.raises(RuntimeError, match=f"at most {MAX_LOBES} lobes"):
         mi.load_dict({"type": "lafortune", "cxy_50": -0.5, "cz_50": 0.5, "exponent_50": 3.0})
-    assert _run("fit-brdf", ".", "--out", "x", "--model", "lafortune", "--lobes", "50").exit_code == 2
+    assert _run("fit-brdf", ".", "--out", "x", "--brdf", "lafortune", "--lobes", "50").exit_code == 2
 
 
 # --------------------------------------------------------------------------------------------
@@ -457,7 +457,7 @@ def test_10_simulate_into_an_existing_empty_folder(tmp_path):
 def test_10_fit_brdf_and_render_into_existing_empty_folders(capture, tmp_path):
     """Before: `mifaces fit-brdf CAPTURE --out DIR` with DIR an empty folder fitted everything, then died."""
     out = _empty(tmp_path, "brdf")
-    result = _run("fit-brdf", str(capture), "--out", str(out), "--model", "phong", "--resolution", "16")
+    result = _run("fit-brdf", str(capture), "--out", str(out), "--brdf", "phong", "--resolution", "16")
     assert result.exit_code == 0, result.output
     assert verify_set(out, KIND) is not None and load_estimate(out)["resolution"] == 16
     images = _empty(tmp_path, "images")
@@ -480,7 +480,7 @@ def test_10_fit_shape_into_an_existing_empty_folder(capture, tmp_path):
 def test_10_measure_into_an_existing_empty_folder(capture, tmp_path):
     """`mifaces measure CAPTURE --out DIR` with DIR an empty folder writes the report and each model's set there."""
     out = _empty(tmp_path, "measure")
-    result = _run("measure", str(capture), "--out", str(out), "--model", "phong", "--geometry", "ground-truth",
+    result = _run("measure", str(capture), "--out", str(out), "--brdf", "phong", "--geometry", "ground-truth",
                   "--resolution", "16")
     assert result.exit_code == 0, result.output
     assert (out / "report.md").is_file() and verify_set(out / "brdf" / "phong", KIND) is not None
@@ -503,7 +503,7 @@ def test_10_batch_into_an_existing_empty_folder(tmp_path):
     broken = _empty(tmp_path, "broken")
     (broken / "capture.json").write_text('{"format": ')
     out = _empty(tmp_path, "batch")
-    result = _run("batch", str(broken), "--out", str(out), "--workers", "1", "--model", "phong",
+    result = _run("batch", str(broken), "--out", str(out), "--workers", "1", "--brdf", "phong",
                   "--geometry", "ground-truth", "--resolution", "16")
     assert result.exit_code == 1 and "1 capture(s) failed: broken" in result.output, result.output
     record = json.loads((out / "batch.json").read_text())

@@ -91,7 +91,7 @@ def test_cli_measure_prints_skin_and_errors(capture_dir, tmp_path):
 
     out = tmp_path / "cli"
     result = CliRunner().invoke(main, ["--variant", "llvm_ad_rgb", "measure", str(capture_dir), "--out", str(out),
-                                       "--model", "ward", "--geometry", "ground-truth", "--resolution", "64"])
+                                       "--brdf", "ward", "--geometry", "ground-truth", "--resolution", "64"])
     assert result.exit_code == 0, result.output
     line = next(line for line in result.output.splitlines() if line.startswith("ward"))
     assert "skin:" in line and "alpha=" in line and "specular_reflectance=[" in line
@@ -103,7 +103,7 @@ def test_cli_measure_prints_skin_and_errors(capture_dir, tmp_path):
 
 def test_novel_light_is_not_a_capture_light(capture_dir):
     from mifaces.capture import load_capture
-    from mifaces.pipeline import novel_light
+    from mifaces.validation.held_out import novel_light
 
     capture = load_capture(capture_dir)
     centre = np.zeros(3)
@@ -122,7 +122,7 @@ def test_novel_direction_for_directional_lights(capture_dir):
     import dataclasses
 
     from mifaces.capture import load_capture
-    from mifaces.pipeline import novel_light
+    from mifaces.validation.held_out import novel_light
 
     capture = load_capture(capture_dir)
     lights = tuple(dataclasses.replace(lamp, position=None, direction=lamp.position / np.linalg.norm(lamp.position))
@@ -150,7 +150,7 @@ def test_cli_fit_shape_then_fit_brdf_on_the_fitted_shape(capture_dir, tmp_path):
     assert "m00: converged" in result.output
     index = json.loads((shapes / "shapes.json").read_text())
     assert index["model_source"] == "builtin"
-    result = runner.invoke(main, ["--variant", "llvm_ad_rgb", "fit-brdf", str(capture_dir), "--model", "ward",
+    result = runner.invoke(main, ["--variant", "llvm_ad_rgb", "fit-brdf", str(capture_dir), "--brdf", "ward",
                                   "--geometry", str(shapes), "--out", str(tmp_path / "brdf"), "--resolution", "48"])
     assert result.exit_code == 0, result.output
     data = json.loads((tmp_path / "brdf" / "brdf.json").read_text())

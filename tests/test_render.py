@@ -11,7 +11,8 @@ import pytest
 from mifaces.capture import Camera
 from mifaces.files import write_exr
 from mifaces.model import load_model
-from mifaces.render import ALBEDO, ALBEDO_REF, FaceScene, region_meshes, rgb, scene_xml
+from mifaces.brdf.model import rgb
+from mifaces.render import ALBEDO, ALBEDO_REF, FaceScene, region_meshes, scene_xml
 
 SPP_PATH = ("sensor", "sampler", "sample_count")
 

@@ -14,8 +14,9 @@ import pytest
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.geometry import load_geometry
 from mifaces.reflectance import FitOptions, fit_brdf
-from mifaces.validation.validator import (Validator, brdf_rmse, hemisphere_grid, held_out_lights, novel_rotation,
-                                          relative_rmse)
+from mifaces.validation.brdf_error import brdf_rmse, hemisphere_grid
+from mifaces.validation.held_out import held_out_lights, novel_rotation
+from mifaces.validation.validator import Validator, relative_rmse
 
 MIN_SEPARATION = 10.0  # degrees between anything held out and anything the fit saw
 

@@ -21,7 +21,8 @@ from mifaces.capture import load_capture, read_ground_truth
 from mifaces.model import load_model
 from mifaces.model.regions import REGIONS, lookup
 from mifaces.model.texture_space import rasterize
-from mifaces.render import region_bsdf, rgb
+from mifaces.brdf.model import rgb
+from mifaces.render import region_bsdf
 from mifaces.studio.detail import span_residual
 from mifaces.studio.simulate import simulate
 from mifaces.studio.subsurface import SKIN1, dipole_albedo
@@ -265,7 +266,8 @@ def test_validation_judges_against_the_truth_with_its_maps(captures):
     maps, as the simulator photographed it, not with the region means its brdf.json records: the
     means differ from the truth in images and in BRDF, and agree with a uniform truth exactly."""
     from mifaces.studio.varying import map_textures
-    from mifaces.validation.validator import SEED, Validator, brdf_rmse, region_texels, relative_rmse
+    from mifaces.validation.brdf_error import brdf_rmse, region_texels
+    from mifaces.validation.validator import SEED, Validator, relative_rmse
 
     path = captures("varying", varying=True)
     truth = read_ground_truth(path)

@@ -26,6 +26,7 @@ import sys
 import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 import numpy as np
 
+from mifaces.brdf.model import rgb
 from mifaces.capture import Camera
 from mifaces.capture.detector import detect_landmarks
 from mifaces.model import load_model
@@ -33,7 +34,7 @@ from mifaces.model.geometry import head_centre, rotation_matrix
 from mifaces.model.ict_convert import ATLAS
 from mifaces.model.mesh import mitsuba_mesh
 from mifaces.model.regions import REGIONS
-from mifaces.render import mitsuba_sensor, rgb
+from mifaces.render import mitsuba_sensor
 
 SEED = 31
 FACES = 6

@@ -13,7 +13,7 @@ analysis by synthesis through Mitsuba fix what the texture-space fit misses?
    from.
 3. For the last refinement: each region's errors with and without it, the
    issue's targets, the image error under a light no photograph used
-   (:func:`mifaces.pipeline.novel_light`) against the ground truth rendered
+   (:func:`mifaces.validation.held_out.novel_light`) against the ground truth rendered
    the same way, cost.
 
 Run:  python validation/refine.py [--image 512] [--spp 2 4] [--iterations 96] [--capture DIR]
@@ -41,7 +41,7 @@ import numpy as np
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.files import write_json
 from mifaces.geometry import load_geometry
-from mifaces.pipeline import novel_light
+from mifaces.validation.held_out import novel_light
 from mifaces.reflectance import FitOptions, fit_brdf
 from mifaces.refine import RefineSchedule, refine_estimate
 from mifaces.render import FaceScene

@@ -17,7 +17,7 @@ reverse modes.
 
 from __future__ import annotations
 
-from .builtin import BUILTIN_NAMES, BUILTINS, validate_builtin
+from .builtin import BUILTIN_NAMES, BUILTINS, BuiltinBSDF
 from .cooktorrance import CookTorrance
 from .lafortune import Lafortune
 from .model import MAX_LOBES, BRDFModel, Parameter, ParameterError
@@ -47,13 +47,28 @@ def model(name: str, **options) -> BRDFModel:
     return cls(**options)
 
 
+def bsdf(name: str, **options) -> BRDFModel | BuiltinBSDF:
+    """The BSDF ``name``: one of the fitted models (:func:`model` with
+    ``options``) or one of Mitsuba's built-ins usable as ground truth
+    (:data:`~mifaces.brdf.builtin.BUILTINS`, its ``options`` checked). Both
+    answer what the renderers, the simulator and the readers of
+    ``brdf.json`` ask of a BSDF: ``validate_document``, ``region_plugin``,
+    ``default_options``, ``parameters``, ``from_cook_torrance``,
+    ``merge_overrides`` and ``check_complete``."""
+    if name in BUILTINS:
+        BUILTINS[name].check_options(options)
+        return BUILTINS[name]
+    return model(name, **options)
+
+
 def validate_brdf(document) -> dict:
     """A BRDF in the ``brdf.json`` layout (``{"model", "options", "regions"}``)
-    with its regions checked by :meth:`~mifaces.brdf.model.BRDFModel.validate_regions`:
-    the one validation the renderers, the simulator and the readers of
-    ``brdf.json`` share. A ground truth may also be one of Mitsuba's
-    built-ins (:data:`mifaces.brdf.builtin.BUILTINS`), checked by
-    :func:`~mifaces.brdf.builtin.validate_builtin`. Raises
+    checked by its :func:`bsdf`'s ``validate_document``
+    (:meth:`~mifaces.brdf.model.BRDFModel.validate_document`,
+    :meth:`~mifaces.brdf.builtin.BuiltinBSDF.validate_document`): the one
+    validation the renderers, the simulator and the readers of ``brdf.json``
+    share. A ground truth may also be one of Mitsuba's built-ins
+    (:data:`mifaces.brdf.builtin.BUILTINS`). Raises
     :class:`~mifaces.brdf.model.ParameterError` (or a ``ValueError`` for an
     unknown model or option)."""
     if not isinstance(document, dict) or not isinstance(document.get("model"), str):
@@ -61,17 +76,7 @@ def validate_brdf(document) -> dict:
     options = document.get("options", {})
     if not isinstance(options, dict):
         raise ParameterError(f"'options' of the BRDF must be an object of plugin options, got {options!r}"[:300])
-    if document["model"] in BUILTINS:
-        return validate_builtin(document)
-    regions = document.get("regions")
-    if document["model"] in MODELS and MODELS[document["model"]].SEVERAL_LOBES and "lobes" not in options:
-        # the lobes the regions name, as a scene's properties would (Lafortune's cxy_2, ...)
-        keys = [key for params in (regions if isinstance(regions, dict) else {}).values()
-                if isinstance(params, dict) for key in params]
-        lobes = max(MODELS[document["model"]].from_properties(keys, options.get).lobe_scales())
-        options = dict(options, lobes=lobes) if lobes > 1 else options
-    instance = model(document["model"], **options)
-    return dict(document, options=dict(options), regions=instance.validate_regions(regions))
+    return bsdf(document["model"], **options).validate_document(document)
 
 
 def evaluate(name: str, wi, wo, params, **options):
@@ -79,6 +84,6 @@ def evaluate(name: str, wi, wo, params, **options):
     return model(name, **options).eval(wi, wo, params)
 
 
-__all__ = ["BUILTINS", "BUILTIN_NAMES", "BRDFModel", "Parameter", "ParameterError", "MAX_LOBES", "MODELS", "NAMES", "model", "evaluate",
-           "validate_brdf",
+__all__ = ["BUILTINS", "BUILTIN_NAMES", "BuiltinBSDF", "BRDFModel", "Parameter", "ParameterError", "MAX_LOBES",
+           "MODELS", "NAMES", "model", "bsdf", "evaluate", "validate_brdf",
            "Phong", "CookTorrance", "Ward", "Lafortune"]

@@ -19,12 +19,12 @@ built-ins are not in any fitted family:
 A built-in ground truth keeps the ``brdf.json`` layout
 ``{"model", "options", "regions": {region: {parameter: value}}}`` with the
 built-in's own parameter names (Mitsuba's XML names); the albedo map is
-the diffuse reflectance (:attr:`Builtin.albedo`: roughplastic's
+the diffuse reflectance (:attr:`BuiltinBSDF.albedo`: roughplastic's
 ``diffuse_reflectance``, principled's ``base_color``).
 
 Mapping from the published Cook–Torrance skin values
 ----------------------------------------------------
-:func:`from_cook_torrance` turns a region's Cook–Torrance parameters
+:meth:`BuiltinBSDF.from_cook_torrance` turns a region's Cook–Torrance parameters
 (lobe scale ρ_s, Beckmann RMS slope m, index η;
 :data:`mifaces.studio.truth.COOK_TORRANCE_REGIONS`) into a built-in's:
 
@@ -45,12 +45,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import Parameter, ParameterError
+from .model import Parameter, ParameterError, rgb
 
 
 @dataclass(frozen=True)
-class Builtin:
-    """One Mitsuba built-in BSDF usable as ground truth.
+class BuiltinBSDF:
+    """One Mitsuba built-in BSDF usable as ground truth; it answers what a
+    caller asks of a BSDF as :class:`~mifaces.brdf.model.BRDFModel` does
+    (:func:`mifaces.brdf.bsdf` returns either): its options and parameters,
+    the validation of a ``brdf.json`` document, a region's Mitsuba dict and
+    its parameters for the published Cook–Torrance skin values.
 
     Attributes
     ----------
@@ -58,26 +62,104 @@ class Builtin:
         Mitsuba's plugin name.
     albedo : str
         The property the albedo map goes into.
-    parameters : tuple of Parameter
+    table : tuple of Parameter
         The numeric properties a ``brdf.json`` region may set, with their valid ranges.
     options : dict
         Option name -> allowed values (first = default).
+    exclusive : tuple of (str, str)
+        Pairs of parameters a region gives one of: Mitsuba derives one from the other.
     """
 
     name: str
     albedo: str
-    parameters: tuple[Parameter, ...]
+    table: tuple[Parameter, ...]
     options: dict
+    exclusive: tuple[tuple[str, str], ...] = ()
+
+    def parameters(self) -> tuple[Parameter, ...]:
+        """The numeric properties a region may set (the albedo map aside)."""
+        return self.table
 
     def parameter(self, name: str) -> Parameter:
-        for p in self.parameters:
+        for p in self.table:
             if p.name == name:
                 return p
         raise ParameterError(f"{self.name} has no parameter {name!r}; parameters: "
-                             f"{[p.name for p in self.parameters]} (the albedo map is its {self.albedo})")
+                             f"{[p.name for p in self.table]} (the albedo map is its {self.albedo})")
 
     def default_options(self) -> dict:
         return {k: v[0] for k, v in self.options.items()}
+
+    def check_options(self, options: dict) -> dict:
+        """``options`` if every one is known with an allowed value; a :class:`ParameterError` otherwise."""
+        for key, value in options.items():
+            if key not in self.options:
+                raise ParameterError(f"{self.name}: unknown option {key!r}; options: {sorted(self.options) or 'none'}")
+            if value not in self.options[key]:
+                raise ParameterError(f"{self.name}: option {key} = {value!r}; allowed: {list(self.options[key])}")
+        return options
+
+    def from_cook_torrance(self, region: dict) -> dict:
+        """This built-in's parameters for one region of Cook–Torrance
+        parameters ``region`` (``specular_reflectance``, ``roughness``,
+        ``eta``), by the mapping of the module docstring."""
+        scale = float(np.mean(region["specular_reflectance"]))
+        m, eta = float(region["roughness"]), float(region["eta"])
+        if self.name == "roughplastic":
+            return {"alpha": m, "int_ior": eta, "ext_ior": 1.0,
+                    "specular_reflectance": [float(x) for x in np.broadcast_to(region["specular_reflectance"], 3)]}
+        return {"roughness": round(float(np.sqrt(m)), 5),
+                "specular": round(min(1.0, scale * fresnel_normal(eta) / 0.08), 5),
+                "metallic": 0.0, "spec_tint": 0.0, "sheen": 0.0, "clearcoat": 0.0}
+
+    def validate_document(self, document: dict) -> dict:
+        """A ground truth of this built-in in the ``brdf.json`` layout,
+        checked: known options with allowed values, every region an object
+        of known parameter names with values in range (the albedo property
+        is the albedo map, not a parameter), at most one of each
+        :attr:`exclusive` pair. Returns the document with values as plain floats."""
+        options = self.check_options(document.get("options", {}))
+        regions = document.get("regions")
+        if not isinstance(regions, dict) or not regions:
+            raise ParameterError(f"{self.name}: 'regions' must map region names to parameter objects")
+        checked = {}
+        for region, params in regions.items():
+            if not isinstance(params, dict):
+                raise ParameterError(f"{self.name} region {region!r}: parameters must be an object")
+            if self.albedo in params:
+                raise ParameterError(f"{self.name} region {region!r}: {self.albedo} is the albedo map, "
+                                     "not a parameter")
+            checked[region] = {k: self.parameter(k).check(v, f"{self.name} region {region!r}")
+                               for k, v in params.items()}
+            for a, b in self.exclusive:
+                if a in params and b in params:
+                    raise ParameterError(f"{self.name} region {region!r}: give {a} or {b}, not both "
+                                         "(Mitsuba derives one from the other)")
+        return dict(document, options=dict(options), regions=checked)
+
+    def merge_overrides(self, base: dict, params: dict) -> dict:
+        """A region's parameters ``base`` with ``params`` replacing them; giving
+        one of an :attr:`exclusive` pair drops the other's value from ``base``."""
+        base = dict(base)
+        for a, b in self.exclusive + tuple((b, a) for a, b in self.exclusive):
+            if a in params and b not in params:
+                base.pop(b, None)
+        return dict(base, **params)
+
+    def check_complete(self, params: dict, where: str) -> None:
+        """Nothing to check: Mitsuba gives every parameter a region leaves out its default."""
+
+    def region_plugin(self, document: dict, region: str, texture) -> dict:
+        """The Mitsuba dict of ``region`` of ``document`` (the skin's where the
+        region has no entry) over albedo ``texture`` (None: Mitsuba's default)."""
+        params = document["regions"].get(region, document["regions"]["skin"])
+        d = {"type": self.name, **document.get("options", {})}
+        if texture is not None:
+            d[self.albedo] = texture
+        kinds = {p.name: p.kind for p in self.table}
+        for k, v in params.items():
+            d[k] = rgb(v) if kinds[k] == "rgb" else float(v)
+        return d
 
 
 def _p(name: str, kind: str, default: float, lower: float, upper: float, doc: str) -> Parameter:
@@ -87,29 +169,21 @@ def _p(name: str, kind: str, default: float, lower: float, upper: float, doc: st
 _UNIT = ("metallic", "specular", "spec_tint", "anisotropic", "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss",
          "spec_trans")
 #: Built-in name -> its description, in the order the CLI lists them.
-BUILTINS: dict[str, Builtin] = {
-    "roughplastic": Builtin("roughplastic", "diffuse_reflectance", (
+BUILTINS: dict[str, BuiltinBSDF] = {
+    "roughplastic": BuiltinBSDF("roughplastic", "diffuse_reflectance", (
         _p("alpha", "float", 0.1, 1e-3, 1.0, "Beckmann (or GGX) roughness α of the coating"),
         _p("int_ior", "float", 1.49, 1.0, 3.0, "index of refraction of the coating"),
         _p("ext_ior", "float", 1.0, 1.0, 3.0, "index of refraction outside (air)"),
         _p("specular_reflectance", "rgb", 1.0, 0.0, 10.0, "scale of the specular lobe"),
     ), {"distribution": ("beckmann", "ggx"), "nonlinear": (False, True)}),
-    "principled": Builtin("principled", "base_color", (
+    "principled": BuiltinBSDF("principled", "base_color", (
         _p("roughness", "float", 0.5, 0.0, 1.0, "GGX roughness (α = roughness²)"),
         _p("eta", "float", 1.5, 1.0, 3.0, "index of refraction (instead of specular)"),
         *(_p(n, "float", 0.0, 0.0, 1.0, f"principled {n}") for n in _UNIT),
-    ), {}),
+    ), {}, exclusive=(("eta", "specular"),)),
 }
 #: The built-in names.
 BUILTIN_NAMES = tuple(BUILTINS)
-
-
-def builtin(name: str) -> Builtin:
-    """The built-in ``name``, or a ValueError naming the known ones."""
-    try:
-        return BUILTINS[name]
-    except KeyError:
-        raise ValueError(f"unknown built-in BSDF {name!r}; known: {list(BUILTINS)}") from None
 
 
 def fresnel_normal(eta: float) -> float:
@@ -117,62 +191,4 @@ def fresnel_normal(eta: float) -> float:
     return ((eta - 1.0) / (eta + 1.0)) ** 2
 
 
-def from_cook_torrance(name: str, region: dict) -> dict:
-    """The parameters of built-in ``name`` for one region of Cook–Torrance
-    parameters ``region`` (``specular_reflectance``, ``roughness``, ``eta``),
-    by the mapping of the module docstring."""
-    scale = float(np.mean(region["specular_reflectance"]))
-    m, eta = float(region["roughness"]), float(region["eta"])
-    if name == "roughplastic":
-        return {"alpha": m, "int_ior": eta, "ext_ior": 1.0,
-                "specular_reflectance": [float(x) for x in np.broadcast_to(region["specular_reflectance"], 3)]}
-    if name == "principled":
-        return {"roughness": round(float(np.sqrt(m)), 5), "specular": round(min(1.0, scale * fresnel_normal(eta) / 0.08), 5),
-                "metallic": 0.0, "spec_tint": 0.0, "sheen": 0.0, "clearcoat": 0.0}
-    raise ValueError(f"unknown built-in BSDF {name!r}; known: {list(BUILTINS)}")
-
-
-def validate_builtin(document: dict) -> dict:
-    """A built-in ground truth in the ``brdf.json`` layout, checked: known
-    options with allowed values, every region an object of known parameter
-    names with values in range (the albedo property is the albedo map, not
-    a parameter). Returns the document with values as plain floats."""
-    spec = builtin(document["model"])
-    options = document.get("options", {})
-    for key, value in options.items():
-        if key not in spec.options:
-            raise ParameterError(f"{spec.name}: unknown option {key!r}; options: {sorted(spec.options) or 'none'}")
-        if value not in spec.options[key]:
-            raise ParameterError(f"{spec.name}: option {key} = {value!r}; allowed: {list(spec.options[key])}")
-    regions = document.get("regions")
-    if not isinstance(regions, dict) or not regions:
-        raise ParameterError(f"{spec.name}: 'regions' must map region names to parameter objects")
-    checked = {}
-    for region, params in regions.items():
-        if not isinstance(params, dict):
-            raise ParameterError(f"{spec.name} region {region!r}: parameters must be an object")
-        if spec.albedo in params:
-            raise ParameterError(f"{spec.name} region {region!r}: {spec.albedo} is the albedo map, not a parameter")
-        checked[region] = {k: spec.parameter(k).check(v, f"{spec.name} region {region!r}") for k, v in params.items()}
-        if spec.name == "principled" and "eta" in params and "specular" in params:
-            raise ParameterError(f"principled region {region!r}: give eta or specular, not both "
-                                 "(Mitsuba derives one from the other)")
-    return dict(document, options=dict(options), regions=checked)
-
-
-def region_bsdf(document: dict, region: str, texture) -> dict:
-    """The Mitsuba dict of a built-in ground truth's ``region`` (the skin's
-    where the region has no entry) over albedo ``texture`` (None: Mitsuba's
-    default)."""
-    spec = builtin(document["model"])
-    params = document["regions"].get(region, document["regions"]["skin"])
-    d = {"type": spec.name, **document.get("options", {})}
-    if texture is not None:
-        d[spec.albedo] = texture
-    kinds = {p.name: p.kind for p in spec.parameters}
-    for k, v in params.items():
-        if kinds[k] == "rgb":
-            d[k] = {"type": "rgb", "value": [float(x) for x in np.broadcast_to(np.asarray(v, np.float64), 3)]}
-        else:
-            d[k] = float(v)
-    return d
+__all__ = ["BuiltinBSDF", "BUILTINS", "BUILTIN_NAMES", "fresnel_normal"]

@@ -19,8 +19,11 @@ mirror material. No cosine term included; local frame.
 
 from __future__ import annotations
 
+from typing import Mapping
+
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from . import microfacet
 from .materials import REFRACTIVE_INDEX, SKIN_REFRACTIVE_INDEX
@@ -29,6 +32,8 @@ from .model import SLOPE_GRID, BRDFModel, COS_EPSILON, Parameter, dot, mean
 #: The index of refraction of the Fresnel term; a fit starts it at skin's.
 ETA = Parameter("eta", "float", 1.4, 1.0, 3.0, "relative index of refraction of the Fresnel term",
                 start=SKIN_REFRACTIVE_INDEX)
+#: Decimals of the parameters derived from a Cook–Torrance lobe in ``brdf.json``: colours, numbers.
+DIGITS = {"rgb": 5, "float": 4}
 
 
 class CookTorrance(BRDFModel):
@@ -54,6 +59,10 @@ class CookTorrance(BRDFModel):
     def fixed_in_region(self, region):
         """η at the region's published value, where there is one."""
         return {ETA.name: REFRACTIVE_INDEX[region]} if region in REFRACTIVE_INDEX else {}
+
+    def from_cook_torrance(self, region):
+        """The region's values themselves."""
+        return {k: (list(v) if isinstance(v, list) else v) for k, v in region.items()}
 
     def fresnel_term(self, cos_theta, eta):
         """F at incidence cosine ``cos_theta`` for this model's ``fresnel`` option."""
@@ -86,3 +95,34 @@ class CookTorrance(BRDFModel):
     def pdf_specular(self, wi, wo, params):
         h = microfacet.half_vector(wi, wo)
         return microfacet.reflected_pdf(microfacet.beckmann_pdf_h(h, params["roughness"]), wo, h)
+
+
+def lobe_albedo(params: Mapping, samples: int = 256) -> np.ndarray:
+    """Directional albedo at normal incidence of the Cook–Torrance specular lobe
+    with ``params`` (RGB), by midpoint quadrature over the hemisphere with the array API."""
+    model = CookTorrance()
+    # quadrature in (cos θ, φ); the lobe at normal incidence is isotropic, φ is trivial
+    mu = (np.arange(samples) + 0.5) / samples
+    sin = np.sqrt(1 - mu * mu)
+    wi = mi.Vector3f(0.0, 0.0, 1.0)
+    wo = mi.Vector3f(mi.Float(sin), mi.Float(np.zeros(samples)), mi.Float(mu))
+    p = {"diffuse_reflectance": mi.Color3f(0.0), "specular_reflectance": mi.Color3f(*params["specular_reflectance"]),
+         "roughness": mi.Float(params["roughness"]), "eta": mi.Float(params["eta"])}
+    f = model.eval(wi, wo, p, diffuse=False)
+    f = np.array([np.asarray(f[i]) for i in range(3)])  # (3, samples)
+    return 2 * np.pi * np.mean(f * mu, axis=1)
+
+
+def from_cook_torrance_lobe(model: BRDFModel, region: Mapping) -> dict:
+    """Glossy parameters of ``model`` for one region of Cook–Torrance
+    parameters: its :meth:`~mifaces.brdf.model.BRDFModel.from_lobe` of the
+    Cook–Torrance lobe's directional albedo at normal incidence
+    (:func:`lobe_albedo`) and roughness, rounded to :data:`DIGITS` decimals."""
+    kinds = {p.name: p.kind for p in model.specular_parameters()}
+    albedo = [round(float(a), DIGITS["rgb"]) for a in lobe_albedo(region)]
+    derived = model.from_lobe(albedo, region["roughness"])
+    return {k: ([round(x, DIGITS["rgb"]) for x in v] if kinds[k] == "rgb" else round(v, DIGITS["float"]))
+            for k, v in derived.items()}
+
+
+__all__ = ["CookTorrance", "ETA", "DIGITS", "lobe_albedo", "from_cook_torrance_lobe"]

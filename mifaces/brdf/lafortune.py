@@ -26,6 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import cosine_lobe
+from .cooktorrance import from_cook_torrance_lobe
 from .model import EXPONENT_GRID, MAX_LOBES, BRDFModel, Parameter, ParameterError, dot, mean, power
 
 #: Largest lobe albedo estimate used to weight sampling (keeps weights finite).
@@ -83,6 +84,21 @@ class Lafortune(BRDFModel):
         """The lobes a scene names: 1, plus every j with ``cxy_j``, ``cz_j`` or ``exponent_j``."""
         return cls(lobes=lobes_named(keys))
 
+    def validate_document(self, document):
+        """As :meth:`BRDFModel.validate_document`; a document whose options
+        give no ``lobes`` has the lobes its regions name (``cxy_2``, ...), and
+        the checked options say so where they are more than one."""
+        options = document.get("options", {})
+        regions = document.get("regions")
+        if "lobes" in options:
+            return super().validate_document(document)
+        keys = [key for params in (regions if isinstance(regions, dict) else {}).values()
+                if isinstance(params, dict) for key in params]
+        lobes = max(lobes_named(keys))
+        if lobes == 1:
+            return super().validate_document(document)
+        return Lafortune(lobes=lobes).validate_document(dict(document, options=dict(options, lobes=lobes)))
+
     def specular_parameters(self):
         # The fit starts lobe 1 as a weak forward-scattering lobe, the others weaker and wider.
         out = []
@@ -127,6 +143,9 @@ class Lafortune(BRDFModel):
 
     def only_lobes(self, lobes):
         return Lafortune(lobes=lobes)
+
+    def from_cook_torrance(self, region):
+        return from_cook_torrance_lobe(self, region)
 
     def from_lobe(self, albedo, roughness):
         """One forward-scattering lobe, C_z = -C_xy = c, as wide as the

@@ -138,6 +138,12 @@ def check_numbers(name: str, value, length: int | None = None, minimum: float | 
     return float(values) if length is None else values
 
 
+def rgb(value) -> dict:
+    """A Mitsuba ``rgb`` spectrum dict from a number or an RGB triple."""
+    v = np.broadcast_to(np.asarray(value, np.float64), 3)
+    return {"type": "rgb", "value": [float(x) for x in v]}
+
+
 def _numeric(value) -> bool:
     """Whether ``value`` is a number, a sequence of them or a Dr.Jit array (not a texture)."""
     return isinstance(value, (int, float, list, tuple, np.ndarray)) or dr.is_array_v(value)
@@ -202,8 +208,13 @@ class BRDFModel:
     :meth:`scaled_lobe`), which parameters a fit holds
     (:meth:`fixed_defaults`, :meth:`fixed_in_region`), how coefficients are
     kept energy-bounded (:meth:`energy_coupled`, :meth:`coefficient_bound`),
-    which lobes can be dropped (:meth:`lobe_scales`, :meth:`only_lobes`)
-    and how it is derived from a generic glossy lobe (:meth:`from_lobe`).
+    which lobes can be dropped (:meth:`lobe_scales`, :meth:`only_lobes`),
+    how it is derived from a generic glossy lobe (:meth:`from_lobe`,
+    :meth:`from_cook_torrance`) and how a ``brdf.json`` document of it is
+    checked and becomes a region's plugin (:meth:`validate_document`,
+    :meth:`region_plugin`, :meth:`merge_overrides`, :meth:`check_complete`),
+    as a Mitsuba built-in ground truth
+    (:class:`~mifaces.brdf.builtin.BuiltinBSDF`) does.
     The defaults here fit a model with one lobe scaled by
     ``specular_reflectance``.
     """
@@ -317,6 +328,43 @@ class BRDFModel:
         """Default value of every parameter (floats)."""
         return {p.name: p.default for p in self.parameters()}
 
+    # -- documents (``brdf.json``) and plugins ---------------------------------
+    def validate_document(self, document: Mapping) -> dict:
+        """A BRDF of this model in the ``brdf.json`` layout
+        (``{"model", "options", "regions"}``), its regions checked by
+        :meth:`validate_regions`; see :func:`mifaces.brdf.validate_brdf`."""
+        options = document.get("options", {})
+        return dict(document, options=dict(options), regions=self.validate_regions(document.get("regions")))
+
+    def plugin_options(self, options: Mapping) -> dict:
+        """The properties of this model's plugin for a document's
+        ``options``: all but ``lobes``, which every model accepts as 1
+        (:func:`mifaces.brdf.model`) and a plugin reads from the lobe
+        parameters a scene names (:meth:`from_properties`)."""
+        return {k: v for k, v in options.items() if k != "lobes"}
+
+    def region_plugin(self, document: Mapping, region: str, texture) -> dict:
+        """The Mitsuba dict of ``region`` of ``document`` (the skin's
+        parameters where the region has no entry) over diffuse ``texture``
+        (None: the plugin's default)."""
+        params = document["regions"].get(region, document["regions"]["skin"])
+        d = {"type": self.name} if texture is None else {"type": self.name, DIFFUSE.name: texture}
+        d.update(self.plugin_options(document.get("options", {})))
+        kinds = {p.name: p.kind for p in self.specular_parameters()}
+        for k, v in params.items():
+            d[k] = rgb(v) if kinds.get(k) == "rgb" else float(v)
+        return d
+
+    def merge_overrides(self, base: Mapping, params: Mapping) -> dict:
+        """A region's parameters ``base`` with ``params`` replacing them."""
+        return dict(base, **params)
+
+    def check_complete(self, params: Mapping, where: str) -> None:
+        """A ``ValueError`` naming ``where`` unless ``params`` gives every glossy parameter."""
+        missing = [p.name for p in self.specular_parameters() if p.name not in params]
+        if missing:
+            raise ValueError(f"{where}: {self.name} with {len(self.lobe_scales())} lobes needs {', '.join(missing)}")
+
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self.options.items())
         return f"{type(self).__name__}({opts})"
@@ -373,6 +421,14 @@ class BRDFModel:
         directional albedo ``albedo`` (RGB) at normal incidence and as wide
         as a Beckmann lobe of RMS slope ``roughness``."""
         raise NotImplementedError(f"{self.name} is not derived from a generic lobe")
+
+    def from_cook_torrance(self, region: Mapping) -> dict:
+        """Glossy parameters of this model for one region of the published
+        Cook–Torrance skin values (``specular_reflectance``, ``roughness``,
+        ``eta``; :data:`mifaces.studio.truth.COOK_TORRANCE_REGIONS`): the
+        simulator's ground truth. The other models derive theirs by
+        :func:`mifaces.brdf.cooktorrance.from_cook_torrance_lobe`."""
+        raise NotImplementedError(f"{self.name} is not derived from Cook–Torrance values")
 
     # -- the formulas ----------------------------------------------------
     def specular(self, wi, wo, params):

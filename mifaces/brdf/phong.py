@@ -16,6 +16,7 @@ import drjit as dr
 import mitsuba as mi
 
 from . import cosine_lobe
+from .cooktorrance import from_cook_torrance_lobe
 from .model import EXPONENT_GRID, BRDFModel, Parameter, mean, power
 
 
@@ -34,6 +35,9 @@ class Phong(BRDFModel):
                       start=0.05),
             Parameter("exponent", "float", 30.0, 1.0, 1e5, "Phong exponent n", start=10.0),
         )
+
+    def from_cook_torrance(self, region):
+        return from_cook_torrance_lobe(self, region)
 
     def from_lobe(self, albedo, roughness):
         """ρ_s = the albedo (the lobe reflects exactly ρ_s at normal

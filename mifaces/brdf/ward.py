@@ -21,6 +21,7 @@ import drjit as dr
 import mitsuba as mi
 
 from . import microfacet
+from .cooktorrance import from_cook_torrance_lobe
 from .model import SLOPE_GRID, BRDFModel, COS_EPSILON, Parameter, dot, exp_flushed, mean
 
 
@@ -37,6 +38,9 @@ class Ward(BRDFModel):
             Parameter("specular_reflectance", "rgb", 0.2, 0.0, 1.0, "albedo ρ_s of the lobe", start=0.05),
             Parameter("alpha", "float", 0.2, 1e-3, 1.0, "RMS slope α of the Gaussian lobe", start=0.3),
         )
+
+    def from_cook_torrance(self, region):
+        return from_cook_torrance_lobe(self, region)
 
     def from_lobe(self, albedo, roughness):
         """ρ_s = the albedo, α = the RMS slope (the Ward lobe is Beckmann's slope distribution)."""

@@ -25,7 +25,7 @@ incidence ``f90``. Each fitted model maps onto it (:func:`gltf_lobe`):
   f0 = f90 = ρ_s.
 * Lafortune: the lobes have no microfacet parameters; the nearest GGX lobe
   by least squares of f cos θo over the hemisphere grid of
-  :func:`mifaces.validation.validator.hemisphere_grid` (:func:`fit_lafortune`):
+  :func:`mifaces.validation.brdf_error.hemisphere_grid` (:func:`fit_lafortune`):
   for every α of :data:`ALPHA_GRID` the best non-negative scale per channel
   in closed form, then the α with the least residual; f0 = the scale,
   f90 = its largest channel.
@@ -46,6 +46,9 @@ import numpy as np
 from ..brdf import MODELS, model as brdf_model
 from ..brdf.builtin import fresnel_normal
 from ..brdf.materials import REFRACTIVE_INDEX, SKIN_REFRACTIVE_INDEX
+from ..brdf.model import rgb
+from ..render import region_bsdf
+from ..validation.brdf_error import eval_bsdf, hemisphere_grid
 
 #: Smallest and largest GGX α a glTF material is given (roughness = √α).
 ALPHA_RANGE = (1e-3, 1.0)
@@ -146,8 +149,7 @@ def gltf_brdf(wi: np.ndarray, wo: np.ndarray, base_color, lobe: GltfLobe) -> np.
 
 
 def hemisphere_pairs(grid: int = FIT_GRID) -> tuple[np.ndarray, np.ndarray]:
-    """Every (ωi, ωo) pair of :func:`mifaces.validation.validator.hemisphere_grid` (cosine-weighted, stratified)."""
-    from ..validation.validator import hemisphere_grid
+    """Every (ωi, ωo) pair of :func:`mifaces.validation.brdf_error.hemisphere_grid` (cosine-weighted, stratified)."""
 
     d = hemisphere_grid(grid)
     i, o = np.meshgrid(np.arange(len(d)), np.arange(len(d)), indexing="ij")
@@ -192,12 +194,10 @@ def mapping_rmse(document: dict, region: str, albedo, grid: int = FIT_GRID) -> d
     RMSE of f cos θo over the hemisphere grid (every (ωi, ωo) pair of
     :func:`hemisphere_pairs`, RGB), ``sqrt(Σ (F_glTF − F_fit)² / Σ F_fit²)``,
     the fitted BRDF evaluated by its Mitsuba plugin
-    (:func:`mifaces.validation.validator.eval_bsdf`), glTF's by :func:`gltf_brdf`;
+    (:func:`mifaces.validation.brdf_error.eval_bsdf`), glTF's by :func:`gltf_brdf`;
     ``rmse`` for the whole BRDF (diffuse ``albedo``, RGB, plus lobe) and
     ``rmse_specular`` for the lobes alone (against the fitted lobes' RMS).
     """
-    from ..render import region_bsdf, rgb
-    from ..validation.validator import eval_bsdf
 
     wi, wo = hemisphere_pairs(grid)
     params = document["regions"].get(region, document["regions"]["skin"])

@@ -13,5 +13,5 @@ from .render import render_estimate, render_fitted
 from .samples import ReflectanceSamples, capture_samples
 
 __all__ = ["ReflectanceSamples", "capture_samples", "RegionFit", "fit_region", "fit_regions", "DiffuseMap",
-           "refine_diffuse", "BRDFEstimate", "fit_brdf", "write_estimate", "load_estimate", "render_estimate",
+           "refine_diffuse", "BRDFEstimate", "FitOptions", "fit_brdf", "write_estimate", "load_estimate", "render_estimate",
            "render_fitted"]

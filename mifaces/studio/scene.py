@@ -19,7 +19,8 @@ import numpy as np
 
 from ..capture import Camera
 from ..environment import environment_emitter
-from ..render import mitsuba_sensor, rgb
+from ..brdf.model import rgb
+from ..render import mitsuba_sensor
 from .environment_light import EnvironmentLight, environment_light
 
 #: Studio geometry (mm). Camera distance to the head centre, field height there.

@@ -68,6 +68,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..brdf.cooktorrance import DIGITS
 from ..capture import write_ground_truth
 from ..files import MAX_IMAGE_SIDE, check_image_size, check_render_size, check_result_target, result_set
 from ..model import load_model
@@ -79,7 +80,7 @@ from .detail import fine_detail, span_residual
 from .environment_light import check_environment
 from .scene import set_up_studio
 from .subject import head_pose, make_subject, with_detail
-from .truth import DIGITS, brdf_with_overrides
+from .truth import brdf_with_overrides
 from .varying import VARYING, map_textures, region_means, varying_maps
 from .write import (ground_truth, light_names, pose_name, true_measurement, write_environment, write_manifest,
                     write_photographs, write_sphere_photographs)

@@ -6,31 +6,18 @@ environments the fit never saw.
 Four numbers per fitted model (:meth:`Validator.validate`):
 
 ``brdf_rmse`` (per region)
-    The BRDF error over the hemisphere, for any truth that
-    :func:`mifaces.render.region_bsdf` builds (the four plugins, Mitsuba's
-    built-ins, spatially varying maps). Truth and fit are loaded as Mitsuba
-    BSDFs and evaluated by their ``eval``, which returns F = f(ωi, ωo) cos θo,
-    on every pair of a fixed set of directions (:func:`hemisphere_grid`:
-    :data:`GRID` ² directions, stratified and cosine-weighted, so that a
-    sample mean is a cosine-weighted hemispherical mean) at
-    :data:`UV_SAMPLES` texels of the region (where the truth varies over
-    the face). The diffuse reflectance is the region's mean albedo, the
-    truth's for the truth and the fit's for the fit, so that a wrong albedo
-    level counts but texel noise does not::
-
-        brdf_rmse = sqrt( Σ (F_fit − F_true)² / Σ F_true² )
-
-    summed over direction pairs, texels and RGB: the RMSE of f cos θo
-    relative to the truth's RMS (0 for a perfect fit, 1 for a fit that
-    returns nothing; None for a truth whose ``eval`` is zero, a delta BSDF).
+    The BRDF error over the hemisphere, relative to the truth's RMS
+    (:func:`mifaces.validation.brdf_error.brdf_rmse`, whose module says how).
 ``albedo_rmse``
     RMSE of the fitted albedo map against the truth's (resized to the fit's
     resolution), on texels with samples (linear reflectance units;
     :func:`mifaces.validation.truth_errors.ground_truth_errors`).
 ``heldout_rmse``
-    Image error under :data:`HELD_OUT_LIGHTS` point lights none of the
-    photographs used (:func:`held_out_lights`), in a novel pose
-    (:data:`NOVEL_POSE`, :func:`novel_rotation`): the true face (true shape
+    Image error under :data:`~mifaces.validation.held_out.HELD_OUT_LIGHTS`
+    point lights none of the photographs used
+    (:func:`~mifaces.validation.held_out.held_out_lights`), in a novel pose
+    (:data:`~mifaces.validation.held_out.NOVEL_POSE`,
+    :func:`~mifaces.validation.held_out.novel_rotation`): the true face (true shape
     from the ground truth, true BSDF, true albedo) and the fitted face
     (fitted shape, fitted BRDF, fitted albedo) rendered by the same camera,
     cropped to the face (:func:`face_camera`, :data:`RENDER_SIZE`,
@@ -61,48 +48,29 @@ of its reflectance alone, which separates the models.
 from __future__ import annotations
 
 import time
-from dataclasses import replace
-from pathlib import Path
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 from scipy.spatial.transform import Rotation
 from skimage.transform import resize
 
 from ..capture import Camera, read_ground_truth
-from ..capture.types import RELATIVE_IRRADIANCE
-from ..environment import LUMINANCE, SKY_SUN_ANGLES, camera_frame, dominant_direction, sky_emitter, studio_environment
+from ..environment import LUMINANCE, SKY_SUN_ANGLES, sky_emitter, studio_environment
 from ..face_pixels import front_of_face_pixels
-from ..files import read_exr
 from ..geometry import load_geometry
 from ..model.regions import REGIONS
-from ..render import ALBEDO, FaceScene, region_bsdf, rgb
+from ..render import ALBEDO, FaceScene
 from ..studio import subsurface as translucent
 from ..studio.photograph import albedo_texture
 from ..studio.simulate import true_face_shapes
 from ..studio.varying import map_textures
+from .brdf_error import brdf_rmse, region_texels
+from .held_out import HELD_OUT_LIGHTS, NOVEL_POSE, held_out_lights, novel_rotation, true_lights, turned
 from .truth_errors import ground_truth_errors
 
-#: Directions per axis of the hemisphere grid: GRID² directions, GRID⁴ (ωi, ωo) pairs.
-GRID = 12
-#: Texels per region at which the BRDFs are compared.
-UV_SAMPLES = 8
-#: The novel pose: yaw about the camera's up axis, then pitch about its right
-#: axis (degrees, through the true face's centroid; positive yaw turns the face
-#: towards the image's left, positive pitch tips the top of the head towards the camera).
-NOVEL_POSE = (35.0, 15.0)
-#: Number of held-out point lights.
-HELD_OUT_LIGHTS = 2
 #: Longer side of the face crop rendered (pixels), and samples per pixel.
 RENDER_SIZE = 112
 SPP = 16
-#: Candidate held-out light directions about the camera (azimuth, elevation in
-#: degrees, :meth:`mifaces.capture.Camera.direction`), of which those farthest
-#: from every capture light are taken.
-#: They stay within 45° of the camera's axis sideways and between 15° below and 40° above it, lighting the front
-#: of the face as a photographer would.
-LIGHT_CANDIDATES = tuple((a, e) for a in (-45.0, -22.5, 0.0, 22.5, 45.0) for e in (-15.0, 5.0, 25.0, 40.0))
 #: Seed of every validation render (common random numbers, module docstring).
 SEED = 101
 #: Seed of the second render of the truth that measures the renders' Monte Carlo noise (``noise_floor``).
@@ -112,155 +80,8 @@ TRUE_SHAPE = "_true_shape"
 
 
 # --------------------------------------------------------------------------------------------
-# BRDF error over the hemisphere
+# The novel view: the camera's crop
 # --------------------------------------------------------------------------------------------
-def hemisphere_grid(n: int = GRID) -> np.ndarray:
-    """n² unit directions (local frame, z the normal), one per cell of an n x n
-    grid of the unit square mapped by Mitsuba's cosine-weighted hemisphere
-    warp (Shirley–Chiu concentric map): stratified, each with the same
-    share of the projected solid angle."""
-    u = (np.arange(n) + 0.5) / n
-    x, y = np.meshgrid(u, u)
-    d = mi.warp.square_to_cosine_hemisphere(mi.Point2f(x.ravel(), y.ravel()))
-    return np.stack([np.asarray(d[i], np.float64) for i in range(3)], axis=1)
-
-
-def eval_bsdf(bsdf: dict, uv: np.ndarray, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    """f(ωi, ωo) cos θo of a Mitsuba BSDF dict (``mi.load_dict``'s layout) at
-    texture coordinates ``uv`` (N, 2) and local directions ``wi``, ``wo``
-    (N, 3, z the normal): ``BSDF.eval`` in one kernel. Returns (N, 3)."""
-    loaded = mi.load_dict(bsdf)
-    n = len(uv)
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    normal = mi.Normal3f(0.0, 0.0, 1.0)
-    si.n = normal
-    si.sh_frame = mi.Frame3f(normal)
-    si.uv = mi.Point2f(*(np.ascontiguousarray(uv[:, k], np.float32) for k in range(2)))
-    si.wi = mi.Vector3f(*(np.ascontiguousarray(wi[:, k], np.float32) for k in range(3)))
-    value = loaded.eval(mi.BSDFContext(), si, mi.Vector3f(*(np.ascontiguousarray(wo[:, k], np.float32)
-                                                            for k in range(3))))
-    return np.stack([np.asarray(value[c], np.float64) for c in range(3)], axis=1)
-
-
-def region_texels(region_map: np.ndarray, label: int, count: int = UV_SAMPLES, seed: int = 0) -> np.ndarray:
-    """(k, 2) texture coordinates of up to ``count`` texel centres of region
-    ``label`` (row 0 at v = 0), drawn without replacement by a fixed seed."""
-    rows, cols = np.nonzero(region_map == label)
-    if rows.size == 0:
-        return np.zeros((0, 2))
-    r = region_map.shape[0]
-    pick = np.random.default_rng(seed).choice(rows.size, min(count, rows.size), replace=False)
-    return np.stack([(cols[pick] + 0.5) / r, (rows[pick] + 0.5) / r], axis=1)
-
-
-def brdf_rmse(truth: dict, fit: dict, region: str, true_albedo, fit_albedo, uv: np.ndarray,
-              grid: int = GRID, truth_maps: dict | None = None, scale: float = 1.0) -> float | None:
-    """The relative BRDF error of one region (module docstring): truth and fit
-    (``brdf.json`` documents) at texture coordinates ``uv`` (k, 2), with the
-    diffuse reflectances ``true_albedo`` and ``fit_albedo`` (RGB). None where
-    the truth's ``eval`` is zero everywhere (a delta BSDF, such as the smooth
-    boundary of a subsurface truth). ``truth_maps``: a spatially varying
-    truth's parameter textures (:func:`mifaces.studio.varying.map_textures`),
-    read at ``uv``. ``scale`` multiplies the fit's BRDF (a relative estimate's, in the truth's
-    units)."""
-    d = hemisphere_grid(grid)
-    i, o = np.meshgrid(np.arange(len(d)), np.arange(len(d)), indexing="ij")
-    pairs = i.size
-    wi, wo = np.tile(d[i.ravel()], (len(uv), 1)), np.tile(d[o.ravel()], (len(uv), 1))
-    at = np.repeat(uv, pairs, axis=0)
-    f_true = eval_bsdf(region_bsdf(truth, region, rgb(true_albedo), maps=truth_maps), at, wi, wo)
-    f_fit = scale * eval_bsdf(region_bsdf(fit, region, rgb(fit_albedo)), at, wi, wo)
-    energy = float(np.sum(f_true ** 2))
-    if not energy > 0 or not np.isfinite(energy):
-        return None  # a truth without a finite BRDF (a smooth boundary over a scattering medium): no BRDF error
-    return float(np.sqrt(np.sum((f_fit - f_true) ** 2) / energy))
-
-
-# --------------------------------------------------------------------------------------------
-# The novel view: pose, held-out lights, the camera's crop
-# --------------------------------------------------------------------------------------------
-def novel_rotation(camera, pose=NOVEL_POSE) -> np.ndarray:
-    """The world-frame rotation (3x3) of the novel pose: ``pose`` = (yaw,
-    pitch) degrees about the camera's up and then its right axis."""
-    right, up, _ = camera_frame(camera).T
-    yaw = Rotation.from_rotvec(np.radians(pose[0]) * up)
-    pitch = Rotation.from_rotvec(np.radians(pose[1]) * right)
-    return (pitch * yaw).as_matrix()
-
-
-def turned(vertices: np.ndarray, rotation: np.ndarray, centre: np.ndarray) -> np.ndarray:
-    """``vertices`` (V, 3) turned by ``rotation`` about ``centre`` (world, mm)."""
-    return (np.asarray(vertices, np.float64) - centre) @ np.asarray(rotation).T + centre
-
-
-def true_lights(capture, truth):
-    """``capture`` with each light it estimated (or still does not know) replaced by the one the
-    simulator placed (``truth``, its ground truth): its point light, or the environment map it
-    rendered with. The held-out lights are chosen away from these, so that a run that estimated
-    its lights is judged under the same held-out lights as one that was given them."""
-    placed = {light.name: light for light in truth.lights}
-    rendered = truth.description.get("map")  # an environment-lit capture's one map, inside the capture
-    lights = []
-    for light in capture.lights:
-        if not (light.estimated or light.unknown):
-            lights.append(light)
-        elif light.name in placed:
-            true = placed[light.name]
-            lights.append(replace(light, position=np.asarray(true.position, np.float64), direction=None,
-                                  intensity=np.asarray(true.intensity, np.float64), envmap=None,
-                                  unknown=False, estimated=False, relative=False))
-        elif light.environment and rendered is not None:
-            lights.append(replace(light, envmap=read_exr(Path(capture.path) / rendered)[..., :3], unknown=False,
-                                  estimated=False, relative=False))
-        else:
-            raise ValueError(f"light {light.name!r} was estimated, and the ground truth does not say where the "
-                             "simulator placed it")
-    return replace(capture, lights=tuple(lights))
-
-
-def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -> list[dict]:
-    """``count`` lights none of the capture's photographs used, as keyword
-    arguments of :meth:`mifaces.render.FaceScene.render`: of
-    :data:`LIGHT_CANDIDATES`, those whose smallest angle (seen from
-    ``centre``) to every capture light and to each other is largest; point
-    lights at the capture lights' mean distance with the first light's
-    intensity (directional lights for a capture of directional lights, and for one lit by environment
-    maps alone: irradiance :data:`~mifaces.capture.types.RELATIVE_IRRADIANCE`); away from where most
-    of each environment map's light comes from, too.
-    Each dict also holds ``angle_to_capture`` (degrees)."""
-    maps = [dominant_direction(light.envmap, capture.camera) for light in capture.lights if light.environment]
-    lights = [light for light in capture.lights if not light.environment]  # the point or directional ones
-    environment = not lights
-    directional = environment or lights[0].directional
-    if environment:
-        used = np.zeros((0, 3))
-    elif directional:
-        used = np.array([light.direction for light in lights], np.float64)
-    else:
-        used = np.array([light.position for light in lights], np.float64) - centre
-    used = np.concatenate([used, np.reshape(maps, (-1, 3))])  # and where most of each map's light comes from
-    used /= np.linalg.norm(used, axis=1, keepdims=True)
-    candidates = np.array([capture.camera.direction(a, e) for a, e in LIGHT_CANDIDATES])
-    chosen = []
-    for _ in range(count):
-        taken = np.concatenate([used, candidates[chosen]]) if chosen else used
-        separation = np.degrees(np.arccos(np.clip(candidates @ taken.T, -1, 1))).min(axis=1)
-        separation[chosen] = -1
-        chosen.append(int(np.argmax(separation)))
-    distance = 1.0 if directional else float(np.mean([np.linalg.norm(l.position - centre) for l in lights]))
-    out = []
-    for k in chosen:
-        angle = float(np.degrees(np.arccos(np.clip(used @ candidates[k], -1, 1))).min())
-        intensity = np.full(3, RELATIVE_IRRADIANCE) if environment else np.asarray(lights[0].intensity, np.float64)
-        light = {"intensity": intensity, "angle_to_capture": angle}
-        if directional:
-            light["light_direction"] = candidates[k]
-        else:
-            light["light_position"] = centre + distance * candidates[k]
-        out.append(light)
-    return out
-
-
 def face_camera(camera, vertices: np.ndarray, size: int = RENDER_SIZE, margin: float = 0.1) -> Camera:
     """``camera`` cropped to the box around the projected ``vertices`` (with
     ``margin`` of its size around) and scaled so that its longer side is
@@ -493,6 +314,5 @@ class Validator:
         return entry, images
 
 
-__all__ = ["GRID", "UV_SAMPLES", "NOVEL_POSE", "HELD_OUT_LIGHTS", "RENDER_SIZE", "SPP", "LIGHT_CANDIDATES",
-           "TRUE_SHAPE", "hemisphere_grid", "eval_bsdf", "region_texels", "brdf_rmse", "novel_rotation", "turned",
-           "true_lights", "held_out_lights", "face_camera", "relative_rmse", "pose_angle", "Validator"]
+__all__ = ["RENDER_SIZE", "SPP", "SEED", "NOISE_SEED", "TRUE_SHAPE", "face_camera", "relative_rmse", "pose_angle",
+           "Validator"]

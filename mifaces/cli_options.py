@@ -1,0 +1,53 @@
+"""The options of the ``mifaces`` command line (:mod:`mifaces.cli`): their
+defaults taken from the API, their parsing callbacks, and the spellings of
+renamed options kept for one release."""
+
+from __future__ import annotations
+
+import functools
+import inspect
+
+import click
+
+
+def default(function, name: str):
+    """The default of parameter ``name`` of API ``function``: the CLI states no default of its own."""
+    return inspect.signature(function).parameters[name].default
+
+
+def width_x_height(ctx, param, value: str) -> tuple[int, int]:
+    """The Click callback of an image size ``WxH`` (e.g. ``512x512``): (width, height)."""
+    try:
+        width, height = (int(v) for v in value.lower().split("x"))
+    except ValueError:
+        raise click.BadParameter(f"must be WxH, e.g. 512x512, got {value!r}") from None
+    return width, height
+
+
+def renamed(old: str, new: str, name: str, **attrs):
+    """A decorator of a command: the hidden option ``old``, the spelling of
+    option ``new`` (parameter ``name``) before it was renamed, still sets
+    ``name`` for one release, with a deprecation message on stderr naming
+    ``new``. ``attrs`` are the option's (its type, ``multiple``); giving
+    both spellings is a usage error. Put it right below the command's
+    ``@main.command``."""
+    hidden = f"_{name}_as_{old.lstrip('-').replace('-', '_')}"
+
+    def decorate(command):
+        @functools.wraps(command)
+        def wrapper(*args, **kwargs):
+            value = kwargs.pop(hidden)
+            if value is not None and value != ():
+                ctx = click.get_current_context()
+                if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE:
+                    raise click.UsageError(f"give {new}, not both {new} and {old} (its deprecated spelling)")
+                click.echo(f"warning: {old} is deprecated and goes in the next release: use {new}", err=True)
+                kwargs[name] = value
+            return command(*args, **kwargs)
+
+        return click.option(old, hidden, hidden=True, default=None, **attrs)(wrapper)
+
+    return decorate
+
+
+__all__ = ["default", "width_x_height", "renamed"]

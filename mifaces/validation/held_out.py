@@ -1,0 +1,126 @@
+"""The conditions a fit never saw, under which the validation renders the
+true and the fitted faces: a novel pose (:func:`novel_rotation`) and
+held-out lights (:func:`held_out_lights`) chosen away from the lights the
+simulator placed (:func:`true_lights`). :func:`held_out_lights` is the one
+choice of a light the capture did not use: the report's novel light
+(:func:`novel_light`) is its first."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..capture.types import RELATIVE_IRRADIANCE
+from ..environment import camera_frame, dominant_direction
+from ..files import read_exr
+
+#: The novel pose: yaw about the camera's up axis, then pitch about its right
+#: axis (degrees, through the true face's centroid; positive yaw turns the face
+#: towards the image's left, positive pitch tips the top of the head towards the camera).
+NOVEL_POSE = (35.0, 15.0)
+#: Number of held-out point lights.
+HELD_OUT_LIGHTS = 2
+#: Candidate held-out light directions about the camera (azimuth, elevation in
+#: degrees, :meth:`mifaces.capture.Camera.direction`), of which those farthest
+#: from every capture light are taken.
+#: They stay within 45° of the camera's axis sideways and between 15° below and 40° above it, lighting the front
+#: of the face as a photographer would.
+LIGHT_CANDIDATES = tuple((a, e) for a in (-45.0, -22.5, 0.0, 22.5, 45.0) for e in (-15.0, 5.0, 25.0, 40.0))
+
+
+def novel_rotation(camera, pose=NOVEL_POSE) -> np.ndarray:
+    """The world-frame rotation (3x3) of the novel pose: ``pose`` = (yaw,
+    pitch) degrees about the camera's up and then its right axis."""
+    right, up, _ = camera_frame(camera).T
+    yaw = Rotation.from_rotvec(np.radians(pose[0]) * up)
+    pitch = Rotation.from_rotvec(np.radians(pose[1]) * right)
+    return (pitch * yaw).as_matrix()
+
+
+def turned(vertices: np.ndarray, rotation: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """``vertices`` (V, 3) turned by ``rotation`` about ``centre`` (world, mm)."""
+    return (np.asarray(vertices, np.float64) - centre) @ np.asarray(rotation).T + centre
+
+
+def true_lights(capture, truth):
+    """``capture`` with each light it estimated (or still does not know) replaced by the one the
+    simulator placed (``truth``, its ground truth): its point light, or the environment map it
+    rendered with. The held-out lights are chosen away from these, so that a run that estimated
+    its lights is judged under the same held-out lights as one that was given them."""
+    placed = {light.name: light for light in truth.lights}
+    rendered = truth.description.get("map")  # an environment-lit capture's one map, inside the capture
+    lights = []
+    for light in capture.lights:
+        if not (light.estimated or light.unknown):
+            lights.append(light)
+        elif light.name in placed:
+            true = placed[light.name]
+            lights.append(replace(light, position=np.asarray(true.position, np.float64), direction=None,
+                                  intensity=np.asarray(true.intensity, np.float64), envmap=None,
+                                  unknown=False, estimated=False, relative=False))
+        elif light.environment and rendered is not None:
+            lights.append(replace(light, envmap=read_exr(Path(capture.path) / rendered)[..., :3], unknown=False,
+                                  estimated=False, relative=False))
+        else:
+            raise ValueError(f"light {light.name!r} was estimated, and the ground truth does not say where the "
+                             "simulator placed it")
+    return replace(capture, lights=tuple(lights))
+
+
+def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -> list[dict]:
+    """``count`` lights none of the capture's photographs used, as keyword
+    arguments of :meth:`mifaces.render.FaceScene.render`: of
+    :data:`LIGHT_CANDIDATES`, those whose smallest angle (seen from
+    ``centre``) to every capture light and to each other is largest; point
+    lights at the capture lights' mean distance with the first light's
+    intensity (directional lights for a capture of directional lights, and for one lit by environment
+    maps alone: irradiance :data:`~mifaces.capture.types.RELATIVE_IRRADIANCE`); away from where most
+    of each environment map's light comes from, too.
+    Each dict also holds ``angle_to_capture`` (degrees)."""
+    maps = [dominant_direction(light.envmap, capture.camera) for light in capture.lights if light.environment]
+    lights = [light for light in capture.lights if not light.environment]  # the point or directional ones
+    environment = not lights
+    directional = environment or lights[0].directional
+    if environment:
+        used = np.zeros((0, 3))
+    elif directional:
+        used = np.array([light.direction for light in lights], np.float64)
+    else:
+        used = np.array([light.position for light in lights], np.float64) - centre
+    used = np.concatenate([used, np.reshape(maps, (-1, 3))])  # and where most of each map's light comes from
+    used /= np.linalg.norm(used, axis=1, keepdims=True)
+    candidates = np.array([capture.camera.direction(a, e) for a, e in LIGHT_CANDIDATES])
+    chosen = []
+    for _ in range(count):
+        taken = np.concatenate([used, candidates[chosen]]) if chosen else used
+        separation = np.degrees(np.arccos(np.clip(candidates @ taken.T, -1, 1))).min(axis=1)
+        separation[chosen] = -1
+        chosen.append(int(np.argmax(separation)))
+    distance = 1.0 if directional else float(np.mean([np.linalg.norm(l.position - centre) for l in lights]))
+    out = []
+    for k in chosen:
+        angle = float(np.degrees(np.arccos(np.clip(used @ candidates[k], -1, 1))).min())
+        intensity = np.full(3, RELATIVE_IRRADIANCE) if environment else np.asarray(lights[0].intensity, np.float64)
+        light = {"intensity": intensity, "angle_to_capture": angle}
+        if directional:
+            light["light_direction"] = candidates[k]
+        else:
+            light["light_position"] = centre + distance * candidates[k]
+        out.append(light)
+    return out
+
+
+def novel_light(capture, centre: np.ndarray) -> dict:
+    """The light none of the measurements used that :func:`mifaces.pipeline.measure`
+    renders each fit under beside its photograph: the first of :func:`held_out_lights`
+    (of ``capture``'s lights, seen from ``centre``), as keyword arguments of
+    :meth:`mifaces.render.FaceScene.render`."""
+    light = held_out_lights(capture, centre, 1)[0]
+    return {key: value for key, value in light.items() if key != "angle_to_capture"}
+
+
+__all__ = ["NOVEL_POSE", "HELD_OUT_LIGHTS", "LIGHT_CANDIDATES", "novel_rotation", "turned", "true_lights",
+           "held_out_lights", "novel_light"]
