@@ -36,7 +36,7 @@ from .capture import Capture, load_capture, read_ground_truth
 from .capture.types import RELATIVE_IRRADIANCE
 from .environment import dominant_direction
 from .export import export_face
-from .files import write_json
+from .atomic import write_json
 from .geometry import load_geometry
 from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, as_given, balance_intensities, check_estimable,
                        estimate_environments, estimate_lights, lights_document, refit_lights, write_lights,

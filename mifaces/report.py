@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .capture import read_ground_truth
-from .files import atomic_write, save_figure
+from .atomic import atomic_write, save_figure
 from .model.regions import REGIONS
 from .status import CONVERGED, NOT_FITTED
 from .validation.validator import TRUE_SHAPE

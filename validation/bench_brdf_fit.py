@@ -42,7 +42,7 @@ import scipy.optimize
 from mifaces import brdf
 from mifaces.reflectance.fit.regions import (FULL_DATA, ParameterSpace, SubsetSchedule, _Problem, fit_region,
                                              linear_start)
-from mifaces.files import save_figure, write_json
+from mifaces.atomic import save_figure, write_json
 
 OUT = Path(__file__).resolve().parent / "results"
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from mifaces import brdf
 from mifaces.reflectance.fit.regions import fit_region, fit_regions
-from mifaces.files import write_json
+from mifaces.atomic import write_json
 from mifaces.reflectance.samples import unsaturated
 
 OUT = Path(__file__).resolve().parent / "results"

@@ -28,7 +28,7 @@ import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 
 from mifaces.export import export_face
 from mifaces.export.material import FIT_GRID, mapping_rmse
-from mifaces.files import write_json
+from mifaces.atomic import write_json
 from mifaces.model import load_model
 from mifaces.model.regions import REGIONS, texel_regions_of_mesh
 from mifaces.pipeline import measure

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import check_image_size, check_name, read_exr, resolve_inside
+from ..image_files import check_image_size, read_exr
+from ..paths import check_name, resolve_inside
 from .detector import NoFaceError
 from ..model.landmarks import FEATURE_POINTS
 from .calibration import CalibrationError, calibrate_light
@@ -83,7 +84,7 @@ def _intrinsics(entry: dict, calibrated: bool, width, height, problems: Problems
 
 def _image(entry, where: str, root: Path, camera: Camera | None, problems: Problems) -> Image | None:
     """Read and check one image entry ``{"path", "transfer", "gamma", "exposure", "saturation"}``:
-    a path inside the capture folder (:func:`mifaces.files.resolve_inside`), finite, non-negative pixels."""
+    a path inside the capture folder (:func:`mifaces.paths.resolve_inside`), finite, non-negative pixels."""
     if isinstance(entry, str):
         entry = {"path": entry}
     if not isinstance(entry, dict):

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_path, encode_png
+from ..atomic import atomic_path
+from ..image_files import encode_png
 from .face import ExportedFace
 
 #: glTF constants (the specification's enums).

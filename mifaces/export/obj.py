@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_write, encode_png
+from ..atomic import atomic_write
+from ..image_files import encode_png
 from .face import ExportedFace
 
 

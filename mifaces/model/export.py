@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_path
+from ..atomic import atomic_path
 
 
 def export_mesh(path: str | os.PathLike, vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray,

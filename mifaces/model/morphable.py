@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_write
+from ..atomic import atomic_write
 from . import geometry
 from .export import export_mesh
 from .mesh import mitsuba_mesh

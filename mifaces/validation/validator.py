@@ -73,7 +73,7 @@ from skimage.transform import resize
 from ..capture import Camera, read_ground_truth
 from ..capture.types import RELATIVE_IRRADIANCE
 from ..environment import LUMINANCE, SKY_SUN_ANGLES, camera_frame, dominant_direction, sky_emitter, studio_environment
-from ..files import read_exr
+from ..image_files import read_exr
 from ..geometry import load_geometry
 from ..model.regions import REGIONS
 from ..model.mesh import mitsuba_mesh
