@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pygltflib as g
 
 from ..atomic import atomic_path
 from ..image_files import encode_png
@@ -30,8 +31,6 @@ SRGB = {"base_color": True, "metallic_roughness": False, "specular": True, "norm
 
 def gltf_document(face: ExportedFace):
     """The face as a ``pygltflib.GLTF2`` with one binary blob (buffers and images)."""
-    import pygltflib as g
-
     blob = bytearray()
     views, accessors = [], []
 
@@ -93,8 +92,6 @@ def gltf_document(face: ExportedFace):
 
 def write_gltf(face: ExportedFace, path) -> list[Path]:
     """Write ``path`` (``.glb``: binary; ``.gltf``: JSON with the buffer as a data URI), atomically."""
-    import pygltflib as g
-
     path = Path(path)
     document = gltf_document(face)
     with atomic_path(path) as tmp:

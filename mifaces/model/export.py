@@ -35,7 +35,7 @@ def export_mesh(path: str | os.PathLike, vertices: np.ndarray, triangles: np.nda
     -------
     Path
     """
-    import trimesh
+    import trimesh  # trimesh takes about half a second to import: only where a mesh is written
 
     path = Path(path)
     fmt = path.suffix.lower().lstrip(".")
