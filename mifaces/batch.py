@@ -48,7 +48,7 @@ from tqdm import tqdm
 
 from .reflectance import FitOptions
 from .capture.types import MANIFEST
-from .files import write_json
+from .atomic import write_json
 from .importers.yaleb import import_subject
 from .pipeline import GEOMETRIES, MODELS, measure
 from .population import write_population

@@ -25,7 +25,10 @@ from .capture import load_capture
 from .capture.ground_truth import ground_truth_folder
 from .environment import SKY_SUN_ANGLES, TURBIDITY, sky_emitter
 from .export import export_face
-from .files import MAX_IMAGE_PIXELS, check_result_target, check_writable, write_json
+from .atomic import write_json
+from .image_files import MAX_IMAGE_PIXELS
+from .paths import check_writable
+from .result_set import check_result_target
 from .gallery import render_gallery
 from .importers.diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
 from .importers.yaleb import SPLIT, import_subject

@@ -9,7 +9,8 @@ from pathlib import Path
 import mitsuba as mi
 
 from .brdf import NAMES
-from .render import render_passes, save_image
+from .image_files import save_image
+from .render import render_passes
 from .scenes import scene_path
 
 #: Plugins in the gallery, left to right.

@@ -38,7 +38,8 @@ import mitsuba as mi
 
 from .capture.types import RELATIVE_IRRADIANCE, Capture
 from .environment import texel_directions, to_world
-from .files import save_figure, write_exr, write_json
+from .atomic import save_figure, write_json
+from .image_files import write_exr
 from .model.mesh import mitsuba_mesh
 from .model.texture_space import rasterize
 from .progress import progress as progress_bar

@@ -34,8 +34,8 @@ import numpy as np
 from .brdf import NAMES
 from .capture import Capture, load_capture, read_ground_truth
 from .export import export_face
+from .atomic import write_json
 from .face_pixels import face_pixels
-from .files import write_json
 from .geometry import load_geometry
 from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, as_given, balance_intensities, check_estimable,
                        estimate_environments, estimate_lights, lights_document, refit_lights, write_lights,

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import atomic_write, save_figure, write_json
+from .atomic import atomic_write, save_figure, write_json
 from .status import NOT_FITTED
 
 #: Scale that makes the median absolute deviation estimate a normal distribution's σ.

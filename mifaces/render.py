@@ -1,6 +1,6 @@
 """Rendering with Mitsuba: the capture's camera as a sensor, a face with its
 fitted (or ground-truth) BRDF per region, lit by a point light or an
-environment map; rendering in passes with progress; writing EXR and PNG.
+environment map; rendering in passes with progress, within the size one pass traces.
 
 A face scene is described once, by :meth:`FaceScene.description`: a Mitsuba
 scene dict whose meshes (``meshes/<key>.ply``) and albedo map
@@ -24,9 +24,10 @@ import mitsuba as mi
 import numpy as np
 
 from . import brdf as brdf_models
+from .atomic import atomic_path
 from .brdf.model import check_numbers, rgb
 from .environment import environment_emitter
-from .files import atomic_path, check_render_size, write_exr, write_png
+from .image_files import check_image_size
 from .progress import progress
 from .model.mesh import mitsuba_mesh
 from .model.regions import REGIONS, triangle_regions
@@ -41,6 +42,21 @@ NORMALS = "normals"
 SPECULAR = "specular"
 #: Folder of a face scene's meshes, beside its ``scene.xml``.
 MESH_FOLDER = "meshes"
+#: Largest number of samples one render pass traces (Mitsuba's wavefront:
+#: width x height x spp must stay below 2^32).
+MAX_RENDER_SAMPLES = 2 ** 32 - 1
+
+
+def check_render_size(width: int, height: int, spp: int, what: str = "render") -> None:
+    """A ``ValueError`` unless an image of ``width`` x ``height`` at ``spp``
+    samples per pixel fits the image limits and one Mitsuba pass
+    (:data:`MAX_RENDER_SAMPLES`)."""
+    check_image_size(width, height, what)
+    if isinstance(spp, bool) or int(spp) < 1:
+        raise ValueError(f"{what}: samples per pixel must be a positive integer, got {spp!r}")
+    if width * height * int(spp) > MAX_RENDER_SAMPLES:
+        raise ValueError(f"{what}: {width}x{height} pixels at {spp} spp are {width * height * int(spp)} samples, "
+                         f"more than one render pass traces ({MAX_RENDER_SAMPLES}); lower the spp or the size")
 
 
 def render_passes(scene, spp: int, passes: int = 8, desc: str = "rendering") -> np.ndarray:
@@ -54,16 +70,6 @@ def render_passes(scene, spp: int, passes: int = 8, desc: str = "rendering") -> 
         image = np.array(mi.render(scene, spp=n, seed=seed), dtype=np.float64)
         total = image * n if total is None else total + image * n
     return (total / spp).astype(np.float32)
-
-
-def save_image(image: np.ndarray, stem: str | os.PathLike) -> dict[str, Path]:
-    """Write ``image`` as ``<stem>.exr`` (linear) and ``<stem>.png`` (sRGB,
-    clipped at 1), atomically. Returns the two paths."""
-    stem = Path(stem)
-    paths = {"exr": stem.with_suffix(".exr"), "png": stem.with_suffix(".png")}
-    write_exr(paths["exr"], image)
-    write_png(paths["png"], image)
-    return paths
 
 
 def mitsuba_sensor(camera, spp: int) -> dict:
@@ -483,6 +489,6 @@ def scene_xml(scene: dict, parameters: Mapping[str, tuple[str, ...]] | None = No
     return header + ET.tostring(root, encoding="unicode") + "\n"
 
 
-__all__ = ["ALBEDO", "ALBEDO_REF", "NORMALS", "SPECULAR", "MESH_FOLDER", "render_passes", "save_image", "mitsuba_sensor",
-           "region_bsdf",
-           "RegionMesh", "region_meshes", "face_shapes", "FaceScene", "face_scene", "render_face", "scene_xml"]
+__all__ = ["ALBEDO", "ALBEDO_REF", "NORMALS", "SPECULAR", "MESH_FOLDER", "MAX_RENDER_SAMPLES", "check_render_size",
+           "render_passes", "mitsuba_sensor", "region_bsdf", "RegionMesh", "region_meshes", "face_shapes",
+           "FaceScene", "face_scene", "render_face", "scene_xml"]

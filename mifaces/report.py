@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import atomic_write, save_figure
+from .atomic import atomic_write, save_figure
 from .status import CONVERGED
 from .validation.validator import TRUE_SHAPE
 

@@ -21,7 +21,7 @@ import shutil
 from importlib import resources
 from pathlib import Path
 
-from .files import atomic_write
+from .atomic import atomic_write
 from .lighting import LIGHTS_PICTURE
 
 #: The vendored viewer and its licences (``mifaces/web``), copied beside the page.

@@ -13,7 +13,7 @@ import pytest
 
 from mifaces.capture import (FEATURE_POINT_RANGE, MANIFEST, Camera, CaptureError, WhiteTarget, decode,
                              load_capture, read_image)
-from mifaces.files import read_exr, write_exr, write_png
+from mifaces.image_files import read_exr, write_exr, write_png
 from test_simulate import STUDIO, copy_capture, studio  # noqa: F401  (studio: the shared session fixture)
 
 WIDTH, HEIGHT = STUDIO["resolution"]

@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from mifaces import photometric_stereo as ps
-from mifaces.capture.images import read_codes
+from mifaces.image_files import read_codes
 from mifaces.cli import main
 from mifaces.importers import diligent
 from mifaces.photometric_stereo import nonlambertian as nm

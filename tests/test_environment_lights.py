@@ -16,7 +16,7 @@ from mifaces.capture import Camera, CaptureError, load_capture, read_ground_trut
 from mifaces.capture.types import RELATIVE_IRRADIANCE
 from mifaces.environment import (LUMINANCE, dominant_direction, environment_emitter, irradiance, peak_irradiance,
                                  studio_environment, texel_directions, to_world)
-from mifaces.files import read_exr, write_exr
+from mifaces.image_files import read_exr, write_exr
 from mifaces.lighting import LIGHTS_FILE, LIGHTS_FOLDER, write_lights, write_lights_picture
 from mifaces.reflectance.environment import equivalent_lights, estimate_map, reduced_map
 from mifaces.refine.environment import ENVMAP_FLOOR, padded_envmap

@@ -281,7 +281,7 @@ def test_normal_map_is_converted_to_gltfs_tangent_frame(tmp_path):
 @pytest.mark.parametrize("damage", ["changed", "missing", "no manifest"])
 def test_incomplete_or_mixed_result_is_refused(measured, tmp_path, damage):
     from mifaces.export import export_face
-    from mifaces.files import SET_MANIFEST, ResultSetError
+    from mifaces.result_set import SET_MANIFEST, ResultSetError
 
     result = tmp_path / "cooktorrance"
     shutil.copytree(measured / "brdf" / "cooktorrance", result)

@@ -33,8 +33,10 @@ from mifaces.brdf import MAX_LOBES, ParameterError, validate_brdf
 from mifaces.capture import CaptureError, load_capture
 from mifaces.capture.calibration import CalibrationError, calibrate_light
 from mifaces.cli import main
-from mifaces.files import (SET_MANIFEST, TEST_PAUSE_ENV, ResultSetError, check_render_size, check_result_target,
-                           read_exr, result_set, verify_set, write_exr, write_json)
+from mifaces.atomic import write_json
+from mifaces.image_files import read_exr, write_exr
+from mifaces.render import check_render_size
+from mifaces.result_set import SET_MANIFEST, TEST_PAUSE_ENV, ResultSetError, check_result_target, result_set, verify_set
 from mifaces.reflectance.io import FILES, KIND, load_estimate
 from mifaces.shape.io import write_fit
 from mifaces.studio.simulate import simulate
@@ -182,7 +184,7 @@ def test_3_fit_brdf_killed_at_a_random_moment(capture, tmp_path):
 
 
 def _kill_in_write_window(command: list[str], flag: Path, points: list[str], timeout: float = 240.0) -> None:
-    """Run ``command`` with :data:`~mifaces.files.TEST_PAUSE_ENV` set to ``flag``: let it go on at each of
+    """Run ``command`` with :data:`~mifaces.result_set.TEST_PAUSE_ENV` set to ``flag``: let it go on at each of
     ``points`` but the last, where it is killed, inside the write window and nowhere else."""
     log = flag.with_suffix(".log")
     with open(log, "wb") as output:

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mifaces.files import atomic_write, read_exr, write_exr, write_json, write_png
+from mifaces.atomic import atomic_write, write_json
+from mifaces.image_files import read_exr, write_exr, write_png
 
 
 def test_atomic_write_keeps_the_old_file_on_failure(tmp_path):

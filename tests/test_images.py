@@ -1,4 +1,4 @@
-"""Integer photographs read at their true bit depth (mifaces.capture.images)."""
+"""Integer photographs read at their true bit depth (mifaces.image_files, mifaces.capture.images)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mifaces.capture import images
 from mifaces.capture.images import read_image
+from mifaces.image_files import read_codes
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -28,7 +28,7 @@ def test_16bit_rgb_png_keeps_every_code(tmp_path):
     image = read_image(tmp_path / "a.png")
     np.testing.assert_array_equal(np.round(image.pixels * 65535.0), codes)
     assert not image.saturated.any()
-    np.testing.assert_array_equal(images.read_codes(tmp_path / "a.png"), codes)
+    np.testing.assert_array_equal(read_codes(tmp_path / "a.png"), codes)
 
 
 def test_8bit_png_is_unchanged(tmp_path):
@@ -36,7 +36,7 @@ def test_8bit_png_is_unchanged(tmp_path):
 
     codes = np.random.default_rng(1).integers(0, 256, (4, 6)).astype(np.uint8)
     png.from_array(codes, "L;8").save(tmp_path / "a.png")
-    data = images.read_codes(tmp_path / "a.png")
+    data = read_codes(tmp_path / "a.png")
     assert data.dtype == np.uint8
     np.testing.assert_array_equal(data, codes)
 
@@ -48,7 +48,7 @@ def test_netpbm_at_its_depth(tmp_path, magic, planes, top):
     sample = ">u2" if top > 255 else "u1"
     header = magic + b"\n# a comment\n4 3\n" + str(top).encode() + b"\n"
     (tmp_path / "a.pnm").write_bytes(header + codes.astype(sample).tobytes())
-    data = images.read_codes(tmp_path / "a.pnm")
+    data = read_codes(tmp_path / "a.pnm")
     assert data.dtype == (np.uint8 if top == 255 else np.uint16)
     expected = codes[:, :, 0] if planes == 1 else codes
     full = np.iinfo(data.dtype).max
@@ -60,7 +60,7 @@ def test_16bit_tiff(tmp_path):
 
     codes = _codes16((4, 5, 3), seed=2)
     tifffile.imwrite(tmp_path / "a.tif", codes)
-    np.testing.assert_array_equal(images.read_codes(tmp_path / "a.tif"), codes)
+    np.testing.assert_array_equal(read_codes(tmp_path / "a.tif"), codes)
 
 
 def test_diligent_image_at_16_bits():
@@ -78,6 +78,6 @@ def test_yale_pgm():
         pytest.skip(f"Yale faces not found at {path.parent}")
     import PIL.Image
 
-    data = images.read_codes(path)
+    data = read_codes(path)
     assert data.dtype == np.uint8 and data.shape == (192, 168)
     np.testing.assert_array_equal(data, np.asarray(PIL.Image.open(path)))

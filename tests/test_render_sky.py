@@ -133,7 +133,7 @@ def test_cli_render_sky_refuses_bad_options(tmp_path, arguments, message):
 def test_cli_render_sky(small_capture, tmp_path):
     """``mifaces render --sky``: the ground truth's BRDF (a brdf.json folder) under the sun and sky."""
     from mifaces.cli import main
-    from mifaces.files import read_exr
+    from mifaces.image_files import read_exr
 
     # (seed 3: at 64 px the steel spheres locate some lights too poorly to load, 2 of 8 seeds)
     capture = small_capture("sky", measurements=1, resolution=(64, 64), spp=2, albedo_resolution=32, seed=3)

@@ -21,7 +21,8 @@ import mifaces  # noqa: F401  # isort: skip
 from conftest import JIT_VARIANTS
 from mifaces.capture import (GROUND_TRUTH, IMAGE_SUFFIXES, MANIFEST, GroundTruth, load_capture, read_ground_truth,
                              read_image, write_ground_truth)
-from mifaces.files import SET_MANIFEST, read_exr
+from mifaces.image_files import read_exr
+from mifaces.result_set import SET_MANIFEST
 from mifaces.studio.truth import COOK_TORRANCE_REGIONS, brdf_with_overrides, default_brdf
 from mifaces.studio.scene import LIGHT_DISTANCE, studio_camera
 from mifaces.studio.simulate import simulate
@@ -49,7 +50,7 @@ def studio(tmp_path_factory) -> Path:
 
 def copy_capture(source: Path, target: Path) -> Path:
     """A copy of a capture whose files are hard links (cheap); replace a file rather than
-    writing into it (the writers in :mod:`mifaces.files` do) so the source stays intact."""
+    writing into it (the writers in :mod:`mifaces.atomic` do) so the source stays intact."""
     shutil.copytree(source, target, copy_function=_link)
     return target
 

@@ -27,7 +27,7 @@ import mitsuba as mi
 import numpy as np
 
 from mifaces import brdf
-from mifaces.files import write_json
+from mifaces.atomic import write_json
 from mifaces.scenes import scene_path
 
 OUT = Path(__file__).resolve().parent / "results"

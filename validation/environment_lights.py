@@ -43,7 +43,8 @@ import numpy as np
 
 from mifaces.capture import MANIFEST, load_capture, read_ground_truth
 from mifaces.environment import LUMINANCE, irradiance, texel_directions
-from mifaces.files import read_exr, save_figure, write_json
+from mifaces.atomic import save_figure, write_json
+from mifaces.image_files import read_exr
 from mifaces.geometry import load_geometry
 from mifaces.lighting import LIGHTS_FOLDER
 from mifaces.pipeline import measure

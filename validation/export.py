@@ -18,7 +18,6 @@ Machine: 2 CPU cores shared with other jobs; times are indicative only.
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import tempfile
 import time
@@ -28,7 +27,7 @@ import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 
 from mifaces.export import export_face
 from mifaces.export.material import FIT_GRID, mapping_rmse
-from mifaces.files import write_json
+from mifaces.atomic import write_json
 from mifaces.model import load_model
 from mifaces.model.regions import REGIONS, texel_regions_of_mesh
 from mifaces.pipeline import measure

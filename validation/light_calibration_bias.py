@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import uncertainty as U  # noqa: E402  (the captures and checks of validation/uncertainty.py)
 
 from mifaces.capture import with_true_lights  # noqa: E402
-from mifaces.files import write_json  # noqa: E402
+from mifaces.atomic import write_json  # noqa: E402
 from mifaces.reflectance import FitOptions, fit_brdf  # noqa: E402
 from mifaces.reflectance.light_balance import GIVEN_MAX_HALF_COSINE, log_light_errors  # noqa: E402
 from mifaces.reflectance.samples import capture_samples  # noqa: E402

@@ -165,7 +165,7 @@ def main(selected: list[str]) -> None:
     results.sort(key=lambda r: order.index(r["id"]))
 
     import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
-    from mifaces.files import write_json
+    from mifaces.atomic import write_json
 
     write_json(OUT, {"tests": TESTS, "mutations": results,
                      "missed": [r["id"] for r in results if not r["caught"]]})

@@ -43,7 +43,7 @@ import mifaces  # first: libLLVM  # isort: skip
 import mitsuba as mi
 import numpy as np
 
-from mifaces.files import save_figure, write_json
+from mifaces.atomic import save_figure, write_json
 from mifaces.pipeline import measure
 from mifaces.studio import simulate
 from mifaces.reflectance import FitOptions

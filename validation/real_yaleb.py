@@ -63,7 +63,8 @@ import numpy as np
 from mifaces import photometric_stereo
 from mifaces.brdf import NAMES
 from mifaces.capture import load_capture
-from mifaces.files import save_figure, write_exr, write_json, write_png
+from mifaces.atomic import save_figure, write_json
+from mifaces.image_files import write_exr, write_png
 from mifaces.geometry import load_geometry
 from mifaces.importers.yaleb import default_split, import_subject, read_subject
 from mifaces.pipeline import SHAPES, measure
@@ -247,7 +248,7 @@ def figure(results: list[dict], out: Path, data_dir: Path, run_dir: Path, best: 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from mifaces.files import read_exr
+    from mifaces.image_files import read_exr
 
     r = results[0]
     lights = sorted(r["per_light"], key=lambda s: r["per_light"][s]["azimuth"])

@@ -39,7 +39,7 @@ import mitsuba as mi
 import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.files import write_json
+from mifaces.atomic import write_json
 from mifaces.geometry import load_geometry
 from mifaces.validation.held_out import novel_light
 from mifaces.reflectance import FitOptions, fit_brdf

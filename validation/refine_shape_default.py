@@ -23,7 +23,7 @@ from pathlib import Path
 import mifaces  # first: libLLVM  # isort: skip
 
 from mifaces.capture import load_capture
-from mifaces.files import write_json
+from mifaces.atomic import write_json
 from mifaces.geometry import load_geometry
 from mifaces.refine.shape import refine_fits
 from mifaces.shape import fit_shape, shapes_in_world

@@ -32,7 +32,7 @@ import mifaces  # first: libLLVM  # isort: skip
 import numpy as np
 
 from mifaces.capture import load_capture
-from mifaces.files import write_json
+from mifaces.atomic import write_json
 from mifaces.geometry import load_geometry
 from mifaces.shape import fit_shape, shapes_in_world
 from mifaces.shape_errors import capture_shape_errors

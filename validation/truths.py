@@ -57,7 +57,8 @@ import numpy as np
 
 from mifaces.brdf.materials import REFRACTIVE_INDEX
 from mifaces.capture import read_ground_truth
-from mifaces.files import read_exr, save_figure, write_json
+from mifaces.atomic import save_figure, write_json
+from mifaces.image_files import read_exr
 from mifaces.model import load_model
 from mifaces.model.regions import REGIONS
 from mifaces.pipeline import measure

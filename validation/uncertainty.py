@@ -40,7 +40,7 @@ import mifaces  # first: libLLVM  # isort: skip
 import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.files import atomic_write, save_figure, write_json
+from mifaces.atomic import atomic_write, save_figure, write_json
 from mifaces.geometry import load_geometry
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
 from mifaces.reflectance.fit import intervals

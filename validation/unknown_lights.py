@@ -40,7 +40,7 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 import numpy as np
 
 from mifaces.brdf import NAMES
-from mifaces.files import save_figure, write_json
+from mifaces.atomic import save_figure, write_json
 from mifaces.importers.yaleb import default_split, read_subject
 from mifaces.lighting import LIGHTS_FILE
 

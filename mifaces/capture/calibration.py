@@ -35,6 +35,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.ndimage as ndi
+import skimage.filters
+import skimage.measure
 
 from .camera import Camera
 from .types import SpherePictures
@@ -169,10 +172,6 @@ def locate_spheres(outline: np.ndarray, camera: Camera, radius: float,
     -------
     list of SphereDetection, ordered left to right.
     """
-    import scipy.ndimage as ndi
-    import skimage.filters
-    import skimage.measure
-
     lum = _luminance(outline)
     threshold = skimage.filters.threshold_otsu(lum)
     bright = lum > threshold
@@ -236,8 +235,6 @@ def find_highlight(image: np.ndarray, sphere: SphereDetection, inner: float = 0.
         reflection of the other's, and :func:`calibrate_light` drops it by
         comparing peaks.
     """
-    import scipy.ndimage as ndi
-
     lum = _luminance(image)
     h, w = lum.shape
     cx, cy = sphere.center_px

@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..image_files import read_codes, read_exr
+
 #: Number of landmarks (iBUG 300-W).
 COUNT = 68
 #: Rows of the jaw contour, whose points slide along the outline and are least reliable.
@@ -78,14 +80,10 @@ def _as_uint8(image) -> np.ndarray:
     Integer codes keep their top 8 bits; floats are display values in [0, 1] (clipped).
     """
     if isinstance(image, (str, os.PathLike)):
-        from .images import read_codes
-
         path = Path(image)
         if not path.is_file():
             raise FileNotFoundError(f"image not found: {path}")
         if path.suffix.lower() == ".exr":
-            from ..files import read_exr
-
             image = read_exr(path)
         else:
             image = read_codes(path)
@@ -111,7 +109,7 @@ def detect_landmarks(image, box=None, name: str | None = None) -> Landmarks:
     Parameters
     ----------
     image : path or array
-        A photograph (any format :func:`mifaces.capture.images.read_codes` or
+        A photograph (any format :func:`mifaces.image_files.read_codes` or
         EXR reads), or an array (H, W) or (H, W, C), integer codes or floats in [0, 1].
     box : (x0, y0, x1, y1), optional
         The face box, skipping the detector: needed for tight crops, whose

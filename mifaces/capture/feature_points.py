@@ -20,7 +20,7 @@ DISPLAY_PERCENTILE = 99.5
 def display_values(image: Image) -> np.ndarray:
     """A photograph as a viewer shows it, for the detector: the linear values exposed so that their
     :data:`DISPLAY_PERCENTILE` is white, sRGB-encoded (IEC 61966-2-1, colour-science)."""
-    import colour
+    import colour  # colour-science takes most of a second to import: only where faces are detected
 
     pixels = image.pixels[..., 0] if image.greyscale else image.pixels
     top = float(np.percentile(pixels, DISPLAY_PERCENTILE))

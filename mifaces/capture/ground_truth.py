@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_write, read_exr, write_exr, write_json
+from ..atomic import atomic_write, write_json
+from ..image_files import read_exr, write_exr
 from .camera import Camera
 from .types import GROUND_TRUTH, Capture
 

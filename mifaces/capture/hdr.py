@@ -41,7 +41,7 @@ def decode_srgb(codes: np.ndarray) -> np.ndarray:
 
 
 def _decode_srgb(values) -> np.ndarray:
-    import colour
+    import colour  # colour-science takes most of a second to import: only where sRGB is decoded
 
     return np.asarray(colour.cctf_decoding(np.clip(np.asarray(values, np.float64), 0.0, 1.0), function="sRGB"),
                       np.float32)

@@ -2,7 +2,7 @@
 glTF-style PBR textures, built from a ``fit-brdf`` or ``measure`` model folder.
 
 :func:`exported_face` reads the folder (a complete, unmixed result set:
-:func:`mifaces.files.verify_set`), takes the face's shape (the model's mean,
+:func:`mifaces.result_set.verify_set`), takes the face's shape (the model's mean,
 or the shape fitted to one photograph), and maps every region's BRDF onto
 glTF's model (:mod:`mifaces.export.material`), spread over texture space by
 the region map. The writers (:mod:`mifaces.export.gltf`, ``obj``, ``usd``)
@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..brdf.materials import SKIN_REFRACTIVE_INDEX
-from ..files import ResultSetError, verify_set
+from ..result_set import ResultSetError, verify_set
 from ..model import MorphableModel, load_model
 from ..model.regions import REGION_NAMES, REGIONS, texel_regions_of_mesh
 from ..reflectance.io import FILES, KIND, load_estimate
@@ -94,7 +94,7 @@ def check_result(folder) -> Path:
     ------
     FileNotFoundError
         No ``brdf.json`` there.
-    mifaces.files.ResultSetError
+    mifaces.result_set.ResultSetError
         No set manifest (not written as a set, or cut short), files missing,
         changed or from another run.
     """
@@ -197,7 +197,7 @@ def exported_face(result, measurement: str | None = None, shapes=None, face_mode
 
     Raises
     ------
-    mifaces.files.ResultSetError
+    mifaces.result_set.ResultSetError
         An incomplete or mixed result set (:func:`check_result`).
     """
     folder = check_result(result)

@@ -13,8 +13,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pygltflib as g
 
-from ..files import atomic_path, encode_png
+from ..atomic import atomic_path
+from ..image_files import encode_png
 from .face import ExportedFace
 
 #: glTF constants (the specification's enums).
@@ -29,8 +31,6 @@ SRGB = {"base_color": True, "metallic_roughness": False, "specular": True, "norm
 
 def gltf_document(face: ExportedFace):
     """The face as a ``pygltflib.GLTF2`` with one binary blob (buffers and images)."""
-    import pygltflib as g
-
     blob = bytearray()
     views, accessors = [], []
 
@@ -92,8 +92,6 @@ def gltf_document(face: ExportedFace):
 
 def write_gltf(face: ExportedFace, path) -> list[Path]:
     """Write ``path`` (``.glb``: binary; ``.gltf``: JSON with the buffer as a data URI), atomically."""
-    import pygltflib as g
-
     path = Path(path)
     document = gltf_document(face)
     with atomic_path(path) as tmp:

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import mitsuba as mi
 import numpy as np
 
 from ..brdf import MODELS, model as brdf_model
@@ -150,7 +151,6 @@ def gltf_brdf(wi: np.ndarray, wo: np.ndarray, base_color, lobe: GltfLobe) -> np.
 
 def hemisphere_pairs(grid: int = FIT_GRID) -> tuple[np.ndarray, np.ndarray]:
     """Every (ωi, ωo) pair of :func:`mifaces.validation.brdf_error.hemisphere_grid` (cosine-weighted, stratified)."""
-
     d = hemisphere_grid(grid)
     i, o = np.meshgrid(np.arange(len(d)), np.arange(len(d)), indexing="ij")
     return d[i.ravel()], d[o.ravel()]
@@ -159,8 +159,6 @@ def hemisphere_pairs(grid: int = FIT_GRID) -> tuple[np.ndarray, np.ndarray]:
 def specular_lobe(model: str, params: dict, options: dict, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     """A fitted model's glossy part f_s(ωi, ωo) (no diffuse, no cosine), (N, 3), by its own
     Dr.Jit formula (:meth:`mifaces.brdf.model.BRDFModel.eval`)."""
-    import mitsuba as mi
-
     def vec(a):
         return mi.Vector3f(*(np.ascontiguousarray(a[:, k], np.float32) for k in range(3)))
 
@@ -198,7 +196,6 @@ def mapping_rmse(document: dict, region: str, albedo, grid: int = FIT_GRID) -> d
     ``rmse`` for the whole BRDF (diffuse ``albedo``, RGB, plus lobe) and
     ``rmse_specular`` for the lobes alone (against the fitted lobes' RMS).
     """
-
     wi, wo = hemisphere_pairs(grid)
     params = document["regions"].get(region, document["regions"]["skin"])
     lobe = gltf_lobe(document["model"], params, region, document.get("options", {}))

@@ -9,21 +9,22 @@ the full material.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
-from ..files import atomic_write, encode_png
+from ..atomic import atomic_write
+from ..image_files import encode_png
 from .face import ExportedFace
 
 
 def trimesh_mesh(face: ExportedFace, name: str = "face"):
     """The face as a ``trimesh.Trimesh`` with a textured PBR material ``name`` (trimesh's uv: v up)."""
-    import trimesh
-    from PIL import Image
+    import trimesh  # trimesh takes about half a second to import: only where a mesh is written
 
     def image(name, srgb):
-        import io
         return Image.open(io.BytesIO(encode_png(face.textures[name], srgb)))
 
     material = trimesh.visual.material.PBRMaterial(
@@ -37,7 +38,7 @@ def trimesh_mesh(face: ExportedFace, name: str = "face"):
 
 def write_obj(face: ExportedFace, path) -> list[Path]:
     """Write ``path`` (``.obj``), its ``.mtl`` and textures beside it, each atomically, the OBJ last."""
-    import trimesh
+    import trimesh  # trimesh takes about half a second to import: only where a mesh is written
 
     path = Path(path)
     text, files = trimesh.exchange.obj.export_obj(trimesh_mesh(face, path.stem), include_normals=True, include_texture=True,

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_path, atomic_write, encode_png
+from ..atomic import atomic_path, atomic_write
+from ..image_files import encode_png
 from .face import ExportedFace
 
 #: The textures written beside the layer, and whether they are sRGB-encoded.

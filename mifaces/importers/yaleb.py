@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from ..capture.camera import camera_frame_direction
-from ..capture.images import read_codes
+from ..image_files import read_codes
 from ..capture.types import FORMAT, MANIFEST, VERSION
-from ..files import atomic_write, write_json
+from ..atomic import atomic_write, write_json
 
 #: ``yaleBxx_P00A+035E-20``: azimuth and elevation in degrees.
 _LIGHT = re.compile(r"_P00A([+-]\d+)E([+-]\d+)$")

@@ -11,9 +11,14 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
+
+from .basel import load_basel2009, load_basel2017
+from .builtin import load_builtin
 from .loaders import ModelFormatError
 from .morphable import MorphableModel
 from .regions import REGIONS
+from .sfm import is_sfm_npz, load_eos, load_sfm_npz
 
 __all__ = ["MorphableModel", "ModelFormatError", "REGIONS", "load_model"]
 
@@ -44,18 +49,12 @@ def load_model(source: str | os.PathLike | MorphableModel = "builtin", **kwargs)
     if isinstance(source, MorphableModel):
         return source
     if str(source) == "builtin":
-        from .builtin import load_builtin
-
         return load_builtin(**kwargs)
     path = Path(source)
     if not path.is_file():
         raise FileNotFoundError(f"model file not found: {path} (or pass 'builtin')")
     suffix = path.suffix.lower()
     if suffix == ".npz":
-        import numpy as np
-
-        from .sfm import is_sfm_npz, load_sfm_npz
-
         with np.load(path, allow_pickle=False) as data:
             keys = set(data.files)
         if "mifaces_model_format" in keys:
@@ -66,16 +65,10 @@ def load_model(source: str | os.PathLike | MorphableModel = "builtin", **kwargs)
                                f"nor a Surrey Face Model (keys 'shape_mean', 'shape_basis', "
                                f"'shape_eigenvalues', ...); its keys: {sorted(keys)}")
     if suffix == ".bin":
-        from .sfm import load_eos
-
         return load_eos(path, **kwargs)
     if suffix == ".mat":
-        from .basel import load_basel2009
-
         return load_basel2009(path, **kwargs)
     if suffix in (".h5", ".hdf5"):
-        from .basel import load_basel2017
-
         return load_basel2017(path, **kwargs)
     raise ValueError(f"unknown model format {suffix!r} for {path}; "
                      "expected .npz, .bin (eos), .mat (Basel 2009) or .h5 (Basel 2017/2019)")

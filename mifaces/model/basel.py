@@ -27,6 +27,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
+import scipy.io
 
 from .geometry import face_normals
 from .loaders import ModelFormatError, check_shape, existing, require
@@ -90,8 +91,6 @@ def _assemble(path, mean, basis, var, tri, color, expression, landmarks, region_
 def load_basel2009(path: str | os.PathLike, landmarks: dict[int, int] | None = None,
                    region_map_shape=REGION_MAP_SHAPE) -> MorphableModel:
     """Load the Basel Face Model 2009 ``.mat`` (layout in the module docstring)."""
-    import scipy.io
-
     path = existing(path)
     try:
         data = scipy.io.loadmat(str(path))

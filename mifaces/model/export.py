@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_path
+from ..atomic import atomic_path
 
 
 def export_mesh(path: str | os.PathLike, vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray,
@@ -35,7 +35,7 @@ def export_mesh(path: str | os.PathLike, vertices: np.ndarray, triangles: np.nda
     -------
     Path
     """
-    import trimesh
+    import trimesh  # trimesh takes about half a second to import: only where a mesh is written
 
     path = Path(path)
     fmt = path.suffix.lower().lstrip(".")

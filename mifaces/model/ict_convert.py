@@ -44,6 +44,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import scipy.ndimage as ndi
 
 from .regions import REGIONS, _fill_polygon, region_map_from_landmarks
 from .texture_space import rasterize
@@ -249,8 +250,6 @@ def convert(source: Path) -> dict[str, np.ndarray]:
 
 def _dilate(region_map: np.ndarray, margin: int) -> np.ndarray:
     """Background texels within ``margin`` texels of a labelled one take the nearest label."""
-    import scipy.ndimage as ndi
-
     background = region_map == REGIONS["background"]
     distance, (rows, cols) = ndi.distance_transform_edt(background, return_indices=True)
     out = region_map[rows, cols]

@@ -32,9 +32,10 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import drjit as dr
 import numpy as np
 
-from ..files import atomic_write
+from ..atomic import atomic_write
 from . import geometry
 from .export import export_mesh
 from .mesh import mitsuba_mesh
@@ -232,8 +233,6 @@ class MorphableModel:
         Vetter 1999, eq. 3), the E_P term of the fit (paper section 4.2).
         Accepts numpy arrays and Dr.Jit arrays (then it stays differentiable).
         """
-        import drjit as dr
-
         if dr.is_array_v(coefficients):
             return dr.sum(dr.square(coefficients))
         c = np.asarray(coefficients, dtype=np.float64)
@@ -333,8 +332,6 @@ class MorphableModel:
     @classmethod
     def load(cls, path: str | os.PathLike) -> MorphableModel:
         """Load a model written by :meth:`save`."""
-        import json
-
         path = Path(path)
         with np.load(path, allow_pickle=False) as data:
             if "mifaces_model_format" not in data:

@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+import skimage.draw
 
 from .texture_space import rasterize
 
@@ -63,8 +64,6 @@ def lookup(region_map: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 
 def _fill_polygon(image: np.ndarray, value: int, uv_points: np.ndarray, where: np.ndarray) -> None:
-    import skimage.draw
-
     h, w = image.shape
     rows, cols = skimage.draw.polygon(uv_points[:, 1] * h - 0.5, uv_points[:, 0] * w - 0.5, shape=(h, w))
     keep = where[rows, cols]

@@ -14,7 +14,7 @@ region's BSDF in; ``albedo_std.exr``, the albedo's posterior standard
 deviation per texel (:attr:`mifaces.reflectance.maps.diffuse.DiffuseMap.std`),
 when known. ``brdf.json``'s ``"uncertainty"`` holds each region's parameter
 intervals (:mod:`mifaces.reflectance.fit.uncertainty`). The files are one result set
-(:func:`mifaces.files.result_set`): written together into a sibling folder
+(:func:`mifaces.result_set.result_set`): written together into a sibling folder
 and swapped in, so a killed run leaves the earlier set whole.
 :func:`load_estimate` reads ``brdf.json`` and the albedo map back and refuses
 a mixed set.
@@ -26,8 +26,9 @@ import json
 from pathlib import Path
 
 from .. import brdf as brdf_models
-from ..files import (ResultSetError, atomic_write, read_exr, result_set, verify_set, write_exr,
-                     write_json, write_png)
+from ..atomic import atomic_write, write_json
+from ..image_files import read_exr, write_exr, write_png
+from ..result_set import ResultSetError, result_set, verify_set
 from ..environment import environment_emitter
 from ..render import FaceScene, light_arguments, scene_xml
 from .result import FILES, BRDFEstimate
@@ -44,7 +45,7 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light, 
                    force: bool = False) -> dict[str, Path]:
     """Write ``brdf.json``, ``albedo.exr`` (+ ``albedo.png``), ``meshes/*.ply``
     and ``scene.xml`` into folder ``out`` as one result set
-    (:func:`mifaces.files.result_set`): all of them or none.
+    (:func:`mifaces.result_set.result_set`): all of them or none.
 
     Parameters
     ----------
@@ -114,7 +115,7 @@ def load_estimate(path) -> dict:
 
     Raises
     ------
-    mifaces.files.ResultSetError
+    mifaces.result_set.ResultSetError
         Files that were not written together (a ``brdf.json`` and an albedo
         map of different runs: changed checksums, or, in a folder without a
         set manifest, an albedo map of another resolution).

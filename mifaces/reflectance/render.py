@@ -14,10 +14,11 @@ from scipy.spatial.transform import Rotation
 
 from ..brdf.model import check_numbers
 from ..capture import load_capture
-from ..files import check_writable
 from ..geometry import load_geometry
+from ..image_files import save_image
 from ..model import MorphableModel
-from ..render import FaceScene, light_arguments, save_image
+from ..paths import check_writable
+from ..render import FaceScene, light_arguments
 from .estimate import BRDFEstimate
 from .io import load_estimate
 

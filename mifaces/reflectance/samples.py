@@ -29,7 +29,7 @@ import numpy as np
 import scipy.ndimage
 import skimage.morphology
 
-from ..files import atomic_path
+from ..atomic import atomic_path
 from ..model.geometry import tangent_frames
 from ..model.mesh import mitsuba_mesh
 from ..progress import progress as progress_bar

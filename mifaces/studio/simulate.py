@@ -70,7 +70,9 @@ import numpy as np
 
 from ..brdf.cooktorrance import DIGITS
 from ..capture import write_ground_truth
-from ..files import MAX_IMAGE_SIDE, check_image_size, check_render_size, check_result_target, result_set
+from ..image_files import MAX_IMAGE_SIDE, check_image_size
+from ..render import check_render_size
+from ..result_set import check_result_target, result_set
 from ..model import load_model
 from ..progress import progress as progress_bar
 from ..render import face_shapes, region_bsdf, region_meshes
@@ -120,7 +122,7 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     ----------
     out : path
         Capture folder to write, as one result set
-        (:func:`mifaces.files.result_set`): the photographs, the manifest and
+        (:func:`mifaces.result_set.result_set`): the photographs, the manifest and
         the ground truth appear together, or not at all.
     model : str, path or MorphableModel
         ``'builtin'``, a model file for :func:`mifaces.load_model`, or a model.
@@ -184,7 +186,7 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     ------
     FileExistsError
         ``out`` holds a simulated capture and ``force`` is False.
-    mifaces.files.ResultSetError
+    mifaces.result_set.ResultSetError
         ``out`` holds files mifaces did not write (a real capture).
     """
     t_start = time.perf_counter()
@@ -304,7 +306,7 @@ def _integer(name: str, value, lowest: int, highest: int) -> int:
 def _check_arguments(measurements: int, resolution, preset: str | None, companion: str, spp: int = 64,
                      albedo_resolution: int = 1024, seed: int = 0) -> tuple[int, tuple[int, int]]:
     """The number of measurements and the resolution; a ValueError naming a bad argument (sizes
-    within :func:`mifaces.files.check_render_size`'s limits, before anything is allocated)."""
+    within :func:`mifaces.render.check_render_size`'s limits, before anything is allocated)."""
     if preset is not None:
         if preset not in PRESETS:
             raise ValueError(f"unknown preset {preset!r}; presets: {sorted(PRESETS)}")

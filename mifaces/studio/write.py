@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from ..capture import FORMAT, MANIFEST, VERSION, GroundTruth, TrueLight, TrueMeasurement
-from ..files import write_exr, write_json, write_png
+from ..atomic import write_json
+from ..image_files import write_exr, write_png
 from ..model.landmarks import FEATURE_POINTS
 from .photograph import FULL_WELL, READ_NOISE, Photographs, SpherePhotographs
 from .environment_light import EnvironmentLight

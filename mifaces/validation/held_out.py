@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from ..capture.types import RELATIVE_IRRADIANCE
 from ..environment import camera_frame, dominant_direction
-from ..files import read_exr
+from ..image_files import read_exr
 
 #: The novel pose: yaw about the camera's up axis, then pitch about its right
 #: axis (degrees, through the true face's centroid; positive yaw turns the face
