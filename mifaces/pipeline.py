@@ -51,8 +51,7 @@ from .report import (ranking, write_markdown, write_picture, write_uncertainty_p
                      write_validation_picture)
 from .report_html import write_html
 from .shape import fit_shape, shapes_in_world
-from .shape.fit import model_source
-from .shape.io import write_fit, write_index
+from .shape.io import model_source, write_fit, write_index
 from .shape_errors import capture_shape_errors
 from .studio import simulate
 from .validation.truth_errors import ground_truth_errors
