@@ -175,7 +175,7 @@ def region_meshes(model, vertices: np.ndarray, normals: np.ndarray | None = None
     return meshes
 
 
-def face_shapes(model, vertices: np.ndarray, truth: dict, texture=None, normals: np.ndarray | None = None, *,
+def face_meshes(model, vertices: np.ndarray, truth: dict, texture=None, normals: np.ndarray | None = None, *,
                 maps: Mapping | None = None) -> dict:
     """One Mitsuba mesh per region (:func:`region_meshes`), each with its
     region's BSDF from ``truth`` (the ``brdf.json`` layout) over the albedo
@@ -497,4 +497,4 @@ def scene_xml(scene: dict, parameters: Mapping[str, tuple[str, ...]] | None = No
 
 __all__ = ["ALBEDO", "ALBEDO_REF", "NORMALS", "SPECULAR", "MESH_FOLDER", "render_passes", "save_image", "mitsuba_sensor", "rgb",
            "region_bsdf",
-           "RegionMesh", "region_meshes", "face_shapes", "FaceScene", "face_scene", "render_face", "scene_xml"]
+           "RegionMesh", "region_meshes", "face_meshes", "FaceScene", "face_scene", "render_face", "scene_xml"]

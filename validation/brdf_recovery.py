@@ -40,7 +40,7 @@ from mifaces.validation.truth_errors import ground_truth_errors
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.files import write_json
 from mifaces.model.regions import REGIONS
-from mifaces.render import face_shapes, mitsuba_sensor
+from mifaces.render import face_meshes, mitsuba_sensor
 from mifaces.studio.simulate import simulate
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -141,7 +141,7 @@ def cross_family(work: Path, args) -> list[dict]:
                  "sensor": mitsuba_sensor(capture.camera, args.spp),
                  "light": {"type": "point", "position": lamp.position.tolist(),
                            "intensity": {"type": "rgb", "value": lamp.intensity.tolist()}},
-                 **face_shapes(face, shapes[m.name], truth, texture)}
+                 **face_meshes(face, shapes[m.name], truth, texture)}
         return np.array(mi.render(mi.load_dict(scene), spp=args.spp, seed=7), dtype=np.float32)[..., :3]
 
     floor = image_error(truth_render)

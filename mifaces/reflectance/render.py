@@ -10,13 +10,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..brdf.model import check_numbers
 from ..capture import load_capture
 from ..files import check_writable
 from ..geometry import load_geometry
 from ..model import MorphableModel
+from ..model.geometry import rotation_about, turned
 from ..render import FaceScene, light_arguments, save_image
 from .estimate import BRDFEstimate
 from .io import load_estimate
@@ -37,14 +37,6 @@ def render_estimate(estimate: BRDFEstimate, face_model: MorphableModel, vertices
                                                   specular=estimate.specular_texture())
 
 
-def turn(vertices: np.ndarray, yaw: float, up: np.ndarray) -> np.ndarray:
-    """``vertices`` (V, 3) turned by ``yaw`` degrees about the axis ``up``
-    (unit, world frame) through their centroid (right-handed)."""
-    vertices = np.asarray(vertices, np.float64)
-    centre = vertices.mean(axis=0)
-    return Rotation.from_rotvec(np.radians(yaw) * np.asarray(up, np.float64)).apply(vertices - centre) + centre
-
-
 def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geometry="ground-truth",
                   face_model=None, yaw: float = 0.0, light_position=None, envmap=None, envmap_scale: float = 1.0,
                   spp: int = 64, light_direction=None, intensity=None) -> dict[str, Path]:
@@ -54,7 +46,8 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     The BRDF may come from another face than the geometry: both share the
     model's texture parameterization, so the albedo map and the regions move
     with it (paper sec. 6). ``yaw`` turns the face about the camera's up
-    direction (degrees, about the face's centroid, :func:`turn`); the light is
+    direction (degrees, right-handed, about the face's centroid:
+    :func:`~mifaces.model.geometry.turned`, :attr:`~mifaces.capture.Camera.up`); the light is
     the measurement's light unless ``light_position`` (a point light, world,
     mm), ``light_direction`` (a directional light, world frame, towards the
     light; :meth:`mifaces.capture.Camera.direction` turns an azimuth and
@@ -79,7 +72,7 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
         raise ValueError(f"{brdf_dir}: the albedo map must be a square RGB image, got shape {albedo.shape}")
     vertices = np.asarray(shapes[name], np.float64)
     if yaw:
-        vertices = turn(vertices, yaw, -capture.camera.rotation[1])  # the camera's up direction in the world frame
+        vertices = turned(vertices, rotation_about(capture.camera.up, yaw), vertices.mean(axis=0))
     lamp = capture.light(next(m.light for m in capture.measurements if m.name == name))
     if light_position is None and light_direction is None and envmap is None:  # the measurement's light
         given = light_arguments(lamp)
@@ -93,4 +86,4 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     return save_image(image, out)
 
 
-__all__ = ["render_estimate", "render_fitted", "turn"]
+__all__ = ["render_estimate", "render_fitted"]

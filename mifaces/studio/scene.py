@@ -173,11 +173,12 @@ def white_value(studio: Studio) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 # Mitsuba scenes
 # --------------------------------------------------------------------------------------------
-def scene(studio: Studio, shapes: dict, emitters: dict, spp: int) -> dict:
-    """The scene dict of ``shapes`` lit by ``emitters`` as the studio camera sees it with ``spp`` samples."""
+def scene(studio: Studio, meshes: dict, emitters: dict, spp: int) -> dict:
+    """The scene dict of ``meshes`` (Mitsuba shapes) lit by ``emitters`` as the studio camera sees it
+    with ``spp`` samples."""
     d = {"type": "scene", "integrator": studio.integrator,
          "sensor": dict(studio.sensor, sampler={"type": "independent", "sample_count": spp})}
-    d.update(shapes)
+    d.update(meshes)
     d.update(emitters)
     return d
 

@@ -72,16 +72,17 @@ from skimage.transform import resize
 
 from ..capture import Camera, read_ground_truth
 from ..capture.types import RELATIVE_IRRADIANCE
-from ..environment import LUMINANCE, SKY_SUN_ANGLES, camera_frame, dominant_direction, sky_emitter, studio_environment
+from ..environment import LUMINANCE, SKY_SUN_ANGLES, dominant_direction, sky_emitter, studio_environment
 from ..files import read_exr
 from ..geometry import load_geometry
+from ..model.geometry import turned
 from ..model.regions import REGIONS
 from ..model.mesh import mitsuba_mesh
 from ..render import ALBEDO, FaceScene, mitsuba_sensor, region_bsdf, rgb
 from ..shape_errors import front_of_face
 from ..studio import subsurface as translucent
 from ..studio.photograph import albedo_texture
-from ..studio.simulate import true_face_shapes
+from ..studio.simulate import true_face_meshes
 from ..studio.varying import map_textures
 from .truth_errors import ground_truth_errors
 
@@ -182,16 +183,11 @@ def brdf_rmse(truth: dict, fit: dict, region: str, true_albedo, fit_albedo, uv: 
 # --------------------------------------------------------------------------------------------
 def novel_rotation(camera, pose=NOVEL_POSE) -> np.ndarray:
     """The world-frame rotation (3x3) of the novel pose: ``pose`` = (yaw,
-    pitch) degrees about the camera's up and then its right axis."""
-    right, up, _ = camera_frame(camera).T
+    pitch) degrees about the camera's up and then its right axis (:attr:`~mifaces.capture.Camera.frame`)."""
+    right, up, _ = camera.frame.T
     yaw = Rotation.from_rotvec(np.radians(pose[0]) * up)
     pitch = Rotation.from_rotvec(np.radians(pose[1]) * right)
     return (pitch * yaw).as_matrix()
-
-
-def turned(vertices: np.ndarray, rotation: np.ndarray, centre: np.ndarray) -> np.ndarray:
-    """``vertices`` (V, 3) turned by ``rotation`` about ``centre`` (world, mm)."""
-    return (np.asarray(vertices, np.float64) - centre) @ np.asarray(rotation).T + centre
 
 
 def true_lights(capture, truth):
@@ -389,10 +385,10 @@ class Validator:
         self.truth_mask = face_coverage(truth_model, turned(true_vertices, rotation, centre), self.camera)
         self.mask = self.truth_mask | face_coverage(face_model, turned(fit_vertices, rotation, centre), self.camera)
         truth = self.ground_truth.brdf
-        true_shapes = self._true_face(truth_model, self.truth_scene, turned(true_vertices, rotation, centre))
-        self.truth = {name: self._render_truth(true_shapes, light) for name, light in self.conditions.items()}
+        true_meshes = self._true_face(truth_model, self.truth_scene, turned(true_vertices, rotation, centre))
+        self.truth = {name: self._render_truth(true_meshes, light) for name, light in self.conditions.items()}
         # the Monte Carlo noise of these renders: the truth against itself rendered with another seed
-        noise = {name: relative_rmse(self._render_truth(true_shapes, light, NOISE_SEED), self.truth[name],
+        noise = {name: relative_rmse(self._render_truth(true_meshes, light, NOISE_SEED), self.truth[name],
                                      self.truth_mask) for name, light in self.conditions.items()}
         floor = self._shape_floor(truth_model, face_model, true_vertices, fit_vertices, rotation, centre)
         # where the shapes differ but share a texture space, the fitted reflectance is also judged on the true shape
@@ -412,24 +408,24 @@ class Validator:
 
     def _true_face(self, face_model, scene: FaceScene, vertices: np.ndarray) -> dict:
         """The true reflectance on ``vertices`` as the simulator photographed it
-        (:func:`mifaces.studio.simulate.true_face_shapes`): parameter maps of a
+        (:func:`mifaces.studio.simulate.true_face_meshes`): parameter maps of a
         spatially varying truth, translucent skin of a subsurface one."""
         truth = self.ground_truth
-        shapes = true_face_shapes(face_model, np.asarray(vertices, np.float32), truth.brdf,
+        meshes = true_face_meshes(face_model, np.asarray(vertices, np.float32), truth.brdf,
                                   albedo_texture(truth.albedo), map_textures(truth.maps), self._subsurface)
-        return {key: shapes[key] for key in scene.meshes}  # keyed as the scene's meshes
+        return {key: meshes[key] for key in scene.meshes}  # keyed as the scene's meshes
 
     @property
     def _subsurface(self) -> bool:
         return "subsurface" in self.ground_truth.description
 
-    def _render_truth(self, shapes: dict, light: dict, seed: int = SEED) -> np.ndarray:
-        """An image of the true face ``shapes`` (:meth:`_true_face`) under condition ``light``: the
+    def _render_truth(self, meshes: dict, light: dict, seed: int = SEED) -> np.ndarray:
+        """An image of the true face ``meshes`` (:meth:`_true_face`) under condition ``light``: the
         validation's camera and emitters, the simulator's integrator for a translucent truth."""
         scene = self.truth_scene.description(self.ground_truth.brdf, self.camera, spp=self.spp, **light)
         for key in (ALBEDO, *self.truth_scene.meshes):
             scene.pop(key)
-        scene.update(shapes)
+        scene.update(meshes)
         if self._subsurface:
             scene["integrator"] = translucent.INTEGRATOR
         return np.array(mi.render(mi.load_dict(scene), spp=self.spp, seed=seed), dtype=np.float32)[..., :3]
@@ -443,8 +439,8 @@ class Validator:
             return None
         if np.array_equal(np.asarray(true_vertices, np.float64), np.asarray(fit_vertices, np.float64)):
             return {name: 0.0 for name in self.conditions}
-        shapes = self._true_face(face_model, self.fit_scene, turned(fit_vertices, rotation, centre))
-        return {name: relative_rmse(self._render_truth(shapes, light), self.truth[name], self.mask)
+        meshes = self._true_face(face_model, self.fit_scene, turned(fit_vertices, rotation, centre))
+        return {name: relative_rmse(self._render_truth(meshes, light), self.truth[name], self.mask)
                 for name, light in self.conditions.items()}
 
     def _pooled(self, per_condition: dict) -> dict:
@@ -523,5 +519,5 @@ class Validator:
 
 
 __all__ = ["GRID", "UV_SAMPLES", "NOVEL_POSE", "HELD_OUT_LIGHTS", "RENDER_SIZE", "SPP", "LIGHT_CANDIDATES",
-           "TRUE_SHAPE", "hemisphere_grid", "eval_bsdf", "region_texels", "brdf_rmse", "novel_rotation", "turned",
+           "TRUE_SHAPE", "hemisphere_grid", "eval_bsdf", "region_texels", "brdf_rmse", "novel_rotation",
            "true_lights", "held_out_lights", "face_camera", "coverage", "relative_rmse", "pose_angle", "Validator"]
