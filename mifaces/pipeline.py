@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from .brdf import NAMES
-from .capture import Capture, load_capture, read_ground_truth
+from .capture import Capture, Light, load_capture, read_ground_truth
 from .capture.types import RELATIVE_IRRADIANCE
 from .environment import dominant_direction
 from .export import export_face
@@ -46,7 +46,8 @@ from .reflectance import FitOptions, capture_samples, fit_brdf, write_estimate
 from .reflectance.light_balance import balance_given_lights
 from .refine import refine_estimate
 from .refine.shape import refine_lit, refined_fits
-from .render import FaceScene, light_arguments
+from .emitters import light_record
+from .render import FaceScene
 from .report import (ranking, write_markdown, write_picture, write_uncertainty_picture,
                      write_validation_picture)
 from .report_html import write_html
@@ -77,20 +78,20 @@ class NoUsableShapeError(ValueError):
     """No photograph of a capture got a shape fit that the next stages can use."""
 
 
-def novel_light(capture, centre: np.ndarray) -> dict:
-    """A light none of the measurements used, as keyword arguments of
-    :meth:`mifaces.render.FaceScene.render`: :func:`novel_point_light` for
-    point lights, :func:`novel_direction` for directional ones; for an environment map a
-    directional light of irradiance :data:`RELATIVE_IRRADIANCE` mirrored from the map's
+def novel_light(capture, centre: np.ndarray) -> Light:
+    """A light none of the measurements used (a :class:`~mifaces.capture.Light` named
+    ``'novel'``): :func:`novel_point_light` for point lights, :func:`novel_direction` for
+    directional ones; for an environment map a directional light of irradiance
+    :data:`RELATIVE_IRRADIANCE` mirrored from the map's
     :func:`~mifaces.environment.dominant_direction`."""
     first = next((light for light in capture.lights if not light.environment), capture.lights[0])
     if first.environment:  # a directional light from the other side of where most of the map's light comes
         towards = capture.camera.rotation @ dominant_direction(first.envmap, capture.camera)
-        return {"light_direction": capture.camera.rotation.T @ _mirrored(towards),
-                "intensity": np.full(3, RELATIVE_IRRADIANCE)}
+        return Light("novel", None, np.full(3, RELATIVE_IRRADIANCE),
+                     direction=capture.camera.rotation.T @ _mirrored(towards))
     if first.directional:
-        return {"light_direction": novel_direction(capture), "intensity": first.intensity}
-    return {"light_position": novel_point_light(capture, centre), "intensity": first.intensity}
+        return Light("novel", None, first.intensity, direction=novel_direction(capture))
+    return Light("novel", novel_point_light(capture, centre), first.intensity)
 
 
 def novel_direction(capture) -> np.ndarray:
@@ -278,7 +279,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
         panels.append(panel[:-1])
     timings["total"] = time.perf_counter() - t0
     report["seconds"] = timings
-    report["novel_light"] = {key: np.asarray(value).tolist() for key, value in novel.items()}
+    report["novel_light"] = light_record(novel)
     if validator is not None:
         report["ranking"] = ranking(report["models"])
     write_json(out / "report.json", report)
@@ -390,15 +391,15 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
         estimate = replace(estimate, lighting={"lights": "estimated", "reflectance": "relative", "note": RELATIVE_NOTE})
     light = capture.light(first.light)
     write_estimate(estimate, out / "brdf" / model, scene, capture.camera, light, force=True)  # measure's own folder
-    lamp = light_arguments(estimate.fitted_light(light))
+    lamp = estimate.fitted_light(light)
     timings[f"fit_brdf_{model}"] = time.perf_counter() - t
     entry = estimate.to_json()
     entry["warnings"] = [str(w.message) for w in caught]
     entry["ground_truth"] = ground_truth_errors(estimate, capture)
     brdf, albedo = estimate.to_json(), estimate.albedo.albedo
     maps = {"normals": estimate.normal_texture(), "specular": estimate.specular_texture()}
-    rendered = scene.render(brdf, albedo, capture.camera, spp=spp, **lamp, **maps)
-    relit = scene.render(brdf, albedo, capture.camera, spp=spp, **novel, **maps)
+    rendered = scene.render(brdf, albedo, capture.camera, lamp, spp=spp, **maps)
+    relit = scene.render(brdf, albedo, capture.camera, novel, spp=spp, **maps)
     photo = first.image.pixels
     face_pixels = coverage(scene, capture.camera)  # the fitted face's pixels, whatever the background shows
     entry["training_rmse"] = relative_rmse(rendered, photo, face_pixels)

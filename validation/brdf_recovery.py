@@ -164,8 +164,8 @@ def cross_family(work: Path, args) -> list[dict]:
         spec_rel = float(np.sqrt(np.mean((r_fit - r_true) ** 2)) / np.sqrt(np.mean(specular ** 2)))
         grazing = (light[:, 2] < 0.34) & (view[:, 2] < 0.34)
         grazing_rmse = float(np.sqrt(np.mean((r_fit[grazing] - r_true[grazing]) ** 2)))
-        image = image_error(lambda m, lamp: render_estimate(estimate, face, shapes[m.name], capture.camera,
-                                                            lamp.position, lamp.intensity, spp=args.spp, seed=7))
+        image = image_error(lambda m, lamp: render_estimate(estimate, face, shapes[m.name], capture.camera, lamp,
+                                                            spp=args.spp, seed=7))
         label = model if lobes == 1 else f"{model} ({lobes} lobes)"
         rows.append({"model": label, "skin_loss": skin.loss, "skin_samples": skin.samples,
                      "brdf_rmse": brdf_rmse, "brdf_rmse_over_specular_rms": spec_rel,

@@ -29,7 +29,7 @@ from .. import brdf as brdf_models
 from ..files import (ResultSetError, atomic_write, read_exr, result_set, verify_set, write_exr,
                      write_json, write_png)
 from ..environment import environment_emitter
-from ..render import FaceScene, light_arguments, scene_xml
+from ..render import FaceScene, scene_xml
 from .result import FILES, BRDFEstimate
 
 #: Samples per pixel of ``scene.xml`` (``mi.load_file(path, spp=N)`` overrides it).
@@ -54,7 +54,7 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light, 
         The geometry the scene shows (world frame, mm).
     camera : mifaces.capture.Camera
     light : mifaces.capture.Light
-        The scene's light (:func:`mifaces.render.light_arguments`), as the
+        The scene's light (:func:`mifaces.emitters.light_emitters`), as the
         estimate was fitted under it (:meth:`BRDFEstimate.fitted_light`: a map
         the refinement refined is the refined one). An environment map is
         written beside the scene as ``environment.exr``.
@@ -64,11 +64,11 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light, 
     out = Path(out)
     document = estimate.to_json()
     normals, specular = estimate.normal_texture(), estimate.specular_texture()
-    lamp = light_arguments(estimate.fitted_light(light))
-    envmap = lamp.get("envmap")
-    environment = None if envmap is None else environment_emitter(FILES["environment"], camera)
-    scene = face.description(document, camera, lamp.get("light_position"), lamp.get("intensity"), environment,
-                             spp=SCENE_SPP, albedo=FILES["albedo"], light_direction=lamp.get("light_direction"),
+    lamp = estimate.fitted_light(light)
+    envmap = lamp.envmap if lamp.environment else None
+    environment = None if envmap is None else environment_emitter(FILES["environment"], camera)  # named by file
+    scene = face.description(document, camera, lamp if envmap is None else None, envmap=environment,
+                             spp=SCENE_SPP, albedo=FILES["albedo"],
                              normals=None if normals is None else FILES["normals"],
                              specular=None if specular is None else FILES["specular"])
     # (description checks the BRDF and the light before anything is written)

@@ -7,33 +7,34 @@ with Mitsuba's path tracer as the simulator renders photographs
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from ..brdf.model import check_numbers
-from ..capture import load_capture
+from ..capture import Light, load_capture
 from ..files import check_writable
 from ..geometry import load_geometry
 from ..model import MorphableModel
 from ..model.geometry import rotation_about, turned
-from ..render import FaceScene, light_arguments, save_image
+from ..render import FaceScene, save_image
 from .estimate import BRDFEstimate
 from .io import load_estimate
 
 
 def render_estimate(estimate: BRDFEstimate, face_model: MorphableModel, vertices: np.ndarray, camera,
-                    light_position=None, intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64,
-                    seed: int = 0, *, light_direction=None) -> np.ndarray:
+                    light: Light | None = None, *, envmap=None, envmap_scale: float = 1.0, spp: int = 64,
+                    seed: int = 0) -> np.ndarray:
     """Render the fitted face (linear RGB, (H, W, 3)) on geometry ``vertices``
-    (world frame) seen by ``camera``, under a point light and/or an
-    environment map, or a directional light (``light_direction``, world frame,
-    towards the light, with ``intensity`` its irradiance): for novel poses,
-    novel lights and comparisons with held-out photographs. To render one face several times, build its
+    (world frame) seen by ``camera``, under a :class:`~mifaces.capture.Light` (point,
+    directional or environment map) and/or an environment ``envmap``
+    (:func:`mifaces.emitters.light_emitters`): for novel poses, novel lights and comparisons with
+    held-out photographs. To render one face several times, build its
     :class:`~mifaces.render.FaceScene` once and call its ``render``."""
-    return FaceScene(face_model, vertices).render(estimate.to_json(), estimate.albedo.albedo, camera, light_position,
-                                                  intensity, envmap, envmap_scale, spp, seed,
-                                                  light_direction=light_direction, normals=estimate.normal_texture(),
+    return FaceScene(face_model, vertices).render(estimate.to_json(), estimate.albedo.albedo, camera, light,
+                                                  envmap=envmap, envmap_scale=envmap_scale, spp=spp, seed=seed,
+                                                  normals=estimate.normal_texture(),
                                                   specular=estimate.specular_texture())
 
 
@@ -53,7 +54,8 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     light; :meth:`mifaces.capture.Camera.direction` turns an azimuth and
     elevation into one) or an ``envmap`` is given (an equirectangular map,
     or an emitter dict such as :func:`mifaces.environment.sky_emitter`'s); its intensity is the
-    measurement light's unless ``intensity`` is given. Rendered in the
+    measurement light's unless ``intensity`` is given (the :class:`~mifaces.capture.Light` rendered:
+    the measurement's, or one made of these). Rendered in the
     capture's camera and units, the image compares pixel for pixel with a
     photograph taken under that light.
     """
@@ -74,15 +76,16 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     if yaw:
         vertices = turned(vertices, rotation_about(capture.camera.up, yaw), vertices.mean(axis=0))
     lamp = capture.light(next(m.light for m in capture.measurements if m.name == name))
+    intensity = lamp.intensity if intensity is None else intensity
     if light_position is None and light_direction is None and envmap is None:  # the measurement's light
-        given = light_arguments(lamp)
-        light_position, light_direction, envmap = (given.get(key) for key in ("light_position", "light_direction",
-                                                                               "envmap"))
-    if intensity is None and (light_position is not None or light_direction is not None):
-        intensity = lamp.intensity
-    image = FaceScene(face, vertices).render(data, albedo, capture.camera, light_position, intensity, envmap,
-                                             envmap_scale, spp, light_direction=light_direction,
-                                             normals=data.get("normals"), specular=data.get("specular"))
+        light = lamp if lamp.environment else replace(lamp, intensity=intensity)
+    elif light_position is None and light_direction is None:
+        light = None  # the environment alone
+    else:
+        light = Light("novel", light_position, intensity, direction=light_direction)
+    image = FaceScene(face, vertices).render(data, albedo, capture.camera, light, envmap=envmap,
+                                             envmap_scale=envmap_scale, spp=spp, normals=data.get("normals"),
+                                             specular=data.get("specular"))
     return save_image(image, out)
 
 

@@ -18,8 +18,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..capture import Camera
+from ..emitters import rgb
 from ..environment import environment_emitter
-from ..render import mitsuba_sensor, rgb
+from ..render import mitsuba_sensor
 from .environment_light import EnvironmentLight, environment_light
 
 #: Studio geometry (mm). Camera distance to the head centre, field height there.

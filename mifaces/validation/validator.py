@@ -70,9 +70,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from skimage.transform import resize
 
-from ..capture import Camera, read_ground_truth
+from ..capture import Camera, Light, read_ground_truth
 from ..capture.types import RELATIVE_IRRADIANCE
 from ..environment import LUMINANCE, SKY_SUN_ANGLES, dominant_direction, sky_emitter, studio_environment
+from ..emitters import light_record
 from ..files import read_exr
 from ..geometry import load_geometry
 from ..model.geometry import turned
@@ -215,16 +216,15 @@ def true_lights(capture, truth):
     return replace(capture, lights=tuple(lights))
 
 
-def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -> list[dict]:
-    """``count`` lights none of the capture's photographs used, as keyword
-    arguments of :meth:`mifaces.render.FaceScene.render`: of
+def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -> list[tuple[Light, float]]:
+    """``count`` lights none of the capture's photographs used (:class:`~mifaces.capture.Light`
+    values named ``held_out_<k>``), each with its angle to the capture's lights: of
     :data:`LIGHT_CANDIDATES`, those whose smallest angle (seen from
     ``centre``) to every capture light and to each other is largest; point
     lights at the capture lights' mean distance with the first light's
     intensity (directional lights for a capture of directional lights, and for one lit by environment
     maps alone: irradiance :data:`~mifaces.capture.types.RELATIVE_IRRADIANCE`); away from where most
-    of each environment map's light comes from, too.
-    Each dict also holds ``angle_to_capture`` (degrees)."""
+    of each environment map's light comes from, too; that angle (degrees) is the smallest to any of them."""
     maps = [dominant_direction(light.envmap, capture.camera) for light in capture.lights if light.environment]
     lights = [light for light in capture.lights if not light.environment]  # the point or directional ones
     environment = not lights
@@ -246,15 +246,13 @@ def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -
         chosen.append(int(np.argmax(separation)))
     distance = 1.0 if directional else float(np.mean([np.linalg.norm(l.position - centre) for l in lights]))
     out = []
-    for k in chosen:
+    for i, k in enumerate(chosen):
         angle = float(np.degrees(np.arccos(np.clip(used @ candidates[k], -1, 1))).min())
         intensity = np.full(3, RELATIVE_IRRADIANCE) if environment else np.asarray(lights[0].intensity, np.float64)
-        light = {"intensity": intensity, "angle_to_capture": angle}
-        if directional:
-            light["light_direction"] = candidates[k]
-        else:
-            light["light_position"] = centre + distance * candidates[k]
-        out.append(light)
+        name = f"held_out_{i + 1}"
+        light = (Light(name, None, intensity, direction=candidates[k]) if directional
+                 else Light(name, centre + distance * candidates[k], intensity))
+        out.append((light, angle))
     return out
 
 
@@ -346,7 +344,8 @@ class Validator:
     Attributes
     ----------
     conditions : dict
-        Name -> the light keyword arguments of :meth:`FaceScene.render`.
+        Name -> the light keyword arguments of :meth:`FaceScene.render`: ``{'light': Light}`` for a
+        held-out light (:func:`held_out_lights`), ``{'envmap': environment}`` for an environment.
     truth : dict
         Name -> the true face's image (H, W, 3).
     mask, truth_mask : (H, W) bool
@@ -376,8 +375,7 @@ class Validator:
         self.camera = face_camera(capture.camera, turned(true_vertices, rotation, centre), size)
         self.spp = int(spp)
         held_out = held_out_lights(true_lights(capture, self.ground_truth), centre, lights)
-        self.conditions = {f"light_{k + 1}": {key: value for key, value in light.items() if key != "angle_to_capture"}
-                           for k, light in enumerate(held_out)}
+        self.conditions = {f"light_{k + 1}": {"light": light} for k, (light, _) in enumerate(held_out)}
         if environments is None:
             environments = {"studio": studio_environment(), "sky": sky_emitter(self.camera)}
         self.environments = tuple(environments)
@@ -398,7 +396,7 @@ class Validator:
         self.summary = {
             "truth_model": truth["model"], "measurement": measurement, "novel_pose": list(pose),
             "novel_pose_angle_to_capture": min(pose_angle(novel, m.rotation) for m in self.ground_truth.measurements),
-            "held_out_lights": [{key: np.asarray(v).tolist() for key, v in light.items()} for light in held_out],
+            "held_out_lights": [{**light_record(light), "angle_to_capture": angle} for light, angle in held_out],
             "environments": [name for name in environments], "sky_sun_angles": list(SKY_SUN_ANGLES),
             "render": {"width": self.camera.width, "height": self.camera.height, "spp": self.spp,
                        "mask_pixels": int(self.mask.sum())},
