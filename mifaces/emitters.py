@@ -11,14 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .brdf.model import check_numbers
+from .brdf.model import check_numbers, rgb
 from .environment import environment_emitter
-
-
-def rgb(value) -> dict:
-    """A Mitsuba ``rgb`` spectrum dict from a number or an RGB triple."""
-    v = np.broadcast_to(np.asarray(value, np.float64), 3)
-    return {"type": "rgb", "value": [float(x) for x in v]}
 
 
 def light_emitters(light, camera, envmap=None, envmap_scale: float = 1.0) -> dict:
@@ -89,4 +83,4 @@ def _light_emitter(light) -> dict:
     return {"type": "point", "position": [float(x) for x in light.position], "intensity": rgb(light.intensity)}
 
 
-__all__ = ["rgb", "light_emitters", "light_record"]
+__all__ = ["light_emitters", "light_record"]

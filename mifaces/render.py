@@ -25,7 +25,8 @@ import numpy as np
 
 from . import brdf as brdf_models
 from .brdf.builtin import region_bsdf as builtin_region_bsdf
-from .emitters import light_emitters, rgb
+from .brdf.model import rgb
+from .emitters import light_emitters
 from .files import atomic_path, check_render_size, write_exr, write_png
 from .progress import progress
 from .model.mesh import mitsuba_mesh

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from mifaces.capture import Camera, Light
-from mifaces.emitters import rgb
 from mifaces.files import write_exr
 from mifaces.model import load_model
+from mifaces.brdf.model import rgb
 from mifaces.render import ALBEDO, ALBEDO_REF, FaceScene, region_meshes, scene_xml
 
 SPP_PATH = ("sensor", "sampler", "sample_count")

@@ -18,10 +18,10 @@ import mifaces  # noqa: F401  # isort: skip
 from mifaces.brdf import validate_brdf
 from mifaces.brdf.builtin import fresnel_normal
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.emitters import rgb
 from mifaces.model import load_model
 from mifaces.model.regions import REGIONS, lookup
 from mifaces.model.texture_space import rasterize
+from mifaces.brdf.model import rgb
 from mifaces.render import region_bsdf
 from mifaces.studio.detail import span_residual
 from mifaces.studio.simulate import simulate

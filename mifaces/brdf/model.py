@@ -138,6 +138,12 @@ def check_numbers(name: str, value, length: int | None = None, minimum: float | 
     return float(values) if length is None else values
 
 
+def rgb(value) -> dict:
+    """A Mitsuba ``rgb`` spectrum dict from a number or an RGB triple."""
+    v = np.broadcast_to(np.asarray(value, np.float64), 3)
+    return {"type": "rgb", "value": [float(x) for x in v]}
+
+
 def _numeric(value) -> bool:
     """Whether ``value`` is a number, a sequence of them or a Dr.Jit array (not a texture)."""
     return isinstance(value, (int, float, list, tuple, np.ndarray)) or dr.is_array_v(value)

@@ -196,7 +196,7 @@ def mapping_rmse(document: dict, region: str, albedo, grid: int = FIT_GRID) -> d
     ``rmse`` for the whole BRDF (diffuse ``albedo``, RGB, plus lobe) and
     ``rmse_specular`` for the lobes alone (against the fitted lobes' RMS).
     """
-    from ..emitters import rgb
+    from ..brdf.model import rgb
     from ..render import region_bsdf
     from ..validation.validator import eval_bsdf
 

@@ -17,8 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..brdf.model import rgb
 from ..capture import Camera, Light
-from ..emitters import light_emitters, rgb
+from ..emitters import light_emitters
 from ..render import mitsuba_sensor
 from .environment_light import EnvironmentLight, environment_light
 

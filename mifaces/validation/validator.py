@@ -70,6 +70,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from skimage.transform import resize
 
+from ..brdf.model import rgb
 from ..capture import Camera, Light, read_ground_truth
 from ..capture.types import RELATIVE_IRRADIANCE
 from ..environment import LUMINANCE, SKY_SUN_ANGLES, dominant_direction, sky_emitter, studio_environment
@@ -79,7 +80,7 @@ from ..geometry import load_geometry
 from ..model.geometry import turned
 from ..model.regions import REGIONS
 from ..model.mesh import mitsuba_mesh
-from ..render import ALBEDO, FaceScene, mitsuba_sensor, region_bsdf, rgb
+from ..render import ALBEDO, FaceScene, mitsuba_sensor, region_bsdf
 from ..shape_errors import front_of_face
 from ..studio import subsurface as translucent
 from ..studio.photograph import albedo_texture
