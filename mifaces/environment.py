@@ -2,7 +2,7 @@
 code, and Mitsuba's ``sunsky`` daylight; both placed in the camera's frame.
 
 Frames. A face scene is in its capture's world frame (mm); its camera says
-where "up" and "towards the camera" are (:func:`camera_frame`): up is the
+where "up" and "towards the camera" are (:attr:`mifaces.capture.Camera.frame`): up is the
 camera's −y axis (OpenCV: y points down in the image), "towards the camera"
 its −z axis. Every environment is placed in that frame, so it lights a face
 the same way whatever the capture's world frame is.
@@ -63,13 +63,6 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 PEAK_NORMALS_HEIGHT = 32
 
 
-def camera_frame(camera) -> np.ndarray:
-    """The camera's frame in the world (3x3, columns): its right (+x of the
-    image), its up, and the direction from the scene towards the camera."""
-    rotation = np.asarray(camera.rotation, np.float64)
-    return np.stack([rotation[0], -rotation[1], -rotation[2]], axis=1)
-
-
 def _transform(columns: np.ndarray) -> mi.ScalarTransform4f:
     matrix = np.eye(4)
     matrix[:3, :3] = columns
@@ -99,7 +92,7 @@ def texel_directions(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
 
 def to_world(directions: np.ndarray, camera) -> np.ndarray:
     """Directions (N, 3) in the map's frame turned into ``camera``'s world frame."""
-    return np.asarray(directions, np.float64) @ camera_frame(camera).T
+    return np.asarray(directions, np.float64) @ camera.frame.T
 
 
 def dominant_direction(envmap: np.ndarray, camera) -> np.ndarray:
@@ -149,7 +142,7 @@ def environment_emitter(envmap, camera, scale: float = 1.0) -> dict:
     an (H, W, 3) array, linear RGB) placed in ``camera``'s frame (see the
     module docstring), its radiance times ``scale``."""
     check_numbers("environment map scale", scale, minimum=0.0)
-    emitter = {"type": "envmap", "scale": float(scale), "to_world": _transform(camera_frame(camera))}
+    emitter = {"type": "envmap", "scale": float(scale), "to_world": _transform(camera.frame)}
     if isinstance(envmap, np.ndarray):
         if envmap.ndim != 3 or envmap.shape[2] != 3 or not np.all(np.isfinite(envmap)) or envmap.min() < 0:
             raise ValueError(f"an environment map must be a finite, non-negative (H, W, 3) array, got shape "
@@ -192,7 +185,7 @@ def sky_emitter(camera, sun_direction=None, time: str | _dt.datetime | None = No
     if float(ground_albedo) > 1:
         raise ValueError(f"ground albedo must lie within [0, 1], got {ground_albedo}")
     check_numbers("sky scale", scale, minimum=0.0)
-    frame = camera_frame(camera)
+    frame = camera.frame
     right, up, towards = frame.T
     emitter = {"type": "sunsky", "turbidity": float(turbidity), "albedo": float(ground_albedo),
                "sun_scale": float(scale), "sky_scale": float(scale),
@@ -317,5 +310,5 @@ def _time_and_place(time, place) -> dict:
 
 
 __all__ = ["STUDIO_PANELS", "STUDIO_AMBIENT", "STUDIO_HEIGHT", "TURBIDITY", "SKY_SUN_ANGLES", "BAKE_HEIGHT",
-           "BAKE_SAMPLES", "BAKE_REFINED", "BAKE_CONTRAST", "camera_frame", "map_directions", "studio_environment",
+           "BAKE_SAMPLES", "BAKE_REFINED", "BAKE_CONTRAST", "map_directions", "studio_environment",
            "environment_emitter", "sky_emitter", "bake_environment", "irradiance", "peak_irradiance"]

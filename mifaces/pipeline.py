@@ -45,12 +45,12 @@ from .reflectance import BRDFEstimate, FitOptions, capture_samples, fit_brdf, wr
 from .reflectance.light_balance import balance_given_lights
 from .refine import refine_estimate
 from .refine.shape import refine_lit, refined_fits
-from .render import FaceScene, light_arguments
+from .emitters import light_record
+from .render import FaceScene
 from .report import ranking, write_fit_picture, write_markdown, write_uncertainty_picture, write_validation_picture
 from .report_html import write_html
 from .shape import fit_shape, shapes_in_world
-from .shape.fit import model_source
-from .shape.io import write_fit, write_index
+from .shape.io import model_source, write_fit, write_index
 from .shape_errors import capture_shape_errors
 from .studio import simulate
 from .validation.truth_errors import ground_truth_errors
@@ -256,7 +256,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
         fitted.append(result)
     timings["total"] = time.perf_counter() - t0
     report["seconds"] = timings
-    report["novel_light"] = {key: np.asarray(value).tolist() for key, value in novel.items()}
+    report["novel_light"] = light_record(novel)
     if validator is not None:
         report["ranking"] = ranking(report["models"])
     write_json(out / "report.json", report)
@@ -368,15 +368,15 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
         estimate = replace(estimate, lighting={"lights": "estimated", "reflectance": "relative", "note": RELATIVE_NOTE})
     light = capture.light(first.light)
     write_estimate(estimate, out / "brdf" / model, scene, capture.camera, light, force=True)  # measure's own folder
-    lamp = light_arguments(estimate.fitted_light(light))
+    lamp = estimate.fitted_light(light)
     timings[f"fit_brdf_{model}"] = time.perf_counter() - t
     entry = estimate.to_json()
     entry["warnings"] = [str(w.message) for w in caught]
     entry["ground_truth"] = ground_truth_errors(estimate, capture)
     brdf, albedo = estimate.to_json(), estimate.albedo.albedo
     maps = {"normals": estimate.normal_texture(), "specular": estimate.specular_texture()}
-    rendered = scene.render(brdf, albedo, capture.camera, spp=spp, **lamp, **maps)
-    relit = scene.render(brdf, albedo, capture.camera, spp=spp, **novel, **maps)
+    rendered = scene.render(brdf, albedo, capture.camera, lamp, spp=spp, **maps)
+    relit = scene.render(brdf, albedo, capture.camera, novel, spp=spp, **maps)
     photo = first.image.pixels
     on_face = face_pixels(scene, capture.camera)  # the fitted face's pixels, whatever the background shows
     entry["training_rmse"] = relative_rmse(rendered, photo, on_face)

@@ -25,8 +25,7 @@ import numpy as np
 
 from . import brdf as brdf_models
 from .atomic import atomic_path
-from .brdf.model import check_numbers, rgb
-from .environment import environment_emitter
+from .emitters import light_emitters
 from .image_files import check_image_size
 from .progress import progress
 from .model.mesh import mitsuba_mesh
@@ -163,7 +162,7 @@ def region_meshes(model, vertices: np.ndarray, normals: np.ndarray | None = None
     return meshes
 
 
-def face_shapes(model, vertices: np.ndarray, truth: dict, texture=None, normals: np.ndarray | None = None, *,
+def face_meshes(model, vertices: np.ndarray, truth: dict, texture=None, normals: np.ndarray | None = None, *,
                 maps: Mapping | None = None) -> dict:
     """One Mitsuba mesh per region (:func:`region_meshes`), each with its
     region's BSDF from ``truth`` (the ``brdf.json`` layout) over the albedo
@@ -176,21 +175,6 @@ def face_shapes(model, vertices: np.ndarray, truth: dict, texture=None, normals:
 # --------------------------------------------------------------------------------------------
 # One face scene: the description, in memory, rendered, written
 # --------------------------------------------------------------------------------------------
-def light_arguments(light) -> dict:
-    """The keyword arguments of :meth:`FaceScene.render` (and ``scene``, ``description``) for a
-    capture's :class:`~mifaces.capture.Light`: its position or direction and intensity, or its
-    environment map."""
-    if light.environment:
-        if light.envmap is None:
-            raise ValueError(f"light {light.name!r} is an unknown environment map: estimate it first")
-        return {"envmap": light.envmap}
-    if light.directional:
-        return {"light_direction": light.direction, "intensity": light.intensity}
-    if light.position is None:
-        raise ValueError(f"light {light.name!r} has no position (load the capture with calibrate=True)")
-    return {"light_position": light.position, "intensity": light.intensity}
-
-
 class FaceScene:
     """A face's region meshes, built once, in scenes under any per-region
     BRDF, albedo map, camera and light.
@@ -225,9 +209,9 @@ class FaceScene:
         mesh, _, parameter = key.partition(".bsdf.")
         return (self.meshes[mesh].region, parameter) if mesh in self.meshes and parameter else None
 
-    def description(self, brdf: dict, camera, light_position=None, intensity=None, envmap=None,
-                    envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, albedo: str = "albedo.exr", *,
-                    light_direction=None, normals: str | None = None, specular: str | None = None) -> dict:
+    def description(self, brdf: dict, camera, light=None, *, envmap=None, envmap_scale: float = 1.0,
+                    spp: int = 64, max_depth: int = 4, albedo: str = "albedo.exr", normals: str | None = None,
+                    specular: str | None = None) -> dict:
         """The Mitsuba scene dict of the face with a per-region BRDF over an
         albedo map, as ``camera`` sees it; meshes and albedo map named by
         file (:meth:`mesh_file`, ``albedo``), relative to the scene's folder.
@@ -237,26 +221,15 @@ class FaceScene:
         brdf : dict
             The ``brdf.json`` layout: ``model``, ``options``, ``regions``.
         camera : mifaces.capture.Camera
-        light_position, intensity : (3,) arrays, optional
-            A point light (world, mm) and its radiant intensity; with
-            ``light_direction`` instead, ``intensity`` is the directional
-            light's irradiance (pixel units: a white Lambertian surface facing
-            it shows intensity/π).
-        envmap : path, (H, W, 3) array or dict, optional
-            An equirectangular environment map (linear RGB) instead of, or
-            besides, the point light, scaled by ``envmap_scale`` and placed in
-            the camera's frame (:func:`mifaces.environment.environment_emitter`);
-            or an emitter dict such as :func:`mifaces.environment.sky_emitter`'s,
-            used as it is. A scene holds only the emitters it is given.
+        light, envmap, envmap_scale : optional
+            A :class:`~mifaces.capture.Light` and an environment instead of it or besides it
+            (:func:`mifaces.emitters.light_emitters`): a scene holds only the emitters it is given.
         spp, max_depth : int
             Samples per pixel and the path tracer's depth (shadows and
             interreflection).
         albedo : str
             The albedo map's file: diffuse albedo in the model's texture space
             (row 0 at v = 0), linear.
-        light_direction : (3,) array, optional
-            A directional (distant) light instead of the point light: unit
-            vector in the world frame from the face towards the light.
         normals : str, optional
             A tangent-space normal map's file (texture space as ``albedo``,
             Mitsuba's ``normalmap`` encoding (n + 1) / 2 relative to the
@@ -269,17 +242,8 @@ class FaceScene:
             region's value (models that have one).
         """
         brdf = brdf_models.validate_brdf(brdf)
-        for name, value, minimum in (("light position", light_position, None),
-                                     ("light direction", light_direction, None), ("light intensity", intensity, 0.0)):
-            if value is not None:
-                check_numbers(name, value, 3, minimum, scalar_ok=True)
-        check_numbers("environment map scale", envmap_scale, minimum=0.0)
         check_render_size(camera.width, camera.height, spp, "face scene")
-        if light_position is None and light_direction is None and envmap is None:
-            raise ValueError("a face scene needs a light: a point light position, a light direction or an "
-                             "environment map")
-        if light_position is not None and light_direction is not None:
-            raise ValueError("give a point light position or a light direction, not both")
+        emitters = light_emitters(light, camera, envmap, envmap_scale)
         scene = {"type": "scene", "integrator": {"type": "path", "max_depth": int(max_depth)},
                  "sensor": mitsuba_sensor(camera, spp),
                  ALBEDO: {"type": "bitmap", "filename": albedo, "raw": True, "filter_type": "bilinear",
@@ -294,41 +258,18 @@ class FaceScene:
             if normals is not None:
                 bsdf = {"type": "normalmap", "normalmap": {"type": "ref", "id": NORMALS}, "bsdf": bsdf}
             scene[key] = {"type": "ply", "filename": self.mesh_file(key), "bsdf": bsdf}
-        if light_position is not None:
-            if intensity is None:
-                raise ValueError("a point light needs its intensity")
-            scene["light"] = {"type": "point", "position": [float(x) for x in light_position],
-                              "intensity": rgb(intensity)}
-        if light_direction is not None:
-            if intensity is None:
-                raise ValueError("a directional light needs its irradiance (intensity)")
-            towards = np.asarray(light_direction, np.float64)
-            norm = float(np.linalg.norm(towards)) if towards.shape == (3,) else 0.0
-            if not np.isfinite(norm) or norm == 0:
-                raise ValueError(f"light direction must be a finite, non-zero 3-vector, got {light_direction!r}")
-            # Mitsuba's directional emitter takes the direction light travels in
-            scene["light"] = {"type": "directional", "direction": [float(-x / norm) for x in towards],
-                              "irradiance": rgb(intensity)}
-        if isinstance(envmap, dict):  # an emitter, e.g. mifaces.environment.sky_emitter's
-            if envmap_scale != 1.0:
-                raise ValueError("an environment given as an emitter carries its own scale: leave envmap_scale at 1")
-            scene["environment"] = envmap
-        elif envmap is not None:
-            if isinstance(envmap, (str, os.PathLike)) and not Path(envmap).is_file():
-                raise FileNotFoundError(f"environment map not found: {envmap}")
-            source = str(envmap) if isinstance(envmap, (str, os.PathLike)) else np.asarray(envmap, np.float32)
-            scene["environment"] = environment_emitter(source, camera, envmap_scale)
+        scene.update(emitters)
         return scene
 
-    def scene(self, brdf: dict, albedo: np.ndarray, camera, light_position=None, intensity=None, envmap=None,
-              envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, *, light_direction=None,
-              normals: np.ndarray | None = None, specular: np.ndarray | None = None) -> dict:
+    def scene(self, brdf: dict, albedo: np.ndarray, camera, light=None, *, envmap=None, envmap_scale: float = 1.0,
+              spp: int = 64, max_depth: int = 4, normals: np.ndarray | None = None,
+              specular: np.ndarray | None = None) -> dict:
         """:meth:`description` with the meshes, the ``albedo`` array (R, R, 3), the
         tangent-space ``normals`` texture (R', R', 3, encoded, or None) and the ``specular``
         reflectance map (R', R', 3 or None) in memory in place of their files: a dict for
         ``mi.load_dict``."""
-        scene = self.description(brdf, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth,
-                                 light_direction=light_direction, normals=None if normals is None else NORMALS,
+        scene = self.description(brdf, camera, light, envmap=envmap, envmap_scale=envmap_scale, spp=spp,
+                                 max_depth=max_depth, normals=None if normals is None else NORMALS,
                                  specular=None if specular is None else SPECULAR)
         textures = {}
         for name, data in ((ALBEDO, albedo), (NORMALS, normals), (SPECULAR, specular)):
@@ -339,13 +280,12 @@ class FaceScene:
             scene[key] = part.mesh(_with_textures(scene[key]["bsdf"], textures))
         return scene
 
-    def render(self, brdf: dict, albedo: np.ndarray, camera, light_position=None, intensity=None, envmap=None,
-               envmap_scale: float = 1.0, spp: int = 64, seed: int = 0, max_depth: int = 4, *,
-               light_direction=None, normals: np.ndarray | None = None,
+    def render(self, brdf: dict, albedo: np.ndarray, camera, light=None, *, envmap=None, envmap_scale: float = 1.0,
+               spp: int = 64, seed: int = 0, max_depth: int = 4, normals: np.ndarray | None = None,
                specular: np.ndarray | None = None) -> np.ndarray:
         """Render :meth:`scene`: (H, W, 3) float32 linear radiance."""
-        scene = self.scene(brdf, albedo, camera, light_position, intensity, envmap, envmap_scale, spp, max_depth,
-                           light_direction=light_direction, normals=normals, specular=specular)
+        scene = self.scene(brdf, albedo, camera, light, envmap=envmap, envmap_scale=envmap_scale, spp=spp,
+                           max_depth=max_depth, normals=normals, specular=specular)
         return np.array(mi.render(mi.load_dict(scene), spp=spp, seed=seed), dtype=np.float32)[..., :3]
 
     def write_meshes(self, folder: str | os.PathLike) -> dict[str, Path]:
@@ -372,23 +312,21 @@ def _with_textures(bsdf: dict, textures: dict) -> dict:
     return out
 
 
-def face_scene(brdf: dict, albedo: np.ndarray, face_model, vertices: np.ndarray, camera, light_position=None,
-               intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4, *,
-               light_direction=None) -> dict:
+def face_scene(brdf: dict, albedo: np.ndarray, face_model, vertices: np.ndarray, camera, light=None, *,
+               envmap=None, envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4) -> dict:
     """The Mitsuba scene (a dict for ``mi.load_dict``) of a face with a
     per-region BRDF over an albedo map, as ``camera`` sees it: a
     :class:`FaceScene` of ``face_model`` and ``vertices`` (world, mm) built
     for one scene; see :meth:`FaceScene.description` for the arguments."""
-    return FaceScene(face_model, vertices).scene(brdf, albedo, camera, light_position, intensity, envmap,
-                                                 envmap_scale, spp, max_depth, light_direction=light_direction)
+    return FaceScene(face_model, vertices).scene(brdf, albedo, camera, light, envmap=envmap,
+                                                 envmap_scale=envmap_scale, spp=spp, max_depth=max_depth)
 
 
-def render_face(brdf: dict, albedo: np.ndarray, face_model, vertices: np.ndarray, camera, light_position=None,
-                intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64, seed: int = 0,
-                max_depth: int = 4, *, light_direction=None) -> np.ndarray:
+def render_face(brdf: dict, albedo: np.ndarray, face_model, vertices: np.ndarray, camera, light=None, *,
+                envmap=None, envmap_scale: float = 1.0, spp: int = 64, seed: int = 0, max_depth: int = 4) -> np.ndarray:
     """Render :func:`face_scene`: (H, W, 3) float32 linear radiance."""
-    return FaceScene(face_model, vertices).render(brdf, albedo, camera, light_position, intensity, envmap,
-                                                  envmap_scale, spp, seed, max_depth, light_direction=light_direction)
+    return FaceScene(face_model, vertices).render(brdf, albedo, camera, light, envmap=envmap,
+                                                  envmap_scale=envmap_scale, spp=spp, seed=seed, max_depth=max_depth)
 
 
 # --------------------------------------------------------------------------------------------
@@ -490,5 +428,5 @@ def scene_xml(scene: dict, parameters: Mapping[str, tuple[str, ...]] | None = No
 
 
 __all__ = ["ALBEDO", "ALBEDO_REF", "NORMALS", "SPECULAR", "MESH_FOLDER", "MAX_RENDER_SAMPLES", "check_render_size",
-           "render_passes", "mitsuba_sensor", "region_bsdf", "RegionMesh", "region_meshes", "face_shapes",
+           "render_passes", "mitsuba_sensor", "region_bsdf", "RegionMesh", "region_meshes", "face_meshes",
            "FaceScene", "face_scene", "render_face", "scene_xml"]

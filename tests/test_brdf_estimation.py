@@ -100,8 +100,7 @@ def test_scene_renders_the_first_photograph(capture_dir, estimate):
     # the same face rendered from memory: the API agrees with the XML
     model, shapes = load_geometry(capture)
     light = capture.light(first.light)
-    direct = render_estimate(result, model, shapes[first.name], capture.camera, light.position, light.intensity,
-                             spp=16, seed=1)
+    direct = render_estimate(result, model, shapes[first.name], capture.camera, light, spp=16, seed=1)
     assert abs(direct[face].sum() / rendered[face].sum() - 1) < 0.01
 
 
@@ -173,7 +172,7 @@ def test_render_under_an_environment_map(capture_dir, estimate):
     model, shapes = load_geometry(capture)
     args = (result.to_json(), result.albedo.albedo, model, shapes["m00"], capture.camera)
     light = capture.light(capture.measurements[0].light)
-    point_only = face_scene(*args, light.position, light.intensity)
+    point_only = face_scene(*args, light)
     assert "light" in point_only and "environment" not in point_only
     sky = np.ones((16, 32, 3), np.float32) * np.array([0.6, 0.7, 1.0], np.float32)
     env_only = face_scene(*args, envmap=sky)
@@ -199,7 +198,7 @@ def test_scene_xml_is_the_scene_rendered_from_memory(capture_dir, estimate):
     light = capture.light(first.light)
     from_file = np.array(mi.render(mi.load_file(str(out / "scene.xml"), spp=4), seed=5))[..., :3]
     in_memory = FaceScene(face, shapes[first.name]).render(result.to_json(), result.albedo.albedo, capture.camera,
-                                                           light.position, light.intensity, spp=4, seed=5)
+                                                           light, spp=4, seed=5)
     assert from_file.shape == in_memory.shape and in_memory.max() > 0
     np.testing.assert_allclose(from_file, in_memory, rtol=1e-4, atol=1e-5)
 
@@ -229,7 +228,7 @@ def test_render_in_a_novel_pose(capture_dir, estimate, tmp_path):
     by_hand = (vertices - centre) @ rotation_about(-capture.camera.rotation[1], 30).T + centre
     light = capture.light(capture.measurements[0].light)
     expected = FaceScene(face, by_hand).render(result.to_json(), result.albedo.albedo, capture.camera,
-                                               light.position, light.intensity, spp=4)
+                                               light, spp=4)
     # the same samples: equal up to the rounding of the vertices (a pixel or two on the silhouette)
     assert np.mean(np.abs(turned - expected)[on_face]) < 1e-4 * np.mean(expected[on_face])
 
@@ -256,7 +255,7 @@ def test_brdf_moves_to_another_face(estimate, other_dir, tmp_path):
     assert np.mean(np.abs(moved - own)[on_face]) > 0.05 * np.mean(own[on_face])
     light = capture.light(capture.measurements[0].light)
     expected = FaceScene(face, shapes["m00"]).render(result.to_json(), result.albedo.albedo, capture.camera,
-                                                     light.position, light.intensity, spp=4)
+                                                     light, spp=4)
     np.testing.assert_allclose(moved, expected, rtol=1e-5, atol=1e-6)
 
 

@@ -264,16 +264,16 @@ def test_held_out_lights_avoid_the_maps_light(studio_capture):
     capture = load_capture(studio_capture)
     key = dominant_direction(capture.lights[0].envmap, capture.camera)
     lights = held_out_lights(capture, np.zeros(3), count=3)
-    assert all("light_direction" in light and np.allclose(light["intensity"], RELATIVE_IRRADIANCE) for light in lights)
-    assert all(np.degrees(np.arccos(np.clip(light["light_direction"] @ key, -1, 1))) >= light["angle_to_capture"] - 1e-6
-               and light["angle_to_capture"] > 20 for light in lights)
+    assert all(light.directional and np.allclose(light.intensity, RELATIVE_IRRADIANCE) for light, _ in lights)
+    assert all(np.degrees(np.arccos(np.clip(light.direction @ key, -1, 1))) >= angle - 1e-6
+               and angle > 20 for light, angle in lights)
     from mifaces.capture.types import Light
     lamp = Light("lamp", capture.camera.position * 1.5, np.full(3, 1e6))
     mixed = replace(capture, lights=(capture.lights[0], lamp))
-    for light in held_out_lights(mixed, np.zeros(3), count=3):
-        assert "light_position" in light and np.allclose(light["intensity"], 1e6)
-        towards = light["light_position"] / np.linalg.norm(light["light_position"])
-        assert np.degrees(np.arccos(np.clip(towards @ key, -1, 1))) >= light["angle_to_capture"] - 1e-6
+    for light, angle in held_out_lights(mixed, np.zeros(3), count=3):
+        assert light.position is not None and np.allclose(light.intensity, 1e6)
+        towards = light.position / np.linalg.norm(light.position)
+        assert np.degrees(np.arccos(np.clip(towards @ key, -1, 1))) >= angle - 1e-6
 
 
 def test_a_map_without_the_refinement_is_flagged(studio_capture, tmp_path):
@@ -302,11 +302,11 @@ def test_held_out_lights_of_an_estimated_map_are_the_given_maps(studio_capture):
     np.testing.assert_array_equal(restored.lights[0].envmap, light.envmap)
     assert not restored.lights[0].estimated and true_lights(capture, truth).lights == capture.lights
     given = held_out_lights(true_lights(capture, truth), np.zeros(3), count=3)
-    for a, b in zip(held_out_lights(restored, np.zeros(3), count=3), given):
-        np.testing.assert_array_equal(a["light_direction"], b["light_direction"])
+    for (a, _), (b, _) in zip(held_out_lights(restored, np.zeros(3), count=3), given):
+        np.testing.assert_array_equal(a.direction, b.direction)
     # the estimate itself would have moved them
-    assert any(not np.allclose(a["light_direction"], b["light_direction"])
-               for a, b in zip(held_out_lights(estimated, np.zeros(3), count=3), given))
+    assert any(not np.allclose(a.direction, b.direction)
+               for (a, _), (b, _) in zip(held_out_lights(estimated, np.zeros(3), count=3), given))
     from mifaces.capture import with_true_lights
     with pytest.raises(ValueError, match=r"placed no point light for light\(s\) \['studio'\]"):
         with_true_lights(capture)

@@ -14,6 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 from mifaces import brdf
+from mifaces.capture import Light
 from mifaces.cli import main
 from mifaces.model.geometry import vertex_normals
 from mifaces.model.mesh import mitsuba_mesh
@@ -222,9 +223,9 @@ def test_scene_wraps_every_region_in_the_normal_map(face_model):
                              rotation=np.eye(3), position=np.array([0.0, 0.0, 500.0]))
     document = {"model": "cooktorrance", "options": {},
                 "regions": {"skin": {"specular_reflectance": [0.5] * 3, "roughness": 0.3, "eta": 1.38}}}
-    plain = scene.description(document, camera, light_position=[0, 0, 500], intensity=[1e5] * 3)
-    wrapped = scene.description(document, camera, light_position=[0, 0, 500], intensity=[1e5] * 3,
-                                normals="normals.exr")
+    lamp = Light("lamp", np.array([0.0, 0.0, 500.0]), np.full(3, 1e5))
+    plain = scene.description(document, camera, lamp)
+    wrapped = scene.description(document, camera, lamp, normals="normals.exr")
     assert "normals" not in plain and wrapped["normals"]["filename"] == "normals.exr"
     for key in scene.meshes:
         assert wrapped[key]["bsdf"]["type"] == "normalmap"
@@ -245,7 +246,7 @@ def test_renders_read_the_specular_map(face_model):
                 "regions": {"skin": {"specular_reflectance": [0.5] * 3, "roughness": 0.3, "eta": 1.38}}}
     doubled = {**document, "regions": {"skin": {**document["regions"]["skin"], "specular_reflectance": [1.0] * 3}}}
     albedo = np.full((16, 16, 3), 0.1, np.float32)
-    light = {"light_position": [0.0, 0.0, 600.0], "intensity": [3e5] * 3}
+    light = {"light": Light("lamp", np.array([0.0, 0.0, 600.0]), np.full(3, 3e5))}
     with_map = scene.render(document, albedo, camera, spp=8, **light, specular=np.ones((16, 16, 3), np.float32))
     expected = scene.render(doubled, albedo, camera, spp=8, **light)
     plain = scene.render(document, albedo, camera, spp=8, **light)

@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from mifaces.capture import Camera
-from mifaces.environment import STUDIO_PANELS, camera_frame, environment_emitter, sky_emitter, studio_environment
+from mifaces.environment import STUDIO_PANELS, environment_emitter, sky_emitter, studio_environment
 from mifaces.face_pixels import face_pixels
 from mifaces.model import load_model
 from mifaces.render import FaceScene
@@ -64,7 +64,7 @@ def test_sky_follows_the_camera_frame():
     upright, rolled = sky_emitter(camera()), sky_emitter(camera(np.diag([-1.0, 1.0, -1.0])))
     assert np.allclose(np.array(upright["to_world"].matrix)[:3, 2], [0, 1, 0])
     assert np.allclose(np.array(rolled["to_world"].matrix)[:3, 2], [0, -1, 0])
-    assert np.allclose(camera_frame(camera()), np.eye(3))
+    assert np.allclose(camera().frame, np.eye(3))
 
 
 @pytest.mark.parametrize("options, message", [

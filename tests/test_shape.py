@@ -25,8 +25,8 @@ from mifaces.model.landmarks import FEATURE_POINTS
 from mifaces.model.mesh import mitsuba_mesh
 from mifaces.render import mitsuba_sensor
 from mifaces.model.geometry import rotation_matrix
-from mifaces.shape import (ShapeFitError, ShapeSchedule, Weights, feature_targets, fit_measurement, fit_shape,
-                           light_direction, load_fitted_shapes, rotation_centre, shapes_in_world)
+from mifaces.shape import (ShapeFitError, ShapeOptions, ShapeSchedule, Weights, feature_targets, fit_measurement,
+                           fit_shape, light_direction, load_fitted_shapes, rotation_centre, shapes_in_world)
 from mifaces.shape.fitter import Fitter
 from mifaces.status import CONVERGED, DIVERGED, NOT_CONVERGED
 
@@ -155,7 +155,7 @@ def test_shape_recovery_known_pose(model, camera):
     truth = pose_vertices(model, ypr, t, alpha)
     m = measurement("shape", model, camera, truth, render(model, camera, truth))
     schedule = ShapeSchedule(levels=((100, 1000, 3.0), (200, 2000, 1.0)), pose_iterations=60)
-    fit = fit_measurement(m, camera, model, schedule=schedule, progress=False, fit_focal=False,
+    fit = fit_measurement(m, camera, model, schedule=schedule, progress=False, options=ShapeOptions(fit_focal=False),
                              initial={"rotation": np.radians(ypr), "translation": t},
                              fixed=("rotation", "translation", "expression"))
     assert fit.status == CONVERGED
@@ -240,7 +240,8 @@ def test_non_finite_energy_is_diverged(model, camera, posed):
                            m.feature_points)
     # _normalised maps NaN to 0: the fit runs on a black image and does not crash
     fit = fit_measurement(broken_m, camera, model, progress=False,
-                             schedule=ShapeSchedule(levels=((5, 200, 2.0),), pose_iterations=5), lr=(1e30, 1e30))
+                             schedule=ShapeSchedule(levels=((5, 200, 2.0),), pose_iterations=5),
+                             options=ShapeOptions(lr=(1e30, 1e30)))
     assert fit.status == DIVERGED
 
 
@@ -355,7 +356,8 @@ YALE = Path(__file__).resolve().parents[2] / "shared" / "data" / "yaleb"
 def test_feature_limit_follows_the_face_not_the_image(model, camera, posed):
     """4 px on the simulator's 512 x 512 captures, as before; proportional to the face's size in the
     image (plus the points' own noise), whatever the image's size."""
-    from mifaces.shape.fit import FEATURE_NOISE, feature_limit
+    from mifaces.shape.fit import feature_limit
+    from mifaces.shape.result import FEATURE_NOISE
     from mifaces.studio.scene import studio_camera
 
     v = posed[2]
@@ -375,7 +377,7 @@ def test_noisy_feature_points_on_a_small_image_converge(model, camera, posed):
     rng = np.random.default_rng(5)
     noisy = {n: p + rng.normal(0.0, 1.3, 2) for n, p in m.feature_points.items()}
     fit = fit_measurement(measurement("noisy", model, camera, v, (m.image.pixels, m.diffuse.pixels), noisy),
-                          camera, model, progress=False, fit_focal=False,
+                          camera, model, progress=False, options=ShapeOptions(fit_focal=False),
                           schedule=ShapeSchedule(levels=(), pose_iterations=200))
     # 18 points with 1.8 px of noise (RMS): a fit cannot match them far below it (the built-in model's
     # 50 identity modes and 16 expressions absorb about half of it)
@@ -567,9 +569,10 @@ def test_a_fit_continues_from_another(model, camera, posed):
     from mifaces.shape.fit import _start_from
 
     _, _, _, m = posed
-    first = fit_measurement(m, camera, model, progress=False, fit_focal=False,
+    first = fit_measurement(m, camera, model, progress=False, options=ShapeOptions(fit_focal=False),
                             schedule=ShapeSchedule(levels=((10, 300, 2.0),), pose_iterations=30))
-    again = fit_measurement(m, camera, model, progress=False, fit_focal=False, initial=_start_from(first, model, m),
+    again = fit_measurement(m, camera, model, progress=False, options=ShapeOptions(fit_focal=False),
+                            initial=_start_from(first, model, m),
                             fixed=("shape", "expression", "albedo"), schedule=ShapeSchedule(levels=(), pose_iterations=1))
     for key in ("gain", "offset", "ambient", "color"):
         np.testing.assert_allclose(again.light["point"][key], first.light["point"][key], rtol=1e-4, atol=1e-6,

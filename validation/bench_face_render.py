@@ -87,9 +87,9 @@ def main() -> None:
     times = {k: {"load_s": [], "render_s": []} for k in kinds}
     for repeat in range(args.repeats + 1):  # the first round compiles the kernels: not counted
         for kind in kinds:
-            shapes = {key: part.mesh(bsdf(kind, truth, part.region, texture)) for key, part in parts.items()}
+            meshes = {key: part.mesh(bsdf(kind, truth, part.region, texture)) for key, part in parts.items()}
             t0 = time.perf_counter()
-            loaded = mi.load_dict(scene(studio, shapes, point_light(studio, light), args.spp))
+            loaded = mi.load_dict(scene(studio, meshes, point_light(studio, light), args.spp))
             t1 = time.perf_counter()
             image = np.array(mi.render(loaded, spp=args.spp, seed=repeat))
             t2 = time.perf_counter()

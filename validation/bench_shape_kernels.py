@@ -106,7 +106,7 @@ def bench(capture_path: Path, factor: float, names=None) -> list[dict]:
         counter = KernelCounter()
         dr.kernel_history()  # clear
         t0 = time.perf_counter()
-        fit = fit_measurement(m, capture.camera, model, light_position=capture.light(m.light).position,
+        fit = fit_measurement(m, capture.camera, model, light=capture.light(m.light),
                               schedule=schedule, progress=counter, distances=capture.distances)
         counted = time.perf_counter() - t0
         outside = dr.kernel_history()  # after the last iteration: final visibility and evaluation
@@ -124,7 +124,7 @@ def bench(capture_path: Path, factor: float, names=None) -> list[dict]:
         # the timed fit: the same measurement again (warm), its history read once at the end
         dr.kernel_history()
         t0 = time.perf_counter()
-        fit_measurement(m, capture.camera, model, light_position=capture.light(m.light).position,
+        fit_measurement(m, capture.camera, model, light=capture.light(m.light),
                         schedule=schedule, progress=False, distances=capture.distances)
         seconds = time.perf_counter() - t0
         timed = summary(dr.kernel_history(), fit.iterations)

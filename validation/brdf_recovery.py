@@ -40,7 +40,7 @@ from mifaces.validation.truth_errors import ground_truth_errors
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.atomic import write_json
 from mifaces.model.regions import REGIONS
-from mifaces.render import face_shapes, mitsuba_sensor
+from mifaces.render import face_meshes, mitsuba_sensor
 from mifaces.studio.simulate import simulate
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -141,7 +141,7 @@ def cross_family(work: Path, args) -> list[dict]:
                  "sensor": mitsuba_sensor(capture.camera, args.spp),
                  "light": {"type": "point", "position": lamp.position.tolist(),
                            "intensity": {"type": "rgb", "value": lamp.intensity.tolist()}},
-                 **face_shapes(face, shapes[m.name], truth, texture)}
+                 **face_meshes(face, shapes[m.name], truth, texture)}
         return np.array(mi.render(mi.load_dict(scene), spp=args.spp, seed=7), dtype=np.float32)[..., :3]
 
     floor = image_error(truth_render)
@@ -164,8 +164,8 @@ def cross_family(work: Path, args) -> list[dict]:
         spec_rel = float(np.sqrt(np.mean((r_fit - r_true) ** 2)) / np.sqrt(np.mean(specular ** 2)))
         grazing = (light[:, 2] < 0.34) & (view[:, 2] < 0.34)
         grazing_rmse = float(np.sqrt(np.mean((r_fit[grazing] - r_true[grazing]) ** 2)))
-        image = image_error(lambda m, lamp: render_estimate(estimate, face, shapes[m.name], capture.camera,
-                                                            lamp.position, lamp.intensity, spp=args.spp, seed=7))
+        image = image_error(lambda m, lamp: render_estimate(estimate, face, shapes[m.name], capture.camera, lamp,
+                                                            spp=args.spp, seed=7))
         label = model if lobes == 1 else f"{model} ({lobes} lobes)"
         rows.append({"model": label, "skin_loss": skin.loss, "skin_samples": skin.samples,
                      "brdf_rmse": brdf_rmse, "brdf_rmse_over_specular_rms": spec_rel,

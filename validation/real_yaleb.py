@@ -62,7 +62,7 @@ import numpy as np
 
 from mifaces import photometric_stereo
 from mifaces.brdf import NAMES
-from mifaces.capture import load_capture
+from mifaces.capture import Light, load_capture
 from mifaces.atomic import save_figure, write_json
 from mifaces.image_files import write_exr, write_png
 from mifaces.geometry import load_geometry
@@ -181,11 +181,10 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
         valid = mask & (photo < SATURATED)
         angle = np.degrees(np.arccos(np.clip(-image.direction[2], -1, 1)))
         group = "large_shadows" if angle > shadow_angle else "small_shadows"
-        direction = camera.rotation.T @ image.direction
+        held_out = Light(image.stem, None, irradiance, direction=camera.rotation.T @ image.direction)
         predictions = {"photometric_stereo": photometric_stereo.predict(albedo_ps, normals_ps, image.direction)}
         for model, data in estimates.items():
-            rendered = scene.render(data, data["albedo"], camera, None, irradiance, spp=spp,
-                                    light_direction=direction, normals=data.get("normals"),
+            rendered = scene.render(data, data["albedo"], camera, held_out, spp=spp, normals=data.get("normals"),
                                     specular=data.get("specular")).mean(axis=2)
             rendered[~mask] = 0.0
             write_exr(out / "heldout" / model / f"{image.stem}.exr", rendered[:, :, None].repeat(3, axis=2))
@@ -193,8 +192,8 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
             if model.endswith("_refined"):
                 continue
             predictions[f"{model}_diffuse_only"] = scene.render(
-                diffuse_only(data), data["albedo"], camera, None, irradiance, spp=spp,
-                light_direction=direction, normals=data.get("normals"), specular=data.get("specular")).mean(axis=2)
+                diffuse_only(data), data["albedo"], camera, held_out, spp=spp, normals=data.get("normals"),
+                specular=data.get("specular")).mean(axis=2)
         for key, prediction in predictions.items():
             errors.add(key, group, prediction, photo, valid)
         per_light[image.stem] = {"azimuth": image.azimuth, "elevation": image.elevation, "group": group,

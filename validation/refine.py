@@ -74,11 +74,11 @@ def novel_light_errors(estimates: dict, capture, face, shapes, spp: int) -> tupl
     first = capture.measurements[0].name
     scene = FaceScene(face, shapes[first])
     light = novel_light(capture, np.asarray(shapes[first]).mean(axis=0))
-    reference = scene.render(truth.brdf, truth.albedo, capture.camera, spp=spp, seed=5, **light)
+    reference = scene.render(truth.brdf, truth.albedo, capture.camera, light, spp=spp, seed=5)
     lit = reference.mean(axis=2) > 0.02 * reference.max()
     out, images = {}, {"truth": reference}
     for name, estimate in estimates.items():
-        image = scene.render(estimate.to_json(), estimate.albedo.albedo, capture.camera, spp=spp, seed=5, **light)
+        image = scene.render(estimate.to_json(), estimate.albedo.albedo, capture.camera, light, spp=spp, seed=5)
         out[name] = float(np.sqrt(np.mean((image[lit] - reference[lit]) ** 2)) / np.mean(reference[lit]))
         images[name] = image
     return out, images

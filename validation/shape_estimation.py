@@ -269,7 +269,7 @@ def sweep(path: Path, model_source, factors, name="m00") -> list[dict]:
     mask = evaluated(model, gt, capture.camera)
     out = []
     for factor in factors:
-        fit = se.fit_measurement(m, capture.camera, model, light_position=capture.light(m.light).position,
+        fit = se.fit_measurement(m, capture.camera, model, light=capture.light(m.light),
                                  schedule=se.ShapeSchedule.scaled(factor), progress=False, distances=capture.distances)
         row = {"resolution": capture.camera.width, "factor": factor, "iterations": fit.iterations,
                "seconds": fit.seconds, "status": fit.status,

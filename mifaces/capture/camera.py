@@ -54,6 +54,18 @@ class Camera:
         return self.rotation.T @ camera_frame_direction(azimuth, elevation)
 
     @property
+    def frame(self) -> np.ndarray:
+        """The camera's frame in the world (3x3, columns): its right (+x of the image), its up
+        (-y of the image), and the direction from the scene towards the camera (-z)."""
+        rotation = np.asarray(self.rotation, np.float64)
+        return np.stack([rotation[0], -rotation[1], -rotation[2]], axis=1)
+
+    @property
+    def up(self) -> np.ndarray:
+        """The camera's up direction in the world frame (unit): the second column of :attr:`frame`."""
+        return self.frame[:, 1]
+
+    @property
     def position(self) -> np.ndarray:
         """Centre of projection in world coordinates, ``-R^T t``."""
         return -self.rotation.T @ self.translation

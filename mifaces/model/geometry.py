@@ -1,4 +1,5 @@
-"""Differential geometry of triangle meshes: vertex normals and tangent frames.
+"""Differential geometry of triangle meshes: vertex normals and tangent frames; rotations,
+and vertices turned by them.
 
 Conventions, held everywhere in :mod:`mifaces.model`: positions in model
 space (millimetres for the shipped models, y up, the face looking along +z),
@@ -11,6 +12,7 @@ coordinates ``(u, v)`` follow Mitsuba's convention: ``v = 0`` is the first
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 
 def face_normals(vertices: np.ndarray, triangles: np.ndarray, normalize: bool = True) -> np.ndarray:
@@ -117,6 +119,18 @@ def rotation_matrix(yaw: float, pitch: float, roll: float) -> np.ndarray:
     rx = np.array([[1, 0, 0], [0, np.cos(p), -np.sin(p)], [0, np.sin(p), np.cos(p)]])
     rz = np.array([[np.cos(r), -np.sin(r), 0], [np.sin(r), np.cos(r), 0], [0, 0, 1]])
     return ry @ rx @ rz
+
+
+def rotation_about(axis: np.ndarray, degrees: float) -> np.ndarray:
+    """The rotation (3x3) by ``degrees`` about the unit ``axis``, right-handed (a rotation vector
+    ``radians(degrees) * axis``)."""
+    return Rotation.from_rotvec(np.radians(degrees) * np.asarray(axis, np.float64)).as_matrix()
+
+
+def turned(vertices: np.ndarray, rotation: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """``vertices`` (V, 3) turned by ``rotation`` (3x3) about the point ``centre`` (same frame, mm):
+    ``(v - centre) R^T + centre``, float64."""
+    return (np.asarray(vertices, np.float64) - centre) @ np.asarray(rotation).T + centre
 
 
 def head_centre(vertices: np.ndarray, landmarks: dict[int, int] | None = None) -> np.ndarray:

@@ -14,7 +14,7 @@ import numpy as np
 from scipy.ndimage import binary_erosion
 
 from ..face_pixels import face_pixels
-from ..render import FaceScene, light_arguments, mitsuba_sensor
+from ..render import FaceScene, mitsuba_sensor
 
 #: Key of a capture's ``metadata`` that gives the lamp's radius (mm).
 LAMP_RADIUS_KEY = "lamp_radius_mm"
@@ -49,16 +49,15 @@ def _box_mean(a: np.ndarray, k: int) -> np.ndarray:
     return a.reshape(h // k, k, w // k, k, *a.shape[2:]).mean(axis=(1, 3))
 
 
-def _light(capture, measurement, lamp_radius: float | None) -> tuple[dict, dict | None]:
-    """The keyword arguments of :meth:`FaceScene.scene` for the measurement's
-    light, and the sphere lamp that replaces its point light (or None)."""
+def _light(capture, measurement, lamp_radius: float | None) -> tuple:
+    """The measurement's :class:`~mifaces.capture.Light`, and the sphere lamp that replaces its point
+    light (or None)."""
     light = capture.light(measurement.light)
-    kwargs = light_arguments(light)
-    if "light_position" not in kwargs or not lamp_radius:
-        return kwargs, None
+    if light.environment or light.directional or light.position is None or not lamp_radius:
+        return light, None
     radiance = np.asarray(light.intensity, np.float64) / (np.pi * lamp_radius ** 2)  # same intensity, I = L π r²
-    return kwargs, {"type": "sphere", "center": [float(x) for x in light.position], "radius": float(lamp_radius),
-                    "emitter": {"type": "area", "radiance": {"type": "rgb", "value": radiance.tolist()}}}
+    return light, {"type": "sphere", "center": [float(x) for x in light.position], "radius": float(lamp_radius),
+                   "emitter": {"type": "area", "radiance": {"type": "rgb", "value": radiance.tolist()}}}
 
 
 @dataclass(eq=False)
@@ -139,10 +138,10 @@ def photograph_view(capture, m, face: FaceScene, brdf: dict, albedo: np.ndarray,
     """
     k = downsample
     camera = capture.camera
-    kwargs, lamp = _light(capture, m, lamp_radius)
-    kind = ("sphere" if lamp is not None else "directional" if "light_direction" in kwargs
-            else "environment" if "envmap" in kwargs else "point")
-    description = face.scene(brdf, albedo, camera, normals=normals, specular=specular, **kwargs)
+    light, lamp = _light(capture, m, lamp_radius)
+    kind = ("sphere" if lamp is not None else "environment" if light.environment
+            else "directional" if light.directional else "point")
+    description = face.scene(brdf, albedo, camera, light, normals=normals, specular=specular)
     labels = face_pixels(face, camera, spp=None, region_map=region_map)
     covered = binary_erosion(labels > 0, iterations=1) & ~m.image.saturated
     # the render's pixels: those whose every photograph pixel is covered

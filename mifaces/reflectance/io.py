@@ -30,7 +30,7 @@ from ..atomic import atomic_write, write_json
 from ..image_files import read_exr, write_exr, write_png
 from ..result_set import ResultSetError, result_set, verify_set
 from ..environment import environment_emitter
-from ..render import FaceScene, light_arguments, scene_xml
+from ..render import FaceScene, scene_xml
 from .result import FILES, BRDFEstimate
 
 #: Samples per pixel of ``scene.xml`` (``mi.load_file(path, spp=N)`` overrides it).
@@ -55,7 +55,7 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light, 
         The geometry the scene shows (world frame, mm).
     camera : mifaces.capture.Camera
     light : mifaces.capture.Light
-        The scene's light (:func:`mifaces.render.light_arguments`), as the
+        The scene's light (:func:`mifaces.emitters.light_emitters`), as the
         estimate was fitted under it (:meth:`BRDFEstimate.fitted_light`: a map
         the refinement refined is the refined one). An environment map is
         written beside the scene as ``environment.exr``.
@@ -65,11 +65,11 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light, 
     out = Path(out)
     document = estimate.to_json()
     normals, specular = estimate.normal_texture(), estimate.specular_texture()
-    lamp = light_arguments(estimate.fitted_light(light))
-    envmap = lamp.get("envmap")
-    environment = None if envmap is None else environment_emitter(FILES["environment"], camera)
-    scene = face.description(document, camera, lamp.get("light_position"), lamp.get("intensity"), environment,
-                             spp=SCENE_SPP, albedo=FILES["albedo"], light_direction=lamp.get("light_direction"),
+    lamp = estimate.fitted_light(light)
+    envmap = lamp.envmap if lamp.environment else None
+    environment = None if envmap is None else environment_emitter(FILES["environment"], camera)  # named by file
+    scene = face.description(document, camera, lamp if envmap is None else None, envmap=environment,
+                             spp=SCENE_SPP, albedo=FILES["albedo"],
                              normals=None if normals is None else FILES["normals"],
                              specular=None if specular is None else FILES["specular"])
     # (description checks the BRDF and the light before anything is written)

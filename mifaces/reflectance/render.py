@@ -7,43 +7,36 @@ with Mitsuba's path tracer as the simulator renders photographs
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..brdf.model import check_numbers
-from ..capture import load_capture
+from ..capture import Light, load_capture
 from ..geometry import load_geometry
 from ..image_files import save_image
 from ..model import MorphableModel
+from ..model.geometry import rotation_about, turned
 from ..paths import check_writable
-from ..render import FaceScene, light_arguments
+from ..render import FaceScene
 from .estimate import BRDFEstimate
 from .io import load_estimate
 
 
 def render_estimate(estimate: BRDFEstimate, face_model: MorphableModel, vertices: np.ndarray, camera,
-                    light_position=None, intensity=None, envmap=None, envmap_scale: float = 1.0, spp: int = 64,
-                    seed: int = 0, *, light_direction=None) -> np.ndarray:
+                    light: Light | None = None, *, envmap=None, envmap_scale: float = 1.0, spp: int = 64,
+                    seed: int = 0) -> np.ndarray:
     """Render the fitted face (linear RGB, (H, W, 3)) on geometry ``vertices``
-    (world frame) seen by ``camera``, under a point light and/or an
-    environment map, or a directional light (``light_direction``, world frame,
-    towards the light, with ``intensity`` its irradiance): for novel poses,
-    novel lights and comparisons with held-out photographs. To render one face several times, build its
+    (world frame) seen by ``camera``, under a :class:`~mifaces.capture.Light` (point,
+    directional or environment map) and/or an environment ``envmap``
+    (:func:`mifaces.emitters.light_emitters`): for novel poses, novel lights and comparisons with
+    held-out photographs. To render one face several times, build its
     :class:`~mifaces.render.FaceScene` once and call its ``render``."""
-    return FaceScene(face_model, vertices).render(estimate.to_json(), estimate.albedo.albedo, camera, light_position,
-                                                  intensity, envmap, envmap_scale, spp, seed,
-                                                  light_direction=light_direction, normals=estimate.normal_texture(),
+    return FaceScene(face_model, vertices).render(estimate.to_json(), estimate.albedo.albedo, camera, light,
+                                                  envmap=envmap, envmap_scale=envmap_scale, spp=spp, seed=seed,
+                                                  normals=estimate.normal_texture(),
                                                   specular=estimate.specular_texture())
-
-
-def turn(vertices: np.ndarray, yaw: float, up: np.ndarray) -> np.ndarray:
-    """``vertices`` (V, 3) turned by ``yaw`` degrees about the axis ``up``
-    (unit, world frame) through their centroid (right-handed)."""
-    vertices = np.asarray(vertices, np.float64)
-    centre = vertices.mean(axis=0)
-    return Rotation.from_rotvec(np.radians(yaw) * np.asarray(up, np.float64)).apply(vertices - centre) + centre
 
 
 def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geometry="ground-truth",
@@ -55,13 +48,15 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     The BRDF may come from another face than the geometry: both share the
     model's texture parameterization, so the albedo map and the regions move
     with it (paper sec. 6). ``yaw`` turns the face about the camera's up
-    direction (degrees, about the face's centroid, :func:`turn`); the light is
+    direction (degrees, right-handed, about the face's centroid:
+    :func:`~mifaces.model.geometry.turned`, :attr:`~mifaces.capture.Camera.up`); the light is
     the measurement's light unless ``light_position`` (a point light, world,
     mm), ``light_direction`` (a directional light, world frame, towards the
     light; :meth:`mifaces.capture.Camera.direction` turns an azimuth and
     elevation into one) or an ``envmap`` is given (an equirectangular map,
     or an emitter dict such as :func:`mifaces.environment.sky_emitter`'s); its intensity is the
-    measurement light's unless ``intensity`` is given. Rendered in the
+    measurement light's unless ``intensity`` is given (the :class:`~mifaces.capture.Light` rendered:
+    the measurement's, or one made of these). Rendered in the
     capture's camera and units, the image compares pixel for pixel with a
     photograph taken under that light.
     """
@@ -80,18 +75,19 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
         raise ValueError(f"{brdf_dir}: the albedo map must be a square RGB image, got shape {albedo.shape}")
     vertices = np.asarray(shapes[name], np.float64)
     if yaw:
-        vertices = turn(vertices, yaw, -capture.camera.rotation[1])  # the camera's up direction in the world frame
+        vertices = turned(vertices, rotation_about(capture.camera.up, yaw), vertices.mean(axis=0))
     lamp = capture.light(next(m.light for m in capture.measurements if m.name == name))
+    intensity = lamp.intensity if intensity is None else intensity
     if light_position is None and light_direction is None and envmap is None:  # the measurement's light
-        given = light_arguments(lamp)
-        light_position, light_direction, envmap = (given.get(key) for key in ("light_position", "light_direction",
-                                                                               "envmap"))
-    if intensity is None and (light_position is not None or light_direction is not None):
-        intensity = lamp.intensity
-    image = FaceScene(face, vertices).render(data, albedo, capture.camera, light_position, intensity, envmap,
-                                             envmap_scale, spp, light_direction=light_direction,
-                                             normals=data.get("normals"), specular=data.get("specular"))
+        light = lamp if lamp.environment else replace(lamp, intensity=intensity)
+    elif light_position is None and light_direction is None:
+        light = None  # the environment alone
+    else:
+        light = Light("novel", light_position, intensity, direction=light_direction)
+    image = FaceScene(face, vertices).render(data, albedo, capture.camera, light, envmap=envmap,
+                                             envmap_scale=envmap_scale, spp=spp, normals=data.get("normals"),
+                                             specular=data.get("specular"))
     return save_image(image, out)
 
 
-__all__ = ["render_estimate", "render_fitted", "turn"]
+__all__ = ["render_estimate", "render_fitted"]

@@ -18,11 +18,11 @@ from scipy.spatial import cKDTree
 
 from ..model.geometry import rotation_matrix
 from ..model.mesh import mitsuba_mesh
-from ..status import DIVERGED
+from ..status import DIVERGED, NOT_CONVERGED
 from .adam import COLUMNS, DeviceAdam
 from .energy import POINT, Energy, directed
 from .layout import Layout, adjacency
-from .result import ShapeSchedule, Weights
+from .result import ShapeFit, ShapeSchedule, Weights
 from .targets import (FRONTAL, light_direction, metric_distances, normalised, rotation_centre, start_light,
                       start_translation)
 
@@ -289,6 +289,39 @@ class Fitter:
         terms, _ = self.energy.evaluate(theta, w.feature_final / max(w.feature, 1e-12), 1.0 if use_image else 0.0,
                                         grad=False)
         return theta, terms, history, it_total, None, ""
+
+    def result(self, theta, name, terms, history, iterations, greyscale=False) -> ShapeFit:
+        """The :class:`ShapeFit` of parameters ``theta`` (status still open): vertices, pose and
+        per-image lighting, with the gain and offset back in the photograph's units; for greyscale
+        photographs the tied colour blocks' one value (channel 0) in every channel."""
+        L, model, camera = self.layout, self.model, self.camera
+        finite = np.all(np.isfinite(theta))
+        verts_c = self.vertices_camera(theta) if finite else np.full((model.vertex_count, 3), np.nan)
+
+        def block(key, name):
+            value = theta[L[f"{key}.{name}"]]
+            return np.full_like(value, value[0]) if greyscale and len(value) == 3 else value.copy()
+
+        light = {}
+        for key in self.image_names:
+            el, az = theta[L[f"{key}.light_angles"]]
+            scale = self.image_scale[key]
+            light[key] = {"direction": light_direction(el, az), "color": block(key, "light_color"),
+                          "ambient": block(key, "ambient"), "specular": float(theta[L[f"{key}.specular"]][0]),
+                          "contrast": 1.0 if greyscale else float(theta[L[f"{key}.contrast"]][0]),
+                          "gain": block(key, "gain") * scale, "offset": block(key, "offset") * scale}
+        rot = self.rotation(theta)
+        focal = math.exp(theta[L["log_focal"]][0]) * np.array([camera.fx, camera.fy])
+        return ShapeFit(
+            measurement=name, status=NOT_CONVERGED,
+            vertices_world=camera.to_world(verts_c).astype(np.float32), vertices_camera=verts_c.astype(np.float32),
+            coefficients=theta[L["shape"]].copy(),
+            expression=theta[L["expression"]].copy(),
+            color=theta[L["color"]].copy() if model.has_texture else None,
+            albedo=theta[L["albedo"]].reshape(-1, 3).astype(np.float32) if "albedo" in L.slices else None,
+            rotation=rot, translation=theta[L["translation"]] - rot @ self.centre,
+            yaw_pitch_roll=np.degrees(theta[L["rotation"]]), focal_length=focal, light=light, loss=terms,
+            iterations=iterations, seconds=0.0, history=history)
 
     def _step_table(self, iters: int, image: bool, image_done: int, image_total: int, lr) -> np.ndarray:
         """Per step of a stage (:data:`~mifaces.shape.adam.COLUMNS`): the feature term's weight

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..capture import Camera, load_capture
 from ..atomic import atomic_write, write_json
+from ..model import MorphableModel
 from ..paths import check_name
 from ..result_set import ResultSetError, file_sha256
 from ..status import CONVERGED
@@ -92,6 +93,14 @@ def write_index(out, capture, model, fits: list[ShapeFit], reference=None, model
                            if name is not None and (out / name).is_file()}
         index["measurements"][fit.measurement] = entry
     write_json(out / INDEX, index)
+
+
+def model_source(model) -> str:
+    """What :func:`mifaces.load_model` loads ``model`` (a name, a path or a loaded model) from."""
+    if not isinstance(model, MorphableModel):
+        return str(model)
+    source = Path(str(model.metadata.get("source", "")))
+    return str(model.metadata["source"]) if source.is_file() else model.name
 
 
 def _warn_left_out(skipped: list[str]) -> None:

@@ -89,18 +89,18 @@ def photograph_spheres(studio: Studio, light: int, spp: int, seeds: Iterator[int
     return SpherePhotographs(hl, t_hl, ol, DIFFUSE_EXPOSURE)
 
 
-def photograph_face(studio: Studio, shapes: dict, light: int, companion: str, spp: int, seeds: Iterator[int],
+def photograph_face(studio: Studio, meshes: dict, light: int, companion: str, spp: int, seeds: Iterator[int],
                     rng: np.random.Generator) -> Photographs:
-    """The face (Mitsuba ``shapes``) under point light ``light`` (or the studio's environment,
+    """The face (Mitsuba meshes ``meshes``) under point light ``light`` (or the studio's environment,
     :func:`~mifaces.studio.scene.face_light`), and its companions: ``'diffuse'`` (a picture under
     the diffuse light, half the samples), ``'exposures'`` (the same render at
     :data:`EXPOSURE_FACTORS` times the exposure) or ``'both'``."""
-    radiance = render(scene(studio, shapes, face_light(studio, light), spp), spp, next(seeds))
+    radiance = render(scene(studio, meshes, face_light(studio, light), spp), spp, next(seeds))
     point = camera_noise(radiance * studio.exposure, rng)
     diffuse, exposures = None, []
     if companion in ("diffuse", "both"):
         spp_d = max(spp // 2, 4)
-        diffuse = render(scene(studio, shapes, DIFFUSE_LIGHT, spp_d), spp_d, next(seeds))
+        diffuse = render(scene(studio, meshes, DIFFUSE_LIGHT, spp_d), spp_d, next(seeds))
         diffuse = camera_noise(diffuse * DIFFUSE_EXPOSURE, rng)
     if companion in ("exposures", "both"):
         for factor in EXPOSURE_FACTORS:
@@ -114,10 +114,10 @@ def visible_feature_points(face_model) -> list[str]:
     return [n for n in FEATURE_POINTS if FEATURE_POINTS[n] in face_model.ibug_landmarks]
 
 
-def annotate(shapes: dict, vertices: np.ndarray, face_model, names: list[str], camera: Camera,
+def annotate(meshes: dict, vertices: np.ndarray, face_model, names: list[str], camera: Camera,
              rng: np.random.Generator) -> tuple[dict[str, list], dict[str, list]]:
     """The feature points ``names`` as an annotator clicks them on a photograph of the face
-    (Mitsuba ``shapes``, world-space ``vertices``): those whose landmark the camera sees,
+    (Mitsuba ``meshes``, world-space ``vertices``): those whose landmark the camera sees,
     with 0.5 px noise per coordinate at 512 pixels width, rounded to 0.01 px.
 
     Returns
@@ -132,7 +132,7 @@ def annotate(shapes: dict, vertices: np.ndarray, face_model, names: list[str], c
     origin = [mi.Float(np.full(len(targets), c)) for c in camera.position]
     ray = mi.Ray3f(mi.Point3f(*origin), mi.Vector3f(*[mi.Float(units[:, k]) for k in range(3)]))
     ray.maxt = mi.Float(lengths - 1.0)  # a landmark is visible when nothing is hit before it
-    occluded = np.asarray(mi.load_dict({"type": "scene", **shapes}).ray_test(ray))
+    occluded = np.asarray(mi.load_dict({"type": "scene", **meshes}).ray_test(ray))
     points, exact = {}, {}
     for name, p, hidden in zip(names, targets, occluded):
         if hidden:

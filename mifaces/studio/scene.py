@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..capture import Camera
-from ..environment import environment_emitter
 from ..brdf.model import rgb
+from ..capture import Camera, Light
+from ..emitters import light_emitters
 from ..render import mitsuba_sensor
 from .environment_light import EnvironmentLight, environment_light
 
@@ -174,11 +174,12 @@ def white_value(studio: Studio) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 # Mitsuba scenes
 # --------------------------------------------------------------------------------------------
-def scene(studio: Studio, shapes: dict, emitters: dict, spp: int) -> dict:
-    """The scene dict of ``shapes`` lit by ``emitters`` as the studio camera sees it with ``spp`` samples."""
+def scene(studio: Studio, meshes: dict, emitters: dict, spp: int) -> dict:
+    """The scene dict of ``meshes`` (Mitsuba shapes) lit by ``emitters`` as the studio camera sees it
+    with ``spp`` samples."""
     d = {"type": "scene", "integrator": studio.integrator,
          "sensor": dict(studio.sensor, sampler={"type": "independent", "sample_count": spp})}
-    d.update(shapes)
+    d.update(meshes)
     d.update(emitters)
     return d
 
@@ -202,11 +203,10 @@ def face_light(studio: Studio, light: int) -> dict:
     """What lights the face photographs of condition ``light``: the studio's environment
     (its map in pixel value: the photographs' exposure is 1), or the point light."""
     if studio.environment is not None:
-        return {"environment": environment_emitter(studio.environment.map, studio.camera)}
+        return light_emitters(None, studio.camera, studio.environment.map)
     return point_light(studio, light)
 
 
 def point_light(studio: Studio, light: int) -> dict:
-    """The point light of condition ``light``."""
-    return {"light": {"type": "point", "position": studio.light_positions[light].tolist(),
-                      "intensity": rgb(studio.intensity)}}
+    """The point light of condition ``light`` (:func:`mifaces.emitters.light_emitters`)."""
+    return light_emitters(Light(f"light_{light}", studio.light_positions[light], studio.intensity), studio.camera)

@@ -75,7 +75,7 @@ from ..render import check_render_size
 from ..result_set import check_result_target, result_set
 from ..model import load_model
 from ..progress import progress as progress_bar
-from ..render import face_shapes, region_bsdf, region_meshes
+from ..render import face_meshes, region_bsdf, region_meshes
 from .photograph import albedo_texture, annotate, photograph_face, photograph_spheres, visible_feature_points
 from . import subsurface as translucent
 from .detail import fine_detail, span_residual
@@ -268,12 +268,12 @@ def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width:
         name = f"m{index:02d}"
         pose = head_pose(face_model, subject, studio.poses[pi], rng)
         vertices = pose.vertices.astype(np.float32)
-        shapes = true_face_shapes(face_model, vertices, truth, texture, textures, variation["subsurface"])
-        photographs = photograph_face(studio, shapes, li, companion, spp, seeds, rng)
+        meshes = true_face_meshes(face_model, vertices, truth, texture, textures, variation["subsurface"])
+        photographs = photograph_face(studio, meshes, li, companion, spp, seeds, rng)
         bar.update(1 + (photographs.diffuse is not None) + bool(photographs.exposures))
         entry = write_photographs(out, name, light_name[li], pose_name(studio, li, pi), photographs)
         # feature points: the visible landmarks, as an annotator would click them
-        entry["feature_points"], exact = annotate(shapes, pose.vertices, face_model, names, studio.camera, rng)
+        entry["feature_points"], exact = annotate(meshes, pose.vertices, face_model, names, studio.camera, rng)
         entries.append(entry)
         true_measurements.append(true_measurement(name, light_name[li], pose, exact, face_model))
         render_seconds.append(time.perf_counter() - t0)
@@ -285,15 +285,15 @@ def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width:
     return len(studio.per_light), render_seconds
 
 
-def true_face_shapes(face_model, vertices: np.ndarray, truth: dict, texture, maps: dict, subsurface: bool) -> dict:
+def true_face_meshes(face_model, vertices: np.ndarray, truth: dict, texture, maps: dict, subsurface: bool) -> dict:
     """The face's Mitsuba meshes with their truth, as the photographs show it: surfaces (with
     parameter ``maps``, textures of :func:`~mifaces.studio.varying.map_textures`), or translucent
     skin (render with :data:`mifaces.studio.subsurface.INTEGRATOR`). ``texture``: the albedo."""
     normals = face_model.vertex_normals(vertices)
     if subsurface:
-        return translucent.subsurface_shapes(region_meshes(face_model, vertices, normals), truth,
+        return translucent.subsurface_meshes(region_meshes(face_model, vertices, normals), truth,
                                              lambda region: region_bsdf(truth, region, texture))
-    return face_shapes(face_model, vertices, truth, texture, normals, maps=maps)
+    return face_meshes(face_model, vertices, truth, texture, normals, maps=maps)
 
 
 def _integer(name: str, value, lowest: int, highest: int) -> int:

@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.ndimage as ndi
 
-from ..model.geometry import head_centre, rotation_matrix
+from ..model.geometry import head_centre, rotation_matrix, turned
 from ..model.texture_space import bake
 from .skin import paint_skin
 
@@ -91,7 +91,7 @@ def head_pose(face_model, subject: Subject, turn: tuple[float, float, float],
     local = face_model.shape(subject.coefficients["shape"], expression).astype(np.float64)
     if subject.detail is not None:
         local = local + subject.detail
-    vertices = (local - subject.head) @ rotation.T + subject.head + translation
+    vertices = turned(local, rotation, subject.head) + translation
     return HeadPose((yaw, pitch, roll), rotation, translation, expression, vertices)
 
 

@@ -104,7 +104,7 @@ def subsurface_albedo(face_model, albedo: np.ndarray, truth: dict) -> np.ndarray
     return out
 
 
-def subsurface_shapes(region_meshes: dict, truth: dict, surface_bsdf) -> dict:
+def subsurface_meshes(region_meshes: dict, truth: dict, surface_bsdf) -> dict:
     """Mitsuba meshes of a face's ``region_meshes``
     (:func:`mifaces.render.region_meshes`): the translucent regions as the
     boundary over the skin medium, the others with ``surface_bsdf(region)``."""

@@ -14,7 +14,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..capture.types import RELATIVE_IRRADIANCE
-from ..environment import camera_frame, dominant_direction
+from ..capture import Light
+from ..environment import dominant_direction
 from ..image_files import read_exr
 
 #: The novel pose: yaw about the camera's up axis, then pitch about its right
@@ -33,16 +34,11 @@ LIGHT_CANDIDATES = tuple((a, e) for a in (-45.0, -22.5, 0.0, 22.5, 45.0) for e i
 
 def novel_rotation(camera, pose=NOVEL_POSE) -> np.ndarray:
     """The world-frame rotation (3x3) of the novel pose: ``pose`` = (yaw,
-    pitch) degrees about the camera's up and then its right axis."""
-    right, up, _ = camera_frame(camera).T
+    pitch) degrees about the camera's up and then its right axis (:attr:`~mifaces.capture.Camera.frame`)."""
+    right, up, _ = camera.frame.T
     yaw = Rotation.from_rotvec(np.radians(pose[0]) * up)
     pitch = Rotation.from_rotvec(np.radians(pose[1]) * right)
     return (pitch * yaw).as_matrix()
-
-
-def turned(vertices: np.ndarray, rotation: np.ndarray, centre: np.ndarray) -> np.ndarray:
-    """``vertices`` (V, 3) turned by ``rotation`` about ``centre`` (world, mm)."""
-    return (np.asarray(vertices, np.float64) - centre) @ np.asarray(rotation).T + centre
 
 
 def true_lights(capture, truth):
@@ -70,16 +66,15 @@ def true_lights(capture, truth):
     return replace(capture, lights=tuple(lights))
 
 
-def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -> list[dict]:
-    """``count`` lights none of the capture's photographs used, as keyword
-    arguments of :meth:`mifaces.render.FaceScene.render`: of
+def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -> list[tuple[Light, float]]:
+    """``count`` lights none of the capture's photographs used (:class:`~mifaces.capture.Light`
+    values named ``held_out_<k>``), each with its angle to the capture's lights: of
     :data:`LIGHT_CANDIDATES`, those whose smallest angle (seen from
     ``centre``) to every capture light and to each other is largest; point
     lights at the capture lights' mean distance with the first light's
     intensity (directional lights for a capture of directional lights, and for one lit by environment
     maps alone: irradiance :data:`~mifaces.capture.types.RELATIVE_IRRADIANCE`); away from where most
-    of each environment map's light comes from, too.
-    Each dict also holds ``angle_to_capture`` (degrees)."""
+    of each environment map's light comes from, too; that angle (degrees) is the smallest to any of them."""
     maps = [dominant_direction(light.envmap, capture.camera) for light in capture.lights if light.environment]
     lights = [light for light in capture.lights if not light.environment]  # the point or directional ones
     environment = not lights
@@ -101,26 +96,23 @@ def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -
         chosen.append(int(np.argmax(separation)))
     distance = 1.0 if directional else float(np.mean([np.linalg.norm(l.position - centre) for l in lights]))
     out = []
-    for k in chosen:
+    for i, k in enumerate(chosen):
         angle = float(np.degrees(np.arccos(np.clip(used @ candidates[k], -1, 1))).min())
         intensity = np.full(3, RELATIVE_IRRADIANCE) if environment else np.asarray(lights[0].intensity, np.float64)
-        light = {"intensity": intensity, "angle_to_capture": angle}
-        if directional:
-            light["light_direction"] = candidates[k]
-        else:
-            light["light_position"] = centre + distance * candidates[k]
-        out.append(light)
+        name = f"held_out_{i + 1}"
+        light = (Light(name, None, intensity, direction=candidates[k]) if directional
+                 else Light(name, centre + distance * candidates[k], intensity))
+        out.append((light, angle))
     return out
 
 
-def novel_light(capture, centre: np.ndarray) -> dict:
+def novel_light(capture, centre: np.ndarray) -> Light:
     """The light none of the measurements used that :func:`mifaces.pipeline.measure`
     renders each fit under beside its photograph: the first of :func:`held_out_lights`
-    (of ``capture``'s lights, seen from ``centre``), as keyword arguments of
-    :meth:`mifaces.render.FaceScene.render`."""
-    light = held_out_lights(capture, centre, 1)[0]
-    return {key: value for key, value in light.items() if key != "angle_to_capture"}
+    (of ``capture``'s lights, seen from ``centre``), named ``'novel'``."""
+    light, _ = held_out_lights(capture, centre, 1)[0]
+    return replace(light, name="novel")
 
 
-__all__ = ["NOVEL_POSE", "HELD_OUT_LIGHTS", "LIGHT_CANDIDATES", "novel_rotation", "turned", "true_lights",
+__all__ = ["NOVEL_POSE", "HELD_OUT_LIGHTS", "LIGHT_CANDIDATES", "novel_rotation", "true_lights",
            "held_out_lights", "novel_light"]

@@ -55,17 +55,19 @@ from scipy.spatial.transform import Rotation
 from skimage.transform import resize
 
 from ..capture import Camera, read_ground_truth
+from ..emitters import light_record
 from ..environment import LUMINANCE, SKY_SUN_ANGLES, sky_emitter, studio_environment
 from ..face_pixels import front_of_face_pixels
 from ..geometry import load_geometry
+from ..model.geometry import turned
 from ..model.regions import REGIONS
 from ..render import ALBEDO, FaceScene
 from ..studio import subsurface as translucent
 from ..studio.photograph import albedo_texture
-from ..studio.simulate import true_face_shapes
+from ..studio.simulate import true_face_meshes
 from ..studio.varying import map_textures
 from .brdf_error import brdf_rmse, region_texels
-from .held_out import HELD_OUT_LIGHTS, NOVEL_POSE, held_out_lights, novel_rotation, true_lights, turned
+from .held_out import HELD_OUT_LIGHTS, NOVEL_POSE, held_out_lights, novel_rotation, true_lights
 from .truth_errors import ground_truth_errors
 
 #: Longer side of the face crop rendered (pixels), and samples per pixel.
@@ -141,7 +143,8 @@ class Validator:
     Attributes
     ----------
     conditions : dict
-        Name -> the light keyword arguments of :meth:`FaceScene.render`.
+        Name -> the light keyword arguments of :meth:`FaceScene.render`: ``{'light': Light}`` for a
+        held-out light (:func:`held_out_lights`), ``{'envmap': environment}`` for an environment.
     truth : dict
         Name -> the true face's image (H, W, 3).
     mask, truth_mask : (H, W) bool
@@ -171,8 +174,7 @@ class Validator:
         self.camera = face_camera(capture.camera, turned(true_vertices, rotation, centre), size)
         self.spp = int(spp)
         held_out = held_out_lights(true_lights(capture, self.ground_truth), centre, lights)
-        self.conditions = {f"light_{k + 1}": {key: value for key, value in light.items() if key != "angle_to_capture"}
-                           for k, light in enumerate(held_out)}
+        self.conditions = {f"light_{k + 1}": {"light": light} for k, (light, _) in enumerate(held_out)}
         if environments is None:
             environments = {"studio": studio_environment(), "sky": sky_emitter(self.camera)}
         self.environments = tuple(environments)
@@ -181,10 +183,10 @@ class Validator:
         self.mask = self.truth_mask | front_of_face_pixels(face_model, turned(fit_vertices, rotation, centre),
                                                            self.camera)
         truth = self.ground_truth.brdf
-        true_shapes = self._true_face(truth_model, self.truth_scene, turned(true_vertices, rotation, centre))
-        self.truth = {name: self._render_truth(true_shapes, light) for name, light in self.conditions.items()}
+        true_meshes = self._true_face(truth_model, self.truth_scene, turned(true_vertices, rotation, centre))
+        self.truth = {name: self._render_truth(true_meshes, light) for name, light in self.conditions.items()}
         # the Monte Carlo noise of these renders: the truth against itself rendered with another seed
-        noise = {name: relative_rmse(self._render_truth(true_shapes, light, NOISE_SEED), self.truth[name],
+        noise = {name: relative_rmse(self._render_truth(true_meshes, light, NOISE_SEED), self.truth[name],
                                      self.truth_mask) for name, light in self.conditions.items()}
         floor = self._shape_floor(truth_model, face_model, true_vertices, fit_vertices, rotation, centre)
         # where the shapes differ but share a texture space, the fitted reflectance is also judged on the true shape
@@ -194,7 +196,7 @@ class Validator:
         self.summary = {
             "truth_model": truth["model"], "measurement": measurement, "novel_pose": list(pose),
             "novel_pose_angle_to_capture": min(pose_angle(novel, m.rotation) for m in self.ground_truth.measurements),
-            "held_out_lights": [{key: np.asarray(v).tolist() for key, v in light.items()} for light in held_out],
+            "held_out_lights": [{**light_record(light), "angle_to_capture": angle} for light, angle in held_out],
             "environments": [name for name in environments], "sky_sun_angles": list(SKY_SUN_ANGLES),
             "render": {"width": self.camera.width, "height": self.camera.height, "spp": self.spp,
                        "mask_pixels": int(self.mask.sum())},
@@ -204,24 +206,24 @@ class Validator:
 
     def _true_face(self, face_model, scene: FaceScene, vertices: np.ndarray) -> dict:
         """The true reflectance on ``vertices`` as the simulator photographed it
-        (:func:`mifaces.studio.simulate.true_face_shapes`): parameter maps of a
+        (:func:`mifaces.studio.simulate.true_face_meshes`): parameter maps of a
         spatially varying truth, translucent skin of a subsurface one."""
         truth = self.ground_truth
-        shapes = true_face_shapes(face_model, np.asarray(vertices, np.float32), truth.brdf,
+        meshes = true_face_meshes(face_model, np.asarray(vertices, np.float32), truth.brdf,
                                   albedo_texture(truth.albedo), map_textures(truth.maps), self._subsurface)
-        return {key: shapes[key] for key in scene.meshes}  # keyed as the scene's meshes
+        return {key: meshes[key] for key in scene.meshes}  # keyed as the scene's meshes
 
     @property
     def _subsurface(self) -> bool:
         return "subsurface" in self.ground_truth.description
 
-    def _render_truth(self, shapes: dict, light: dict, seed: int = SEED) -> np.ndarray:
-        """An image of the true face ``shapes`` (:meth:`_true_face`) under condition ``light``: the
+    def _render_truth(self, meshes: dict, light: dict, seed: int = SEED) -> np.ndarray:
+        """An image of the true face ``meshes`` (:meth:`_true_face`) under condition ``light``: the
         validation's camera and emitters, the simulator's integrator for a translucent truth."""
         scene = self.truth_scene.description(self.ground_truth.brdf, self.camera, spp=self.spp, **light)
         for key in (ALBEDO, *self.truth_scene.meshes):
             scene.pop(key)
-        scene.update(shapes)
+        scene.update(meshes)
         if self._subsurface:
             scene["integrator"] = translucent.INTEGRATOR
         return np.array(mi.render(mi.load_dict(scene), spp=self.spp, seed=seed), dtype=np.float32)[..., :3]
@@ -235,8 +237,8 @@ class Validator:
             return None
         if np.array_equal(np.asarray(true_vertices, np.float64), np.asarray(fit_vertices, np.float64)):
             return {name: 0.0 for name in self.conditions}
-        shapes = self._true_face(face_model, self.fit_scene, turned(fit_vertices, rotation, centre))
-        return {name: relative_rmse(self._render_truth(shapes, light), self.truth[name], self.mask)
+        meshes = self._true_face(face_model, self.fit_scene, turned(fit_vertices, rotation, centre))
+        return {name: relative_rmse(self._render_truth(meshes, light), self.truth[name], self.mask)
                 for name, light in self.conditions.items()}
 
     def _pooled(self, per_condition: dict) -> dict:
