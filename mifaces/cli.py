@@ -36,7 +36,7 @@ from .capture.detector import NoFaceError, detect_landmarks
 from .cli_options import default, renamed, width_x_height
 from .model import load_model
 from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
-from .geometry import load_geometry
+from .shape.io import load_geometry
 from .reflectance import FitOptions, fit_brdf as fit_brdf_model, render_fitted
 from .reflectance.fit.uncertainty import METHODS as UNCERTAINTY_METHODS
 from .reflectance.io import KIND as BRDF_KIND, write_fitted

@@ -36,7 +36,7 @@ from .capture import Capture, load_capture, read_ground_truth
 from .export import export_face
 from .atomic import write_json
 from .face_pixels import face_pixels
-from .geometry import load_geometry
+from .shape.io import load_geometry
 from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, as_given, balance_intensities, check_estimable,
                        estimate_environments, estimate_lights, lights_document, refit_lights, write_lights,
                        write_lights_picture)
@@ -180,6 +180,20 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
         or one none of whose photographs got a converged shape fit.
     ValueError
         For unknown lights with ``geometry='ground-truth'`` (they are estimated on fitted faces).
+
+    Examples
+    --------
+    The main job on a small capture (``capture_folder``, one :func:`mifaces.simulate` wrote here),
+    one BRDF model on the simulator's true shapes, into ``out / "measure"``:
+
+    >>> from mifaces import measure
+    >>> from mifaces.reflectance import FitOptions
+    >>> report = measure(out / "measure", capture_folder, models=("phong",), geometry="ground-truth", spp=2,
+    ...                  options=FitOptions(resolution=32), progress=False)
+    >>> list(report["models"]), sorted(p.name for p in (out / "measure").glob("report.*"))
+    (['phong'], ['report.html', 'report.json', 'report.md', 'report.png'])
+    >>> sorted(report["models"]["phong"]["validation"])[:3]  # a simulated capture is judged against its truth
+    ['albedo_rmse', 'brdf_rmse', 'environment_rmse']
     """
     t0 = time.perf_counter()
     out = Path(out)

@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.geometry import load_geometry
+from mifaces.shape.io import load_geometry
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
 from mifaces.reflectance.maps.diffuse import albedo_offsets
 

@@ -226,7 +226,7 @@ def test_measure_estimates_a_hidden_map_with_the_face(studio_capture, tmp_path):
 def test_the_refinement_differentiates_an_estimated_map(studio_capture):
     """An estimated map is a variable of the refinement: its log radiance gets a gradient from the
     photographs, its mean is held, and a given map stays fixed."""
-    from mifaces.geometry import load_geometry
+    from mifaces.shape.io import load_geometry
     from mifaces.reflectance import fit_brdf
     from mifaces.refine.problem import RefineProblem
     from mifaces.refine.schedule import RefineSchedule, environment_variable

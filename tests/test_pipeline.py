@@ -217,7 +217,7 @@ def test_measure_writes_the_refined_shapes_it_fits_on(capture_dir, tmp_path, mon
     import mifaces
     import mifaces.pipeline as pipeline
     from mifaces.capture import load_capture
-    from mifaces.geometry import load_geometry
+    from mifaces.shape.io import load_geometry
     from mifaces.refine.shape import ShapeRefinement
 
     mifaces.set_variant("llvm_ad_rgb")

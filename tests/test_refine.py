@@ -113,7 +113,7 @@ def test_albedo_correction_interpolates_bilinearly():
 @pytest.fixture(scope="module")
 def fitted(small_capture):
     from mifaces.capture import load_capture
-    from mifaces.geometry import load_geometry
+    from mifaces.shape.io import load_geometry
     from mifaces.reflectance import fit_brdf
 
     capture = load_capture(small_capture("refine", measurements=2, resolution=(64, 64), spp=8,
@@ -237,7 +237,7 @@ def test_the_lights_gains_take_up_a_light_calibrated_too_weak(small_capture):
     With the lights' gains free, the refinement finds the first light's photographs 1/0.9 times
     brighter than the second's; with the lights held as calibrated, every gain stays 1."""
     from mifaces.capture import load_capture, with_true_lights
-    from mifaces.geometry import load_geometry
+    from mifaces.shape.io import load_geometry
     from mifaces.reflectance import fit_brdf
 
     capture = load_capture(small_capture("refine_lights", measurements=4, resolution=(64, 64), spp=8,

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.geometry import load_geometry
+from mifaces.shape.io import load_geometry
 from mifaces.reflectance import FitOptions, fit_brdf
 from mifaces.validation.brdf_error import brdf_rmse, hemisphere_grid
 from mifaces.validation.held_out import held_out_lights, novel_rotation

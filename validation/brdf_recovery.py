@@ -34,7 +34,7 @@ import numpy as np
 from skimage.transform import resize
 
 from mifaces import brdf
-from mifaces.geometry import load_geometry
+from mifaces.shape.io import load_geometry
 from mifaces.reflectance import FitOptions, fit_brdf, render_estimate
 from mifaces.validation.truth_errors import ground_truth_errors
 from mifaces.capture import load_capture, read_ground_truth

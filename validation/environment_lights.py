@@ -45,7 +45,7 @@ from mifaces.capture import MANIFEST, load_capture, read_ground_truth
 from mifaces.environment import LUMINANCE, irradiance, texel_directions
 from mifaces.atomic import save_figure, write_json
 from mifaces.image_files import read_exr
-from mifaces.geometry import load_geometry
+from mifaces.shape.io import load_geometry
 from mifaces.lighting import LIGHTS_FOLDER
 from mifaces.pipeline import measure
 from mifaces.studio import simulate

@@ -40,7 +40,7 @@ import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.atomic import save_figure, write_json
-from mifaces.geometry import load_geometry
+from mifaces.shape.io import load_geometry
 from mifaces.model.regions import REGIONS
 from mifaces.model.texture_space import rasterize
 from mifaces.reflectance.estimate import fit_brdf

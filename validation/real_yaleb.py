@@ -65,7 +65,7 @@ from mifaces.brdf import NAMES
 from mifaces.capture import Light, load_capture
 from mifaces.atomic import save_figure, write_json
 from mifaces.image_files import write_exr, write_png
-from mifaces.geometry import load_geometry
+from mifaces.shape.io import load_geometry
 from mifaces.importers.yaleb import default_split, import_subject, read_subject
 from mifaces.pipeline import SHAPES, measure
 from mifaces.reflectance import FitOptions, fit_brdf, load_estimate

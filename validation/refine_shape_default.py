@@ -24,7 +24,7 @@ import mifaces  # first: libLLVM  # isort: skip
 
 from mifaces.capture import load_capture
 from mifaces.atomic import write_json
-from mifaces.geometry import load_geometry
+from mifaces.shape.io import load_geometry
 from mifaces.refine.shape import refine_fits
 from mifaces.shape import fit_shape, shapes_in_world
 from mifaces.shape_errors import capture_shape_errors

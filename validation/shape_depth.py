@@ -33,7 +33,7 @@ import numpy as np
 
 from mifaces.capture import load_capture
 from mifaces.atomic import write_json
-from mifaces.geometry import load_geometry
+from mifaces.shape.io import load_geometry
 from mifaces.shape import fit_shape, shapes_in_world
 from mifaces.shape_errors import capture_shape_errors
 from mifaces.studio import simulate

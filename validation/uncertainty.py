@@ -41,7 +41,7 @@ import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.atomic import atomic_write, save_figure, write_json
-from mifaces.geometry import load_geometry
+from mifaces.shape.io import load_geometry
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
 from mifaces.reflectance.fit import intervals
 from mifaces.reflectance.fit import uncertainty as unc

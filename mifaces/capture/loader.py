@@ -125,12 +125,15 @@ def load_capture(path: str | os.PathLike | Capture, calibrate: bool = True, dete
 
     Examples
     --------
+    ``capture_folder`` is a capture folder (one :func:`mifaces.simulate` wrote, here):
+
     >>> from mifaces import load_capture
-    >>> capture = load_capture(SHARED / "data" / "yaleb_capture")  # doctest: +SKIP
-    >>> capture = load_capture(tiny_capture)  # a folder mifaces.simulate wrote
-    >>> [light.name for light in capture.lights][:2]
-    ['L0', 'L1']
-    >>> load_capture(capture) is capture
+    >>> capture = load_capture(capture_folder)
+    >>> [m.name for m in capture.measurements], capture.camera.width
+    (['m00', 'm01'], 96)
+    >>> capture.light(capture.measurements[0].light).directional
+    False
+    >>> load_capture(capture) is capture  # a loaded capture passes through
     True
     """
     if isinstance(path, Capture):

@@ -328,7 +328,7 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
     capture : Capture
     shapes : mapping
         Measurement name -> (V, 3) world vertices (mm) of ``face_model``:
-        :func:`mifaces.shape.shapes_in_world` or :func:`mifaces.geometry.load_geometry`.
+        :func:`mifaces.shape.shapes_in_world` or :func:`mifaces.shape.io.load_geometry`.
     face_model : MorphableModel
     estimate : BRDFEstimate
         The fitted BRDF and albedo map (:func:`mifaces.reflectance.estimate.fit_brdf`).

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..brdf.model import check_numbers
 from ..capture import Light, load_capture
-from ..geometry import load_geometry
+from ..shape.io import load_geometry
 from ..image_files import save_image
 from ..model import MorphableModel
 from ..model.geometry import rotation_about, turned

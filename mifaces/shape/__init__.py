@@ -8,10 +8,10 @@ in memory or on disk), :mod:`.fit` (:func:`fit_measurement`, :func:`fit_shape`).
 """
 
 from .fit import feature_limit, fit_measurement, fit_shape
-from .io import INDEX, load_fitted_shapes, shapes_in_world, write_fit, write_index
+from .io import INDEX, load_fitted_shapes, load_geometry, shapes_in_world, write_fit, write_index
 from .result import ShapeFit, ShapeFitError, ShapeOptions, ShapeSchedule, Weights
 from .targets import feature_targets, light_direction, metric_distances, rotation_centre
 
 __all__ = ["ShapeFit", "ShapeFitError", "ShapeOptions", "ShapeSchedule", "Weights", "feature_limit",
-           "fit_measurement", "fit_shape", "shapes_in_world", "load_fitted_shapes", "write_fit", "write_index",
+           "fit_measurement", "fit_shape", "shapes_in_world", "load_fitted_shapes", "load_geometry", "write_fit", "write_index",
            "INDEX", "feature_targets", "light_direction", "metric_distances", "rotation_centre"]

@@ -269,6 +269,18 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     ShapeFitError
         For an unknown measurement name, or missing or misnamed feature points
         (checked for all measurements before any fitting).
+
+    Examples
+    --------
+    The built-in face fitted to each photograph of a capture (``capture_folder``, one
+    :func:`mifaces.simulate` wrote here), on a short schedule:
+
+    >>> from mifaces.shape import fit_shape, shapes_in_world
+    >>> fits = fit_shape(capture_folder, iterations=0.2, progress=False)
+    >>> [fit.measurement for fit in fits]
+    ['m00', 'm01']
+    >>> fits[0].vertices_camera.shape[1], fits[0].status in ("converged", "not_converged")
+    (3, True)
     """
     capture = load_capture(capture)
     source = model_source(model)

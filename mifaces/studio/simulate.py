@@ -182,6 +182,19 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     -------
     SimulationResult
 
+    Examples
+    --------
+    A small capture of the built-in face (``out``: a folder to write into):
+
+    >>> from mifaces import load_capture, simulate
+    >>> result = simulate(out / "capture", measurements=2, resolution=(64, 64), spp=4, albedo_resolution=128,
+    ...                   progress=False)
+    >>> result.measurements, result.path.name
+    (2, 'capture')
+    >>> capture = load_capture(result.path)
+    >>> capture.camera.width, len(capture.measurements)
+    (64, 2)
+
     Raises
     ------
     FileExistsError

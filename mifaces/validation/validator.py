@@ -58,7 +58,7 @@ from ..capture import Camera, read_ground_truth
 from ..emitters import light_record
 from ..environment import LUMINANCE, SKY_SUN_ANGLES, sky_emitter, studio_environment
 from ..face_pixels import front_of_face_pixels
-from ..geometry import load_geometry
+from ..shape.io import load_geometry
 from ..model.geometry import turned
 from ..model.regions import REGIONS
 from ..render import ALBEDO, FaceScene
