@@ -43,6 +43,7 @@ from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, as_given, balance_intensit
 from .model import load_model
 from .reflectance import BRDFEstimate, FitOptions, capture_samples, fit_brdf, write_estimate
 from .reflectance.light_balance import balance_given_lights
+from .reflectance.options import fit_options
 from .refine import refine_estimate
 from .refine.shape import refine_lit, refined_fits
 from .emitters import light_record
@@ -105,7 +106,7 @@ class FittedModel:
 
 def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, options: FitOptions | None = None,
             refine: bool = False, refine_shape: bool = False, shape_iterations: float | None = None, spp: int = 64,
-            face_model="builtin", progress: bool = True) -> dict:
+            face_model="builtin", progress: bool = True, **deprecated) -> dict:
     """Measure the reflectance of the face in ``capture``, writing everything to ``out``.
 
     The stages hand their results to each other in memory: the face model is
@@ -156,6 +157,10 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
         every photograph, and it is kept only if it lowers the loss on pixels it
         did not fit; the samples are then taken on the refined faces. Off by
         default: it costs minutes (``docs/refine_shape.md``).
+    **deprecated
+        ``resolution=``, ``normals=``, ``specular_maps=``, ``balance_lights=`` as separate
+        keywords, as before :class:`~mifaces.reflectance.FitOptions`: still accepted, with a
+        :class:`DeprecationWarning`.
 
     Returns
     -------
@@ -197,7 +202,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
     """
     t0 = time.perf_counter()
     out = Path(out)
-    options = options or FitOptions()
+    options = fit_options(options, deprecated, "measure")
     resolution = options.resolution
     if geometry not in GEOMETRIES:
         raise ValueError(f"geometry must be one of {GEOMETRIES}, got {geometry!r}")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mifaces import brdf
-from mifaces.capture import Camera
+from mifaces.capture import Camera, Light
 from mifaces.model.mesh import mitsuba_mesh
 from mifaces.model.texture_space import rasterize
 from mifaces.reflectance.samples import (MIN_COSINE, ReflectanceSamples, confidence, confidence_with_distance,
@@ -133,7 +133,8 @@ def test_resampled_reflectance_matches_the_brdf(jit_variant):
             "specular_reflectance": 1.5, "roughness": 0.35}
     photo = render_photo(camera, vertices, triangles, uv, light, intensity, bsdf)
     raster = rasterize(uv, triangles, (128, 128))
-    samples = measurement_samples(camera, light, intensity, photo, vertices, triangles, uv, raster, name="m0")
+    samples = measurement_samples(camera, Light("L0", light, intensity), photo, vertices, triangles, uv, raster,
+                                  name="m0")
     assert len(samples) > 0.5 * 128 * 128
     assert np.all(np.isfinite(samples.sigma)) and np.all(samples.sigma >= 1)
     assert np.all(samples.light[:, 2] > 0.17) and np.all(samples.view[:, 2] > 0.17)
@@ -158,8 +159,8 @@ def test_directional_light_reflectance_matches_the_brdf(jit_variant):
             "specular_reflectance": 1.5, "roughness": 0.35}
     photo = render_photo(camera, vertices, triangles, uv, towards, irradiance, bsdf, directional=True)
     raster = rasterize(uv, triangles, (128, 128))
-    samples = measurement_samples(camera, None, irradiance, photo, vertices, triangles, uv, raster, name="m0",
-                                  light_direction=towards)
+    samples = measurement_samples(camera, Light("L0", None, irradiance, direction=towards), photo, vertices,
+                                  triangles, uv, raster, name="m0")
     assert len(samples) > 0.4 * 128 * 128
     model = brdf.model("cooktorrance")
     p = {"diffuse_reflectance": mi.Color3f(0.5, 0.35, 0.3), "specular_reflectance": 1.5, "roughness": 0.35,
@@ -177,14 +178,13 @@ def test_shadowed_and_hidden_texels_give_no_sample(jit_variant):
     vertices, triangles, uv = spherical_cap(n=40)
     raster = rasterize(uv, triangles, (48, 48))
     photo = np.full((64, 64, 3), 0.1, np.float32)
-    behind = measurement_samples(camera, np.array([0.0, 0.0, 600.0]), np.ones(3), photo, vertices, triangles, uv,
-                                 raster)
+    behind = measurement_samples(camera, Light("L0", np.array([0.0, 0.0, 600.0]), np.ones(3)), photo, vertices,
+                                 triangles, uv, raster)
     assert len(behind) == 0
     narrow = Camera(width=64, height=64, fx=400.0, fy=400.0, cx=31.5, cy=31.5)  # sees only the middle
-    middle = measurement_samples(narrow, np.array([0.0, -50.0, 0.0]), np.ones(3), photo, vertices, triangles, uv,
-                                 raster)
-    full = measurement_samples(camera, np.array([0.0, -50.0, 0.0]), np.ones(3), photo, vertices, triangles, uv,
-                               raster)
+    side = Light("L0", np.array([0.0, -50.0, 0.0]), np.ones(3))
+    middle = measurement_samples(narrow, side, photo, vertices, triangles, uv, raster)
+    full = measurement_samples(camera, side, photo, vertices, triangles, uv, raster)
     assert 0 < len(middle) < 0.5 * len(full)
 
 
@@ -193,11 +193,12 @@ def test_bad_photographs_are_named(jit_variant):
     vertices, triangles, uv = spherical_cap(n=20)
     raster = rasterize(uv, triangles, (16, 16))
     with pytest.raises(ValueError, match="does not match the camera"):
-        measurement_samples(camera, np.zeros(3), np.ones(3), np.zeros((32, 64, 3)), vertices, triangles, uv, raster)
+        measurement_samples(camera, Light("L0", np.zeros(3), np.ones(3)), np.zeros((32, 64, 3)), vertices, triangles,
+                            uv, raster)
     photo = np.zeros((64, 64, 3), np.float32)
     photo[3, 4, 1] = np.nan
     with pytest.raises(ValueError, match="1 NaN"):
-        measurement_samples(camera, np.zeros(3), np.ones(3), photo, vertices, triangles, uv, raster)
+        measurement_samples(camera, Light("L0", np.zeros(3), np.ones(3)), photo, vertices, triangles, uv, raster)
 
 
 def test_samples_round_trip_and_concatenate(tmp_path):

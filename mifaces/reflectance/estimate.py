@@ -41,7 +41,7 @@ from ..model.regions import REGIONS, regions_present, texel_regions_of_mesh
 from .maps.diffuse import AlbedoOffsets, refine_diffuse
 from .fit.regions import fit_regions
 from .io import write_fitted
-from .options import FitOptions
+from .options import FitOptions, fit_options
 from .result import BRDFEstimate
 from .light_balance import balance_given_lights
 from .samples import ReflectanceSamples, capture_samples
@@ -53,7 +53,7 @@ from .maps.normals import MIN_OBSERVATIONS, mitsuba_tangent_normals, refine_texe
 
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
              options: FitOptions | None = None, samples: ReflectanceSamples | None = None, measurements=None,
-             out=None, progress: bool = True, force: bool = False) -> BRDFEstimate:
+             out=None, progress: bool = True, force: bool = False, **deprecated) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture.
 
     Parameters
@@ -74,6 +74,9 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         Write the result there (:func:`mifaces.reflectance.io.write_estimate`).
     force : bool
         Replace a fitted BRDF that ``out`` holds.
+    **deprecated
+        The fit options as separate keywords (``resolution=``, ``normals=``, ...), as before
+        :class:`FitOptions`: still accepted, with a :class:`DeprecationWarning`.
 
     Returns
     -------
@@ -98,7 +101,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     ``mifaces.refine.refine_estimate(estimate, capture, shapes, face)``.
     """
     t0 = time.perf_counter()
-    options = options or FitOptions()
+    options = fit_options(options, deprecated, "fit_brdf")
     resolution, fixed, schedule, seed = options.resolution, options.fixed, options.schedule, options.seed
     normals, uncertainty = options.normals, options.uncertainty
     capture = load_capture(capture)

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import warnings
 from dataclasses import dataclass, field
 
 from .fit.region_fit import SubsetSchedule
@@ -90,4 +92,33 @@ class FitOptions:
         return options
 
 
-__all__ = ["FitOptions"]
+def fit_options(options, flags: dict, caller: str) -> FitOptions:
+    """``options`` (a :class:`FitOptions`, or None for the defaults) with ``flags`` applied: the
+    keyword arguments ``caller`` took one by one before :class:`FitOptions` (``resolution=``,
+    ``normals=``, ...; deprecated, with a :class:`DeprecationWarning`). A dict ``options`` is the
+    BRDF model's options, as ``fit_brdf`` took them then (``model_options`` now).
+
+    Raises
+    ------
+    TypeError
+        For a keyword no :class:`FitOptions` field has (``refine``: the refinement is the next
+        stage's call, :func:`mifaces.refine.refine_estimate`).
+    """
+    flags = dict(flags)
+    if isinstance(options, dict):
+        flags = {"model_options": options, **flags}
+        options = None
+    if "refine" in flags:
+        raise TypeError(f"{caller}() no longer refines: call mifaces.refine.refine_estimate(estimate, capture, "
+                        "shapes, face_model) on the estimate it returns")
+    unknown = sorted(set(flags) - {f.name for f in dataclasses.fields(FitOptions)})
+    if unknown:
+        raise TypeError(f"{caller}() got unexpected keyword argument(s) {unknown}")
+    if flags:
+        shown = ", ".join(f"{key}=..." for key in flags)
+        warnings.warn(f"{caller}({shown}) is deprecated and goes in the next release: pass "
+                      f"options=FitOptions({shown})", DeprecationWarning, stacklevel=3)
+    return dataclasses.replace(options or FitOptions(), **flags)
+
+
+__all__ = ["FitOptions", "fit_options"]

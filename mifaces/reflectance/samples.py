@@ -311,20 +311,22 @@ def read_photograph(camera, pixels, saturated, points) -> tuple[np.ndarray, np.n
     return radiance, ok
 
 
-def measurement_samples(camera, light_position, intensity, pixels, vertices, triangles, uv, raster, *,
-                        saturated=None, scale: float = np.pi, erosion: int = 1, min_cosine: float = MIN_COSINE,
-                        name: str = "", offset: float | None = None, light_direction=None,
-                        envmap=None) -> ReflectanceSamples:
+def measurement_samples(camera, light, pixels, vertices, triangles, uv, raster, *, saturated=None,
+                        scale: float = np.pi, erosion: int = 1, min_cosine: float = MIN_COSINE, name: str = "",
+                        offset: float | None = None) -> ReflectanceSamples:
     """Reflectance samples of one photograph (paper sec. 4.3, 5.3).
 
     Parameters
     ----------
     camera : mifaces.capture.Camera
         Calibrated camera (world frame in mm, OpenCV pixel conventions).
-    light_position : (3,) world position of the point light, mm; None for a
-        directional light (``light_direction``).
-    intensity : (3,) its radiant intensity, in the units of ``pixels``·mm²;
-        a directional light's irradiance, in the units of ``pixels``.
+    light : mifaces.capture.Light
+        The photograph's light: a point light (``position``, world frame, mm; ``intensity``,
+        its radiant intensity in the units of ``pixels``·mm²), a directional one (``direction``,
+        the unit vector in the world frame towards the light; ``intensity``, its irradiance in the
+        units of ``pixels``) or an environment map (``envmap``, (H, 2H, 3): each texel is read as
+        lit by the directional light that stands for the map there,
+        :func:`mifaces.reflectance.environment.equivalent_lights`).
     pixels : (H, W, 3) linear radiance image.
     vertices : (V, 3) the face in world coordinates for this measurement.
     triangles, uv : the model's triangles and texture coordinates.
@@ -334,13 +336,6 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
         Scale of eq. 4 (π: a white Lambertian target has r = 1).
     erosion : int
         Texels eroded from the borders of the valid region.
-    light_direction : (3,) array, optional
-        A directional light instead of the point light: unit vector in the
-        world frame towards the light.
-    envmap : (H, 2H, 3) array, optional
-        An environment map instead (:attr:`mifaces.capture.Light.envmap`): each
-        texel is read as lit by the directional light that stands for the map
-        there (:func:`mifaces.reflectance.environment.equivalent_lights`).
 
     Returns
     -------
@@ -361,6 +356,7 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
     offset = 1e-4 * size if offset is None else offset
     scene = mi.load_dict({"type": "scene", "face": mitsuba_mesh(vertices, triangles, uv)})
     to_camera = camera.position[None, :] - p
+    envmap, light_direction, intensity = light.envmap, light.direction, light.intensity
     if envmap is not None:  # per texel the directional light that stands for the map
         l_world, e = equivalent_lights(scene, p, n, envmap, camera, offset, 10.0 * size)
         dist_light = np.full(len(p), np.inf)
@@ -371,10 +367,10 @@ def measurement_samples(camera, light_position, intensity, pixels, vertices, tri
         dist_light = np.full(len(p), np.inf)
         light_target = p + l_world * (10.0 * size)  # far beyond the face: shadow rays leave it
     else:
-        to_light = np.asarray(light_position, np.float64)[None, :] - p
+        to_light = np.asarray(light.position, np.float64)[None, :] - p
         dist_light = np.linalg.norm(to_light, axis=1)
         l_world = to_light / dist_light[:, None]
-        light_target = np.broadcast_to(np.asarray(light_position, np.float64), p.shape)
+        light_target = np.broadcast_to(np.asarray(light.position, np.float64), p.shape)
     v_world = to_camera / np.linalg.norm(to_camera, axis=1, keepdims=True)
     cos_l, cos_v = np.sum(l_world * n, 1), np.sum(v_world * n, 1)
     front = (cos_l > 0) & (cos_v > 0)
@@ -479,11 +475,9 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
         if light.position is None and not light.directional and light.envmap is None:
             raise ValueError(f"measurement {m.name!r}: light {light.name!r} has no position "
                              "(load the capture with calibrate=True)")
-        parts.append(measurement_samples(capture.camera, light.position, light.intensity, m.image.pixels,
-                                         geometry[m.name], face_model.triangles, face_model.uv, raster,
-                                         saturated=m.image.saturated, scale=scale, erosion=erosion,
-                                         min_cosine=min_cosine, name=m.name, light_direction=light.direction,
-                                         envmap=light.envmap))
+        parts.append(measurement_samples(capture.camera, light, m.image.pixels, geometry[m.name],
+                                         face_model.triangles, face_model.uv, raster, saturated=m.image.saturated,
+                                         scale=scale, erosion=erosion, min_cosine=min_cosine, name=m.name))
     samples = ReflectanceSamples.concatenate(parts)
     samples.label = samples.region(region_map).astype(np.uint8)
     samples.region_map = region_map
