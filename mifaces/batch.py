@@ -26,6 +26,7 @@ complete capture of the batch. See ``docs/scaling.md``.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import importlib.util
 import inspect
 import json
@@ -179,8 +180,8 @@ def measure_one(name: str, source, out, importer: str | None = None, options: di
         entry["capture"] = str(capture)
         shutil.rmtree(partial, ignore_errors=True)
         kwargs = dict(options or {})
-        if "resolution" in kwargs:  # the record's plain value, a FitOptions for measure
-            kwargs["options"] = FitOptions(resolution=kwargs.pop("resolution"))
+        fields = {f.name for f in dataclasses.fields(FitOptions)}  # the record's plain values, one FitOptions
+        kwargs["options"] = FitOptions(**{k: kwargs.pop(k) for k in list(kwargs) if k in fields})
         report = measure(partial, capture, progress=False, **kwargs)
         _replace_folder(partial, final)
         entry.update(status=DONE, measure_seconds=report["seconds"]["total"])
@@ -263,7 +264,7 @@ def dashboard(client: Client) -> str:
 def measure_batch(inputs, out, workers: int | None = None, scheduler: str | None = None, models=MODELS,
                   resume: bool = False, importer: str | None = None, variant: str | None = None,
                   geometry: str = _MEASURE["geometry"].default,
-                  resolution: int = inspect.signature(FitOptions).parameters["resolution"].default,
+                  resolution: int = FitOptions.resolution,
                   progress: bool = True, echo=None,
                   **options) -> dict:
     """Measure many captures on Dask, each as :func:`mifaces.pipeline.measure` would.

@@ -37,7 +37,8 @@ from mifaces.atomic import write_json
 from mifaces.image_files import read_exr, write_exr
 from mifaces.render import check_render_size
 from mifaces.result_set import SET_MANIFEST, TEST_PAUSE_ENV, ResultSetError, check_result_target, result_set, verify_set
-from mifaces.reflectance.io import FILES, KIND, load_estimate
+from mifaces.reflectance.io import KIND, load_estimate
+from mifaces.reflectance.result import FILES
 from mifaces.shape.io import write_fit
 from mifaces.studio.simulate import simulate
 from mifaces.studio.truth import default_brdf

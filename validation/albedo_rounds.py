@@ -1,4 +1,4 @@
-"""The region fit alternated with the per-texel albedo (``fit_brdf(..., albedo_rounds=k)``) against
+"""The region fit alternated with the per-texel albedo (``FitOptions(albedo_rounds=k)``) against
 the one region fit, on same-family truths (SIMULATED): skin's fitted parameters against the truth,
 and how often the 95 % intervals hold the true values, per estimate and per region class (skin,
 small regions, the others).

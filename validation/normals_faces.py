@@ -7,7 +7,7 @@ then fitted per region at a 256 x 256 texture (``fit_brdf``):
 
 * ``true_shapes``: the simulator's shapes, no normal refinement;
 * ``fitted``: the fitted shapes, no normal refinement (issue 13: 34 % / 8 %);
-* ``fitted_normals``: the fitted shapes, ``fit_brdf(..., normals=True)``;
+* ``fitted_normals``: the fitted shapes, ``fit_brdf(..., options=FitOptions(normals=True))``;
 * ``fitted_offsets_only``: the same alternation with the normals held at the
   model's (prior weight 1e6): what the albedo offsets and the choice of
   samples do without any normal moving (an ablation);

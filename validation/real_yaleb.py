@@ -15,7 +15,7 @@ photographs:
 
 With ``--refine``, each model is also fitted again on the same shapes and
 samples and refined by differentiable rendering against the same training
-photographs (``fit_brdf(..., refine=True)``, directional lights as the
+photographs (``mifaces.refine.refine_estimate`` after ``fit_brdf``, directional lights as the
 capture gives them; :mod:`mifaces.refine.reflectance`), and its held-out
 renders are scored beside the unrefined ones (``<model>_refined``): same
 split, same pixels. Results then go to ``real_yaleb[_trainN]_refine.json``
@@ -292,9 +292,10 @@ def figure(results: list[dict], out: Path, data_dir: Path, run_dir: Path, best: 
 
 
 def normals_comparison(args, subjects, models, argv) -> int:
-    """Each subject measured without and with per-texel normals (``measure(..., normals=True)``, into
-    ``DIR/<subject>`` and ``DIR/<subject>_normals``): held-out relative RMSE of both, pooled and per
-    subject, in ``real_yaleb_normals.{json,png}``."""
+    """Each subject measured without and with per-texel normals
+    (``measure(..., options=FitOptions(normals=True))``, into ``DIR/<subject>`` and
+    ``DIR/<subject>_normals``): held-out relative RMSE of both, pooled and per subject,
+    in ``real_yaleb_normals.{json,png}``."""
     import matplotlib
 
     matplotlib.use("Agg")

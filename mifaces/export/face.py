@@ -32,7 +32,8 @@ from ..brdf.materials import SKIN_REFRACTIVE_INDEX
 from ..result_set import ResultSetError, verify_set
 from ..model import MorphableModel, load_model
 from ..model.regions import REGION_NAMES, REGIONS, texel_regions_of_mesh
-from ..reflectance.io import FILES, KIND, load_estimate
+from ..reflectance.io import KIND, load_estimate
+from ..reflectance.result import FILES
 from ..reflectance.maps.normals import decode, encode, mitsuba_frames
 from ..shape.io import INDEX as SHAPES_INDEX, file_stem
 from ..status import CONVERGED

@@ -80,7 +80,7 @@ def observation_weights(values, saturated=None, shadow: float = lambertian.SHADO
 
     ``values`` (K, P, 3) or (K, P); ``saturated`` (K, P) bool. An observation
     below ``shadow`` times its pixel's brightest is shadowed, as in
-    :func:`mifaces.lambertian.observation_weights`.
+    :func:`mifaces.photometric_stereo.lambertian.observation_weights`.
     """
     values = np.asarray(values, np.float64)
     grey = values.mean(axis=2) if values.ndim == 3 else values

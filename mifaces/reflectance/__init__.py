@@ -4,7 +4,8 @@ diffuse refinement, the estimate they make together, its files, and renders
 of it in novel poses and lights or on another face."""
 
 from .maps.diffuse import DiffuseMap, refine_diffuse
-from .estimate import BRDFEstimate, fit_brdf
+from .estimate import fit_brdf
+from .result import BRDFEstimate
 from .options import FitOptions
 from .fit.region_fit import RegionFit, fit_region
 from .fit.regions import fit_regions

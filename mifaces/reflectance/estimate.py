@@ -173,14 +173,14 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     return estimate
 
 
-def _refine_normals(brdf, fits, samples, names, options, progress, fit_options):
+def _refine_normals(brdf, fits, samples, names, options, progress, region_fit):
     """:func:`refine_texel_normals` on the face's ``samples``, the region fit as :func:`fit_brdf`'s
-    (``fit_options`` of :func:`fit_regions`), or None (with a warning) where no texel has
+    (``region_fit``: keyword arguments of :func:`fit_regions`), or None (with a warning) where no texel has
     :data:`MIN_OBSERVATIONS` samples (one light per texel: nothing to tell a normal from)."""
     def fit(rotated):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the fit at the model's normals has warned already
-            return fit_regions(brdf, rotated, names, **fit_options)
+            return fit_regions(brdf, rotated, names, **region_fit)
 
     if not np.any(np.bincount(samples.texel) >= MIN_OBSERVATIONS):
         warnings.warn(f"per-texel normals left out: no texel has the {MIN_OBSERVATIONS} samples (lights and "
@@ -191,4 +191,4 @@ def _refine_normals(brdf, fits, samples, names, options, progress, fit_options):
     return refine_texel_normals(brdf, fit, fits, samples, names, progress=report, **(options or {}))
 
 
-__all__ = ["BRDFEstimate", "FitOptions", "fit_brdf"]
+__all__ = ["fit_brdf"]

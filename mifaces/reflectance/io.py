@@ -159,4 +159,4 @@ def load_estimate(path) -> dict:
     return data
 
 
-__all__ = ["FILES", "KIND", "write_estimate", "load_estimate"]
+__all__ = ["KIND", "write_estimate", "write_fitted", "load_estimate"]

@@ -20,8 +20,8 @@ from ..model import MorphableModel
 from ..model.geometry import rotation_about, turned
 from ..paths import check_writable
 from ..render import FaceScene
-from .estimate import BRDFEstimate
 from .io import load_estimate
+from .result import BRDFEstimate, fitted_light
 
 
 def render_estimate(estimate: BRDFEstimate, face_model: MorphableModel, vertices: np.ndarray, camera,
@@ -76,7 +76,8 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     vertices = np.asarray(shapes[name], np.float64)
     if yaw:
         vertices = turned(vertices, rotation_about(capture.camera.up, yaw), vertices.mean(axis=0))
-    lamp = capture.light(next(m.light for m in capture.measurements if m.name == name))
+    lamp = fitted_light(capture.light(next(m.light for m in capture.measurements if m.name == name)),
+                        data.get("refinement"))  # a map the refinement refined, as scene.xml has it
     intensity = lamp.intensity if intensity is None else intensity
     if light_position is None and light_direction is None and envmap is None:  # the measurement's light
         light = lamp if lamp.environment else replace(lamp, intensity=intensity)

@@ -14,6 +14,17 @@ from .maps.diffuse import DiffuseMap
 from .maps.normals import encode
 from .maps.specular import SpecularMap
 
+def fitted_light(light, refinement: dict | None):
+    """``light`` (:class:`~mifaces.capture.Light`) as a fit was fitted under it: an estimated
+    environment map that the fit's refinement refined (``refinement['environment_maps']``, a
+    ``brdf.json`` record, kept only where the refinement was) is that refined map; any other light
+    is itself."""
+    maps = (refinement or {}).get("environment_maps") or {}
+    if light.environment and light.estimated and light.name in maps:
+        return dataclasses.replace(light, envmap=np.asarray(maps[light.name], np.float32))
+    return light
+
+
 #: The fitted BRDF's files in an output folder.
 FILES = {"brdf": "brdf.json", "albedo": "albedo.exr", "preview": "albedo.png", "scene": "scene.xml",
          "normals": "normals.exr", "specular": "specular.exr", "albedo_std": "albedo_std.exr",
@@ -42,7 +53,8 @@ class BRDFEstimate:
         Reflectance samples used.
     measurements : tuple of str
     seconds : dict
-        Wall time of each step: ``samples``, ``fit``, ``refine``, ``total``.
+        Wall time of each step: ``samples``, ``fit`` (the region fits), ``refine`` (the per-texel
+        maps), ``total`` (with a refinement by differentiable rendering, when there was one).
     refinement : dict or None
         How the fit was refined by differentiable rendering
         (:func:`mifaces.refine.reflectance.refine_estimate`), with its image
@@ -50,7 +62,7 @@ class BRDFEstimate:
     normals : ndarray (R, R, 3) or None
         Per-texel unit normals relative to Mitsuba's shading frame of the
         face mesh (:func:`mifaces.reflectance.maps.normals.mitsuba_tangent_normals`),
-        if they were estimated (``fit_brdf(..., normals=True)``).
+        if they were estimated (``fit_brdf(..., options=FitOptions(normals=True))``).
     normal_refinement : dict or None
         How they were (:meth:`~mifaces.reflectance.maps.normals.TexelNormals.summary`).
     specular : SpecularMap or None
@@ -62,7 +74,7 @@ class BRDFEstimate:
         written to ``brdf.json``; None for a capture whose lights are given.
     light_balance : dict or None
         Light name -> the factor its given intensity was off by, as the face's one albedo
-        says (``fit_brdf(..., balance_lights=True)``,
+        says (``fit_brdf(..., options=FitOptions(balance_lights=True))``,
         :func:`mifaces.reflectance.light_balance.balance_given_lights`); None where not balanced.
     """
 
@@ -82,13 +94,8 @@ class BRDFEstimate:
     light_balance: dict | None = None
 
     def fitted_light(self, light):
-        """``light`` (:class:`~mifaces.capture.Light`) as this estimate was fitted under it: an
-        estimated environment map that the refinement refined (``refinement['environment_maps']``,
-        kept only where the refinement was) is that refined map; any other light is itself."""
-        maps = (self.refinement or {}).get("environment_maps") or {}
-        if light.environment and light.estimated and light.name in maps:
-            return dataclasses.replace(light, envmap=np.asarray(maps[light.name], np.float32))
-        return light
+        """``light`` as this estimate was fitted under it (:func:`fitted_light`)."""
+        return fitted_light(light, self.refinement)
 
     def normal_texture(self) -> np.ndarray | None:
         """The normals as a ``normalmap`` texture ((n + 1) / 2), or None."""
@@ -126,4 +133,4 @@ class BRDFEstimate:
                     name: self.specular.shrinkage.get(REGIONS[name]) for name in self.fits}})}
 
 
-__all__ = ["FILES", "FIT_KEYS", "BRDFEstimate"]
+__all__ = ["FILES", "FIT_KEYS", "BRDFEstimate", "fitted_light"]

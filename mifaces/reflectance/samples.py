@@ -178,6 +178,12 @@ class ReflectanceSamples:
     def __len__(self) -> int:
         return len(self.sigma)
 
+    def labels(self) -> np.ndarray:
+        """Each sample's region label (:attr:`label`); a ``ValueError`` for samples that have none."""
+        if self.label is None:
+            raise ValueError("the samples have no region labels (samples.label; ReflectanceSamples.region)")
+        return np.asarray(self.label)
+
     def select(self, mask) -> ReflectanceSamples:
         """The samples ``mask`` selects, as a new set.
 

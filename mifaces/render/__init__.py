@@ -12,11 +12,11 @@ capture's world frame.
 """
 
 from .sensor import MAX_RENDER_SAMPLES, check_render_size, mitsuba_sensor, render_passes
-from .materials import ALBEDO, ALBEDO_REF, NORMALS, SPECULAR, region_bsdf, with_textures
+from .materials import ALBEDO, ALBEDO_REF, NORMALS, SPECULAR, region_bsdf
 from .meshes import MESH_FOLDER, RegionMesh, face_meshes, region_meshes
 from .scene import FaceScene, face_scene, render_face
 from .scene_xml import scene_xml
 
 __all__ = ["MAX_RENDER_SAMPLES", "check_render_size", "render_passes", "mitsuba_sensor", "ALBEDO", "ALBEDO_REF",
-           "NORMALS", "SPECULAR", "region_bsdf", "with_textures", "MESH_FOLDER", "RegionMesh", "region_meshes",
+           "NORMALS", "SPECULAR", "region_bsdf", "MESH_FOLDER", "RegionMesh", "region_meshes",
            "face_meshes", "FaceScene", "face_scene", "render_face", "scene_xml"]

@@ -2,8 +2,9 @@
 true and the fitted faces: a novel pose (:func:`novel_rotation`) and
 held-out lights (:func:`held_out_lights`) chosen away from the lights the
 simulator placed (:func:`true_lights`). :func:`held_out_lights` is the one
-choice of a light the capture did not use: the report's novel light
-(:func:`novel_light`) is its first."""
+rule for a light the capture did not use: the report's novel light
+(:func:`novel_light`) is the first it chooses from the capture's own lights (the validation
+chooses from the lights the simulator placed, so the two differ where lights were estimated)."""
 
 from __future__ import annotations
 

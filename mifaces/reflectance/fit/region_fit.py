@@ -141,8 +141,8 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         How :attr:`RegionFit.uncertainty` is estimated at the optimum, one of
         :data:`~mifaces.reflectance.fit.uncertainty.METHODS`; None leaves it out.
     offsets : AlbedoOffsets, optional
-        The per-texel albedo offsets ``reflectance`` was corrected by (``fit_brdf(...,
-        albedo_rounds=k)``): the jackknife and the sandwich then re-estimate them with
+        The per-texel albedo offsets ``reflectance`` was corrected by (``FitOptions(albedo_rounds=k)``):
+        the jackknife and the sandwich then re-estimate them with
         each cluster left out (:func:`~mifaces.reflectance.fit.offset_uncertainty.offset_sums`;
         every texel's samples must lie in one cluster); Laplace and the bootstrap
         take them as known.

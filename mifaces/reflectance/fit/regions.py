@@ -59,11 +59,9 @@ def fit_regions(model: BRDFModel | str, samples: ReflectanceSamples, region_name
     uncertainty, ``offsets`` the albedo offsets the reflectance was corrected by
     (:func:`~mifaces.reflectance.fit.region_fit.fit_region`).
     """
-    if samples.label is None:
-        raise ValueError("the samples have no region labels (samples.label; ReflectanceSamples.region)")
     model = brdf_models.model(model) if isinstance(model, str) else model
     neighbours = NEIGHBOURS if neighbours is None else neighbours
-    region = np.asarray(samples.label)
+    region = samples.labels()
     fixed = options.get("fixed")
     needed = min_samples(model, model.fixed_defaults() if fixed is None else fixed)
     counts = {name: int(np.count_nonzero(region == label)) for label, name in region_names.items()}

@@ -36,7 +36,7 @@ The sums u_g and H_g come from one Dr.Jit kernel at the optimum
 fit's own; all are model-agnostic: they also hold when the model is not the
 truth's family (they estimate the spread around the model's best fit).
 
-**Albedo offsets** (``fit_brdf(..., albedo_rounds=k)``). The alternated fit
+**Albedo offsets** (``fit_brdf(..., options=FitOptions(albedo_rounds=k))``). The alternated fit
 subtracts from each sample its texel's albedo offset o_i = a_t - ā
 (:class:`~mifaces.reflectance.maps.diffuse.AlbedoOffsets`), estimated from the same
 samples given the glossy fit: a_t = (Σ_{s ∈ t} ω_s (r_s - π f_s) + λ ρ̄)/(W_t + λ),
@@ -44,7 +44,8 @@ samples given the glossy fit: a_t = (Σ_{s ∈ t} ω_s (r_s - π f_s) + λ ρ̄)
 the offsets as known gives intervals far too narrow (the fit no longer sees the
 albedo texture the offsets absorbed; tuning seeds: 34-55 % coverage,
 validation/results/albedo_rounds.json). The jackknife and the sandwich instead
-re-estimate them in every replicate, at the fixed point of the alternation. A texel's offset comes only from its own samples
+re-estimate them in every replicate, at the fixed point of the alternation. A texel's offset comes only
+from its own samples
 (texels nest in tiles), so leaving tile g out removes its texels' offsets with
 its scores, shifts ā of the others by δ_g = -Σ_{i ∈ g} o_i / (N - N_g), and
 makes every offset follow the fit: ∂o_i/∂x = B_t - B̄, B_t = S_t/(W_t + λ) per

@@ -80,7 +80,7 @@ class DiffuseMap:
 @dataclass
 class AlbedoOffsets:
     """Per-texel albedo offsets a region fit's reflectance was corrected by
-    (``fit_brdf(..., albedo_rounds=k)``), with what their uncertainty needs.
+    (``fit_brdf(..., options=FitOptions(albedo_rounds=k))``), with what their uncertainty needs.
 
     Each offset o_i = a_t - ā is its texel t's refined albedo (the posterior mean
     of the module docstring, shrunk with λ) less its region's mean over the
@@ -209,10 +209,8 @@ def refine_diffuse(model, params_by_region: dict[int, dict], samples: Reflectanc
     region_map = np.asarray(region_map)
     if region_map.ndim != 2 or region_map.shape[0] != region_map.shape[1]:
         raise ValueError(f"region_map must be a square (R, R) label image, got shape {region_map.shape}")
-    if samples.label is None:
-        raise ValueError("the samples have no region labels (samples.label; ReflectanceSamples.region)")
     size = region_map.size
-    texel, region = np.asarray(samples.texel), np.asarray(samples.label)
+    texel, region = np.asarray(samples.texel), samples.labels()
     if texel.size and (texel.min() < 0 or texel.max() >= size):
         raise ValueError(f"texel indices must lie in [0, {size}) for a {region_map.shape} region map")
     specular = (specular_reflectance_factor(model, params_by_region, samples.light, samples.view, region)

@@ -18,7 +18,7 @@ map.
 **Normal step.** Per region, with the region's glossy parameters θ fixed, the
 texel's normal n_p and albedo ρ_p minimise
 E = Σ_k w_kp |I_kp - (ρ_p + π f_s(l̂', v̂'; θ)) max(0, n_p·l_kp)|² + λ |n_p - ẑ|²
-(:func:`mifaces.photometric_stereo.nonlambertian.refine_normals`), with I = r cos θ_l the
+(:func:`mifaces.reflectance.maps.normal_fit.refine_normals`), with I = r cos θ_l the
 sample's reflectance times its cosine at the model's normal (radiance per unit
 irradiance, up to π), l̂', v̂' the directions in the frame of n_p, and w the
 image-space weight of eq. 10's σ, w = 1 / (σ cos θ_l)² (the BRDF fit's residual
@@ -68,7 +68,7 @@ PRIOR_WEIGHT = 0.5
 #: Texels with fewer samples keep the model's normal.
 MIN_OBSERVATIONS = 3
 #: The start search of the normal step (radius, step, levels in degrees; see
-#: :func:`mifaces.photometric_stereo.nonlambertian.search_start`): fitted shapes are off by a few degrees.
+#: :func:`mifaces.reflectance.maps.normal_fit.search_start`): fitted shapes are off by a few degrees.
 SEARCH = (9.0, 3.0, 3)
 
 
@@ -226,9 +226,7 @@ def refine_texel_normals(model, fit, fits: dict, samples: ReflectanceSamples, na
         The best round's state (lowest E).
     """
     t0 = time.perf_counter()
-    if samples.label is None:
-        raise ValueError("the samples have no region labels (samples.label; ReflectanceSamples.region)")
-    texel, label, resolution = np.asarray(samples.texel), np.asarray(samples.label), samples.resolution
+    texel, label, resolution = np.asarray(samples.texel), samples.labels(), samples.resolution
     regions = {lab: _Region(samples, label == lab) for lab in names}
     size = resolution * resolution
     normals = np.zeros((size, 3))

@@ -1,5 +1,5 @@
 """Pixels under many lights on the Dr.Jit side, for the per-pixel normal step
-of :mod:`mifaces.photometric_stereo.nonlambertian`: the shading of each observation by
+of :mod:`mifaces.reflectance.maps.normal_fit`: the shading of each observation by
 an analytic BRDF and its derivatives with respect to the normal."""
 
 from __future__ import annotations

@@ -83,9 +83,7 @@ def refine_specular(model, params_by_region: dict[int, dict], samples: Reflectan
     SpecularMap
     """
     size = np.asarray(region_map).size
-    if samples.label is None:
-        raise ValueError("the samples have no region labels (samples.label; ReflectanceSamples.region)")
-    texel, region = np.asarray(samples.texel), np.asarray(samples.label)
+    texel, region = np.asarray(samples.texel), samples.labels()
     g = specular_reflectance_factor(model, params_by_region, samples.light, samples.view, region)
     r = np.asarray(samples.reflectance, np.float64)
     w = 1.0 / np.square(np.asarray(samples.sigma, np.float64))
