@@ -41,3 +41,20 @@ def test_bad_options_are_named():
         FitOptions(uncertainty="guess")
     with pytest.raises(ValueError, match="resolution must be a positive"):
         FitOptions(resolution=0)
+
+
+def test_the_light_a_fit_was_fitted_under_is_the_refined_map():
+    """An estimated map that the refinement refined is the light its scene.xml and render_fitted show
+    (the brdf.json record as load_estimate returns it); a given light is itself."""
+    import numpy as np
+
+    from mifaces.capture import Light
+    from mifaces.reflectance.result import fitted_light
+
+    start, refined = np.ones((4, 8, 3), np.float32), np.full((4, 8, 3), 2.0, np.float32)
+    estimated = Light("room", None, np.ones(3), kind="environment", estimated=True, envmap=start)
+    record = {"environment_maps": {"room": refined.tolist()}}
+    np.testing.assert_array_equal(fitted_light(estimated, record).envmap, refined)
+    assert fitted_light(estimated, None) is estimated and fitted_light(estimated, {"environment_maps": {}}) is estimated
+    given = Light("lamp", np.zeros(3), np.ones(3))
+    assert fitted_light(given, record) is given
