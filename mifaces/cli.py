@@ -270,14 +270,18 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolut
 @click.option("--balance-lights/--no-balance-lights", default=default(FitOptions, "balance_lights"),
               show_default=True, help="Correct the given lights' relative intensities by the face's one albedo before "
                                       "the BRDF fits (a lamp a percent off biases the glossy fit).")
+@click.option("--interreflection/--no-interreflection", default=default(FitOptions, "interreflection"),
+              show_default=True, help="Take the light bounced between parts of the face out of the samples "
+                                      "(a second fit; bounced light biases skin's lobe low).")
 def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int,
-            refine: bool, normals: bool, specular_maps: bool, refine_shape: bool, balance_lights: bool) -> None:
+            refine: bool, normals: bool, specular_maps: bool, refine_shape: bool, balance_lights: bool,
+            interreflection: bool) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
     check_writable(out_dir)
     report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, refine=refine,
                              refine_shape=refine_shape,
                              options=FitOptions(resolution=resolution, normals=normals, specular_maps=specular_maps,
-                                                balance_lights=balance_lights))
+                                                balance_lights=balance_lights, interreflection=interreflection))
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")

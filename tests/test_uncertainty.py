@@ -212,6 +212,30 @@ def test_tile_clusters():
         tile_clusters(texel, r, 0)
 
 
+def test_tile_clusters_give_small_regions_smaller_tiles():
+    """A region in fewer than ``min_tiles`` tiles gets tiles half as wide until it has that many (or they
+    are single texels); a large region keeps the full tile, and no cluster spans two regions."""
+    r = 64
+    rows, cols = np.meshgrid(np.arange(r), np.arange(r), indexing="ij")
+    texel = (rows * r + cols).ravel()
+    small = (rows < 8) & (cols < 8)  # one 8-texel tile of 64 texels
+    label = np.where(small, 2, 1).ravel()
+    cluster = tile_clusters(texel, r, 8, label=label, min_tiles=4)
+    assert len(np.unique(cluster[label == 2])) == 4  # halved once: 4 tiles of 4 texels a side
+    assert len(np.unique(cluster[label == 1])) == 63  # the rest keeps its 8-texel tiles
+    assert not set(cluster[label == 1]) & set(cluster[label == 2])
+    # without a floor the small region is one tile, and so is the partition within each region
+    plain = tile_clusters(texel, r, 8, label=label, min_tiles=1)
+    assert len(np.unique(plain[label == 2])) == 1
+    assert np.array_equal(np.unique(plain[label == 1], return_inverse=True)[1],
+                          np.unique(tile_clusters(texel[label == 1], r, 8), return_inverse=True)[1])
+    # a floor no tiling reaches ends at single texels
+    tiny = tile_clusters(texel[:3], r, 8, label=np.zeros(3, int), min_tiles=10)
+    assert len(np.unique(tiny)) == 3
+    with pytest.raises(ValueError, match="label"):
+        tile_clusters(texel, r, 8, label=label[:5])
+
+
 def test_albedo_posterior_std_matches_its_error():
     """Texel albedos drawn around the region's with spread τ, samples with noise s₀: the shrunk
     albedo's error over the texels has the RMS the posterior std predicts (within 10 %), and a texel

@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
+import sys
 import tempfile
 import time
 import warnings
@@ -55,11 +57,39 @@ IMAGE, MEASUREMENTS, SPP, TEXTURE = (256, 256), 6, 16, 128
 REFERENCE_SPP = 128
 #: Plausible skin ranges the Cook-Torrance truth's skin is drawn from (uniform; grey lobe).
 SKIN_RANGES = {"specular_reflectance": (0.5, 1.5), "roughness": (0.2, 0.5)}
-#: Seeds the tile size was chosen on (not in the tables).
+#: :func:`measure_check` draws seed S's skin as :func:`skin_truth` (S + this offset): draws the coverage
+#: tables do not use.
+MEASURE_SEED_OFFSET = 1000
+#: Seeds the first tile size was chosen on (not in the tables; validation/results/uncertainty_tuning.json).
 TUNING_SEEDS = range(100, 105)
-#: Estimates compared: name -> (method, tile at resolution 128 or None).
-VARIANTS = {"jackknife": ("jackknife", None), "sandwich": ("sandwich", None), "sandwich_texel": ("sandwich", 1),
-            "laplace": ("laplace", None), "bootstrap": ("bootstrap", None)}
+#: Seeds the tiles are chosen on with ``--tune-tiles`` (not in the tables): every model, 20 captures each.
+TILE_TUNING_SEEDS = range(100, 120)
+#: Tilings compared: (tile side at resolution 128, fewest tiles per region; see
+#: :func:`mifaces.reflectance.fit.uncertainty.tile_clusters`).
+TILE_CANDIDATES = ((8, 1), (8, 8), (16, 1), (16, 8), (32, 1), (32, 8))
+#: The estimates shown in the tables, at the default tiling (laplace has no clusters; sandwich_texel
+#: clusters single texels).
+SHOWN = ("jackknife", "sandwich", "sandwich_texel", "laplace", "bootstrap")
+
+
+def tiled(method: str, tile: int, floor: int) -> str:
+    """The name of ``method`` over tiles of ``tile`` texels at 128² with at least ``floor`` per region."""
+    return f"{method}_t{tile}_m{floor}"
+
+
+def default_variant(method: str = "jackknife") -> str:
+    """The name of ``method`` at the library's tiling (:data:`unc.TILE_AT_128`, :data:`unc.MIN_TILES`)."""
+    return tiled(method, unc.TILE_AT_128, unc.MIN_TILES)
+
+
+def shown_variants() -> dict:
+    """The tables' estimates: their names in the tables -> the records' variant names."""
+    return {name: name if name in ("laplace", "sandwich_texel") else default_variant(name) for name in SHOWN}
+
+
+#: Estimates compared: name -> (method, tile at resolution 128 or None, fewest tiles per region or None).
+VARIANTS = ({tiled(m, t, f): (m, t, f) for t, f in TILE_CANDIDATES for m in ("jackknife", "sandwich", "bootstrap")}
+            | {"sandwich_texel": ("sandwich", 1, 1), "laplace": ("laplace", None, None)})
 MODELS = ("cooktorrance", "phong", "ward", "lafortune")
 OUT_OF_FAMILY = {"roughplastic": dict(brdf="roughplastic"), "principled": dict(brdf="principled"),
                  "varying": dict(brdf="cooktorrance", varying=True)}
@@ -99,16 +129,17 @@ def _simulate(folder: Path, seed: int, spp: int = SPP, clean: bool = False, **op
     return capture, face, shapes, capture_samples(capture, shapes, face, TEXTURE, progress=False)
 
 
-def _fit(capture, face, shapes, samples, model, method, tile=None, texture=TEXTURE):
-    default = unc.TILE_AT_128
-    unc.TILE_AT_128 = default if tile is None else tile
+def _fit(capture, face, shapes, samples, model, method, tile=None, floor=None, texture=TEXTURE):
+    default = unc.TILE_AT_128, unc.MIN_TILES
+    unc.TILE_AT_128 = default[0] if tile is None else tile
+    unc.MIN_TILES = default[1] if floor is None else floor
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return fit_brdf(capture, model, shapes, face_model=face, samples=samples, progress=False,
                             options=FitOptions(resolution=texture, uncertainty=method))
     finally:
-        unc.TILE_AT_128 = default
+        unc.TILE_AT_128, unc.MIN_TILES = default
 
 
 def _checks(estimate, truth: dict, variant: str, meta: dict) -> list[dict]:
@@ -153,8 +184,8 @@ def same_family(model: str, seeds, tmp: Path, variants=VARIANTS) -> list:
         params = skin_truth(seed) if model == "cooktorrance" else None
         capture, face, shapes, samples = _simulate(tmp / f"{model}_{seed}", seed, brdf=model, brdf_params=params)
         truth = _truth_of(capture, model)
-        for variant, (method, tile) in variants.items():
-            estimate = _fit(capture, face, shapes, samples, model, method, tile)
+        for variant, (method, tile, floor) in variants.items():
+            estimate = _fit(capture, face, shapes, samples, model, method, tile, floor)
             records += _checks(estimate, truth, variant, {"truth_model": model, "model": model, "seed": seed})
         print(f"{model} seed {seed}: {time.perf_counter() - t:.1f} s", flush=True)
     return records
@@ -197,11 +228,49 @@ def out_of_family(name: str, seeds, tmp: Path, variants=VARIANTS) -> list:
             reference = _fit(*ref, model, None)
             truth = {r: {k: v for k, v in f.params.items() if k != "eta"} for r, f in reference.fits.items()
                      if f.status != PRIOR}
-            for variant, (method, tile) in variants.items():
-                estimate = _fit(*noisy, model, method, tile)
+            for variant, (method, tile, floor) in variants.items():
+                estimate = _fit(*noisy, model, method, tile, floor)
                 records += _checks(estimate, truth, variant, {"truth_model": name, "model": model, "seed": seed})
         print(f"{name} seed {seed}: {time.perf_counter() - t:.1f} s", flush=True)
     return records
+
+
+def measure_check(seeds, tmp: Path, extra: tuple = ()) -> dict:
+    """The issue's literal check: per seed, the default simulated capture (``mifaces simulate``: 512²,
+    6 photographs, 64 spp) with a Cook-Torrance truth whose skin :func:`skin_truth` draws, measured by
+    ``mifaces measure --geometry ground-truth --brdf cooktorrance``; whether every fitted skin
+    parameter's 95 % interval in ``brdf.json`` holds the truth (``extra``: more options of measure)."""
+    command = Path(sys.executable).with_name("mifaces")
+    rows = []
+    for seed in seeds:
+        t = time.perf_counter()
+        truth = skin_truth(MEASURE_SEED_OFFSET + seed)
+        folder, out = tmp / f"measure_{seed}", tmp / f"measure_{seed}_out"
+        (tmp / f"skin_{seed}.json").write_text(json.dumps(truth))
+        subprocess.run([str(command), "simulate", str(folder), "--seed", str(seed), "--brdf", "cooktorrance",
+                        "--brdf-params", str(tmp / f"skin_{seed}.json"), "--force"], check=True,
+                       stdout=subprocess.DEVNULL)
+        subprocess.run([str(command), "measure", str(folder), "--out", str(out), "--geometry", "ground-truth",
+                        "--brdf", "cooktorrance", *extra], check=True, stdout=subprocess.DEVNULL)
+        fitted = json.loads((out / "brdf" / "cooktorrance" / "brdf.json").read_text())
+        params, entries = fitted["regions"]["skin"], fitted["uncertainty"]["skin"]
+        checks = []
+        for name, value in truth["regions"]["skin"].items():
+            entry = entries[name]
+            for c in (range(3) if np.ndim(value) else [None]):
+                pick = (lambda v: v[c]) if c is not None else (lambda v: v)
+                lo, hi = (pick(b) for b in entry["interval95"]) if "interval95" in entry else (None, None)
+                true = float(pick(value))
+                checks.append({"parameter": name, "channel": c, "truth": true, "fitted": float(pick(params[name])),
+                               "lo": lo, "hi": hi, "status": entry.get("status", intervals.ESTIMATED),
+                               "covered": None if lo is None else bool(lo <= true <= hi)})
+        rows.append({"seed": seed, "truth": truth["regions"]["skin"], "parameters": checks,
+                     "all_covered": all(c["covered"] for c in checks), "seconds": time.perf_counter() - t})
+        print(rows[-1], flush=True)
+    return {"command": "mifaces simulate OUT --seed S --brdf cooktorrance --brdf-params SKIN.json; "
+                       "mifaces measure OUT --geometry ground-truth --brdf cooktorrance " + " ".join(extra),
+            "skin_seed_offset": MEASURE_SEED_OFFSET, "tile_at_128": unc.TILE_AT_128, "min_tiles": unc.MIN_TILES,
+            "captures": len(rows), "all_covered": sum(r["all_covered"] for r in rows), "runs": rows}
 
 
 def coverage(records: list, **where) -> dict:
@@ -243,7 +312,7 @@ def skin_check(records: list) -> list:
     out = []
     for seed in sorted({r["seed"] for r in records if r["truth_model"] == "cooktorrance"}):
         rows = [r for r in records if r["truth_model"] == "cooktorrance" and r["seed"] == seed
-                and r["region"] == "skin" and r["variant"] == unc.METHODS[0]]
+                and r["region"] == "skin" and r["variant"] == default_variant()]
         out.append({"seed": seed, "truth": skin_truth(seed)["regions"]["skin"],
                     "all_covered": all(r["covered"] for r in rows),
                     "parameters": [{k: r[k] for k in ("parameter", "channel", "truth", "fitted", "lo", "hi",
@@ -252,14 +321,16 @@ def skin_check(records: list) -> list:
 
 
 def markdown(result: dict, records: list) -> str:
-    """The coverage tables of docs/uncertainty.md: per truth and model, every estimate's pooled coverage,
-    and the default's on small regions, the others, skin, the glossy parameters and the diffuse albedo."""
+    """The coverage tables of docs/uncertainty.md: per truth and model, the shown estimates' pooled
+    coverage at the default tiling, and the default's on small regions, the others, skin, the glossy
+    parameters and the diffuse albedo; then the jackknife's pooled coverage per tiling."""
     def pct(entry):
         return "n/a" if entry["coverage"] is None else f"{100 * entry['coverage']:.0f} % ({entry['intervals']})"
 
-    default = result["default"]
-    lines = ["| truth | model | seeds | " + " | ".join(VARIANTS) + f" | {default}: small regions | others | skin | "
-             "glossy | diffuse |", "|---" * (len(VARIANTS) + 8) + "|"]
+    shown = shown_variants()
+    default = shown["jackknife"]
+    lines = ["| truth | model | seeds | " + " | ".join(shown) + " | jackknife: small regions | others | skin | "
+             "glossy | diffuse |", "|---" * (len(shown) + 8) + "|"]
     for truth, models in result["coverage"].items():
         for model, entry in models.items():
             d = entry[default]
@@ -267,10 +338,60 @@ def markdown(result: dict, records: list) -> str:
                               truth_model=truth, model=model, variant=default)
             diffuse = d["parameters"].get("diffuse_reflectance", {"coverage": None, "intervals": 0})
             lines.append(f"| {truth} | {model} | {result['seeds'][truth]} | "
-                         + " | ".join(pct(entry[v]["pooled"]) for v in VARIANTS)
+                         + " | ".join(pct(entry[v]["pooled"]) for v in shown.values())
                          + f" | {pct(d['small'])} | {pct(d['large'])} | {pct(d['regions']['skin'])} | {pct(glossy)} | "
                          + f"{pct(diffuse)} |")
+    lines += ["", tile_markdown(result["coverage"]), "", skin_markdown(result)]
     return "\n".join(lines)
+
+
+def skin_markdown(result: dict) -> str:
+    """The skin check's table: per Cook-Torrance seed, the drawn skin, the fitted green ρ_s and m with
+    their 95 % intervals, and whether every skin interval holds the truth."""
+    lines = ["| seed | true ρs | true m | fitted ρs (green) [95 %] | fitted m [95 %] | all covered |",
+             "|---|---|---|---|---|---|"]
+    for row in result["skin_check"]:
+        cells = {(p["parameter"], p["channel"]): p for p in row["parameters"]}
+        rho, m = cells[("specular_reflectance", 1)], cells[("roughness", None)]
+        lines.append(f"| {row['seed']} | {rho['truth']:.3f} | {m['truth']:.3f} | {rho['fitted']:.3f} "
+                     f"[{rho['lo']:.3f}, {rho['hi']:.3f}] | {m['fitted']:.3f} [{m['lo']:.3f}, {m['hi']:.3f}] | "
+                     f"{'yes' if row['all_covered'] else 'no'} |")
+    return "\n".join(lines)
+
+
+def tile_markdown(table: dict) -> str:
+    """The jackknife's pooled coverage (and on small regions) per tiling and same-family model."""
+    models = [m for m in MODELS if m in table and m in table[m]]
+    lines = ["| tile at 128² | fewest tiles per region | " + " | ".join(models) + " |",
+             "|---" * (len(models) + 2) + "|"]
+    for tile, floor in TILE_CANDIDATES:
+        cells = []
+        for m in models:
+            e = table[m][m].get(tiled("jackknife", tile, floor))
+            cells.append("n/a" if e is None or e["pooled"]["coverage"] is None else
+                         f"{100 * e['pooled']['coverage']:.0f} % (small {100 * e['small']['coverage']:.0f} %)")
+        mark = " (default)" if (tile, floor) == (unc.TILE_AT_128, unc.MIN_TILES) else ""
+        lines.append(f"| {tile}{mark} | {floor} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def choose_tiling(records: list) -> dict:
+    """The rule the tiling is chosen by, on the tuning seeds' records: the candidate whose worst
+    same-family model is nearest the nominal 95 % (the smallest max_m |coverage_m - 0.95|; ties: the
+    smaller tile, then the smaller floor)."""
+    table = {}
+    for tile, floor in TILE_CANDIDATES:
+        v = tiled("jackknife", tile, floor)
+        table[v] = {m: coverage(records, variant=v, model=m, truth_model=m) for m in MODELS}
+
+    def distance(candidate):
+        cells = table[tiled("jackknife", *candidate)].values()
+        return max(abs(c["coverage"] - 0.95) for c in cells if c["coverage"] is not None)
+
+    best = min(TILE_CANDIDATES, key=lambda c: (distance(c), c))
+    return {"rule": choose_tiling.__doc__.split(":", 1)[1].strip().replace("\n   ", ""),
+            "chosen": {"tile_at_128": best[0], "min_tiles": best[1]},
+            "distance": {tiled("jackknife", *c): distance(c) for c in TILE_CANDIDATES}, "coverage": table}
 
 
 def figure(result: dict, path: Path) -> None:
@@ -282,15 +403,16 @@ def figure(result: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     table = result["coverage"]
+    shown = shown_variants()
     panels = [("same family (truth = fitted model)", {m: table[m][m] for m in MODELS if m in table})]
     panels += [(f"truth {t} (out of family)", table[t]) for t in OUT_OF_FAMILY if t in table]
     fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), squeeze=False, sharey=True)
-    width = 0.8 / len(VARIANTS)
+    width = 0.8 / len(shown)
     for ax, (title, models) in zip(axes.ravel(), panels):
-        for i, variant in enumerate(VARIANTS):
+        for i, (label, variant) in enumerate(shown.items()):
             for j, entry in enumerate(models.values()):
                 ax.bar(j + i * width, entry[variant]["pooled"]["coverage"], width, color=f"C{i}",
-                       label=variant if j == 0 else None)
+                       label=label if j == 0 else None)
                 small = entry[variant]["small"]["coverage"]
                 if small is not None:
                     ax.plot(j + i * width, small, "k_", markersize=7)
@@ -305,7 +427,8 @@ def figure(result: dict, path: Path) -> None:
         ax.set_ylabel("coverage of the 95 % intervals")
     axes[0][0].legend(fontsize=7, loc="lower left", ncol=2)
     fig.suptitle("SIMULATED captures: how often the 95 % interval holds the true value (bars: pooled, "
-                 "dashes: lips and eyebrows; band 85-99 %)", fontsize=9)
+                 f"dashes: lips and eyebrows; band 85-99 %)\ntiles of {unc.TILE_AT_128} texels at 128², "
+                 f"at least {unc.MIN_TILES} per region", fontsize=9)
     fig.tight_layout()
     save_figure(fig, path, dpi=90)
 
@@ -327,7 +450,14 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=20, help="seeds of the Cook-Torrance and Phong truths")
     parser.add_argument("--other-seeds", type=int, default=20, help="seeds of the Ward and Lafortune truths")
     parser.add_argument("--out-seeds", type=int, default=6, help="seeds of each out-of-family truth")
-    parser.add_argument("--tune", action="store_true", help="only the tuning seeds (tile size)")
+    parser.add_argument("--tune", action="store_true", help="only the first tuning seeds (tile size, 2 models)")
+    parser.add_argument("--tune-tiles", action="store_true",
+                        help="only the tile tuning seeds: every tiling's jackknife, every model, and the choice")
+    parser.add_argument("--measure-check", type=int, default=0, metavar="N",
+                        help="only the literal check: N default captures with a drawn Cook-Torrance skin, "
+                             "measured on the true geometry (uncertainty_measure.json)")
+    parser.add_argument("--interreflection", action="store_true",
+                        help="with --measure-check: measure --interreflection (uncertainty_measure_interreflection.json)")
     parser.add_argument("--summarize", action="store_true",
                         help="only the tables and the figure again, from the records uncertainty.json holds")
     parser.add_argument("--cost", type=int, default=0, metavar="N",
@@ -337,7 +467,8 @@ def main() -> None:
     if args.summarize:
         result = json.loads((RESULTS / "uncertainty.json").read_text())
         records = read_records()
-        result.update(default=unc.METHODS[0], coverage=summary(records), skin_check=skin_check(records))
+        result.update(default=default_variant(), tile_at_128=unc.TILE_AT_128, min_tiles=unc.MIN_TILES,
+                      coverage=summary(records), skin_check=skin_check(records))
         write_json(RESULTS / "uncertainty.json", result)
         figure(result, RESULTS / "uncertainty.png")
         print(markdown(result, records))
@@ -347,10 +478,25 @@ def main() -> None:
         if args.cost:
             write_json(RESULTS / "uncertainty_cost.json", cost(range(args.cost), tmp))
             return
+        if args.measure_check:
+            extra = ("--interreflection",) if args.interreflection else ()
+            name = "uncertainty_measure_interreflection.json" if args.interreflection else "uncertainty_measure.json"
+            write_json(RESULTS / name, measure_check(range(args.measure_check), tmp, extra))
+            return
+        if args.tune_tiles:
+            variants = {tiled("jackknife", t, f): ("jackknife", t, f) for t, f in TILE_CANDIDATES}
+            records = []
+            for model in MODELS:
+                records += same_family(model, TILE_TUNING_SEEDS, tmp, variants)
+                write_json(RESULTS / "uncertainty_tile_tuning.json",
+                           {"seeds": list(TILE_TUNING_SEEDS), **choose_tiling(records)} if model == MODELS[-1]
+                           else {"seeds": list(TILE_TUNING_SEEDS), "partial": True})
+            print(json.dumps(choose_tiling(records), indent=1))
+            return
         if args.tune:
-            variants = ({f"sandwich_tile{t}": ("sandwich", t) for t in (1, 4, 8, 16)}
-                        | {f"jackknife_tile{t}": ("jackknife", t) for t in (1, 4, 8, 16)}
-                        | {"laplace": ("laplace", None), "bootstrap": ("bootstrap", None)})
+            variants = ({f"sandwich_tile{t}": ("sandwich", t, 1) for t in (1, 4, 8, 16)}
+                        | {f"jackknife_tile{t}": ("jackknife", t, 1) for t in (1, 4, 8, 16)}
+                        | {"laplace": ("laplace", None, None), "bootstrap": ("bootstrap", None, None)})
             records = []
             for model in ("cooktorrance", "phong"):
                 records += same_family(model, TUNING_SEEDS, tmp, variants)
@@ -359,9 +505,9 @@ def main() -> None:
             write_json(RESULTS / "uncertainty_tuning.json", {"seeds": list(TUNING_SEEDS), "coverage": table})
             print(json.dumps(table, indent=1))
             return
-        result = {"default": unc.METHODS[0], "image": IMAGE, "measurements": MEASUREMENTS, "spp": SPP,
+        result = {"default": default_variant(), "image": IMAGE, "measurements": MEASUREMENTS, "spp": SPP,
                   "texture": TEXTURE,
-                  "reference_spp": REFERENCE_SPP, "tile_at_128": unc.TILE_AT_128, "skin_ranges": SKIN_RANGES,
+                  "reference_spp": REFERENCE_SPP, "tile_at_128": unc.TILE_AT_128, "min_tiles": unc.MIN_TILES, "skin_ranges": SKIN_RANGES,
                   "variants": {k: list(v) for k, v in VARIANTS.items()}, "seeds": {}}
         records = []
 

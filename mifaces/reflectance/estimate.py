@@ -40,6 +40,7 @@ from ..shape.io import load_geometry
 from ..model.regions import REGIONS, regions_present, texel_regions_of_mesh
 from .maps.diffuse import AlbedoOffsets, refine_diffuse
 from .fit.regions import fit_regions
+from .interreflection import bounced_light
 from .io import write_fitted
 from .options import FitOptions, fit_options
 from .result import BRDFEstimate
@@ -107,6 +108,14 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     capture = load_capture(capture)
     brdf = brdf_models.model(model, **options.brdf_options())
     face, shapes = load_geometry(capture, geometry, face_model)
+    bounced = None
+    if options.interreflection:  # a first fit, its bounced light rendered, then the fit on samples without it
+        first = fit_brdf(capture, model, shapes, face_model=face, samples=samples, measurements=measurements,
+                         progress=progress, options=dataclasses.replace(
+                             options, interreflection=False, uncertainty=None, normals=False, specular_maps=False))
+        bounced = bounced_light(capture, shapes, face, first, measurements=first.measurements, progress=progress)
+        samples = capture_samples(capture, shapes, face, resolution, measurements=first.measurements,
+                                  progress=progress, indirect=bounced)
     if samples is None:
         samples = capture_samples(capture, shapes, face, resolution, measurements=measurements, progress=progress)
     elif samples.resolution != resolution:
@@ -128,7 +137,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
                   for name in names.values()}
     rounds = 0 if normals else int(options.albedo_rounds)
     region_fit = dict(progress=progress, fixed=fixed, fixed_by_region=per_region, schedule=schedule, seed=seed,
-                      cluster=tile_clusters(on_face.texel, resolution))
+                      cluster=tile_clusters(on_face.texel, resolution, label=on_face.label))
     fits = fit_regions(brdf, on_face, names, **region_fit, uncertainty=None if normals or rounds else uncertainty)
     for round_ in range(rounds):
         by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}

@@ -63,6 +63,13 @@ class FitOptions:
         fitting (:func:`mifaces.reflectance.light_balance.balance_given_lights`; the mean
         kept): a calibrated lamp a percent off in distance biases the glossy fit
         (``docs/uncertainty.md``).
+    interreflection : bool
+        Take the light bounced between parts of the face out of the samples: fit, render
+        that light with the fit (:func:`mifaces.reflectance.interreflection.bounced_light`),
+        sample the photographs again without it and fit again. It removes most of skin's
+        glossy bias on simulated captures (``docs/uncertainty.md``); off by default until
+        measured on the other validations. Costs a second fit and two coarse renders per
+        photograph.
     """
 
     resolution: int = 512
@@ -77,6 +84,7 @@ class FitOptions:
     uncertainty: str | None = METHODS[0]
     albedo_rounds: int = 0
     balance_lights: bool = False
+    interreflection: bool = False
 
     def __post_init__(self):
         if self.uncertainty is not None and self.uncertainty not in METHODS:

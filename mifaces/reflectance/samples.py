@@ -319,7 +319,7 @@ def read_photograph(camera, pixels, saturated, points) -> tuple[np.ndarray, np.n
 
 def measurement_samples(camera, light, pixels, vertices, triangles, uv, raster, *, saturated=None,
                         scale: float = np.pi, erosion: int = 1, min_cosine: float = MIN_COSINE, name: str = "",
-                        offset: float | None = None) -> ReflectanceSamples:
+                        offset: float | None = None, indirect=None) -> ReflectanceSamples:
     """Reflectance samples of one photograph (paper sec. 4.3, 5.3).
 
     Parameters
@@ -342,6 +342,8 @@ def measurement_samples(camera, light, pixels, vertices, triangles, uv, raster, 
         Scale of eq. 4 (π: a white Lambertian target has r = 1).
     erosion : int
         Texels eroded from the borders of the valid region.
+    indirect : (H, W, 3) array, optional
+        Light bounced off the face, units of ``pixels`` (:mod:`mifaces.reflectance.interreflection`): subtracted.
 
     Returns
     -------
@@ -389,6 +391,10 @@ def measurement_samples(camera, light, pixels, vertices, triangles, uv, raster, 
     else:
         lit[front] = _unoccluded(scene, p[front], light_target[front], n[front], offset)
     radiance, ok = read_photograph(camera, pixels, saturated, p)
+    if indirect is not None:  # the bounced light out: eq. 4 reads direct light
+        if np.shape(indirect) != pixels.shape:
+            raise ValueError(f"bounced light of shape {np.shape(indirect)} does not match the image's {pixels.shape}")
+        radiance = radiance - read_photograph(camera, indirect, None, p)[0]
     r = reflectance(radiance, dist_light, intensity, cos_l, scale)
 
     def image(values, fill):
@@ -412,7 +418,8 @@ def measurement_samples(camera, light, pixels, vertices, triangles, uv, raster, 
 
 
 def capture_samples(capture, geometry, face_model, resolution: int = 512, *, measurements=None,
-                    erosion: int = 1, min_cosine: float = MIN_COSINE, progress: bool = True) -> ReflectanceSamples:
+                    erosion: int = 1, min_cosine: float = MIN_COSINE, progress: bool = True,
+                    indirect: dict | None = None) -> ReflectanceSamples:
     """Reflectance samples of every measurement of a capture (sec. 4.3).
 
     Parameters
@@ -434,6 +441,8 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
         R of the R × R texture the samples live in (the paper used 1000).
     measurements : sequence of str, optional
         The measurements to use (default: all that ``geometry`` has).
+    indirect : mapping, optional
+        Measurement name -> its light bounced off the face (``measurement_samples``' ``indirect``).
 
     Returns
     -------
@@ -483,7 +492,8 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
                              "(load the capture with calibrate=True)")
         parts.append(measurement_samples(capture.camera, light, m.image.pixels, geometry[m.name],
                                          face_model.triangles, face_model.uv, raster, saturated=m.image.saturated,
-                                         scale=scale, erosion=erosion, min_cosine=min_cosine, name=m.name))
+                                         scale=scale, erosion=erosion, min_cosine=min_cosine, name=m.name,
+                                         indirect=None if indirect is None else indirect.get(m.name)))
     samples = ReflectanceSamples.concatenate(parts)
     samples.label = samples.region(region_map).astype(np.uint8)
     samples.region_map = region_map
