@@ -125,8 +125,8 @@ def tile_clusters(texel: np.ndarray, resolution: int, tile: int | None = None, l
 
     With ``label`` (each sample's region), a region whose texels fall into fewer
     than ``min_tiles`` tiles (default :data:`MIN_TILES`) gets tiles half as wide,
-    again until it has that many or they are single texels; cluster numbers
-    then differ between regions."""
+    again until it has that many or they are single texels; clusters are then
+    numbered 0 … G - 1 over all regions, none spanning two."""
     texel = np.asarray(texel, np.int64)
     if resolution < 1:
         raise ValueError(f"resolution must be positive, got {resolution}")
@@ -140,14 +140,16 @@ def tile_clusters(texel: np.ndarray, resolution: int, tile: int | None = None, l
         raise ValueError(f"label must have the texels' shape {texel.shape}, got {label.shape}")
     floor = MIN_TILES if min_tiles is None else int(min_tiles)
     out = np.empty_like(texel)
-    for region in np.unique(label):
+    base = 0
+    for region in np.flatnonzero(np.bincount(label.astype(np.int64))) if label.size else []:
         members = label == region
         size = tile
-        tiles = _tiles(texel[members], resolution, size)
-        while size > 1 and len(np.unique(tiles)) < floor:
+        tiles, count = cluster_index(_tiles(texel[members], resolution, size))
+        while size > 1 and count < floor:
             size = max(1, size // 2)
-            tiles = _tiles(texel[members], resolution, size)
-        out[members] = int(region) * resolution * resolution + tiles
+            tiles, count = cluster_index(_tiles(texel[members], resolution, size))
+        out[members] = base + tiles  # numbered 0 ... G - 1 over all regions: small sums per cluster
+        base += count
     return out
 
 
