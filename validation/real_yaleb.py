@@ -34,7 +34,7 @@ Writes ``DIR/<subject>/capture`` (with ``split.json``), ``DIR/<subject>/measure`
 Real photographs: these figures are not simulated.
 
     python validation/real_yaleb.py --data ../shared/data/yaleb --out out/real_yaleb [--subjects yaleB01] [--train 8]
-        [--refine] [--refine-shape] [--normals]
+        [--refine] [--refine-shape] [--normals] [--interreflection]
 
 With ``--refine-shape``, the fitted faces are refined by differentiable rendering against the
 training photographs (``mifaces measure --refine-shape``) before the BRDFs are fitted, and the
@@ -44,8 +44,9 @@ refined geometry's cast shadows beside the photographs.
 
 With ``--normals``, each subject is measured twice, without and with per-texel
 normals (``mifaces measure --normals``), and the held-out errors of both are
-written to ``validation/results/real_yaleb_normals.{json,png}``
-(:func:`normals_comparison`).
+written to ``validation/results/real_yaleb_normals.{json,png}`` (:func:`comparison`);
+with ``--interreflection`` likewise without and with the bounced light taken out
+(``mifaces measure --interreflection``): ``real_yaleb_interreflection.{json,png}``.
 """
 
 from __future__ import annotations
@@ -136,7 +137,7 @@ def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> 
 
 def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shadow_angle: float,
                 resolution: int, normals: bool = False, refine: bool = False, refine_shape: bool = False,
-                unknown_lights: bool = False) -> dict:
+                unknown_lights: bool = False, interreflection: bool = False) -> dict:
     """Import, measure and relight one subject; its errors and timings. With ``unknown_lights`` the
     capture hides its light directions (``mifaces import yaleb --unknown-lights``) and ``measure``
     estimates them (``validation/unknown_lights.py``); the held-out lights are rendered as known."""
@@ -147,7 +148,7 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     train_images, heldout = default_split(list(images.values()), train)
     t_measure = time.perf_counter()
     report = measure(out / "measure", capture_dir, models=models, progress=True, refine_shape=refine_shape,
-                     options=FitOptions(resolution=resolution, normals=normals))
+                     options=FitOptions(resolution=resolution, normals=normals, interreflection=interreflection))
     seconds = {"import": t_measure - t0, "measure": time.perf_counter() - t_measure}
     capture = load_capture(capture_dir, detect=False)
     # the faces the BRDFs were fitted on: the refined ones where this run kept a refinement
@@ -291,41 +292,41 @@ def figure(results: list[dict], out: Path, data_dir: Path, run_dir: Path, best: 
     save_figure(fig, out, dpi=80)
 
 
-def normals_comparison(args, subjects, models, argv) -> int:
-    """Each subject measured without and with per-texel normals
-    (``measure(..., options=FitOptions(normals=True))``, into ``DIR/<subject>`` and
-    ``DIR/<subject>_normals``): held-out relative RMSE of both, pooled and per subject,
-    in ``real_yaleb_normals.{json,png}``."""
+def comparison(args, subjects, models, argv, option: str = "normals") -> int:
+    """Each subject measured without and with ``option`` of :class:`FitOptions` (``normals``: per-texel
+    normals; ``interreflection``: the bounced light taken out; ``measure(..., options=FitOptions(<option>=True))``,
+    into ``DIR/<subject>`` and ``DIR/<subject>_<option>``): held-out relative RMSE of both, pooled and per
+    subject, in ``real_yaleb_<option>.{json,png}``."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     runs = {}
-    for label, normals in (("without", False), ("with", True)):
+    for label, on in (("without", False), ("with", True)):
         results = []
         for subject in subjects:
-            print(f"== {subject} ({label} normals)", flush=True)
-            folder = args.out / (subject + ("_normals" if normals else ""))
+            print(f"== {subject} ({label} {option})", flush=True)
+            folder = args.out / (subject + (f"_{option}" if on else ""))
             results.append(subject_run(args.data / subject, folder, args.train, models, args.spp, args.shadow_angle,
-                                       args.resolution, normals=normals))
+                                       args.resolution, **{option: on}))
         runs[label] = {"overall": summary(results, models),
                        "subjects": {r["subject"]: r["relative_rmse"] for r in results},
                        "seconds": {r["subject"]: r["seconds"] for r in results}}
     best = runs["without"]["overall"]["best_model"]
     document = {"data": "Extended Yale Face Database B (cropped), real photographs", "train_lights": args.train,
-                "models": list(models), "spp": args.spp, "texture_resolution": args.resolution,
+                "models": list(models), "spp": args.spp, "texture_resolution": args.resolution, "option": option,
                 "command": "python validation/real_yaleb.py " + " ".join(argv if argv is not None else sys.argv[1:]),
                 "best_model_without": best, "runs": runs,
                 "best_model_error": {k: runs[k]["overall"]["relative_rmse"][best]["all"] for k in runs}}
-    write_json(args.results / "real_yaleb_normals.json", document)
+    write_json(args.results / f"real_yaleb_{option}.json", document)
     fig, ax = plt.subplots(figsize=(8, 4))
     names = subjects + ["pooled"]
     x = np.arange(len(names))
     bars = {"photometric stereo": [runs["without"]["subjects"][s]["photometric_stereo"]["all"] for s in subjects]
             + [runs["without"]["overall"]["relative_rmse"]["photometric_stereo"]["all"]]}
     for k in runs:
-        bars[f"{best}, {k} normals"] = ([runs[k]["subjects"][s][best]["all"] for s in subjects]
+        bars[f"{best}, {k} {option}"] = ([runs[k]["subjects"][s][best]["all"] for s in subjects]
                                         + [runs[k]["overall"]["relative_rmse"][best]["all"]])
     for i, (label, values) in enumerate(bars.items()):
         ax.bar(x + (i - 1) * 0.27, values, 0.27, label=label)
@@ -334,9 +335,9 @@ def normals_comparison(args, subjects, models, argv) -> int:
     ax.set_title(f"Yale B, real photographs: held-out relighting ({args.train} training lights)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    save_figure(fig, args.results / "real_yaleb_normals.png", dpi=110)
+    save_figure(fig, args.results / f"real_yaleb_{option}.png", dpi=110)
     print(f"{best}: {document['best_model_error']['without']:.4f} without, {document['best_model_error']['with']:.4f} "
-          "with per-texel normals")
+          f"with {option}")
     return 0
 
 
@@ -353,6 +354,9 @@ def main(argv=None) -> int:
     parser.add_argument("--results", type=Path, default=RESULTS)
     parser.add_argument("--normals", action="store_true",
                         help="measure without and with per-texel normals; write real_yaleb_normals.{json,png}")
+    parser.add_argument("--interreflection", action="store_true",
+                        help="measure without and with the bounced light taken out; write "
+                             "real_yaleb_interreflection.{json,png}")
     parser.add_argument("--refine", action="store_true",
                         help="also refine each fit by differentiable rendering and score it beside the unrefined")
     parser.add_argument("--refine-shape", action="store_true",
@@ -364,7 +368,9 @@ def main(argv=None) -> int:
     subjects = args.subjects.split(",") if args.subjects else sorted(p.name for p in args.data.iterdir() if p.is_dir())
     models = tuple(args.models.split(","))
     if args.normals:
-        return normals_comparison(args, subjects, models, argv)
+        return comparison(args, subjects, models, argv, "normals")
+    if args.interreflection:
+        return comparison(args, subjects, models, argv, "interreflection")
     results = []
     for subject in subjects:
         print(f"== {subject}", flush=True)

@@ -474,12 +474,14 @@ def _yale_table(overall, subjects):
 
 
 def sec_real_yaleb(d):
-    if isinstance(d.get("runs"), dict):  # --normals: runs without and with
+    if isinstance(d.get("runs"), dict):  # --normals, --interreflection: runs without and with
+        what = {"normals": "per-texel normals", "interreflection": "the bounced light taken out (interreflection)"}
+        option = what.get(d.get("option", "normals"), text(d.get("option")))
         lines = [f"Training lights {text(d.get('train_lights'))}, models {text(d.get('models'))}, texture "
-                 f"{text(d.get('texture_resolution'))}². Relative RMSE over the face pixels, without and with per-texel "
-                 "normals.", ""]
+                 f"{text(d.get('texture_resolution'))}². Relative RMSE over the face pixels, without and with "
+                 f"{option}.", ""]
         for name, run in items(d.get("runs")):
-            lines += [f"*{name} per-texel normals* (best model {text(get(run, 'overall', 'best_model'))}):", ""]
+            lines += [f"*{name} {option}* (best model {text(get(run, 'overall', 'best_model'))}):", ""]
             lines += _yale_table(get(run, "overall"), items(get(run, "subjects")))
         return lines
     subjects = [(str(i), s) for i, s in enumerate(rows_of(d.get("subjects")))]
