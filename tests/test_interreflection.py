@@ -89,12 +89,15 @@ def test_taking_the_bounced_light_out_brings_skins_lobe_to_the_direct_light_fit(
     capture, direct = captures
     face, shapes = load_geometry(capture, "ground-truth")
     truth = read_ground_truth(capture).brdf["regions"]["skin"]
-    fits = {}
+    fits, records = {}, {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for name, c, inter in (("default", capture, False), ("corrected", capture, True), ("direct", direct, False)):
-            fits[name] = fit_brdf(c, "cooktorrance", shapes, face_model=face, progress=False,
-                                  options=FitOptions(resolution=TEXTURE, interreflection=inter)).fits["skin"].params
+            estimate = fit_brdf(c, "cooktorrance", shapes, face_model=face, progress=False,
+                                options=FitOptions(resolution=TEXTURE, interreflection=inter))
+            fits[name], records[name] = estimate.fits["skin"].params, estimate.to_json().get("interreflection")
+    # brdf.json says whether the bounced light was taken out, and how
+    assert records["default"] is None and records["corrected"]["depth"] == 4 and records["corrected"]["seconds"] > 0
     rho = {k: float(np.mean(v["specular_reflectance"])) for k, v in fits.items()}
     assert rho["default"] < rho["direct"]  # the bounced light biases the lobe low
     assert abs(rho["corrected"] - rho["direct"]) < 0.5 * abs(rho["default"] - rho["direct"]), (rho, truth)

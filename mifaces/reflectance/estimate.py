@@ -40,7 +40,7 @@ from ..shape.io import load_geometry
 from ..model.regions import REGIONS, regions_present, texel_regions_of_mesh
 from .maps.diffuse import AlbedoOffsets, refine_diffuse
 from .fit.regions import fit_regions
-from .interreflection import bounced_light
+from .interreflection import INDIRECT_DEPTH, INDIRECT_SPP, INDIRECT_WIDTH, bounced_light
 from .io import write_fitted
 from .options import FitOptions, fit_options
 from .result import BRDFEstimate
@@ -108,7 +108,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     capture = load_capture(capture)
     brdf = brdf_models.model(model, **options.brdf_options())
     face, shapes = load_geometry(capture, geometry, face_model)
-    bounced = None
+    interreflection = None
     if options.interreflection:  # a first fit, its bounced light rendered, then the fit on samples without it
         first = fit_brdf(capture, model, shapes, face_model=face, samples=samples, measurements=measurements,
                          progress=progress, options=dataclasses.replace(
@@ -116,6 +116,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         bounced = bounced_light(capture, shapes, face, first, measurements=first.measurements, progress=progress)
         samples = capture_samples(capture, shapes, face, resolution, measurements=first.measurements,
                                   progress=progress, indirect=bounced)
+        interreflection = {"depth": INDIRECT_DEPTH, "width": INDIRECT_WIDTH, "spp": INDIRECT_SPP,
+                           "seconds": time.perf_counter() - t0}
     if samples is None:
         samples = capture_samples(capture, shapes, face, resolution, measurements=measurements, progress=progress)
     elif samples.resolution != resolution:
@@ -172,7 +174,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
                             region_map=region_map, samples=len(on_face), specular=specular,
                             measurements=tuple(samples.measurement_names),
                             seconds={"samples": t_samples - t0, "fit": t_fit - t_samples, "refine": t_end - t_fit,
-                                     "total": t_end - t0}, light_balance=light_balance)
+                                     "total": t_end - t0}, light_balance=light_balance,
+                            interreflection=interreflection)
     if texel_normals is not None:
         first = next(name for name in estimate.measurements if name in shapes)
         estimate.normals = mitsuba_tangent_normals(texel_normals.normals, face, shapes[first]).astype(np.float32)

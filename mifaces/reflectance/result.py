@@ -76,6 +76,10 @@ class BRDFEstimate:
         Light name -> the factor its given intensity was off by, as the face's one albedo
         says (``fit_brdf(..., options=FitOptions(balance_lights=True))``,
         :func:`mifaces.reflectance.light_balance.balance_given_lights`); None where not balanced.
+    interreflection : dict or None
+        How the light bounced off the face was taken out of the samples
+        (``FitOptions(interreflection=True)``, :mod:`mifaces.reflectance.interreflection`: the
+        renders' depth, width and samples per pixel, the seconds it took); None where it was not.
     """
 
     model: str
@@ -92,6 +96,7 @@ class BRDFEstimate:
     specular: SpecularMap | None = None
     lighting: dict | None = None
     light_balance: dict | None = None
+    interreflection: dict | None = None
 
     def fitted_light(self, light):
         """``light`` as this estimate was fitted under it (:func:`fitted_light`)."""
@@ -127,6 +132,7 @@ class BRDFEstimate:
                 **({} if self.albedo.std is None else {"albedo_std": FILES["albedo_std"]}),
                 **({} if self.lighting is None else {"lighting": self.lighting}),
                 **({} if self.light_balance is None else {"light_balance": self.light_balance}),
+                **({} if self.interreflection is None else {"interreflection": self.interreflection}),
                 **({} if self.normals is None else {"normals": FILES["normals"],
                                                     "normal_refinement": self.normal_refinement}),
                 **({} if self.specular is None else {"specular": FILES["specular"], "specular_shrinkage": {
