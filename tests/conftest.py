@@ -7,7 +7,10 @@ from pathlib import Path
 import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 
 import drjit as dr
+import numpy as np
 import pytest
+
+from mifaces.capture import Camera
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -15,6 +18,14 @@ REPO = Path(__file__).resolve().parents[1]
 VARIANTS = ["scalar_rgb", "llvm_ad_rgb"] + (["cuda_ad_rgb"] if dr.has_backend(dr.JitBackend.CUDA) else [])
 #: The vectorised (JIT) variants among them.
 JIT_VARIANTS = [v for v in VARIANTS if v != "scalar_rgb"]
+#: OpenCV axes looking down the world's -z: x right, y down, z forward.
+FACING = np.diag([1.0, -1.0, -1.0])
+
+
+def front_camera(focal: float = 500.0, rotation: np.ndarray = FACING) -> Camera:
+    """A 48 x 64 camera 1.2 m in front of the model's face (world = model frame, mm), looking at it."""
+    position = np.array([0.0, 0.0, 1200.0])
+    return Camera(48, 64, focal, focal, 23.5, 31.5, np.zeros(5), rotation, -rotation @ position)
 
 
 @pytest.fixture(params=VARIANTS)

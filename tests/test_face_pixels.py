@@ -8,18 +8,12 @@ import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 import numpy as np
 import pytest
 
-from mifaces.capture import Camera
 from mifaces.face_pixels import face_pixels, front_of_face_pixels
 from mifaces.model import load_model
 from mifaces.model.regions import REGIONS
 from mifaces.render import FaceScene
 
-
-def camera() -> Camera:
-    """A camera 1.2 m in front of the model's face (world = model frame, mm), the head inside its image."""
-    rotation = np.diag([1.0, -1.0, -1.0])
-    position = np.array([0.0, 0.0, 1200.0])
-    return Camera(48, 64, 150.0, 150.0, 23.5, 31.5, np.zeros(5), rotation, -rotation @ position)
+from conftest import front_camera
 
 
 @pytest.fixture(scope="module")
@@ -31,8 +25,8 @@ def face():
 
 def test_centre_rays_label_the_face_pixels_by_region(face):
     model, scene = face
-    labels = face_pixels(scene, camera(), spp=None, region_map=model.region_map)
-    mask = face_pixels(scene, camera(), spp=None)
+    labels = face_pixels(scene, front_camera(150.0), spp=None, region_map=model.region_map)
+    mask = face_pixels(scene, front_camera(150.0), spp=None)
     assert labels.shape == mask.shape == (64, 48) and mask.dtype == bool
     np.testing.assert_array_equal(labels > 0, mask)
     assert 0.2 < mask.mean() < 0.9
@@ -42,19 +36,19 @@ def test_centre_rays_label_the_face_pixels_by_region(face):
 
 def test_the_filtered_footprint_takes_in_the_silhouette(face):
     _, scene = face
-    centre, filtered = face_pixels(scene, camera(), spp=None), face_pixels(scene, camera())
+    centre, filtered = face_pixels(scene, front_camera(150.0), spp=None), face_pixels(scene, front_camera(150.0))
     assert filtered.sum() > centre.sum()
     assert (centre & ~filtered).sum() <= 0.01 * centre.sum()
 
 
 def test_the_front_of_the_face_is_part_of_the_face(face):
     model, scene = face
-    front = front_of_face_pixels(model, model.shape_mean, camera())
-    assert 0 < front.sum() < face_pixels(scene, camera()).sum()
-    assert not np.any(front & ~face_pixels(scene, camera()))
+    front = front_of_face_pixels(model, model.shape_mean, front_camera(150.0))
+    assert 0 < front.sum() < face_pixels(scene, front_camera(150.0)).sum()
+    assert not np.any(front & ~face_pixels(scene, front_camera(150.0)))
 
 
 def test_region_labels_are_those_of_the_centre_rays(face):
     model, scene = face
     with pytest.raises(ValueError, match="spp=None"):
-        face_pixels(scene, camera(), spp=4, region_map=model.region_map)
+        face_pixels(scene, front_camera(150.0), spp=4, region_map=model.region_map)

@@ -14,6 +14,8 @@ from mifaces.model import load_model
 from mifaces.brdf.model import rgb
 from mifaces.render import ALBEDO, ALBEDO_REF, FaceScene, region_meshes, scene_xml
 
+from conftest import front_camera
+
 SPP_PATH = ("sensor", "sampler", "sample_count")
 
 
@@ -58,13 +60,6 @@ def test_scene_xml_refuses_what_it_cannot_write(tmp_path):
         scene_xml(scene["ball"])
 
 
-def camera() -> Camera:
-    """A camera 1.2 m in front of the model's face (world = model frame, mm), looking at it."""
-    rotation = np.diag([1.0, -1.0, -1.0])  # OpenCV axes: x right, y down, z forward (world -z)
-    position = np.array([0.0, 0.0, 1200.0])
-    return Camera(48, 64, 500.0, 500.0, 23.5, 31.5, np.zeros(5), rotation, -rotation @ position)
-
-
 @pytest.fixture(scope="module")
 def face():
     mifaces.set_variant("llvm_ad_rgb")
@@ -100,7 +95,7 @@ def test_face_scene_description_names_files_and_loads_in_memory(face, tmp_path):
     model, scene = face
     brdf = {"model": "ward", "options": {}, "regions": {"skin": {"specular_reflectance": 0.05, "alpha": 0.3}}}
     lamp = Light("lamp", np.array([0.0, 300.0, 1000.0]), np.full(3, 1e6))
-    description = scene.description(brdf, camera(), lamp, spp=2, albedo="a.exr")
+    description = scene.description(brdf, front_camera(), lamp, spp=2, albedo="a.exr")
     assert description[ALBEDO]["filename"] == "a.exr"
     for key in scene.meshes:
         assert description[key]["filename"] == FaceScene.mesh_file(key)
@@ -108,14 +103,14 @@ def test_face_scene_description_names_files_and_loads_in_memory(face, tmp_path):
         assert description[key]["bsdf"]["alpha"] == 0.3  # regions without parameters take skin's
     assert "environment" not in description
     albedo = np.full((16, 16, 3), 0.5, np.float32)
-    loaded = scene.scene(brdf, albedo, camera(), lamp, spp=2)
+    loaded = scene.scene(brdf, albedo, front_camera(), lamp, spp=2)
     assert ALBEDO not in loaded and all(isinstance(loaded[key], mi.Mesh) for key in scene.meshes)
     # the written meshes are the ones in memory
     paths = scene.write_meshes(tmp_path)
     written = mi.load_dict({"type": "ply", "filename": str(paths["face_skin_1"])})
     np.testing.assert_array_equal(np.array(mi.traverse(written)["vertex_positions"]),
                                   np.array(mi.traverse(loaded["face_skin_1"])["vertex_positions"]))
-    image = scene.render(brdf, albedo, camera(), lamp, spp=2)
+    image = scene.render(brdf, albedo, front_camera(), lamp, spp=2)
     assert image.shape == (64, 48, 3) and (image.mean(axis=2) > 0).mean() > 0.2
 
 
@@ -125,19 +120,19 @@ def test_directional_light_lights_a_white_face_at_e_over_pi(face):
     model, scene = face
     brdf = {"model": "phong", "options": {}, "regions": {"skin": {"specular_reflectance": 0.0, "exponent": 10.0}}}
     towards = np.array([0.0, 0.0, 1.0])  # from the face to the camera
-    description = scene.description(brdf, camera(), Light("sun", None, np.full(3, 2.0), direction=towards * 3), spp=2)
+    description = scene.description(brdf, front_camera(), Light("sun", None, np.full(3, 2.0), direction=towards * 3), spp=2)
     assert description["light"] == {"type": "directional", "direction": [-0.0, -0.0, -1.0],
                                     "irradiance": rgb(2.0)}
     albedo = np.ones((16, 16, 3), np.float32)
-    image = scene.render(brdf, albedo, camera(), Light("sun", None, np.full(3, 2.0), direction=towards), spp=16)
+    image = scene.render(brdf, albedo, front_camera(), Light("sun", None, np.full(3, 2.0), direction=towards), spp=16)
     centre = image[28:36, 20:28].mean(axis=(0, 1))  # the nose's neighbourhood faces the camera
     assert np.all(centre > 0.5 * 2.0 / np.pi) and np.all(centre <= 2.0 / np.pi * 1.02)
     with pytest.raises(ValueError, match="not both"):
-        scene.description(brdf, camera(), Light("both", np.array([0.0, 0.0, 1000.0]), np.ones(3), direction=towards))
+        scene.description(brdf, front_camera(), Light("both", np.array([0.0, 0.0, 1000.0]), np.ones(3), direction=towards))
     with pytest.raises(ValueError, match="finite, non-zero"):
-        scene.description(brdf, camera(), Light("zero", None, np.ones(3), direction=np.zeros(3)))
+        scene.description(brdf, front_camera(), Light("zero", None, np.ones(3), direction=np.zeros(3)))
     with pytest.raises(ValueError, match="needs a light"):
-        scene.description(brdf, camera(), None)
+        scene.description(brdf, front_camera(), None)
 
 
 @pytest.mark.parametrize("cx, cy", [(20.0, 50.0), (49.5, 39.5), (70.0, 10.0)])
@@ -146,7 +141,6 @@ def test_sensor_puts_a_point_where_the_camera_projects_it(cx, cy):
     Camera.project puts its centre (Mitsuba's offsets have the opposite sign of OpenCV's)."""
     import mitsuba as mi
 
-    from mifaces.capture import Camera
     from mifaces.render import mitsuba_sensor
 
     mifaces.set_variant("llvm_ad_rgb")

@@ -8,19 +8,14 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mifaces.capture import Camera
 from mifaces.environment import STUDIO_PANELS, environment_emitter, sky_emitter, studio_environment
 from mifaces.face_pixels import face_pixels
 from mifaces.model import load_model
 from mifaces.render import FaceScene
 
+from conftest import front_camera
+
 WHITE = {"model": "phong", "options": {}, "regions": {"skin": {"specular_reflectance": 0.0, "exponent": 10.0}}}
-
-
-def camera(rotation=np.diag([1.0, -1.0, -1.0])) -> Camera:
-    """A camera 1.2 m in front of the model's face (world = model frame, mm), looking at it."""
-    position = np.array([0.0, 0.0, 1200.0])
-    return Camera(48, 64, 500.0, 500.0, 23.5, 31.5, np.zeros(5), rotation, -rotation @ position)
 
 
 @pytest.fixture(scope="module")
@@ -32,18 +27,18 @@ def scene():
 
 def halves(image: np.ndarray, scene) -> tuple[float, float]:
     """Mean brightness of the face in the image's left and right halves."""
-    luminance, face = image.mean(axis=2), face_pixels(scene, camera())
+    luminance, face = image.mean(axis=2), face_pixels(scene, front_camera())
     return float(luminance[:, :24][face[:, :24]].mean()), float(luminance[:, 24:][face[:, 24:]].mean())
 
 
 def render(scene, environment, spp=16) -> np.ndarray:
-    return scene.render(WHITE, np.full((8, 8, 3), 0.6, np.float32), camera(), envmap=environment, spp=spp)
+    return scene.render(WHITE, np.full((8, 8, 3), 0.6, np.float32), front_camera(), envmap=environment, spp=spp)
 
 
 def test_sky_lights_the_face_from_the_sun_side(scene):
     """The sun at 50° azimuth towards the image's left lights the left half more; mirrored, the right."""
-    left = render(scene, sky_emitter(camera(), camera().direction(50.0, 20.0)))
-    right = render(scene, sky_emitter(camera(), camera().direction(-50.0, 20.0)))
+    left = render(scene, sky_emitter(front_camera(), front_camera().direction(50.0, 20.0)))
+    right = render(scene, sky_emitter(front_camera(), front_camera().direction(-50.0, 20.0)))
     assert np.all(np.isfinite(left)) and left.min() >= 0 and left.mean() > 0.01
     lit, shaded = halves(left, scene)
     assert lit > 1.3 * shaded
@@ -53,18 +48,18 @@ def test_sky_lights_the_face_from_the_sun_side(scene):
 
 def test_sky_time_and_place_puts_the_morning_sun_east(scene):
     """The face looks south: at 45° N the morning sun (east) is on the image's right, the evening sun on its left."""
-    morning = render(scene, sky_emitter(camera(), time="2024-06-21T08:00", place=(45.0, 0.0, 0.0)))
-    evening = render(scene, sky_emitter(camera(), time="2024-06-21T16:00", place=(45.0, 0.0, 0.0)))
+    morning = render(scene, sky_emitter(front_camera(), time="2024-06-21T08:00", place=(45.0, 0.0, 0.0)))
+    evening = render(scene, sky_emitter(front_camera(), time="2024-06-21T16:00", place=(45.0, 0.0, 0.0)))
     assert halves(morning, scene)[1] > 1.2 * halves(morning, scene)[0]
     assert halves(evening, scene)[0] > 1.2 * halves(evening, scene)[1]
 
 
 def test_sky_follows_the_camera_frame():
     """The sky's zenith is the camera's up: a camera rolled upside down turns the sky with it."""
-    upright, rolled = sky_emitter(camera()), sky_emitter(camera(np.diag([-1.0, 1.0, -1.0])))
+    upright, rolled = sky_emitter(front_camera()), sky_emitter(front_camera(rotation=np.diag([-1.0, 1.0, -1.0])))
     assert np.allclose(np.array(upright["to_world"].matrix)[:3, 2], [0, 1, 0])
     assert np.allclose(np.array(rolled["to_world"].matrix)[:3, 2], [0, -1, 0])
-    assert np.allclose(camera().frame, np.eye(3))
+    assert np.allclose(front_camera().frame, np.eye(3))
 
 
 @pytest.mark.parametrize("options, message", [
@@ -80,7 +75,7 @@ def test_sky_follows_the_camera_frame():
 ])
 def test_sky_refuses_bad_options(options, message):
     with pytest.raises(ValueError, match=message):
-        sky_emitter(camera(), **options)
+        sky_emitter(front_camera(), **options)
 
 
 def test_studio_environment_is_generated_with_its_panels():
@@ -88,7 +83,7 @@ def test_studio_environment_is_generated_with_its_panels():
     assert image.shape == (32, 64, 3) and image.dtype == np.float32 and image.min() > 0
     # the key light: direction (azimuth, elevation) about the camera -> the map's pixel (Mitsuba's envmap mapping)
     _, azimuth, elevation, _, radiance = STUDIO_PANELS[0]
-    d = camera().direction(azimuth, elevation)  # world = the map's frame for this camera
+    d = front_camera().direction(azimuth, elevation)  # world = the map's frame for this camera
     u = (np.arctan2(d[0], -d[2]) / (2 * np.pi)) % 1.0
     v = np.arccos(d[1]) / np.pi
     assert image[int(v * 32), int(u * 64)].min() > radiance
@@ -96,7 +91,7 @@ def test_studio_environment_is_generated_with_its_panels():
     with pytest.raises(ValueError, match="studio map height"):
         studio_environment(2)
     with pytest.raises(ValueError, match="non-negative"):
-        environment_emitter(-image, camera())
+        environment_emitter(-image, front_camera())
 
 
 def test_studio_lights_the_key_side(scene):
@@ -108,7 +103,7 @@ def test_studio_lights_the_key_side(scene):
 
 def test_an_emitter_dict_carries_its_own_scale(scene):
     with pytest.raises(ValueError, match="carries its own scale"):
-        scene.description(WHITE, camera(), envmap=sky_emitter(camera()), envmap_scale=2.0)
+        scene.description(WHITE, front_camera(), envmap=sky_emitter(front_camera()), envmap_scale=2.0)
 
 
 @pytest.mark.parametrize("arguments, message", [

@@ -40,7 +40,7 @@ import uncertainty as U  # noqa: E402  (the captures and checks of validation/un
 import mifaces.studio.scene as studio_scene  # noqa: E402
 from mifaces.atomic import write_json  # noqa: E402
 from mifaces.capture import with_true_lights  # noqa: E402
-from mifaces.reflectance import FitOptions, capture_samples, fit_brdf  # noqa: E402
+from mifaces.reflectance import capture_samples  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SEEDS = list(range(100, 105)) + list(range(10))
@@ -57,8 +57,7 @@ def _skin(estimate, truth: dict) -> dict:
 
 
 def _fit(capture, face, shapes, samples, interreflection=False):
-    return fit_brdf(capture, "cooktorrance", shapes, face_model=face, samples=samples, progress=False,
-                    options=FitOptions(resolution=U.TEXTURE, interreflection=interreflection))
+    return U._fit(capture, face, shapes, samples, "cooktorrance", interreflection=interreflection)
 
 
 def run(seed: int, work: Path) -> dict:

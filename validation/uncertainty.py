@@ -129,7 +129,10 @@ def _simulate(folder: Path, seed: int, spp: int = SPP, clean: bool = False, **op
     return capture, face, shapes, capture_samples(capture, shapes, face, TEXTURE, progress=False)
 
 
-def _fit(capture, face, shapes, samples, model, method, tile=None, floor=None, texture=TEXTURE):
+def _fit(capture, face, shapes, samples, model, method=unc.METHODS[0], tile=None, floor=None, texture=TEXTURE,
+         **options):
+    """``fit_brdf`` of ``model`` with the uncertainty ``method`` over tiles of ``tile`` (at 128²) and at least
+    ``floor`` per region (None: the library's), warnings silenced; ``options``: more :class:`FitOptions`."""
     default = unc.TILE_AT_128, unc.MIN_TILES
     unc.TILE_AT_128 = default[0] if tile is None else tile
     unc.MIN_TILES = default[1] if floor is None else floor
@@ -137,7 +140,7 @@ def _fit(capture, face, shapes, samples, model, method, tile=None, floor=None, t
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return fit_brdf(capture, model, shapes, face_model=face, samples=samples, progress=False,
-                            options=FitOptions(resolution=texture, uncertainty=method))
+                            options=FitOptions(resolution=texture, uncertainty=method, **options))
     finally:
         unc.TILE_AT_128, unc.MIN_TILES = default
 
@@ -434,9 +437,12 @@ def figure(result: dict, path: Path) -> None:
 
 
 def write_records(records: list) -> None:
-    """The records, one compact row each (:data:`FIELDS`, values to 5 digits), to uncertainty_records.json."""
+    """The records the tables read (the shown estimates at the default tiling, the jackknife at every
+    tiling), one compact row each (:data:`FIELDS`, values to 5 digits), to uncertainty_records.json."""
+    kept = set(shown_variants().values()) | {tiled("jackknife", t, f) for t, f in TILE_CANDIDATES}
     with atomic_write(RESULTS / "uncertainty_records.json", "w") as f:
-        rows = [[float(f"{r[k]:.5g}") if isinstance(r[k], float) else r[k] for k in FIELDS] for r in records]
+        rows = [[float(f"{r[k]:.5g}") if isinstance(r[k], float) else r[k] for k in FIELDS] for r in records
+                if r["variant"] in kept]
         json.dump({"fields": FIELDS, "rows": rows}, f, separators=(",", ":"))
 
 
@@ -469,6 +475,7 @@ def main() -> None:
         records = read_records()
         result.update(default=default_variant(), tile_at_128=unc.TILE_AT_128, min_tiles=unc.MIN_TILES,
                       coverage=summary(records), skin_check=skin_check(records))
+        write_records(records)
         write_json(RESULTS / "uncertainty.json", result)
         figure(result, RESULTS / "uncertainty.png")
         print(markdown(result, records))

@@ -275,6 +275,13 @@ class Capture:
         lights of unknown absolute intensity."""
         return self.white_target is None or any(light.relative for light in self.lights)
 
+    def reflectance_scale(self) -> np.ndarray:
+        """The scale s of eq. 4 the reflectance samples take (RGB): the white target's
+        (:meth:`WhiteTarget.reflectance_scale`), π without one (reflectance relative to the
+        lights' stated intensities)."""
+        return (self.white_target.reflectance_scale() if self.white_target is not None
+                else np.full(3, np.pi))
+
     def light(self, name: str) -> Light:
         """The light condition called ``name``."""
         for light in self.lights:

@@ -88,8 +88,7 @@ class RefineProblem:
         self.model = brdf_models.model(estimate.model, **estimate.options)
         brdf, albedo = estimate.to_json(), estimate.albedo.albedo
         names = list(measurements or estimate.measurements)
-        scale = (capture.white_target.reflectance_scale() / np.pi if capture.white_target is not None
-                 else np.ones(3))
+        scale = capture.reflectance_scale() / np.pi
         self.light_kinds = set()
         self.photographs = [self._photograph(capture, m, shapes[m.name], face_model, brdf, albedo, scale,
                                              lamp_radius)

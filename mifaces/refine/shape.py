@@ -242,8 +242,7 @@ class ShapeProblem:
                 raise ValueError(f"shape of measurement {name!r} holds non-finite vertices")
         self.schedule, self.face_model = schedule, face_model
         self.shapes = {name: np.asarray(shapes[name], np.float32) for name in names}
-        scale = (capture.white_target.reflectance_scale() / np.pi if capture.white_target is not None
-                 else np.ones(3))
+        scale = capture.reflectance_scale() / np.pi
         appearance = _appearance(estimate)
         triangles = np.asarray(face_model.triangles, np.int64)
         self.triangles = tuple(mi.UInt32(np.ascontiguousarray(triangles[:, c], np.uint32)) for c in range(3))

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import mitsuba as mi
 import numpy as np
 import scipy.ndimage
 
@@ -65,17 +66,19 @@ def bounced_light(capture, geometry, face_model, estimate, *, measurements=None,
     point after bouncing off the face (module docstring): from renders of ``face_model`` at
     ``geometry[name]`` with the fitted ``estimate`` (a :class:`~mifaces.reflectance.result.BRDFEstimate`:
     its regions and albedo map, eq. 4's scale undone) under the measurement's camera and light."""
-    scale = capture.white_target.reflectance_scale() if capture.white_target is not None else np.pi
-    brdf, albedo = estimate.to_json(), estimate.albedo.albedo * np.float32(np.pi / scale)
+    undo = (np.pi / capture.reflectance_scale()).astype(np.float32)  # eq. 4's scale: albedo in the lights' units
+    brdf, albedo = estimate.to_json(), estimate.albedo.albedo * undo
     camera = capture.camera
     small = coarse_camera(camera, width)
     chosen = [m for m in capture.measurements
               if m.name in geometry and (measurements is None or m.name in measurements)]
     out = {}
     for m in progress_bar(chosen, desc="interreflection", unit="photo", enabled=progress):
-        scene = FaceScene(face_model, geometry[m.name])
-        full, direct = (scene.render(brdf, albedo, small, capture.light(m.light), spp=spp, seed=0, max_depth=depth)
-                        for depth in (INDIRECT_DEPTH, 2))
+        scene = mi.load_dict(FaceScene(face_model, geometry[m.name]).scene(brdf, albedo, small, capture.light(m.light),
+                                                                          spp=spp, max_depth=INDIRECT_DEPTH))
+        direct_only = mi.load_dict({"type": "path", "max_depth": 2})  # the same scene loaded once, two integrators
+        full, direct = (np.array(mi.render(scene, spp=spp, seed=0, integrator=integrator), np.float32)[..., :3]
+                        for integrator in (scene.integrator(), direct_only))
         bounced = np.clip(full - direct, 0.0, None)
         bounced = np.stack([scipy.ndimage.gaussian_filter(bounced[..., c], INDIRECT_BLUR) for c in range(3)], axis=-1)
         out[m.name] = _upsample(bounced, small, camera).astype(np.float32)

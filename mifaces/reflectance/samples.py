@@ -478,8 +478,7 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     raster = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
     region_map = texel_regions_of_mesh(face_model.region_map, face_model.uv, face_model.triangles, resolution,
                                        raster)
-    # without a white target the scale is π: r is then the albedo relative to the lights' stated intensities
-    scale = capture.white_target.reflectance_scale() if capture.white_target is not None else np.pi
+    scale = capture.reflectance_scale()
     parts = []
     chosen = [m for m in capture.measurements if m.name in wanted]
     for m in progress_bar(chosen, desc="reflectance samples", unit="photo", enabled=progress):
