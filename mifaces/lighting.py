@@ -47,6 +47,7 @@ from .reflectance.environment import estimate_map, transport
 from .reflectance.light_balance import log_light_errors
 from .reflectance.samples import _unoccluded, read_photograph, texel_geometry
 from .shape.fit import fit_light
+from .shape.result import ShapeOptions
 from .shape.targets import light_angles
 
 #: File of a result folder holding the capture's lights, estimated and given.
@@ -180,6 +181,7 @@ def refit_lights(capture: Capture, fits, face_model, **options) -> list:
     (:func:`as_given`). The other photographs keep their fits. One round of the alternation of
     shape and lights (``docs/unknown_lights.md``)."""
     by_name = {fit.measurement: fit for fit in fits}
+    options.setdefault("options", ShapeOptions(ambient=capture.ambient_light))
     out = []
     for fit in fits:
         measurement = next(m for m in capture.measurements if m.name == fit.measurement)

@@ -24,8 +24,8 @@ from .feature_points import detect_feature_points
 from .light_entries import read_lights
 from .measurement_entries import read_measurements
 from .problems import Problems
-from .types import (FEATURE_POINT_RANGE, FORMAT, MANIFEST, VERSION, Capture, CaptureError, Distance, Light, Measurement,
-                    WhiteTarget)
+from .types import (AMBIENT_KINDS, FEATURE_POINT_RANGE, FORMAT, MANIFEST, VERSION, Capture, CaptureError, Distance,
+                    Light, Measurement, WhiteTarget)
 
 
 def _camera(entry, problems: Problems) -> Camera | None:
@@ -148,6 +148,9 @@ def load_capture(path: str | os.PathLike | Capture, calibrate: bool = True, dete
     camera = _camera(data.get("camera"), problems)
     white = _white_target(data.get("white_target"), problems)
     distances = _distances(data.get("distances"), problems)
+    ambient = data.get("ambient", AMBIENT_KINDS[0])
+    if ambient not in AMBIENT_KINDS:
+        problems.append(f"ambient: must be one of {list(AMBIENT_KINDS)}, got {ambient!r}"[:300])
     lights = read_lights(data, root, camera, problems)
     measurements = read_measurements(data, root, camera, [l.name for l in lights], problems)
     if problems:
@@ -160,7 +163,7 @@ def load_capture(path: str | os.PathLike | Capture, calibrate: bool = True, dete
         raise CaptureError(root, problems)
     metadata = data.get("metadata", {})
     return Capture(root, camera, tuple(lights), tuple(measurements), tuple(distances), white,
-                   dict(metadata) if isinstance(metadata, dict) else {})
+                   dict(metadata) if isinstance(metadata, dict) else {}, ambient)
 
 
 def _read_manifest(path: Path) -> tuple[Path, dict]:

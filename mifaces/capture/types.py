@@ -26,6 +26,11 @@ RELATIVE_IRRADIANCE = float(np.pi)
 #: Kinds of a light whose lighting is unknown (``"unknown": true`` in the manifest): a distant light
 #: plus ambient, or a low-resolution environment map (``docs/unknown_lights.md``).
 LIGHT_KINDS = ("directional", "environment")
+#: The capture-level ``ambient``: ``"unknown"`` (default; the shape fit fits an ambient term with each
+#: photograph's light) or ``"none"`` (no light reaches the face but each photograph's own: a dark
+#: room, a light stage, a strobe dome whose ambient-only frame is dark; the shape fit holds its ambient
+#: term at zero, as the reflectance stage has none).
+AMBIENT_KINDS = ("unknown", "none")
 #: Environment map of an unknown ``"environment"`` light: default size (width, height) in texels of the
 #: latitude-longitude map, and the allowed heights (the width is twice the height).
 ENVMAP_SIZE = (32, 16)
@@ -258,6 +263,14 @@ class Capture:
     distances: tuple[Distance, ...]
     white_target: WhiteTarget | None
     metadata: dict = field(default_factory=dict)
+    ambient: str = AMBIENT_KINDS[0]
+
+    @property
+    def ambient_light(self) -> bool:
+        """Light other than each photograph's own may reach the face (:data:`AMBIENT_KINDS`): the
+        shape fit fits an ambient term where it does, and holds it at zero where the capture says
+        ``"ambient": "none"``."""
+        return self.ambient != "none"
 
     @property
     def greyscale(self) -> bool:

@@ -47,6 +47,10 @@ POSE = "frontal"
 #: Training lights of :func:`default_split`: elevation and azimuth limits (degrees), so each lights most of the face.
 MAX_ELEVATION = 60.0
 MAX_AZIMUTH = 90.0
+#: The imported capture says ``"ambient": "none"`` (no light but the strobe's) where the subject's
+#: ambient-only frame is this dark against the training photographs (mean over mean); the three
+#: subjects here read 0.013-0.015.
+AMBIENT_NEGLIGIBLE = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -201,6 +205,12 @@ def import_subject(subject_dir: str | os.PathLike, out: str | os.PathLike, train
       unknown); all of pose :data:`POSE`; their ``diffuse`` companion is the
       training photograph whose light is nearest the camera axis (evenly lit
       for the landmark detector; never a held-out one).
+    * ``"ambient": "none"`` where the subject's ambient-only frame
+      (:func:`read_ambient`) is darker than :data:`AMBIENT_NEGLIGIBLE` of
+      the training photographs (their means): no light but the strobe's, so
+      the shape fit holds its ambient term at zero (``Capture.ambient_light``);
+      the ratio is in ``metadata.ambient_fraction``. Without an ambient frame,
+      or a brighter one, the capture leaves ``ambient`` out (fitted).
     * No white target and no distances (reflectance only up to a factor, and
       no absolute scale); no feature points: :func:`mifaces.capture.load_capture`
       detects them in the companion, inside the capture-level ``face_box``
@@ -246,7 +256,8 @@ def import_subject(subject_dir: str | os.PathLike, out: str | os.PathLike, train
         with atomic_write(out / "images" / f"{image.stem}.pgm") as f:
             f.write((folder / f"{image.stem}.pgm").read_bytes())
     write_json(out / SPLIT, {"train": [i.stem for i in training], "heldout": [i.stem for i in held_out]})
-    write_json(out / MANIFEST, {
+    fraction = ambient_fraction(folder, training)
+    manifest = {
         "format": FORMAT, "version": VERSION,
         "camera": {"width": width, "height": height, "calibrated": False, "focal_guess_px": FOCAL_GUESS * height},
         "face_box": [0, 0, width - 1, height - 1],
@@ -257,6 +268,20 @@ def import_subject(subject_dir: str | os.PathLike, out: str | os.PathLike, train
                           "diffuse": {"path": f"images/{companion.stem}.pgm", "transfer": "linear"}}
                          for i in training],
         "metadata": {"source": "Extended Yale Face Database B, cropped (Georghiades et al. 2001; Lee et al. 2005)",
-                     "subject": folder.name, "subject_dir": str(folder.resolve()), "split": SPLIT},
-    })
+                     "subject": folder.name, "subject_dir": str(folder.resolve()), "split": SPLIT,
+                     "ambient_fraction": fraction},
+    }
+    if fraction is not None and fraction < AMBIENT_NEGLIGIBLE:
+        manifest["ambient"] = "none"
+    write_json(out / MANIFEST, manifest)
     return out
+
+
+def ambient_fraction(subject_dir: str | os.PathLike, training: list[YaleImage]) -> float | None:
+    """How bright the subject's ambient-only frame is against the training photographs (mean over
+    their mean), or None where the folder has no ambient frame."""
+    try:
+        ambient = read_ambient(subject_dir)
+    except FileNotFoundError:
+        return None
+    return float(ambient.mean() / np.mean([image.pixels.mean() for image in training]))

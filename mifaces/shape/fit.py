@@ -17,7 +17,7 @@ from ..environment import dominant_direction
 from ..model import load_model
 from ..progress import progress as progress_bar
 from ..status import CONVERGED, DIVERGED, NOT_CONVERGED
-from .energy import DIFFUSE, POINT, lit_key
+from .energy import DIFFUSE, POINT, directed, lit_key
 from .fitter import Fitter
 from .io import model_source, write_fit, write_index
 from .poses import companions, one_face, own_lights, pose_groups, shared_fit
@@ -137,6 +137,10 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
             initial.setdefault(f"{key}.light_angles", start_light_angles(source, camera, camera.position))
         else:
             positions[key] = source.position
+    if not options.ambient:  # no light but the photographs' own: each directed light's ambient held at zero
+        held = [f"{key}.ambient" for key in images if directed(key)]
+        initial.update(dict.fromkeys(held, 0.0))
+        fixed = tuple(fixed) + tuple(held)
     fitter = Fitter(model, camera, images, targets, weights, schedule, np.random.default_rng(options.seed),
                     light_world=positions, fit_focal=options.fit_focal, initial_color=initial_color,
                     initial=initial, fixed=fixed, distances=distances)
@@ -300,7 +304,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     shared = dict(weights=weights, distances=capture.distances, progress=progress,
                   options=ShapeOptions(use_diffuse=use_diffuse, fit_focal=fit_focal, seed=seed,
                                        max_feature_error=max_feature_error, feature_noise=feature_noise,
-                                       max_image_rms=max_image_rms))
+                                       max_image_rms=max_image_rms, ambient=capture.ambient_light))
     for leader, *others in groups:
         light = capture.light(leader.light) if leader.light else None
         fit = fit_measurement(leader, capture.camera, model, light=light, schedule=schedule,

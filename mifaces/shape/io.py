@@ -69,14 +69,17 @@ def write_fit(out, fit: ShapeFit, model) -> None:
 def write_index(out, capture, model, fits: list[ShapeFit], reference=None, model_source=None) -> None:
     """Write ``shapes.json``: the capture, the model (``model_source``: what
     :func:`mifaces.load_model` loads it from), the camera and per measurement
-    its status and its files' SHA-256 (measurements of earlier runs kept)."""
+    its status and its files' SHA-256 (measurements of earlier runs kept), and whether the
+    directed lights' ambient term was fitted or held at zero (``Capture.ambient_light``)."""
     out = Path(out)
     index = {"format": "mifaces-shapes", "version": 1, "capture": str(capture.path), "model": model.name,
              "model_source": str(model_source if model_source is not None else model.name),
              "vertex_count": model.vertex_count, "shape_modes": model.shape_dim,
              "model_shape_modes": int(model.metadata.get("shape_modes_of", model.shape_dim)),
              "frame": "camera (OpenCV), mm",
-             "camera": capture.camera.to_json(), "texture_reference": reference, "measurements": {}}
+             "camera": capture.camera.to_json(), "texture_reference": reference,
+             "ambient": "fitted" if capture.ambient_light else "held at zero (the capture's \"ambient\": \"none\")",
+             "measurements": {}}
     old = out / INDEX
     if old.is_file():
         try:

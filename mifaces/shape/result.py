@@ -122,6 +122,11 @@ class ShapeOptions:
         Adam's step (in natural units of each parameter) at the start and the end of the image levels.
     visibility_interval : int
         Iterations between re-computations of visibility and cast shadows by ray casting.
+    ambient : bool
+        Fit an ambient term with each photograph lit by a directed light. False holds it at zero:
+        the capture says no other light reaches the face (``Capture.ambient_light``), and an
+        ambient term would only trade against the light's frontal part (``docs/unknown_lights.md``).
+        The diffuse-light companion keeps its ambient: that is its light.
     """
 
     use_diffuse: bool = True
@@ -133,6 +138,7 @@ class ShapeOptions:
     max_image_rms: float = MAX_IMAGE_RMS
     lr: tuple = (0.1, 0.01)
     visibility_interval: int = 50
+    ambient: bool = True
 
 
 @dataclass
