@@ -316,7 +316,8 @@ def lights_document(capture: Capture) -> dict:
     """The ``lights.json`` document of ``capture``'s lights, in the capture format's frame and sign
     convention (module docstring): per light ``name``, ``kind``, ``direction`` (directional) or
     ``position_mm`` (point), ``intensity`` (RGB), ``relative`` and ``estimated``; for an
-    estimated one the photographs it came from and their spread."""
+    estimated one the photographs it came from and their spread; and the capture's ``ambient``
+    (``"none"``: the shape fit held its ambient term at zero, :attr:`Capture.ambient_light`)."""
     estimated = capture.metadata.get("estimated_lights", {})
     entries = []
     for light in capture.lights:
@@ -342,7 +343,8 @@ def lights_document(capture: Capture) -> dict:
         entries.append(entry)
     document = {"lights": entries, "frame": "world frame of the capture; direction: unit vector towards the light",
                 "intensity": "irradiance at normal incidence (pixel value) per RGB channel"
-                + ("; estimated lights: relative, their mean " + f"{RELATIVE_IRRADIANCE:.6g}" if estimated else "")}
+                + ("; estimated lights: relative, their mean " + f"{RELATIVE_IRRADIANCE:.6g}" if estimated else ""),
+                "ambient": capture.ambient}
     if any(light.environment for light in capture.lights):
         document["map"] = (f"environment maps: latitude-longitude OpenEXR, linear RGB radiance in pixel value, in "
                            "the frame of mifaces.environment.environment_emitter (+y the camera's up, +z towards the "

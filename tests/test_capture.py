@@ -223,6 +223,8 @@ CORRUPTIONS = {
     "duplicate measurement": (_edit(_set("measurements", 1, "name", value="m00")),
                               "measurements: name 'm00' used more than once"),
     "no measurements": (_edit(_set("measurements", value=[])), "measurements: need a non-empty list"),
+    "unknown ambient": (_edit(lambda d: d.update(ambient="dim")), "ambient: must be one of ['unknown', 'none'], "
+                                                                  "got 'dim'"),
     "spheres not found": (_blank_outline, "light 'L01': steel-sphere calibration failed: found 0 sphere(s) in "
                                           "L01_spheres_diffuse.exr"),
 }
@@ -277,3 +279,11 @@ def test_point_lights_and_colour_images_stay_as_they_were(studio):
     assert not any(light.directional or light.relative for light in capture.lights)
     assert capture.camera.calibrated and not capture.greyscale
     assert all(m.image.channels == 3 and m.feature_points for m in capture.measurements)
+
+
+def test_a_capture_may_say_no_light_reaches_the_face_but_its_own(studio, tmp_path):
+    assert load_capture(studio).ambient_light  # default: an ambient term is fitted
+    copy = copy_capture(studio, tmp_path / "capture")
+    _edit(lambda d: d.update(ambient="none"))(copy)
+    capture = load_capture(copy)
+    assert capture.ambient == "none" and not capture.ambient_light

@@ -64,6 +64,8 @@ def test_estimate_lights_shares_and_turns_into_the_world_frame(tmp_path):
     assert entries["top"]["kind"] == "directional" and entries["top"]["estimated"] is True
     np.testing.assert_allclose(entries["top"]["direction"], top_l.direction)
     assert entries["known"]["estimated"] is False and entries["known"]["direction"] == [0.0, 0.0, -1.0]
+    assert document["ambient"] == "unknown"  # the capture's: the shape fit fitted an ambient term
+    assert json.loads(write_lights(tmp_path / "dark", replace(result, ambient="none")).read_text())["ambient"] == "none"
     write_lights_picture(tmp_path / "res" / "lights.png", result)
     assert (tmp_path / "res" / "lights.png").stat().st_size > 1000
 

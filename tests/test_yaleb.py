@@ -200,3 +200,24 @@ def test_import_subject_with_unknown_lights(imported, tmp_path):
     assert [(m.name, m.light, m.pose) for m in unknown.measurements] == \
         [(m.name, m.light, m.pose) for m in given.measurements]
     assert (hidden / yaleb.SPLIT).read_text() == (out / yaleb.SPLIT).read_text()
+
+
+def test_import_says_the_dome_has_no_ambient_light(imported, tmp_path):
+    """The ambient-only frame is about 1.5 % of the photographs: the capture says ``"ambient": "none"``
+    and records the ratio; without that frame (or with a bright one) ``ambient`` is left out (fitted)."""
+    import shutil
+
+    from mifaces.capture import load_capture
+
+    out, folder = imported
+    data = json.loads((out / MANIFEST).read_text())
+    assert data["ambient"] == "none" and 0.005 < data["metadata"]["ambient_fraction"] < yaleb.AMBIENT_NEGLIGIBLE
+    assert not load_capture(out, detect=False).ambient_light
+    bare = tmp_path / "subject"
+    shutil.copytree(folder, bare, ignore=shutil.ignore_patterns("*_Ambient.pgm"))
+    data = json.loads((yaleb.import_subject(bare, tmp_path / "capture") / MANIFEST).read_text())
+    assert "ambient" not in data and data["metadata"]["ambient_fraction"] is None
+    bright = next(bare.glob("*_P00A+000E+00.pgm"))  # the frontal photograph as the ambient frame
+    shutil.copy(bright, bare / f"{folder.name}_P00_Ambient.pgm")
+    data = json.loads((yaleb.import_subject(bare, tmp_path / "lit", force=True) / MANIFEST).read_text())
+    assert "ambient" not in data and data["metadata"]["ambient_fraction"] > 1.0

@@ -532,8 +532,12 @@ def sec_unknown_lights(d):
 
 def sec_unknown_lights_simulated(d):
     lights = items(d.get("lights"))
+    ambient = d.get("ambient", "unknown")
     lines = ["Each light's estimate (the mean over the photographs under it) against its true direction from the "
-             "fitted head's centre, and how far its photographs' estimates lie from that mean.", ""]
+             "fitted head's centre, and how far its photographs' estimates lie from that mean. The hidden capture's "
+             f"`ambient`: {text(ambient)} ("
+             + ("held at zero in the shape fit" if ambient == "none" else "the shape fit fits an ambient term") + ").",
+             ""]
     lines += table(["light", "angle to the truth (deg)", "before the alternation", "photographs", "their spread (deg)"],
                    [[name, fixed(get(v, "angle_deg"), 1), fixed(get(v, "angle_deg_first_pass", default=None), 1),
                      text(len(get(v, "photographs") or [])), fixed(get(v, "spread_deg"), 1)] for name, v in lights])

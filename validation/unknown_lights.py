@@ -22,9 +22,12 @@ poses, two point lights 1.5 m away, each shared by three poses) with its lights 
 shape fit estimating them (:func:`simulated_run`), each light's estimate, the mean over its
 three photographs, against its true direction from the face (the steel-sphere calibration
 seen from the fitted head's centre); to ``validation/results/unknown_lights_simulated.json``.
+With ``--ambient none`` the hidden capture says no light but the lamps reaches the face (what the
+simulator renders), so the shape fit holds its ambient term at zero, as the Yale import's does;
+to ``unknown_lights_simulated_ambient_none.json``.
 
     python validation/unknown_lights.py --data ../shared/data/yaleb --out out/unknown_lights [--subjects yaleB01]
-    python validation/unknown_lights.py --simulated --out out/unknown_lights
+    python validation/unknown_lights.py --simulated --out out/unknown_lights [--ambient none]
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 import numpy as np
 
 from mifaces.brdf import NAMES
+from mifaces.capture.types import AMBIENT_KINDS
 from mifaces.atomic import save_figure, write_json
 from mifaces.importers.yaleb import default_split, read_subject
 from mifaces.lighting import LIGHTS_FILE
@@ -63,9 +67,10 @@ def angular_errors(lights_json: Path, subject_dir: Path, train: int) -> dict:
     return {name: float(np.degrees(np.arccos(np.clip(estimated[name] @ truth[name], -1, 1)))) for name in truth}
 
 
-def simulated_run(out: Path) -> dict:
+def simulated_run(out: Path, ambient: str | None = None) -> dict:
     """The default simulated capture at ``out/capture``, its lights hidden in a second manifest
-    beside the first (``capture_unknown.json``: the same images), fitted (:func:`mifaces.shape.fit_shape`)
+    beside the first (``capture_unknown.json``: the same images; with ``ambient``, saying so:
+    ``"none"``, what the simulator's photographs hold, no lamp but the one), fitted (:func:`mifaces.shape.fit_shape`)
     and its lights estimated (:func:`mifaces.lighting.estimate_lights`, with ``measure``'s round of
     alternation: :func:`~mifaces.lighting.as_given`, :func:`~mifaces.lighting.refit_lights`); per light
     the angle (degrees)
@@ -80,6 +85,8 @@ def simulated_run(out: Path) -> dict:
     simulate(out / "capture", force=True)
     data = json.loads((out / "capture" / MANIFEST).read_text())
     data["lights"] = [{"name": light["name"], "unknown": True} for light in data["lights"]]
+    if ambient is not None:
+        data["ambient"] = ambient
     write_json(out / "capture" / "capture_unknown.json", data)
     given, hidden = load_capture(out / "capture"), load_capture(out / "capture" / "capture_unknown.json")
     t_fit = time.perf_counter()
@@ -101,7 +108,7 @@ def simulated_run(out: Path) -> dict:
                               "angle_deg_first_pass": float(np.degrees(np.arccos(np.clip(before @ truth, -1, 1)))),
                               "direction": light.direction.tolist(), "true_direction": truth.tolist(),
                               **estimated.metadata["estimated_lights"][light.name]}
-    return {"lights": lights, "seconds": seconds,
+    return {"ambient": hidden.ambient, "lights": lights, "seconds": seconds,
             "fits": {f.measurement: {"status": f.status, "shared_with": f.shared_with} for f in fits}}
 
 
@@ -158,12 +165,17 @@ def main(argv=None) -> int:
     parser.add_argument("--results", type=Path, default=RESULTS)
     parser.add_argument("--simulated", action="store_true",
                         help="the default simulated capture with its lights hidden, instead of the Yale subjects")
+    parser.add_argument("--ambient", choices=AMBIENT_KINDS, default=None,
+                        help="with --simulated: the hidden capture's 'ambient' (default: left out, fitted); "
+                             "'none' writes unknown_lights_simulated_ambient_none.json")
     args = parser.parse_args(argv)
     command = "python validation/unknown_lights.py " + " ".join(argv if argv is not None else sys.argv[1:])
     if args.simulated:
         document = {"data": "SIMULATED: the default capture of mifaces simulate (six poses, two point lights "
-                            "1.5 m away), lights hidden", "command": command, **simulated_run(args.out / "simulated")}
-        write_json(args.results / "unknown_lights_simulated.json", document)
+                            "1.5 m away), lights hidden", "command": command,
+                    **simulated_run(args.out / "simulated", args.ambient)}
+        suffix = "" if args.ambient is None else f"_ambient_{args.ambient}"
+        write_json(args.results / f"unknown_lights_simulated{suffix}.json", document)
         for name, entry in document["lights"].items():
             print(f"{name}: {entry['angle_deg']:.1f} deg from the truth, spread of its photographs "
                   f"{entry['spread_deg']:.1f} deg ({len(entry['photographs'])} photographs)")
