@@ -181,7 +181,8 @@ def refit_lights(capture: Capture, fits, face_model, **options) -> list:
     (:func:`as_given`). The other photographs keep their fits. One round of the alternation of
     shape and lights (``docs/unknown_lights.md``)."""
     by_name = {fit.measurement: fit for fit in fits}
-    options.setdefault("options", ShapeOptions(ambient=capture.ambient_light))
+    # the capture's ambient holds whatever options are given, as in fit_shape
+    options["options"] = replace(options.get("options") or ShapeOptions(), ambient=capture.ambient_light)
     out = []
     for fit in fits:
         measurement = next(m for m in capture.measurements if m.name == fit.measurement)
