@@ -33,7 +33,7 @@ from .gallery import render_gallery
 from .importers.diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
 from .importers.yaleb import SPLIT, import_subject
 from .capture.detector import NoFaceError, detect_landmarks
-from .cli_options import default, renamed, width_x_height
+from .cli_options import default, fit_flag, renamed, width_x_height
 from .model import load_model
 from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
 from .shape.io import load_geometry
@@ -51,6 +51,7 @@ from .studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
 
 #: Largest texture resolution R the commands take (R x R texels).
 MAX_TEXTURE = math.isqrt(MAX_IMAGE_PIXELS)
+TEXEL_ALBEDO_HELP = "Fit the glossy part with an albedo per texel: the albedo texture stays out of it (docs/uncertainty.md)."
 
 
 class Commands(click.Group):
@@ -219,13 +220,14 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
 @click.option("--uncertainty", default=default(FitOptions, "uncertainty"), show_default=True,
               type=click.Choice(UNCERTAINTY_METHODS + ("none",)),
               help="How the parameters' 95 % intervals are estimated (docs/uncertainty.md); 'none' leaves them out.")
+@fit_flag("texel_albedo", TEXEL_ALBEDO_HELP)
 def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolution: int, lobes: int,
              face_model: str | None, force: bool, refine: bool, normals: bool, specular_maps: bool,
-             uncertainty: str) -> None:
+             uncertainty: str, texel_albedo: bool) -> None:
     """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
     check_result_target(out_dir, BRDF_KIND, force)
     options = FitOptions(resolution=resolution, lobes=lobes, normals=normals, specular_maps=specular_maps,
-                         uncertainty=None if uncertainty == "none" else uncertainty)
+                         uncertainty=None if uncertainty == "none" else uncertainty, texel_albedo=texel_albedo)
     if not refine:
         estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, out=out_dir, force=force,
                                   options=options)
@@ -273,15 +275,17 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolut
 @click.option("--interreflection/--no-interreflection", default=default(FitOptions, "interreflection"),
               show_default=True, help="Take the light bounced between parts of the face out of the samples "
                                       "(a second fit; bounced light biases skin's lobe low).")
+@fit_flag("texel_albedo", TEXEL_ALBEDO_HELP)
 def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int,
             refine: bool, normals: bool, specular_maps: bool, refine_shape: bool, balance_lights: bool,
-            interreflection: bool) -> None:
+            interreflection: bool, texel_albedo: bool) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
     check_writable(out_dir)
     report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, refine=refine,
                              refine_shape=refine_shape,
                              options=FitOptions(resolution=resolution, normals=normals, specular_maps=specular_maps,
-                                                balance_lights=balance_lights, interreflection=interreflection))
+                                                balance_lights=balance_lights, interreflection=interreflection,
+                                                texel_albedo=texel_albedo))
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")

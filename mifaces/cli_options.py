@@ -9,10 +9,19 @@ import inspect
 
 import click
 
+from .reflectance.options import FitOptions
+
 
 def default(function, name: str):
     """The default of parameter ``name`` of API ``function``: the CLI states no default of its own."""
     return inspect.signature(function).parameters[name].default
+
+
+def fit_flag(name: str, help: str):
+    """The ``--NAME/--no-NAME`` option of the :class:`~mifaces.reflectance.FitOptions` field ``name``
+    (``texel_albedo``: ``--texel-albedo``), its default the field's."""
+    flag = name.replace("_", "-")
+    return click.option(f"--{flag}/--no-{flag}", default=default(FitOptions, name), show_default=True, help=help)
 
 
 def width_x_height(ctx, param, value: str) -> tuple[int, int]:
@@ -50,4 +59,4 @@ def renamed(old: str, new: str, name: str, **attrs):
     return decorate
 
 
-__all__ = ["default", "width_x_height", "renamed"]
+__all__ = ["default", "fit_flag", "width_x_height", "renamed"]

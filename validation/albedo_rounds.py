@@ -50,6 +50,8 @@ SEEDS = list(U.TUNING_SEEDS)
 VARIANTS = {"jackknife": ("jackknife", None), "sandwich": ("sandwich", None), "laplace": ("laplace", None),
             "jackknife_known_offsets": ("jackknife", None), "jackknife_tile16": ("jackknife", 16),
             "jackknife_tile32": ("jackknife", 32)}
+#: The ``--rounds`` value of the fit with an albedo per texel (``FitOptions(texel_albedo=True)``).
+TEXEL = "texel"
 #: Region classes the coverage is reported for.
 CLASSES = {"skin": ("skin",), "small": U.SMALL}
 
@@ -73,12 +75,14 @@ def _timed(*args, **kwargs):
 
 
 def _fit(capture, face, shapes, samples, model, rounds, method, known_offsets=False, texture=U.TEXTURE, tile=None):
+    """``fit_brdf`` with ``rounds`` alternations, or :data:`TEXEL` for ``FitOptions(texel_albedo=True)``."""
     with warnings.catch_warnings(), mock.patch.object(
             fitting, "region_uncertainty", _known_offsets if known_offsets else _timed), \
             mock.patch.object(U.unc, "TILE_AT_128", U.unc.TILE_AT_128 if tile is None else tile):
         warnings.simplefilter("ignore")
         return fit_brdf(capture, model, shapes, face_model=face, samples=samples, progress=False,
-                        options=FitOptions(resolution=texture, albedo_rounds=rounds, uncertainty=method))
+                        options=FitOptions(resolution=texture, albedo_rounds=0 if rounds == TEXEL else rounds,
+                                           texel_albedo=rounds == TEXEL, uncertainty=method))
 
 
 def _coverage(records, regions=None, exclude=()) -> dict:
@@ -128,7 +132,7 @@ def summary(rows: list) -> dict:
     channels), the mean of (fitted - truth)/truth over the seeds and of its absolute value."""
     out = {}
     for model in sorted({r["model"] for r in rows}):
-        for k in sorted({r["albedo_rounds"] for r in rows}):
+        for k in sorted({r["albedo_rounds"] for r in rows}, key=str):
             chosen = [r for r in rows if r["model"] == model and r["albedo_rounds"] == k]
             coverage = {}
             for variant in VARIANTS:
@@ -254,7 +258,9 @@ def exact(model: str, seed: int, rounds: int, work: Path) -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=SEEDS)
-    parser.add_argument("--rounds", type=int, nargs="+", default=[0, 3])
+    parser.add_argument("--rounds", type=lambda v: v if v == TEXEL else int(v), nargs="+", default=[0, 3],
+                        help=f"numbers of alternations, or {TEXEL!r}: the fit with an albedo per texel")
+    parser.add_argument("--out", default="albedo_rounds.json", help="the result file's name in validation/results")
     parser.add_argument("--models", nargs="+", default=["cooktorrance", "phong"])
     parser.add_argument("--work", type=Path, default=Path("out/albedo_rounds"))
     parser.add_argument("--cost", type=int, default=0, metavar="N", help="only the cost, on N captures")
@@ -277,7 +283,7 @@ def main(argv=None) -> int:
         return 0
     t0 = time.perf_counter()
     rows = [row for model in args.models for seed in args.seeds for row in run(model, seed, args.rounds, args.work)]
-    write_json(RESULTS / "albedo_rounds.json", {
+    write_json(RESULTS / args.out, {
         "label": "SIMULATED", "command": command, "image": list(U.IMAGE), "measurements": U.MEASUREMENTS,
         "texture": U.TEXTURE, "interval_method": U.unc.METHODS[0], "variants": VARIANTS,
         "summary": summary(rows), "seconds": time.perf_counter() - t0, "rows": rows})

@@ -256,24 +256,45 @@ def measure_check(seeds, tmp: Path, extra: tuple = ()) -> dict:
         subprocess.run([str(command), "measure", str(folder), "--out", str(out), "--geometry", "ground-truth",
                         "--brdf", "cooktorrance", *extra], check=True, stdout=subprocess.DEVNULL)
         fitted = json.loads((out / "brdf" / "cooktorrance" / "brdf.json").read_text())
-        params, entries = fitted["regions"]["skin"], fitted["uncertainty"]["skin"]
-        checks = []
-        for name, value in truth["regions"]["skin"].items():
-            entry = entries[name]
-            for c in (range(3) if np.ndim(value) else [None]):
-                pick = (lambda v: v[c]) if c is not None else (lambda v: v)
-                lo, hi = (pick(b) for b in entry["interval95"]) if "interval95" in entry else (None, None)
-                true = float(pick(value))
-                checks.append({"parameter": name, "channel": c, "truth": true, "fitted": float(pick(params[name])),
-                               "lo": lo, "hi": hi, "status": entry.get("status", intervals.ESTIMATED),
-                               "covered": None if lo is None else bool(lo <= true <= hi)})
-        rows.append({"seed": seed, "truth": truth["regions"]["skin"], "parameters": checks,
-                     "all_covered": all(c["covered"] for c in checks), "seconds": time.perf_counter() - t})
+        # every region's same-family truth: skin's drawn, the others' the simulator's published values
+        regions = {r: {k: v for k, v in p.items() if k != "eta"}
+                   for r, p in read_ground_truth(load_capture(folder)).brdf["regions"].items()}
+        checks = {region: _json_checks(fitted, region, regions[region])
+                  for region in fitted["uncertainty"] if region in regions}
+        skin = checks.pop("skin")
+        others = [dict(c, region=region) for region, cs in checks.items() for c in cs if c["covered"] is not None]
+        rows.append({"seed": seed, "truth": truth["regions"]["skin"], "parameters": skin,
+                     "all_covered": all(c["covered"] for c in skin), "other_regions": others,
+                     "seconds": time.perf_counter() - t})
         print(rows[-1], flush=True)
+    pooled = [c["covered"] for r in rows for c in r["parameters"] + r["other_regions"] if c["covered"] is not None]
     return {"command": "mifaces simulate OUT --seed S --brdf cooktorrance --brdf-params SKIN.json; "
                        "mifaces measure OUT --geometry ground-truth --brdf cooktorrance " + " ".join(extra),
             "skin_seed_offset": MEASURE_SEED_OFFSET, "tile_at_128": unc.TILE_AT_128, "min_tiles": unc.MIN_TILES,
-            "captures": len(rows), "all_covered": sum(r["all_covered"] for r in rows), "runs": rows}
+            "captures": len(rows), "all_covered": sum(r["all_covered"] for r in rows),
+            "pooled_coverage": {"coverage": float(np.mean(pooled)) if pooled else None, "intervals": len(pooled),
+                                "regions": "every region with an estimated interval, skin included"},
+            "runs": rows}
+
+
+def _json_checks(fitted: dict, region: str, truth: dict) -> list[dict]:
+    """Per parameter and channel of ``truth`` (one region's true values), the fitted value of
+    ``brdf.json`` (``fitted``), its 95 % interval and whether it holds the truth (None: no interval)."""
+    params, entries = fitted["regions"][region], fitted["uncertainty"][region]
+    checks = []
+    for name, value in truth.items():
+        entry = entries.get(name, {})
+        for c in (range(3) if np.ndim(value) else [None]):
+            pick = (lambda v: v[c]) if c is not None else (lambda v: v)
+            status = entry.get("status", intervals.ESTIMATED)
+            status = pick(status) if isinstance(status, list) else status
+            lo, hi = (pick(b) for b in entry["interval95"]) if "interval95" in entry else (None, None)
+            estimated = lo is not None and status == intervals.ESTIMATED
+            true = float(pick(value))
+            checks.append({"parameter": name, "channel": c, "truth": true, "fitted": float(pick(params[name])),
+                           "lo": lo, "hi": hi, "status": status,
+                           "covered": bool(lo <= true <= hi) if estimated else None})
+    return checks
 
 
 def coverage(records: list, **where) -> dict:
@@ -464,6 +485,9 @@ def main() -> None:
                              "measured on the true geometry (uncertainty_measure.json)")
     parser.add_argument("--interreflection", action="store_true",
                         help="with --measure-check: measure --interreflection (uncertainty_measure_interreflection.json)")
+    parser.add_argument("--texel-albedo", action="store_true",
+                        help="with --measure-check: measure --texel-albedo (uncertainty_measure[_interreflection]"
+                             "_texel_albedo.json)")
     parser.add_argument("--summarize", action="store_true",
                         help="only the tables and the figure again, from the records uncertainty.json holds")
     parser.add_argument("--cost", type=int, default=0, metavar="N",
@@ -486,8 +510,9 @@ def main() -> None:
             write_json(RESULTS / "uncertainty_cost.json", cost(range(args.cost), tmp))
             return
         if args.measure_check:
-            extra = ("--interreflection",) if args.interreflection else ()
-            name = "uncertainty_measure_interreflection.json" if args.interreflection else "uncertainty_measure.json"
+            extra = (("--interreflection",) if args.interreflection else ()) + \
+                (("--texel-albedo",) if args.texel_albedo else ())
+            name = "uncertainty_measure" + "".join(f"_{flag[2:].replace('-', '_')}" for flag in extra) + ".json"
             write_json(RESULTS / name, measure_check(range(args.measure_check), tmp, extra))
             return
         if args.tune_tiles:

@@ -140,7 +140,15 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     rounds = 0 if normals else int(options.albedo_rounds)
     region_fit = dict(progress=progress, fixed=fixed, fixed_by_region=per_region, schedule=schedule, seed=seed,
                       cluster=tile_clusters(on_face.texel, resolution, label=on_face.label))
-    fits = fit_regions(brdf, on_face, names, **region_fit, uncertainty=None if normals or rounds else uncertainty)
+    texel_albedo = options.texel_albedo and not normals
+    fits = fit_regions(brdf, on_face, names, **region_fit,
+                       uncertainty=None if normals or rounds or texel_albedo else uncertainty)
+    if texel_albedo:  # the glossy parts with an albedo per texel; then, as a last round, the intervals
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the first fit has warned already
+            fits = fit_regions(brdf, on_face, names, **region_fit, uncertainty=None, texel_albedo=True,
+                               starts={name: fit.params for name, fit in fits.items()})
+        rounds = 1
     for round_ in range(rounds):
         by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
         # unshrunk: the texel means (a texel effect per texel, consistent for the glossy part); shrunk
@@ -175,7 +183,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
                             measurements=tuple(samples.measurement_names),
                             seconds={"samples": t_samples - t0, "fit": t_fit - t_samples, "refine": t_end - t_fit,
                                      "total": t_end - t0}, light_balance=light_balance,
-                            interreflection=interreflection)
+                            interreflection=interreflection, texel_albedo=texel_albedo)
     if texel_normals is not None:
         first = next(name for name in estimate.measurements if name in shapes)
         estimate.normals = mitsuba_tangent_normals(texel_normals.normals, face, shapes[first]).astype(np.float32)

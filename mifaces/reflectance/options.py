@@ -58,6 +58,13 @@ class FitOptions:
         re-estimate them in every jackknife or sandwich replicate
         (:mod:`mifaces.reflectance.fit.uncertainty`), and still hold the truth less often
         than they say on simulated faces (``docs/uncertainty.md``): off by default.
+    texel_albedo : bool
+        Fit each region's glossy part with an albedo of its own for every texel, eliminated
+        from the problem (``fit_region(texel=...)``): the glossy part is then measured from
+        how each texel changes between photographs, and the albedo texture no longer leaks
+        into it. The same optimum as ``albedo_rounds`` alternated to convergence, reached in
+        one fit; the intervals are then estimated as after the last of those rounds
+        (re-estimating each texel's offset per replicate). Ignored with ``normals``.
     balance_lights : bool
         Correct the given lights' relative intensities by the face's one albedo before
         fitting (:func:`mifaces.reflectance.light_balance.balance_given_lights`; the mean
@@ -83,6 +90,7 @@ class FitOptions:
     specular_maps: bool = False
     uncertainty: str | None = METHODS[0]
     albedo_rounds: int = 0
+    texel_albedo: bool = False
     balance_lights: bool = False
     interreflection: bool = False
 

@@ -80,6 +80,9 @@ class BRDFEstimate:
         How the light bounced off the face was taken out of the samples
         (``FitOptions(interreflection=True)``, :mod:`mifaces.reflectance.interreflection`: the
         renders' depth, width and samples per pixel, the seconds it took); None where it was not.
+    texel_albedo : bool
+        Whether the glossy parts were fitted with an albedo per texel
+        (``FitOptions(texel_albedo=True)``); ``brdf.json`` says so where they were.
     """
 
     model: str
@@ -97,6 +100,7 @@ class BRDFEstimate:
     lighting: dict | None = None
     light_balance: dict | None = None
     interreflection: dict | None = None
+    texel_albedo: bool = False
 
     def fitted_light(self, light):
         """``light`` as this estimate was fitted under it (:func:`fitted_light`)."""
@@ -133,6 +137,7 @@ class BRDFEstimate:
                 **({} if self.lighting is None else {"lighting": self.lighting}),
                 **({} if self.light_balance is None else {"light_balance": self.light_balance}),
                 **({} if self.interreflection is None else {"interreflection": self.interreflection}),
+                **({"texel_albedo": True} if self.texel_albedo else {}),
                 **({} if self.normals is None else {"normals": FILES["normals"],
                                                     "normal_refinement": self.normal_refinement}),
                 **({} if self.specular is None else {"specular": FILES["specular"], "specular_shrinkage": {

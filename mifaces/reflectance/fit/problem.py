@@ -28,7 +28,7 @@ class Problem:
     (``dr.freeze``), so a step replays the kernel instead of tracing the model again.
     """
 
-    def __init__(self, model, space, light, view, reflectance, sigma):
+    def __init__(self, model, space, light, view, reflectance, sigma, texel=None):
         self.model, self.space = model, space
         # in Dr.Jit's own memory (device_array): a mapped NumPy array's alignment would enter the kernels
         self.wi = mi.Vector3f(*(device_array(np.float32, light[:, k]) for k in range(3)))
@@ -44,6 +44,14 @@ class Problem:
             _FROZEN[key] = dr.freeze(sums, warn_after=1000,  # one recording per sample count
                                      state_fn=lambda arrays, u, jacobian: (dr.width(arrays["w"]), jacobian))
         self._sums = _FROZEN[key]
+        #: with ``texel`` (N,): each texel's albedo is its own free parameter, eliminated (see :meth:`system`)
+        self.texel = None
+        if texel is not None:
+            if np.shape(texel) != np.shape(sigma):
+                raise ValueError(f"texel must have shape {np.shape(sigma)}, got {np.shape(texel)}")
+            self.texel_index = np.unique(np.asarray(texel), return_inverse=True)[1]
+            self.texels = int(self.texel_index.max()) + 1 if len(self.texel_index) else 0
+            self.texel = device_array(np.uint32, self.texel_index.astype(np.uint32))
 
     def _residuals(self, u):
         params = self.space.drjit_params(u)
@@ -56,16 +64,46 @@ class Problem:
 
     def loss(self, x) -> float:
         """½ Σ r², accumulated in float64."""
+        if self.texel is not None:
+            return self.system(x)[2]
         return float(self._run(x, False)[0])
 
     def system(self, x):
-        """``(JᵀJ, Jᵀr, ½ Σ r²)`` (float64) at ``x``, in one pass over the samples."""
+        """``(JᵀJ, Jᵀr, ½ Σ r²)`` (float64) at ``x``, in one pass over the samples.
+
+        With ``texel``, of the residuals with each texel's albedo at its best value for ``x``
+        (a per-texel constant a_t added to π f, eliminated: variable projection). For texel t
+        with W_t = Σ w², A_t = Σ w ρ and S_t = Σ w J per channel (ρ, J the residuals and
+        their Jacobian with no albedo), a_t = A_t / W_t, and the projected sums are
+        JᵀJ - Σ_t S_t S_tᵀ / W_t, Jᵀr - Σ_t S_t A_t / W_t and ½ (Σ ρ² - Σ_t A_t² / W_t):
+        the samples' within-texel variation only, whatever the albedo texture."""
         values, p = self._run(x, True), len(x)
         jtj = np.zeros((p, p))
         rows, cols = np.triu_indices(p)
         jtj[rows, cols] = values[1:1 + len(rows)]
         jtj[cols, rows] = values[1:1 + len(rows)]
-        return jtj, values[1 + len(rows):], float(values[0])
+        jtr, loss = values[1 + len(rows):], float(values[0])
+        if self.texel is not None:
+            weight, a, s = self.texel_albedo_sums(x)
+            inv = 1.0 / weight
+            jtj = jtj - np.einsum("tca,tcb,t->ab", s, s, inv)
+            jtr = jtr - np.einsum("tca,tc,t->a", s, a, inv)
+            loss = loss - 0.5 * float(np.einsum("tc,tc,t->", a, a, inv))
+        return jtj, jtr, loss
+
+    def texel_albedo_sums(self, x) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per texel of ``texel`` (see :meth:`system`): W_t (T,), A_t (T, 3) and S_t (T, 3, P) at ``x``.
+        One kernel, frozen as :meth:`cluster_sums`'s."""
+        p = len(x)
+        sums = self._group_sums("texel_albedo", _texel_albedo_sums, x, self.texel_index, self.texels, 4 + 3 * p)
+        return sums[:, 0], sums[:, 1:4], sums[:, 4:].reshape(self.texels, 3, p)
+
+    def texel_albedo(self, x) -> np.ndarray:
+        """The region's albedo (3,) at ``x`` with ``texel``: the weighted mean of the texels' best
+        albedos, Σ_t A_t / Σ_t W_t per channel (the albedo of :attr:`space` fixed at 0: the
+        residuals are r - π f_s)."""
+        weight, a, _ = self.texel_albedo_sums(x)
+        return a.sum(axis=0) / weight.sum()
 
     def cluster_sums(self, x, cluster: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray, float]:
         """Per cluster g, the score u_g = Σ_{i ∈ g} J_iᵀ ρ_i (G, P) and H_g = Σ_{i ∈ g} J_iᵀ J_i
@@ -191,6 +229,16 @@ def _cluster_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
     terms = [r[0] * r[0] + r[1] * r[1] + r[2] * r[2]]
     terms += [d[a][0] * r[0] + d[a][1] * r[1] + d[a][2] * r[2] for a in range(p)]
     terms += [d[a][0] * d[b][0] + d[a][1] * d[b][1] + d[a][2] * d[b][2] for a in range(p) for b in range(a, p)]
+    return _group_scatter(terms, arrays["c"], groups)
+
+
+def _texel_albedo_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
+    """``[Σ 1/σ², Σ ρ_c/σ per channel c, Σ J_c/σ per channel c and free entry a (row-major)]`` per
+    texel ``arrays["c"]`` as one float64 array of ``groups`` rows (ρ the residuals ``(r - π f)/σ``,
+    J their forward-mode tangents). One kernel."""
+    r, d = _residual_tangents(space, arrays, u)
+    w = mi.Float64(arrays["w"])
+    terms = [w * w] + [w * r[c] for c in range(3)] + [w * d[a][c] for c in range(3) for a in range(len(u))]
     return _group_scatter(terms, arrays["c"], groups)
 
 

@@ -27,7 +27,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ... import brdf as brdf_models
-from ...brdf.model import BRDFModel
+from ...brdf.model import DIFFUSE as DIFFUSE_PARAMETER, BRDFModel
+
 from ...status import AT_BOUND, AT_START, CONVERGED
 from ..maps.diffuse import AlbedoOffsets
 from .levenberg_marquardt import levenberg_marquardt
@@ -108,7 +109,8 @@ def min_samples(model: BRDFModel, fixed: dict | None = None) -> int:
 def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start: dict | None = None,
                fixed: dict | None = None, bounds: dict | None = None, schedule: SubsetSchedule | None = None,
                seed: int = 0, ftol: float = 1e-7, trace: list | None = None, cluster=None,
-               uncertainty: str | None = METHODS[0], offsets: AlbedoOffsets | None = None) -> RegionFit:
+               uncertainty: str | None = METHODS[0], offsets: AlbedoOffsets | None = None,
+               texel=None) -> RegionFit:
     """Fit ``model`` to one region's samples by hierarchical Levenberg-Marquardt.
 
     Parameters
@@ -146,6 +148,13 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         each cluster left out (:func:`~mifaces.reflectance.fit.offset_uncertainty.offset_sums`;
         every texel's samples must lie in one cluster); Laplace and the bootstrap
         take them as known.
+    texel : ndarray (N,), optional
+        Each sample's texel: the fit then gives every texel its own albedo, eliminated from the
+        problem (:meth:`~mifaces.reflectance.fit.problem.Problem.system`), so that the glossy
+        part is measured from each texel's variation between photographs, whatever the albedo
+        texture; the region's ``diffuse_reflectance`` is the weighted mean of the texels' albedos.
+        No uncertainty is estimated (``uncertainty`` must be None): :func:`fit_brdf` estimates it
+        on the samples corrected by these albedos (``FitOptions(texel_albedo=True)``).
 
     Returns
     -------
@@ -163,18 +172,29 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     if cluster is not None and np.shape(cluster) != np.shape(sigma):
         raise ValueError(f"cluster must have shape {np.shape(sigma)}, got {np.shape(cluster)}")
     fixed = model.fixed_defaults() if fixed is None else fixed
+    start = {**linear_start(model, light, view, reflectance, sigma, fixed, seed=seed), **(start or {})}
+    order = np.random.default_rng(seed).permutation(len(sigma))
+    if texel is not None:
+        if uncertainty is not None:
+            raise ValueError("a fit with a free albedo per texel (texel=...) estimates no uncertainty: "
+                             "pass uncertainty=None")
+        if np.shape(texel) != np.shape(sigma):
+            raise ValueError(f"texel must have shape {np.shape(sigma)}, got {np.shape(texel)}")
+        fixed = {**fixed, DIFFUSE_PARAMETER.name: [0.0, 0.0, 0.0]}  # per texel instead, eliminated from the problem
+        # the subsets take whole texels: a texel's single sample says nothing of the glossy part
+        _, rank = np.unique(np.asarray(texel), return_inverse=True)
+        order = np.argsort(np.random.default_rng(seed).permutation(rank.max() + 1)[rank], kind="stable")
     space = ParameterSpace(model, fixed, bounds)
     if len(sigma) < len(space):
         raise ValueError(f"{model.name} has {len(space)} free parameters but only {len(sigma)} samples were given")
-    start = {**linear_start(model, light, view, reflectance, sigma, fixed, seed=seed), **(start or {})}
-    x = x_start = space.vector(start)
+    x = x_start = space.vector({k: v for k, v in start.items() if k not in fixed})
     schedule = schedule or SubsetSchedule()
-    order = np.random.default_rng(seed).permutation(len(sigma))
     history, iterations, result = [], 0, None
     sizes = schedule.sizes(len(sigma))
     for stage, size in enumerate(sizes):
         idx = np.sort(order[:size])
-        problem = Problem(model, space, light[idx], view[idx], reflectance[idx], sigma[idx])
+        problem = Problem(model, space, light[idx], view[idx], reflectance[idx], sigma[idx],
+                          texel=None if texel is None else np.asarray(texel)[idx])
         last = stage == len(sizes) - 1
         result = levenberg_marquardt(None, None, x, system=problem.system,
                                      max_iterations=schedule.final_iterations if last else schedule.iterations,
@@ -185,6 +205,8 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         if trace is not None:
             trace += [(t, space.values(xs)) for t, _, xs in result.history]
     params, loss, reason, status = space.values(x), result.loss, result.reason, result.status
+    if texel is not None:
+        params[DIFFUSE_PARAMETER.name] = [float(v) for v in problem.texel_albedo(x)]
     bounded = space.at_bounds(x)
     if bounded and status == CONVERGED:
         # the best fit lies outside the valid range: the samples do not support this model there

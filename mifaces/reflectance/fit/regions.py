@@ -37,7 +37,8 @@ NEIGHBOURS = {"lips": ["skin"], "nostrils": ["skin"], "beard": ["skin"], "eyes":
 
 def fit_regions(model: BRDFModel | str, samples: ReflectanceSamples, region_names: dict,
                 neighbours: dict | None = None, progress: bool = False, fixed_by_region: dict | None = None,
-                cluster=None, offsets: AlbedoOffsets | None = None, **options) -> dict[str, RegionFit]:
+                cluster=None, offsets: AlbedoOffsets | None = None, texel_albedo: bool = False,
+                starts: dict | None = None, **options) -> dict[str, RegionFit]:
     """Fit ``model`` separately in every region (paper sec. 4.4, 5.2).
 
     ``samples.label`` gives each sample's region label, ``region_names`` label -> name.
@@ -57,7 +58,9 @@ def fit_regions(model: BRDFModel | str, samples: ReflectanceSamples, region_name
     its neighbour's glossy part (status ``'prior'``, the reason says so) and
     lends nothing. ``cluster`` (N,) is each sample's cluster for the
     uncertainty, ``offsets`` the albedo offsets the reflectance was corrected by
-    (:func:`~mifaces.reflectance.fit.region_fit.fit_region`).
+    (:func:`~mifaces.reflectance.fit.region_fit.fit_region`). With ``texel_albedo`` every
+    texel (``samples.texel``) has its own albedo in the fit (``fit_region(texel=...)``).
+    ``starts`` (name -> parameters) are the regions' start values.
     """
     model = brdf_models.model(model) if isinstance(model, str) else model
     neighbours = NEIGHBOURS if neighbours is None else neighbours
@@ -77,7 +80,10 @@ def fit_regions(model: BRDFModel | str, samples: ReflectanceSamples, region_name
         if fixed_by_region and name in fixed_by_region:
             held[name] = region_options["fixed"] = {**held[name], **fixed_by_region[name]}
         part = samples.select(mask)
+        if starts and name in starts:
+            region_options["start"] = starts[name]
         fits[name] = fit_region(model, part.light, part.view, part.reflectance, part.sigma,
+                                texel=part.texel if texel_albedo else None,
                                 cluster=None if cluster is None else np.asarray(cluster)[mask],
                                 offsets=None if offsets is None else offsets[mask], **region_options)
         peak = glossy_peak(model, fits[name].params)
