@@ -34,7 +34,7 @@ Writes ``DIR/<subject>/capture`` (with ``split.json``), ``DIR/<subject>/measure`
 Real photographs: these figures are not simulated.
 
     python validation/real_yaleb.py --data ../shared/data/yaleb --out out/real_yaleb [--subjects yaleB01] [--train 8]
-        [--refine] [--refine-shape] [--normals] [--interreflection]
+        [--refine] [--refine-shape] [--normals] [--interreflection] [--texel-albedo]
 
 With ``--refine-shape``, the fitted faces are refined by differentiable rendering against the
 training photographs (``mifaces measure --refine-shape``) before the BRDFs are fitted, and the
@@ -46,7 +46,9 @@ With ``--normals``, each subject is measured twice, without and with per-texel
 normals (``mifaces measure --normals``), and the held-out errors of both are
 written to ``validation/results/real_yaleb_normals.{json,png}`` (:func:`comparison`);
 with ``--interreflection`` likewise without and with the bounced light taken out
-(``mifaces measure --interreflection``): ``real_yaleb_interreflection.{json,png}``.
+(``mifaces measure --interreflection``): ``real_yaleb_interreflection.{json,png}``; with
+``--texel-albedo``, without and with an albedo per texel in the glossy fit (``mifaces measure
+--texel-albedo``): ``real_yaleb_texel_albedo.{json,png}``.
 """
 
 from __future__ import annotations
@@ -137,7 +139,7 @@ def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> 
 
 def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shadow_angle: float,
                 resolution: int, normals: bool = False, refine: bool = False, refine_shape: bool = False,
-                unknown_lights: bool = False, interreflection: bool = False) -> dict:
+                unknown_lights: bool = False, interreflection: bool = False, texel_albedo: bool = False) -> dict:
     """Import, measure and relight one subject; its errors and timings. With ``unknown_lights`` the
     capture hides its light directions (``mifaces import yaleb --unknown-lights``) and ``measure``
     estimates them (``validation/unknown_lights.py``); the held-out lights are rendered as known."""
@@ -148,7 +150,8 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     train_images, heldout = default_split(list(images.values()), train)
     t_measure = time.perf_counter()
     report = measure(out / "measure", capture_dir, models=models, progress=True, refine_shape=refine_shape,
-                     options=FitOptions(resolution=resolution, normals=normals, interreflection=interreflection))
+                     options=FitOptions(resolution=resolution, normals=normals, interreflection=interreflection,
+                                        texel_albedo=texel_albedo))
     seconds = {"import": t_measure - t0, "measure": time.perf_counter() - t_measure}
     capture = load_capture(capture_dir, detect=False)
     # the faces the BRDFs were fitted on: the refined ones where this run kept a refinement
@@ -294,7 +297,8 @@ def figure(results: list[dict], out: Path, data_dir: Path, run_dir: Path, best: 
 
 def comparison(args, subjects, models, argv, option: str = "normals") -> int:
     """Each subject measured without and with ``option`` of :class:`FitOptions` (``normals``: per-texel
-    normals; ``interreflection``: the bounced light taken out; ``measure(..., options=FitOptions(<option>=True))``,
+    normals; ``interreflection``: the bounced light taken out; ``texel_albedo``: an albedo per texel in the glossy
+    fit; ``measure(..., options=FitOptions(<option>=True))``,
     into ``DIR/<subject>`` and ``DIR/<subject>_<option>``): held-out relative RMSE of both, pooled and per
     subject, in ``real_yaleb_<option>.{json,png}``."""
     import matplotlib
@@ -357,6 +361,9 @@ def main(argv=None) -> int:
     parser.add_argument("--interreflection", action="store_true",
                         help="measure without and with the bounced light taken out; write "
                              "real_yaleb_interreflection.{json,png}")
+    parser.add_argument("--texel-albedo", action="store_true",
+                        help="measure without and with an albedo per texel in the glossy fit; write "
+                             "real_yaleb_texel_albedo.{json,png}")
     parser.add_argument("--refine", action="store_true",
                         help="also refine each fit by differentiable rendering and score it beside the unrefined")
     parser.add_argument("--refine-shape", action="store_true",
@@ -371,6 +378,8 @@ def main(argv=None) -> int:
         return comparison(args, subjects, models, argv, "normals")
     if args.interreflection:
         return comparison(args, subjects, models, argv, "interreflection")
+    if args.texel_albedo:
+        return comparison(args, subjects, models, argv, "texel_albedo")
     results = []
     for subject in subjects:
         print(f"== {subject}", flush=True)
