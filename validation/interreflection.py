@@ -12,7 +12,10 @@ Per seed, skin's fitted ρ_s (per channel) and m against the truth, and whether 
   tracer's depth 2 instead of 4: same face, lights, poses and noise draws): what a perfect removal
   of the bounced light would give;
 * ``true_lights``: the default fit with the simulator's true light positions in place of the
-  steel spheres' calibration (reflectance samples recomputed), on the same capture as ``default``.
+  steel spheres' calibration (reflectance samples recomputed), on the same capture as ``default``;
+* ``texel_albedo``, ``interreflection_texel_albedo``, ``no_bounces_texel_albedo``: ``default``,
+  ``interreflection`` and ``no_bounces`` with an albedo per texel in the glossy fit
+  (``FitOptions(texel_albedo=True)``).
 
 No parameter of the correction was tuned here (its depth, render size, samples and blur were set
 before these runs). Seeds 100-104 are the uncertainty's tuning seeds, 0-9 reported.
@@ -44,7 +47,10 @@ from mifaces.reflectance import capture_samples  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SEEDS = list(range(100, 105)) + list(range(10))
-MODES = ("default", "interreflection", "no_bounces", "true_lights")
+MODES = ("default", "interreflection", "no_bounces", "true_lights", "texel_albedo", "interreflection_texel_albedo",
+         "no_bounces_texel_albedo")
+#: The modes whose time is recorded (the same capture and samples).
+TIMED = ("default", "interreflection", "texel_albedo", "interreflection_texel_albedo")
 
 
 def _skin(estimate, truth: dict) -> dict:
@@ -56,8 +62,9 @@ def _skin(estimate, truth: dict) -> dict:
                         for r in records}}
 
 
-def _fit(capture, face, shapes, samples, interreflection=False):
-    return U._fit(capture, face, shapes, samples, "cooktorrance", interreflection=interreflection)
+def _fit(capture, face, shapes, samples, interreflection=False, texel_albedo=False):
+    return U._fit(capture, face, shapes, samples, "cooktorrance", interreflection=interreflection,
+                  texel_albedo=texel_albedo)
 
 
 def run(seed: int, work: Path) -> dict:
@@ -65,9 +72,10 @@ def run(seed: int, work: Path) -> dict:
     truth = params["regions"]["skin"]
     capture, face, shapes, samples = U._simulate(work / f"c{seed}", seed, brdf="cooktorrance", brdf_params=params)
     out, seconds = {}, {}
-    for mode, inter in (("default", False), ("interreflection", True)):
+    for mode in TIMED:
         t = time.perf_counter()
-        out[mode] = _skin(_fit(capture, face, shapes, samples, inter), truth)
+        out[mode] = _skin(_fit(capture, face, shapes, samples, mode.startswith("interreflection"),
+                               mode.endswith("texel_albedo")), truth)
         seconds[mode] = time.perf_counter() - t
     true_capture = with_true_lights(capture)
     true_samples = capture_samples(true_capture, shapes, face, U.TEXTURE, progress=False)
@@ -79,6 +87,7 @@ def run(seed: int, work: Path) -> dict:
     finally:
         studio_scene.INTEGRATOR = default
     out["no_bounces"] = _skin(_fit(*direct), truth)
+    out["no_bounces_texel_albedo"] = _skin(_fit(*direct, texel_albedo=True), truth)
     return {"seed": seed, "tuning": seed in U.TUNING_SEEDS, "truth": truth, "fits": out, "seconds": seconds}
 
 
@@ -100,7 +109,7 @@ def summary(runs: list) -> dict:
                                 "skin_all_covered": sum(all(v for v in r["fits"][mode]["covered"].values())
                                                         for r in rows)}
         out[split]["seconds_median"] = {mode: float(np.median([r["seconds"][mode] for r in rows]))
-                                        for mode in ("default", "interreflection")}
+                                        for mode in TIMED}
     return out
 
 

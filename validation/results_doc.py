@@ -858,6 +858,24 @@ def sec_shape_depth(d):
                           "after rigid alignment"], rows) + (notes if held else [])
 
 
+def sec_uncertainty_measure(d):
+    lines = [f"`{text(get(d, 'command'))}` on the default simulated capture (512², six photographs, 64 spp) per "
+             "seed, the Cook–Torrance truth's skin drawn per seed: skin's fitted parameters and their 95 % "
+             f"intervals against the truth. Every skin interval held the truth in {text(get(d, 'all_covered'))} of "
+             f"{text(get(d, 'captures'))} captures.", ""]
+    pooled = get(d, "pooled_coverage") or {}
+    if pooled:
+        lines += [f"Every region's intervals (skin's and the other regions' same-family truths), pooled: "
+                  f"{pct(pooled.get('coverage'), 0)} of {text(pooled.get('intervals'))} hold the truth.", ""]
+    rows = []
+    for run in rows_of(get(d, "runs")):
+        for c in rows_of(get(run, "parameters")):
+            name = f"{c.get('parameter')}{'' if c.get('channel') is None else '[' + str(c.get('channel')) + ']'}"
+            rows.append([text(run.get("seed")), name, fixed(c.get("truth"), 4), fixed(c.get("fitted"), 4),
+                         f"[{fixed(c.get('lo'), 4)}, {fixed(c.get('hi'), 4)}]", text(c.get("covered"))])
+    return lines + table(["seed", "skin parameter", "truth", "fitted", "95 % interval", "holds the truth"], rows)
+
+
 def sec_unknown(d):
     if isinstance(d, dict):
         return [f"Layout not known to `validation/results_doc.py`; top-level keys: "
@@ -907,6 +925,10 @@ LAYOUTS = {
     "unknown_lights_simulated": ("Lights nobody measured: the simulated capture with its lights hidden", "SIMULATED",
                                  sec_unknown_lights_simulated),
     "shape_estimation": ("Shape estimation", "SIMULATED", sec_shape_estimation),
+    "texel_albedo_tuning": ("The glossy fit with an albedo per texel, on the tuning captures", "SIMULATED",
+                            sec_albedo_rounds),
+    "uncertainty_measure": ("Skin's intervals on the default capture, measured on the true shapes", "SIMULATED",
+                            sec_uncertainty_measure),
     "truths": ("`mifaces measure` on truths the fit cannot copy", "SIMULATED", sec_truths),
 }
 
