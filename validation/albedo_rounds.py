@@ -12,6 +12,9 @@ the offsets taken as known (what the intervals were before; the same as ``jackkn
 and the jackknife over tiles of 16 and 32 texels (at texture 128).
 
     python validation/albedo_rounds.py [--seeds 100 101 102 103 104] [--rounds 0 3] [--models cooktorrance phong]
+        [--spp 16] [--out albedo_rounds.json]
+    python validation/albedo_rounds.py --rounds 0 texel --out texel_albedo_tuning.json   # the fit with an albedo
+        per texel (FitOptions(texel_albedo=True)) against the one region fit
     python validation/albedo_rounds.py --cost 3     # only the cost: seconds['fit'] with and without intervals
     python validation/albedo_rounds.py --exact --seeds 101 --rounds 6   # one-step replicates against refits
 
@@ -98,9 +101,10 @@ def _classes(records) -> dict:
     return out
 
 
-def run(model: str, seed: int, rounds, work: Path) -> list[dict]:
+def run(model: str, seed: int, rounds, work: Path, spp: int = U.SPP) -> list[dict]:
     params = U.skin_truth(seed) if model == "cooktorrance" else None
-    capture, face, shapes, samples = U._simulate(work / f"{model}_{seed}", seed, brdf=model, brdf_params=params)
+    capture, face, shapes, samples = U._simulate(work / f"{model}_{seed}", seed, spp=spp, brdf=model,
+                                                 brdf_params=params)
     truth = U._truth_of(capture, model)
     rows = []
     for k in rounds:
@@ -260,6 +264,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=SEEDS)
     parser.add_argument("--rounds", type=lambda v: v if v == TEXEL else int(v), nargs="+", default=[0, 3],
                         help=f"numbers of alternations, or {TEXEL!r}: the fit with an albedo per texel")
+    parser.add_argument("--spp", type=int, default=U.SPP, help="samples per pixel of the captures")
     parser.add_argument("--out", default="albedo_rounds.json", help="the result file's name in validation/results")
     parser.add_argument("--models", nargs="+", default=["cooktorrance", "phong"])
     parser.add_argument("--work", type=Path, default=Path("out/albedo_rounds"))
@@ -282,9 +287,11 @@ def main(argv=None) -> int:
             **exact(args.models[0], args.seeds[0], args.rounds[-1], args.work)})
         return 0
     t0 = time.perf_counter()
-    rows = [row for model in args.models for seed in args.seeds for row in run(model, seed, args.rounds, args.work)]
+    rows = [row for model in args.models for seed in args.seeds
+            for row in run(model, seed, args.rounds, args.work, args.spp)]
     write_json(RESULTS / args.out, {
         "label": "SIMULATED", "command": command, "image": list(U.IMAGE), "measurements": U.MEASUREMENTS,
+        "spp": args.spp,
         "texture": U.TEXTURE, "interval_method": U.unc.METHODS[0], "variants": VARIANTS,
         "summary": summary(rows), "seconds": time.perf_counter() - t0, "rows": rows})
     return 0
