@@ -771,7 +771,8 @@ def sec_truths(d):
 
 
 def sec_albedo_rounds(d):
-    lines = [f"Images {text(get(d, 'image'))}, {text(get(d, 'measurements'))} photographs, texture "
+    spp = f", {text(get(d, 'spp'))} samples per pixel" if get(d, "spp", default=None) is not None else ""
+    lines = [f"Images {text(get(d, 'image'))}{spp}, {text(get(d, 'measurements'))} photographs, texture "
              f"{text(get(d, 'texture'))}², tuning seeds. Coverage of the 95 % intervals per truth, number of "
              "alternations and estimate, pooled over seeds, regions, parameters and channels (intervals in "
              "brackets), and on skin, small regions (lips, eyebrows) and the others; skin's mean relative error "
@@ -927,6 +928,8 @@ LAYOUTS = {
     "shape_estimation": ("Shape estimation", "SIMULATED", sec_shape_estimation),
     "texel_albedo_tuning": ("The glossy fit with an albedo per texel, on the tuning captures", "SIMULATED",
                             sec_albedo_rounds),
+    "texel_albedo_tuning_spp64": ("The glossy fit with an albedo per texel, on the tuning captures at 64 samples "
+                                  "per pixel", "SIMULATED", sec_albedo_rounds),
     "uncertainty_measure": ("Skin's intervals on the default capture, measured on the true shapes", "SIMULATED",
                             sec_uncertainty_measure),
     "truths": ("`mifaces measure` on truths the fit cannot copy", "SIMULATED", sec_truths),
