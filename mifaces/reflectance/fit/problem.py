@@ -85,10 +85,10 @@ class Problem:
         jtr, loss = values[1 + len(rows):], float(values[0])
         if self.texel is not None:
             weight, a, s = self.texel_albedo_sums(x)
-            inv = 1.0 / weight
-            jtj = jtj - np.einsum("tca,tcb,t->ab", s, s, inv)
-            jtr = jtr - np.einsum("tca,tc,t->a", s, a, inv)
-            loss = loss - 0.5 * float(np.einsum("tc,tc,t->", a, a, inv))
+            scaled = (s / weight[:, None, None]).reshape(-1, p)  # (T·3, P): S_t / W_t per channel
+            jtj = jtj - scaled.T @ s.reshape(-1, p)
+            jtr = jtr - scaled.T @ a.reshape(-1)
+            loss = loss - 0.5 * float(np.sum(a * a / weight[:, None]))
         return jtj, jtr, loss
 
     def texel_albedo_sums(self, x) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

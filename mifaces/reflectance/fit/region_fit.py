@@ -172,7 +172,9 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     if cluster is not None and np.shape(cluster) != np.shape(sigma):
         raise ValueError(f"cluster must have shape {np.shape(sigma)}, got {np.shape(cluster)}")
     fixed = model.fixed_defaults() if fixed is None else fixed
-    start = {**linear_start(model, light, view, reflectance, sigma, fixed, seed=seed), **(start or {})}
+    given = {k for k, v in (start or {}).items() if v is not None}
+    if not {q.name for q in model.parameters() if q.name not in fixed} <= given:  # a search for what is missing
+        start = {**linear_start(model, light, view, reflectance, sigma, fixed, seed=seed), **(start or {})}
     order = np.random.default_rng(seed).permutation(len(sigma))
     if texel is not None:
         if uncertainty is not None:
