@@ -6,20 +6,15 @@ from __future__ import annotations
 
 import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 
-import json
-import warnings
 
 import mitsuba as mi
 import numpy as np
 import pytest
 
 from mifaces import brdf
-from mifaces.capture import load_capture, read_ground_truth
-from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
 from mifaces.reflectance.fit.parameters import ParameterSpace
 from mifaces.reflectance.fit.problem import Problem
 from mifaces.reflectance.fit.region_fit import fit_region
-from mifaces.shape.io import load_geometry
 
 TRUTH = {"specular_reflectance": [1.3, 1.3, 1.3], "roughness": 0.3, "eta": 1.38}
 
@@ -104,33 +99,6 @@ def test_a_texel_fit_is_refused_bad_texels_and_intervals(jit_variant):
         fit_region("cooktorrance", light, view, r, sigma, texel=texel)
     with pytest.raises(ValueError, match="texel must have shape"):
         fit_region("cooktorrance", light, view, r, sigma, texel=texel[:-1], uncertainty=None)
-
-
-def test_fit_brdf_with_an_albedo_per_texel_measures_skin_nearer_the_truth(small_capture, tmp_path):
-    """A simulated Cook–Torrance face whose painted albedo varies under the highlights: with an albedo
-    per texel skin's lobe comes out nearer the truth than with the region's one albedo, the intervals
-    are estimated on it, and brdf.json says how it was fitted."""
-    mifaces.set_variant("llvm_ad_rgb")
-    capture = load_capture(small_capture("rounds", measurements=4, resolution=(192, 192), spp=8,
-                                         albedo_resolution=256, seed=3))
-    face, shapes = load_geometry(capture, "ground-truth")
-    truth = read_ground_truth(capture).brdf["regions"]["skin"]
-    samples = capture_samples(capture, shapes, face, 96, progress=False)
-    errors, estimates = {}, {}
-    for texel_albedo in (False, True):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            estimates[texel_albedo] = fit_brdf(capture, "cooktorrance", shapes, face_model=face, samples=samples,
-                                               progress=False, out=tmp_path / str(texel_albedo),
-                                               options=FitOptions(resolution=96, texel_albedo=texel_albedo))
-        skin = estimates[texel_albedo].fits["skin"]
-        errors[texel_albedo] = (abs(np.mean(skin.params["specular_reflectance"]) / truth["specular_reflectance"][0] - 1),
-                                abs(skin.params["roughness"] / truth["roughness"] - 1))
-        assert "interval95" in skin.uncertainty["roughness"]
-    assert errors[True][0] < 0.5 * errors[False][0], errors
-    assert errors[True][1] < errors[False][1] + 0.01, errors
-    written = {k: json.loads((tmp_path / str(k) / "brdf.json").read_text()) for k in (False, True)}
-    assert written[True]["texel_albedo"] is True and "texel_albedo" not in written[False]
 
 
 def test_cli_texel_albedo_flag_reaches_the_fit(monkeypatch, tmp_path):
