@@ -12,7 +12,7 @@ the offsets taken as known (what the intervals were before; the same as ``jackkn
 and the jackknife over tiles of 16 and 32 texels (at texture 128).
 
     python validation/albedo_rounds.py [--seeds 100 101 102 103 104] [--rounds 0 3] [--models cooktorrance phong]
-        [--spp 16] [--out albedo_rounds.json]
+        [--spp 16] [--image 256] [--texture 128] [--out albedo_rounds.json]
     python validation/albedo_rounds.py --rounds 0 texel --out texel_albedo_tuning.json   # the fit with an albedo
         per texel (FitOptions(texel_albedo=True)) against the one region fit
     python validation/albedo_rounds.py --cost 3     # only the cost: seconds['fit'] with and without intervals
@@ -77,14 +77,15 @@ def _timed(*args, **kwargs):
     return out
 
 
-def _fit(capture, face, shapes, samples, model, rounds, method, known_offsets=False, texture=U.TEXTURE, tile=None):
+def _fit(capture, face, shapes, samples, model, rounds, method, known_offsets=False, texture=None, tile=None):
     """``fit_brdf`` with ``rounds`` alternations, or :data:`TEXEL` for ``FitOptions(texel_albedo=True)``."""
     with warnings.catch_warnings(), mock.patch.object(
             fitting, "region_uncertainty", _known_offsets if known_offsets else _timed), \
             mock.patch.object(U.unc, "TILE_AT_128", U.unc.TILE_AT_128 if tile is None else tile):
         warnings.simplefilter("ignore")
         return fit_brdf(capture, model, shapes, face_model=face, samples=samples, progress=False,
-                        options=FitOptions(resolution=texture, albedo_rounds=0 if rounds == TEXEL else rounds,
+                        options=FitOptions(resolution=texture or U.TEXTURE,
+                                           albedo_rounds=0 if rounds == TEXEL else rounds,
                                            texel_albedo=rounds == TEXEL, uncertainty=method))
 
 
@@ -265,6 +266,8 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=lambda v: v if v == TEXEL else int(v), nargs="+", default=[0, 3],
                         help=f"numbers of alternations, or {TEXEL!r}: the fit with an albedo per texel")
     parser.add_argument("--spp", type=int, default=U.SPP, help="samples per pixel of the captures")
+    parser.add_argument("--image", type=int, default=U.IMAGE[0], help="width and height of the photographs")
+    parser.add_argument("--texture", type=int, default=U.TEXTURE, help="texture resolution of the fits")
     parser.add_argument("--out", default="albedo_rounds.json", help="the result file's name in validation/results")
     parser.add_argument("--models", nargs="+", default=["cooktorrance", "phong"])
     parser.add_argument("--work", type=Path, default=Path("out/albedo_rounds"))
@@ -273,6 +276,7 @@ def main(argv=None) -> int:
                         help="only skin's jackknife by rerunning the alternation per tile left out, on the first "
                              "seed and model and the last number of rounds")
     args = parser.parse_args(argv)
+    U.IMAGE, U.TEXTURE = (args.image, args.image), args.texture  # the captures' and fits' sizes
     if any(s not in U.TUNING_SEEDS for s in args.seeds):
         parser.error(f"--seeds: the tuning seeds are {list(U.TUNING_SEEDS)} (the others are reported on)")
     command = "python validation/albedo_rounds.py " + " ".join(argv if argv is not None else sys.argv[1:])
