@@ -930,6 +930,8 @@ LAYOUTS = {
                             sec_albedo_rounds),
     "texel_albedo_tuning_spp64": ("The glossy fit with an albedo per texel, on the tuning captures at 64 samples "
                                   "per pixel", "SIMULATED", sec_albedo_rounds),
+    "texel_albedo_tuning_full": ("The glossy fit with an albedo per texel, on the tuning captures at measure's "
+                                 "size (512², 64 spp, texture 512²)", "SIMULATED", sec_albedo_rounds),
     "uncertainty_measure": ("Skin's intervals on the default capture, measured on the true shapes", "SIMULATED",
                             sec_uncertainty_measure),
     "truths": ("`mifaces measure` on truths the fit cannot copy", "SIMULATED", sec_truths),
