@@ -9,7 +9,7 @@ seed, :func:`uncertainty.skin_truth`) and Phong truths by default. The estimates
 sandwich over texel tiles (with ``albedo_rounds`` > 0 they re-estimate the offsets in every replicate,
 :mod:`mifaces.reflectance.fit.uncertainty`), Laplace, ``jackknife_known_offsets``: the jackknife with
 the offsets taken as known (what the intervals were before; the same as ``jackknife`` without rounds),
-and the jackknife over tiles of 16 and 32 texels (at texture 128).
+and the jackknife over tiles of 16, 32 and 64 texels (at texture 128).
 
     python validation/albedo_rounds.py [--seeds 100 101 102 103 104] [--rounds 0 3] [--models cooktorrance phong]
         [--spp 16] [--image 256] [--texture 128] [--out albedo_rounds.json]
@@ -52,7 +52,7 @@ SEEDS = list(U.TUNING_SEEDS)
 #: the default :data:`mifaces.reflectance.fit.uncertainty.TILE_AT_128`).
 VARIANTS = {"jackknife": ("jackknife", None), "sandwich": ("sandwich", None), "laplace": ("laplace", None),
             "jackknife_known_offsets": ("jackknife", None), "jackknife_tile16": ("jackknife", 16),
-            "jackknife_tile32": ("jackknife", 32)}
+            "jackknife_tile32": ("jackknife", 32), "jackknife_tile64": ("jackknife", 64)}
 #: The ``--rounds`` value of the fit with an albedo per texel (``FitOptions(texel_albedo=True)``).
 TEXEL = "texel"
 #: Region classes the coverage is reported for.
