@@ -12,6 +12,9 @@ import numpy as np
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.shape.io import load_geometry
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
+from mifaces.reflectance import estimate as estimate_module
+from mifaces.reflectance.fit import uncertainty as unc
+from mifaces.reflectance.fit.regions import fit_regions
 from mifaces.reflectance.maps.diffuse import albedo_offsets
 
 
@@ -26,12 +29,20 @@ def test_albedo_offsets_are_each_texels_departure_from_its_regions_mean():
     np.testing.assert_allclose(only[:, 0], [-0.1, 0.0, 0.1, 0.0], atol=1e-6)
 
 
-def test_the_texel_albedo_takes_the_skin_lobe_nearer_the_truth(small_capture, tmp_path):
+def test_the_texel_albedo_takes_the_skin_lobe_nearer_the_truth(small_capture, tmp_path, monkeypatch):
     """A Cook–Torrance face whose painted albedo varies under the highlights: the one region fit
     reads skin's lobe a third too weak (0.67 of 1.0 when written), three alternations with the texel
     albedo take it most of the way back (0.82), and the fit with an albedo per texel
     (``texel_albedo``, the alternation's fixed point in one fit) at least as far; the intervals are
-    estimated on the last fit, and brdf.json says how the lobe was fitted."""
+    estimated on the last fit (the texel fit's over tiles of ``TEXEL_TILE_AT_128``), and brdf.json says
+    how the lobe was fitted."""
+    clusters = []
+
+    def spy(brdf, samples, *args, **kwargs):  # the samples and clusters of each region fit
+        clusters.append((samples, kwargs.get("cluster")))
+        return fit_regions(brdf, samples, *args, **kwargs)
+
+    monkeypatch.setattr(estimate_module, "fit_regions", spy)
     mifaces.set_variant("llvm_ad_rgb")
     capture = load_capture(small_capture("rounds", measurements=4, resolution=(192, 192), spp=8,
                                          albedo_resolution=256, seed=3))
@@ -49,6 +60,9 @@ def test_the_texel_albedo_takes_the_skin_lobe_nearer_the_truth(small_capture, tm
                         abs(skin.params["roughness"] / truth["roughness"] - 1))
         assert "interval95" in skin.uncertainty["roughness"]  # estimated on the last round's fit
         assert json.loads((tmp_path / name / "brdf.json").read_text()).get("texel_albedo", False) is (name == "texel")
+        last, cluster = clusters[-1]
+        tile = (unc.TEXEL_TILE_AT_128 if name == "texel" else unc.TILE_AT_128) * 96 // 128
+        np.testing.assert_array_equal(cluster, unc.tile_clusters(last.texel, 96, tile=tile, label=last.labels()))
     assert errors["rounds"][0] < 0.75 * errors["one"][0], errors
     assert errors["rounds"][1] < errors["one"][1] + 0.02, errors
     assert errors["texel"][0] < 0.5 * errors["one"][0], errors

@@ -47,7 +47,7 @@ from .result import BRDFEstimate
 from .light_balance import balance_given_lights
 from .samples import ReflectanceSamples, capture_samples
 from .maps.specular import refine_specular
-from .fit.uncertainty import tile_clusters
+from .fit.uncertainty import TEXEL_TILE_AT_128, tile_clusters
 from .maps.normals import MIN_OBSERVATIONS, mitsuba_tangent_normals, refine_texel_normals
 
 
@@ -148,6 +148,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
             warnings.simplefilter("ignore")  # the first fit has warned already
             fits = fit_regions(brdf, on_face, names, **region_fit, uncertainty=None, texel_albedo=True,
                                starts={name: fit.params for name, fit in fits.items()})
+        region_fit["cluster"] = tile_clusters(on_face.texel, resolution, label=on_face.label,
+                                              tile=max(1, round(TEXEL_TILE_AT_128 * resolution / 128)))
         rounds = 1
     for round_ in range(rounds):
         by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}

@@ -64,7 +64,8 @@ class FitOptions:
         how each texel changes between photographs, and the albedo texture no longer leaks
         into it. The same optimum as ``albedo_rounds`` alternated to convergence, reached in
         one fit; the intervals are then estimated as after the last of those rounds
-        (re-estimating each texel's offset per replicate). Ignored with ``normals``.
+        (re-estimating each texel's offset per replicate), over tiles of
+        :data:`~mifaces.reflectance.fit.uncertainty.TEXEL_TILE_AT_128`. Ignored with ``normals``.
     balance_lights : bool
         Correct the given lights' relative intensities by the face's one albedo before
         fitting (:func:`mifaces.reflectance.light_balance.balance_given_lights`; the mean

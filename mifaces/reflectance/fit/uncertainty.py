@@ -111,6 +111,12 @@ TILE_AT_128 = 32
 #: (:func:`tile_clusters`). 1 (none): a floor of 8 covered 82-92 % on the same tuning captures, against
 #: 90-97 % without.
 MIN_TILES = 1
+#: Side (texels at texture 128, scaled like :data:`TILE_AT_128`) of the tiles of the intervals of the fit
+#: with an albedo per texel (``FitOptions(texel_albedo=True)``): chosen by the same rule on the tuning
+#: captures at ``measure``'s size (512², 64 spp, texture 512²; seeds 100-104, Cook-Torrance and Phong;
+#: validation/results/texel_albedo_tuning_full.json): tiles of 16, 32 and 64 covered 65-72 %, 80-91 % and
+#: 94-98 %. With the texture's part of the error gone, what is left varies over larger parts of the face.
+TEXEL_TILE_AT_128 = 64
 #: Most clusters when the samples come without any (each sample its own, grouped beyond this number).
 MAX_CLUSTERS = 4096
 #: Draws of the bootstrap.
