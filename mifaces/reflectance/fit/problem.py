@@ -45,13 +45,12 @@ class Problem:
                                      state_fn=lambda arrays, u, jacobian: (dr.width(arrays["w"]), jacobian))
         self._sums = _FROZEN[key]
         #: with ``texel`` (N,): each texel's albedo is its own free parameter, eliminated (see :meth:`system`)
-        self.texel = None
+        self.texel_index, self.texels = None, 0
         if texel is not None:
             if np.shape(texel) != np.shape(sigma):
                 raise ValueError(f"texel must have shape {np.shape(sigma)}, got {np.shape(texel)}")
             self.texel_index = np.unique(np.asarray(texel), return_inverse=True)[1]
             self.texels = int(self.texel_index.max()) + 1 if len(self.texel_index) else 0
-            self.texel = device_array(np.uint32, self.texel_index.astype(np.uint32))
 
     def _residuals(self, u):
         params = self.space.drjit_params(u)
@@ -64,7 +63,7 @@ class Problem:
 
     def loss(self, x) -> float:
         """½ Σ r², accumulated in float64."""
-        if self.texel is not None:
+        if self.texel_index is not None:
             return self.system(x)[2]
         return float(self._run(x, False)[0])
 
@@ -83,26 +82,19 @@ class Problem:
         jtj[rows, cols] = values[1:1 + len(rows)]
         jtj[cols, rows] = values[1:1 + len(rows)]
         jtr, loss = values[1 + len(rows):], float(values[0])
-        if self.texel is not None:
-            weight, a, s = self.texel_albedo_sums(x)
+        if self.texel_index is not None:
+            weight, a, s = self.texel_sums(x, self.texel_index, self.texels)
             scaled = (s / weight[:, None, None]).reshape(-1, p)  # (T·3, P): S_t / W_t per channel
             jtj = jtj - scaled.T @ s.reshape(-1, p)
             jtr = jtr - scaled.T @ a.reshape(-1)
             loss = loss - 0.5 * float(np.sum(a * a / weight[:, None]))
         return jtj, jtr, loss
 
-    def texel_albedo_sums(self, x) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Per texel of ``texel`` (see :meth:`system`): W_t (T,), A_t (T, 3) and S_t (T, 3, P) at ``x``.
-        One kernel, frozen as :meth:`cluster_sums`'s."""
-        p = len(x)
-        sums = self._group_sums("texel_albedo", _texel_albedo_sums, x, self.texel_index, self.texels, 4 + 3 * p)
-        return sums[:, 0], sums[:, 1:4], sums[:, 4:].reshape(self.texels, 3, p)
-
     def texel_albedo(self, x) -> np.ndarray:
         """The region's albedo (3,) at ``x`` with ``texel``: the weighted mean of the texels' best
         albedos, Σ_t A_t / Σ_t W_t per channel (the albedo of :attr:`space` fixed at 0: the
         residuals are r - π f_s)."""
-        weight, a, _ = self.texel_albedo_sums(x)
+        weight, a, _ = self.texel_sums(x, self.texel_index, self.texels)
         return a.sum(axis=0) / weight.sum()
 
     def cluster_sums(self, x, cluster: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray, float]:
@@ -119,14 +111,15 @@ class Problem:
         hg[:, cols, rows] = sums[:, 1 + p:]
         return sums[:, 1:1 + p], hg, 0.5 * float(sums[:, 0].sum())
 
-    def texel_sums(self, x, texel: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray]:
-        """Per texel t, W_t = Σ_{i ∈ t} 1/σ_i² (T,) and S_t = Σ_{i ∈ t} J_i/σ_i per colour channel
-        (T, 3, P), at ``x``; ``texel`` (N,) numbers the texels 0 … ``groups`` - 1. What the
-        offsets' part of the uncertainty needs (:func:`mifaces.reflectance.fit.offset_uncertainty.offset_sums`):
-        one kernel as :meth:`cluster_sums`'s, once per fit with ``albedo_rounds``."""
+    def texel_sums(self, x, texel: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per texel t, W_t = Σ_{i ∈ t} 1/σ_i² (T,), A_t = Σ_{i ∈ t} ρ_i/σ_i (T, 3) and
+        S_t = Σ_{i ∈ t} J_i/σ_i per colour channel (T, 3, P), at ``x``; ``texel`` (N,) numbers the
+        texels 0 … ``groups`` - 1. What the offsets' part of the uncertainty needs
+        (:func:`mifaces.reflectance.fit.offset_uncertainty.offset_sums`) and the fit with an albedo
+        per texel (:meth:`system`): one kernel as :meth:`cluster_sums`'s."""
         p = len(x)
-        sums = self._group_sums("texels", _texel_sums, x, texel, groups, 1 + 3 * p)
-        return sums[:, 0], sums[:, 1:].reshape(groups, 3, p)
+        sums = self._group_sums("texels", _texel_sums, x, texel, groups, 4 + 3 * p)
+        return sums[:, 0], sums[:, 1:4], sums[:, 4:].reshape(groups, 3, p)
 
     def _group_sums(self, name: str, kernel, x, group: np.ndarray, groups: int, width: int) -> np.ndarray:
         """``kernel(space, arrays, u, groups)``'s per-group sums at ``x`` for the samples' ``group``
@@ -232,25 +225,14 @@ def _cluster_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
     return _group_scatter(terms, arrays["c"], groups)
 
 
-def _texel_albedo_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
+def _texel_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
     """``[Σ 1/σ², Σ ρ_c/σ per channel c, Σ J_c/σ per channel c and free entry a (row-major)]`` per
     texel ``arrays["c"]`` as one float64 array of ``groups`` rows (ρ the residuals ``(r - π f)/σ``,
-    J their forward-mode tangents). One kernel."""
+    J their forward-mode tangents, as in :func:`_cluster_sums`). One kernel."""
     r, d = _residual_tangents(space, arrays, u)
     w = mi.Float64(arrays["w"])
     terms = [w * w] + [w * r[c] for c in range(3)] + [w * d[a][c] for c in range(3) for a in range(len(u))]
     return _group_scatter(terms, arrays["c"], groups)
-
-
-def _texel_sums(space: ParameterSpace, arrays: dict, u: list, groups: int):
-    """``[Σ 1/σ², Σ J_c/σ for channel c and free entry a (row-major)]`` per texel ``arrays["c"]``
-    as one float64 array of ``groups`` rows (J the forward-mode tangents of the residuals
-    ``(r - π f)/σ``, as in :func:`_cluster_sums`). One kernel."""
-    _, d = _residual_tangents(space, arrays, u)
-    w = mi.Float64(arrays["w"])
-    terms = [w * w] + [w * d[a][c] for c in range(3) for a in range(len(u))]
-    return _group_scatter(terms, arrays["c"], groups)
-
 
 
 __all__ = ["Problem", "EXPAND_LIMIT"]

@@ -361,7 +361,7 @@ def region_uncertainty(space: ParameterSpace, problem: Problem, params: dict, pr
         terms = None
         if offsets is not None and method != "laplace":
             texel, texels = cluster_index(offsets.texel)
-            weight, jsum = problem.texel_sums(x, texel, texels)
+            weight, _, jsum = problem.texel_sums(x, texel, texels)
             terms = offset_sums(texel, index, groups, weight, jsum, offsets.shrinkage, offsets.offsets)
         cov = covariance(x, hg.sum(axis=0), loss, problem.n, u, hg, held, method, offsets=terms)
     return parameter_intervals(space, cov, statuses)
