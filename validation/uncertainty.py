@@ -90,6 +90,10 @@ def shown_variants() -> dict:
 #: Estimates compared: name -> (method, tile at resolution 128 or None, fewest tiles per region or None).
 VARIANTS = ({tiled(m, t, f): (m, t, f) for t, f in TILE_CANDIDATES for m in ("jackknife", "sandwich", "bootstrap")}
             | {"sandwich_texel": ("sandwich", 1, 1), "laplace": ("laplace", None, None)})
+#: With ``--texel-albedo`` (uncertainty_texel_albedo.json): the default region fit beside the fit with an
+#: albedo per texel (``FitOptions(texel_albedo=True)``, its own tiles); name -> (method, tile, floor, options).
+TEXEL_VARIANTS = {"region": (unc.METHODS[0], None, None, {}),
+                  "texel_albedo": (unc.METHODS[0], None, None, {"texel_albedo": True})}
 MODELS = ("cooktorrance", "phong", "ward", "lafortune")
 OUT_OF_FAMILY = {"roughplastic": dict(brdf="roughplastic"), "principled": dict(brdf="principled"),
                  "varying": dict(brdf="cooktorrance", varying=True)}
@@ -145,6 +149,11 @@ def _fit(capture, face, shapes, samples, model, method=unc.METHODS[0], tile=None
         unc.TILE_AT_128, unc.MIN_TILES = default
 
 
+def _options(options: list) -> dict:
+    """The :class:`FitOptions` of a variant's optional fourth entry (none: {})."""
+    return dict(options[0]) if options else {}
+
+
 def _checks(estimate, truth: dict, variant: str, meta: dict) -> list[dict]:
     """One record per region, parameter and channel with a true value: interval, truth, covered."""
     out = []
@@ -187,8 +196,8 @@ def same_family(model: str, seeds, tmp: Path, variants=VARIANTS) -> list:
         params = skin_truth(seed) if model == "cooktorrance" else None
         capture, face, shapes, samples = _simulate(tmp / f"{model}_{seed}", seed, brdf=model, brdf_params=params)
         truth = _truth_of(capture, model)
-        for variant, (method, tile, floor) in variants.items():
-            estimate = _fit(capture, face, shapes, samples, model, method, tile, floor)
+        for variant, (method, tile, floor, *options) in variants.items():
+            estimate = _fit(capture, face, shapes, samples, model, method, tile, floor, **_options(options))
             records += _checks(estimate, truth, variant, {"truth_model": model, "model": model, "seed": seed})
         print(f"{model} seed {seed}: {time.perf_counter() - t:.1f} s", flush=True)
     return records
@@ -228,11 +237,15 @@ def out_of_family(name: str, seeds, tmp: Path, variants=VARIANTS) -> list:
         ref = _simulate(tmp / f"{name}_{seed}_ref", seed, spp=REFERENCE_SPP, clean=True, **OUT_OF_FAMILY[name])
         noisy = _simulate(tmp / f"{name}_{seed}", seed, **OUT_OF_FAMILY[name])
         for model in MODELS:
-            reference = _fit(*ref, model, None)
-            truth = {r: {k: v for k, v in f.params.items() if k != "eta"} for r, f in reference.fits.items()
-                     if f.status != PRIOR}
-            for variant, (method, tile, floor) in variants.items():
-                estimate = _fit(*noisy, model, method, tile, floor)
+            truths = {}  # per fit options: the same fit's best parameters on the reference
+            for variant, (method, tile, floor, *options) in variants.items():
+                key = json.dumps(_options(options), sort_keys=True)
+                if key not in truths:
+                    reference = _fit(*ref, model, None, **_options(options))
+                    truths[key] = {r: {k: v for k, v in f.params.items() if k != "eta"}
+                                   for r, f in reference.fits.items() if f.status != PRIOR}
+                truth = truths[key]
+                estimate = _fit(*noisy, model, method, tile, floor, **_options(options))
                 records += _checks(estimate, truth, variant, {"truth_model": name, "model": model, "seed": seed})
         print(f"{name} seed {seed}: {time.perf_counter() - t:.1f} s", flush=True)
     return records
@@ -313,9 +326,10 @@ def coverage(records: list, **where) -> dict:
 def summary(records: list) -> dict:
     """Coverage per truth, model and variant: pooled, small regions, per region, per parameter."""
     out = {}
+    variants = list(dict.fromkeys(r["variant"] for r in records))
     for truth in sorted({r["truth_model"] for r in records}):
         for model in MODELS:
-            for variant in VARIANTS:
+            for variant in variants:
                 base = dict(truth_model=truth, model=model, variant=variant)
                 pooled = coverage(records, **base)
                 if not pooled["intervals"]:
@@ -330,13 +344,14 @@ def summary(records: list) -> dict:
     return out
 
 
-def skin_check(records: list) -> list:
-    """Per Cook-Torrance seed (the default estimate): the drawn skin truth and whether every fitted
-    skin parameter's interval holds it."""
+def skin_check(records: list, variant: str | None = None) -> list:
+    """Per Cook-Torrance seed (``variant``; None: the default estimate): the drawn skin truth and whether
+    every fitted skin parameter's interval holds it."""
     out = []
+    variant = variant or default_variant()
     for seed in sorted({r["seed"] for r in records if r["truth_model"] == "cooktorrance"}):
         rows = [r for r in records if r["truth_model"] == "cooktorrance" and r["seed"] == seed
-                and r["region"] == "skin" and r["variant"] == default_variant()]
+                and r["region"] == "skin" and r["variant"] == variant]
         out.append({"seed": seed, "truth": skin_truth(seed)["regions"]["skin"],
                     "all_covered": all(r["covered"] for r in rows),
                     "parameters": [{k: r[k] for k in ("parameter", "channel", "truth", "fitted", "lo", "hi",
@@ -457,19 +472,52 @@ def figure(result: dict, path: Path) -> None:
     save_figure(fig, path, dpi=90)
 
 
-def write_records(records: list) -> None:
-    """The records the tables read (the shown estimates at the default tiling, the jackknife at every
-    tiling), one compact row each (:data:`FIELDS`, values to 5 digits), to uncertainty_records.json."""
-    kept = set(shown_variants().values()) | {tiled("jackknife", t, f) for t, f in TILE_CANDIDATES}
-    with atomic_write(RESULTS / "uncertainty_records.json", "w") as f:
+def write_records(records: list, name: str = "uncertainty_records.json", kept=None) -> None:
+    """The records the tables read (``kept`` variants; None: the shown estimates at the default tiling,
+    the jackknife at every tiling), one compact row each (:data:`FIELDS`, values to 5 digits), to ``name``."""
+    if kept is None:
+        kept = set(shown_variants().values()) | {tiled("jackknife", t, f) for t, f in TILE_CANDIDATES}
+    with atomic_write(RESULTS / name, "w") as f:
         rows = [[float(f"{r[k]:.5g}") if isinstance(r[k], float) else r[k] for k in FIELDS] for r in records
                 if r["variant"] in kept]
         json.dump({"fields": FIELDS, "rows": rows}, f, separators=(",", ":"))
 
 
-def read_records() -> list:
-    data = json.loads((RESULTS / "uncertainty_records.json").read_text())
+def read_records(name: str = "uncertainty_records.json") -> list:
+    data = json.loads((RESULTS / name).read_text())
     return [dict(zip(data["fields"], row)) for row in data["rows"]]
+
+
+TEXEL_RESULT, TEXEL_RECORDS = "uncertainty_texel_albedo.json", "uncertainty_texel_albedo_records.json"
+
+
+def texel_table(args, tmp: Path, t0: float) -> None:
+    """The coverage table of :data:`TEXEL_VARIANTS` (the default region fit and the fit with an albedo per
+    texel) on the same seeds as uncertainty.json, to :data:`TEXEL_RESULT` and :data:`TEXEL_RECORDS`,
+    saved after each truth."""
+    result = {"variants": {k: [m, t, f, o] for k, (m, t, f, o) in TEXEL_VARIANTS.items()}, "image": IMAGE,
+              "measurements": MEASUREMENTS, "spp": SPP, "texture": TEXTURE, "reference_spp": REFERENCE_SPP,
+              "tile_at_128": {"region": unc.TILE_AT_128, "texel_albedo": unc.TEXEL_TILE_AT_128},
+              "min_tiles": unc.MIN_TILES, "skin_ranges": SKIN_RANGES, "seeds": {}}
+    records = []
+
+    def save():
+        result.update(coverage=summary(records), seconds=time.perf_counter() - t0,
+                      skin_check={v: skin_check(records, v) for v in TEXEL_VARIANTS})
+        write_json(RESULTS / TEXEL_RESULT, result)
+        write_records(records, TEXEL_RECORDS, set(TEXEL_VARIANTS))
+
+    for model in MODELS:
+        n = args.seeds if model in ("cooktorrance", "phong") else args.other_seeds
+        result["seeds"][model] = n
+        records += same_family(model, range(n), tmp, TEXEL_VARIANTS)
+        save()
+    for name in OUT_OF_FAMILY:
+        result["seeds"][name] = args.out_seeds
+        records += out_of_family(name, range(args.out_seeds), tmp, TEXEL_VARIANTS)
+        save()
+    print(json.dumps({t: {m: {v: (e["pooled"]["coverage"], e["small"]["coverage"]) for v, e in d.items()}
+                          for m, d in table.items()} for t, table in result["coverage"].items()}, indent=1))
 
 
 def main() -> None:
@@ -487,7 +535,8 @@ def main() -> None:
                         help="with --measure-check: measure --interreflection (uncertainty_measure_interreflection.json)")
     parser.add_argument("--texel-albedo", action="store_true",
                         help="with --measure-check: measure --texel-albedo (uncertainty_measure[_interreflection]"
-                             "_texel_albedo.json)")
+                             "_texel_albedo.json); without: the coverage table of the region fit beside the "
+                             "fit with an albedo per texel (uncertainty_texel_albedo.json)")
     parser.add_argument("--summarize", action="store_true",
                         help="only the tables and the figure again, from the records uncertainty.json holds")
     parser.add_argument("--cost", type=int, default=0, metavar="N",
@@ -514,6 +563,9 @@ def main() -> None:
                 (("--texel-albedo",) if args.texel_albedo else ())
             name = "uncertainty_measure" + "".join(f"_{flag[2:].replace('-', '_')}" for flag in extra) + ".json"
             write_json(RESULTS / name, measure_check(range(args.measure_check), tmp, extra))
+            return
+        if args.texel_albedo:
+            texel_table(args, tmp, t0)
             return
         if args.tune_tiles:
             variants = {tiled("jackknife", t, f): ("jackknife", t, f) for t, f in TILE_CANDIDATES}
