@@ -143,14 +143,14 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     texel_albedo = options.texel_albedo and not normals
     fits = fit_regions(brdf, on_face, names, **region_fit,
                        uncertainty=None if normals or rounds or texel_albedo else uncertainty)
-    if texel_albedo:  # the glossy parts with an albedo per texel; then, as a last round, the intervals
+    if texel_albedo:  # the glossy parts with an albedo per texel; then, for the intervals, a last round from them
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the first fit has warned already
             fits = fit_regions(brdf, on_face, names, **region_fit, uncertainty=None, texel_albedo=True,
                                starts={name: fit.params for name, fit in fits.items()})
         region_fit["cluster"] = tile_clusters(on_face.texel, resolution, label=on_face.label,
                                               tile=max(1, round(TEXEL_TILE_AT_128 * resolution / 128)))
-        rounds = 1
+        rounds = 1 if uncertainty else 0
     for round_ in range(rounds):
         by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
         # unshrunk: the texel means (a texel effect per texel, consistent for the glossy part); shrunk
@@ -162,7 +162,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
             warnings.simplefilter("ignore")  # the first fit has warned already
             last = round_ == rounds - 1  # its intervals re-estimate the offsets per replicate
             fits = fit_regions(brdf, corrected, names, **region_fit, uncertainty=uncertainty if last else None,
-                               offsets=offsets if last else None)
+                               offsets=offsets if last else None,
+                               starts={name: fit.params for name, fit in fits.items()} if texel_albedo else None)
     texel_normals = None
     if normals:
         texel_normals = _refine_normals(brdf, fits, on_face, names, options.normal_options, progress,

@@ -63,8 +63,9 @@ class FitOptions:
         from the problem (``fit_region(texel=...)``): the glossy part is then measured from
         how each texel changes between photographs, and the albedo texture no longer leaks
         into it. The same optimum as ``albedo_rounds`` alternated to convergence, reached in
-        one fit; the intervals are then estimated as after the last of those rounds
-        (re-estimating each texel's offset per replicate), over tiles of
+        one fit; the intervals are then estimated by one more such round started at that
+        optimum (skipped without ``uncertainty``), re-estimating each texel's offset per
+        replicate, over tiles of
         :data:`~mifaces.reflectance.fit.uncertainty.TEXEL_TILE_AT_128`. Ignored with ``normals``.
     balance_lights : bool
         Correct the given lights' relative intensities by the face's one albedo before
