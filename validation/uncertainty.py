@@ -47,7 +47,7 @@ from mifaces.shape.io import load_geometry
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
 from mifaces.reflectance.fit import intervals
 from mifaces.reflectance.fit import uncertainty as unc
-from mifaces.status import PRIOR
+from mifaces.status import DEFAULTS, PRIOR
 from mifaces.studio import photograph, simulate
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -92,7 +92,7 @@ VARIANTS = ({tiled(m, t, f): (m, t, f) for t, f in TILE_CANDIDATES for m in ("ja
             | {"sandwich_texel": ("sandwich", 1, 1), "laplace": ("laplace", None, None)})
 #: With ``--texel-albedo`` (uncertainty_texel_albedo.json): the default region fit beside the fit with an
 #: albedo per texel (``FitOptions(texel_albedo=True)``, its own tiles); name -> (method, tile, floor, options).
-TEXEL_VARIANTS = {"region": (unc.METHODS[0], None, None, {}),
+TEXEL_VARIANTS = {"region": (unc.METHODS[0], None, None, {"texel_albedo": False}),
                   "texel_albedo": (unc.METHODS[0], None, None, {"texel_albedo": True})}
 MODELS = ("cooktorrance", "phong", "ward", "lafortune")
 OUT_OF_FAMILY = {"roughplastic": dict(brdf="roughplastic"), "principled": dict(brdf="principled"),
@@ -149,9 +149,13 @@ def _fit(capture, face, shapes, samples, model, method=unc.METHODS[0], tile=None
         unc.TILE_AT_128, unc.MIN_TILES = default
 
 
+#: The fit the tables of uncertainty.json compare estimates on: one albedo per region.
+REGION_FIT = {"texel_albedo": False}
+
+
 def _options(options: list) -> dict:
-    """The :class:`FitOptions` of a variant's optional fourth entry (none: {})."""
-    return dict(options[0]) if options else {}
+    """The :class:`FitOptions` of a variant's optional fourth entry (none: :data:`REGION_FIT`)."""
+    return dict(options[0]) if options else dict(REGION_FIT)
 
 
 def _checks(estimate, truth: dict, variant: str, meta: dict) -> list[dict]:
@@ -167,8 +171,10 @@ def _checks(estimate, truth: dict, variant: str, meta: dict) -> list[dict]:
             channels = range(3) if np.ndim(value) else [None]
             for c in channels:
                 true = float(value[c] if c is not None else value)
-                fitted = float(fit.params[name][c] if c is not None else fit.params[name])
-                status = entry.get("status")
+                # a region left without a lobe (``no_lobe``) has a scalar 0 for an RGB parameter
+                fitted = float(np.broadcast_to(fit.params[name], np.shape(value))[c] if c is not None
+                               else fit.params[name])
+                status = entry.get("status") or (fit.status if fit.status == DEFAULTS else None)
                 status = status[c] if isinstance(status, list) else status
                 if "interval95" in entry and status in (None, intervals.ESTIMATED):
                     lo, hi = entry["interval95"]
@@ -203,10 +209,11 @@ def same_family(model: str, seeds, tmp: Path, variants=VARIANTS) -> list:
     return records
 
 
-def cost(seeds, tmp: Path, textures=(128, 256, 512), repeats: int = 5) -> dict:
+def cost(seeds, tmp: Path, textures=(128, 256, 512), repeats: int = 5, **options) -> dict:
     """The region fits' time (``seconds['fit']``) without and with the default estimate, per model,
     capture and texture resolution: the best of ``repeats`` interleaved runs, after one run of each
-    (the first in the process, which compiles the kernels, is recorded apart)."""
+    (the first in the process, which compiles the kernels, is recorded apart); ``options``: more
+    :class:`FitOptions` of both."""
     rows, first = [], {}
     for seed in seeds:
         capture = _simulate(tmp / f"cost_{seed}", seed)[:3]
@@ -215,7 +222,7 @@ def cost(seeds, tmp: Path, textures=(128, 256, 512), repeats: int = 5) -> dict:
             for model in MODELS:
                 times = {}
                 for i, method in enumerate((None, unc.METHODS[0]) * (repeats + 1)):
-                    seconds = _fit(*capture, samples, model, method, texture=texture).seconds["fit"]
+                    seconds = _fit(*capture, samples, model, method, texture=texture, **options).seconds["fit"]
                     if i < 2:
                         first.setdefault(f"{model}_{method}", seconds)
                         continue
@@ -226,7 +233,7 @@ def cost(seeds, tmp: Path, textures=(128, 256, 512), repeats: int = 5) -> dict:
     ratio = np.array([r["with"] / r["without"] - 1 for r in rows])
     by_texture = {t: float(np.median([r["with"] / r["without"] - 1 for r in rows if r["texture"] == t]))
                   for t in textures}
-    return {"method": unc.METHODS[0], "overhead_median": float(np.median(ratio)),
+    return {"method": unc.METHODS[0], "options": options, "overhead_median": float(np.median(ratio)),
             "overhead_median_by_texture": by_texture, "first_call_seconds": first, "fits": rows}
 
 
@@ -556,7 +563,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         if args.cost:
-            write_json(RESULTS / "uncertainty_cost.json", cost(range(args.cost), tmp))
+            options = {"texel_albedo": True} if args.texel_albedo else REGION_FIT
+            name = "uncertainty_cost" + ("_texel_albedo" if args.texel_albedo else "") + ".json"
+            write_json(RESULTS / name, cost(range(args.cost), tmp, **options))
             return
         if args.measure_check:
             extra = (("--interreflection",) if args.interreflection else ()) + \
