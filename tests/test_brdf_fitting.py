@@ -480,8 +480,20 @@ def test_a_fit_that_never_sees_its_lobe_ends_at_start(jit_variant):
 
 
 def test_a_fit_that_moves_its_lobe_is_not_at_start(jit_variant):
-    """The converse: noise-free samples of a Phong lobe converge, and are not flagged at_start."""
+    """The converse: noise-free samples of a Phong lobe converge, and are not flagged at_start. Nor is a
+    fit started at that optimum (a previous fit's, as the texel albedo's rounds start), which has
+    nowhere to move; a start that leaves the search a glossy parameter is still checked."""
     options, truth = TRUTH["phong"]
     model = brdf.model("phong", **options)
-    fit = fit_region(model, *synthetic_samples(model, truth, 3000), schedule=FULL_DATA)
+    samples = synthetic_samples(model, truth, 3000)
+    fit = fit_region(model, *samples, schedule=FULL_DATA)
     assert fit.status == CONVERGED, fit.reason
+    again = fit_region(model, *samples, schedule=FULL_DATA, start=fit.params)
+    assert again.status == CONVERGED, again.reason
+    np.testing.assert_allclose(again.params["exponent"], fit.params["exponent"], rtol=1e-4)
+    # the unmoved lobe of the test above, from a start without the exponent: still at_start
+    rng = np.random.default_rng(3)
+    light = _direction(rng.uniform(50, 80, 400), rng.uniform(0, 360, 400))
+    blind = fit_region(model, light, light, np.tile([0.4, 0.3, 0.2], (400, 1)), np.ones(400), schedule=FULL_DATA,
+                       start={"specular_reflectance": [0.05] * 3})
+    assert blind.status == AT_START, blind.reason

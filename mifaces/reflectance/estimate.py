@@ -38,6 +38,7 @@ from .. import brdf as brdf_models
 from ..capture import load_capture
 from ..shape.io import load_geometry
 from ..model.regions import REGIONS, regions_present, texel_regions_of_mesh
+from ..status import AT_BOUND, CONVERGED
 from .maps.diffuse import AlbedoOffsets, refine_diffuse
 from .fit.regions import fit_regions
 from .interreflection import INDIRECT_DEPTH, INDIRECT_SPP, INDIRECT_WIDTH, bounced_light
@@ -140,14 +141,14 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     rounds = 0 if normals else int(options.albedo_rounds)
     region_fit = dict(progress=progress, fixed=fixed, fixed_by_region=per_region, schedule=schedule, seed=seed,
                       cluster=tile_clusters(on_face.texel, resolution, label=on_face.label))
-    texel_albedo = options.texel_albedo and not normals
+    texel_albedo = options.texel_albedo and not normals and not rounds
     fits = fit_regions(brdf, on_face, names, **region_fit,
                        uncertainty=None if normals or rounds or texel_albedo else uncertainty)
     if texel_albedo:  # the glossy parts with an albedo per texel; then, for the intervals, a last round from them
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the first fit has warned already
             fits = fit_regions(brdf, on_face, names, **region_fit, uncertainty=None, texel_albedo=True,
-                               starts={name: fit.params for name, fit in fits.items()})
+                               starts=_measured(fits))
         region_fit["cluster"] = tile_clusters(on_face.texel, resolution, label=on_face.label,
                                               tile=max(1, round(TEXEL_TILE_AT_128 * resolution / 128)))
         rounds = 1 if uncertainty else 0
@@ -163,7 +164,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
             last = round_ == rounds - 1  # its intervals re-estimate the offsets per replicate
             fits = fit_regions(brdf, corrected, names, **region_fit, uncertainty=uncertainty if last else None,
                                offsets=offsets if last else None,
-                               starts={name: fit.params for name, fit in fits.items()} if texel_albedo else None)
+                               starts=_measured(fits) if texel_albedo else None)
     texel_normals = None
     if normals:
         texel_normals = _refine_normals(brdf, fits, on_face, names, options.normal_options, progress,
@@ -194,6 +195,12 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     if out is not None:
         write_fitted(estimate, out, capture, face, shapes, force=force)
     return estimate
+
+
+def _measured(fits: dict) -> dict:
+    """The parameters of the region fits that measured their glossy part (converged, or kept at a bound):
+    the next fit's start values, which it may keep (a region that borrowed its lobe starts afresh)."""
+    return {name: fit.params for name, fit in fits.items() if fit.status in (CONVERGED, AT_BOUND)}
 
 
 def _refine_normals(brdf, fits, samples, names, options, progress, region_fit):

@@ -123,7 +123,9 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     sigma : ndarray (N,)
         Confidence σ of each sample (eq. 9/10); weights are 1/σ².
     start : dict, optional
-        Initial values; the rest come from :func:`linear_start`.
+        Initial values; the rest come from :func:`linear_start`. A start that gives every
+        free glossy parameter is taken for a measurement (a previous fit's optimum): a fit
+        that does not move from it is not flagged ``'at_start'``.
     fixed, bounds : dict, optional
         See :class:`ParameterSpace`; ``fixed`` defaults to the model's
         :meth:`~mifaces.brdf.model.BRDFModel.fixed_defaults`.
@@ -172,6 +174,8 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         raise ValueError(f"cluster must have shape {np.shape(sigma)}, got {np.shape(cluster)}")
     fixed = model.fixed_defaults() if fixed is None else fixed
     given = {k for k, v in (start or {}).items() if v is not None}
+    measured_start = {q.name for q in model.parameters() if q.name not in fixed
+                      and q.name != DIFFUSE_PARAMETER.name} <= given
     if not {q.name for q in model.parameters() if q.name not in fixed} <= given:  # a search for what is missing
         start = {**linear_start(model, light, view, reflectance, sigma, fixed, seed=seed), **(start or {})}
     order = np.random.default_rng(seed).permutation(len(sigma))
@@ -212,7 +216,7 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     if bounded and status == CONVERGED:
         # the best fit lies outside the valid range: the samples do not support this model there
         status, reason = AT_BOUND, f"{reason}; at the bound of its range: {', '.join(bounded)}"
-    elif space.glossy_unchanged(x_start, x):
+    elif not measured_start and space.glossy_unchanged(x_start, x):
         # the solver never moved the glossy part: its values are the start's, not a measurement
         status, reason = AT_START, f"{reason}; the glossy parameters stayed at their start values"
     pruned = []
