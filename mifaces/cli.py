@@ -51,7 +51,7 @@ from .studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
 
 #: Largest texture resolution R the commands take (R x R texels).
 MAX_TEXTURE = math.isqrt(MAX_IMAGE_PIXELS)
-TEXEL_ALBEDO_HELP = "Fit the glossy part with an albedo per texel: the albedo texture stays out of it (docs/uncertainty.md)."
+TEXEL_ALBEDO_HELP = "An albedo per texel in the glossy fit; --no-: one per region, as the paper (docs/uncertainty.md)."
 
 
 class Commands(click.Group):

@@ -117,7 +117,7 @@ def test_cli_texel_albedo_flag_reaches_the_fit(monkeypatch, tmp_path):
     capture = tmp_path / "capture"
     capture.mkdir()
     for command in ("fit-brdf", "measure"):
-        for flags, expected in (([], False), (["--texel-albedo"], True)):
+        for flags, expected in (([], True), (["--no-texel-albedo"], False), (["--texel-albedo"], True)):
             calls.clear()
             CliRunner().invoke(cli.main, [command, str(capture), "--out", str(tmp_path / command), *flags])
             assert calls.get("texel_albedo") is expected, (command, flags)

@@ -139,10 +139,11 @@ def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> 
 
 def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shadow_angle: float,
                 resolution: int, normals: bool = False, refine: bool = False, refine_shape: bool = False,
-                unknown_lights: bool = False, interreflection: bool = False, texel_albedo: bool = False) -> dict:
+                unknown_lights: bool = False, interreflection: bool = False, texel_albedo: bool | None = None) -> dict:
     """Import, measure and relight one subject; its errors and timings. With ``unknown_lights`` the
     capture hides its light directions (``mifaces import yaleb --unknown-lights``) and ``measure``
-    estimates them (``validation/unknown_lights.py``); the held-out lights are rendered as known."""
+    estimates them (``validation/unknown_lights.py``); the held-out lights are rendered as known.
+    ``texel_albedo`` None: :class:`FitOptions`' default."""
     t0 = time.perf_counter()
     name = subject_dir.name
     capture_dir = import_subject(subject_dir, out / "capture", train=train, force=True, unknown_lights=unknown_lights)
@@ -151,7 +152,7 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     t_measure = time.perf_counter()
     report = measure(out / "measure", capture_dir, models=models, progress=True, refine_shape=refine_shape,
                      options=FitOptions(resolution=resolution, normals=normals, interreflection=interreflection,
-                                        texel_albedo=texel_albedo))
+                                        **({} if texel_albedo is None else {"texel_albedo": texel_albedo})))
     seconds = {"import": t_measure - t0, "measure": time.perf_counter() - t_measure}
     capture = load_capture(capture_dir, detect=False)
     # the faces the BRDFs were fitted on: the refined ones where this run kept a refinement

@@ -877,6 +877,51 @@ def sec_uncertainty_measure(d):
     return lines + table(["seed", "skin parameter", "truth", "fitted", "95 % interval", "holds the truth"], rows)
 
 
+def sec_uncertainty_texel_albedo(d):
+    variants = list(get(d, "variants") or {})
+    tiles = get(d, "tile_at_128") or {}
+    lines = [f"Captures of {'×'.join(map(str, get(d, 'image') or []))} px, {text(get(d, 'measurements'))} "
+             f"photographs, {text(get(d, 'spp'))} spp, texture {text(get(d, 'texture'))}², the true geometry; one "
+             "capture per seed. Coverage of the jackknife's 95 % intervals (intervals checked in brackets) of the "
+             "region fit (one albedo per region) and of the fit with an albedo per texel, over tiles of "
+             + ", ".join(f"{text(v)} texels at 128² ({k})" for k, v in items(tiles))
+             + ". Out of family: the true value is the same fit's best on the capture rendered without noise at "
+             f"{text(get(d, 'reference_spp'))} spp.", ""]
+
+    def cell(e):
+        return DASH if not e or e.get("coverage") is None else f"{pct(e.get('coverage'), 0)} ({text(e.get('intervals'))})"
+
+    rows = []
+    for truth, models in items(get(d, "coverage")):
+        for model, entry in items(models):
+            row = [text(truth), text(model), text(get(d, "seeds", truth, default=None))]
+            for key in ("pooled", "small", "skin"):
+                for v in variants:
+                    e = get(entry, v, default={}) or {}
+                    row.append(cell(e.get("regions", {}).get("skin") if key == "skin" else e.get(key)))
+            rows.append(row)
+    header = ["truth", "model", "seeds"] + [f"{key}: {v}" for key in ("pooled", "lips and eyebrows", "skin")
+                                              for v in variants]
+    checks = get(d, "skin_check", default={}) or {}
+    notes = ["", "Cook–Torrance truths with a drawn skin: every skin interval holds the truth in "
+             + "; ".join(f"{sum(bool(r.get('all_covered')) for r in rows_of(runs))} of {len(rows_of(runs))} "
+                         f"captures ({v})" for v, runs in items(checks)) + ".", ""] if checks else []
+    return lines + table(header, rows) + notes
+
+
+def sec_uncertainty_cost(d):
+    options = get(d, "options", default={}) or {}
+    lines = [f"The region fits' time (`seconds['fit']`, best of interleaved runs) without and with the "
+             f"{text(get(d, 'method'))} intervals, per capture, model and texture"
+             + (f" ({', '.join(f'{k}={v}' for k, v in options.items())})" if options else "")
+             + f". Median overhead: {pct(get(d, 'overhead_median'), 1)}; by texture: "
+             + ", ".join(f"{k}²: {pct(v, 1)}" for k, v in items(get(d, "overhead_median_by_texture"))) + ".", ""]
+    rows = [[text(r.get("seed")), text(r.get("texture")), text(r.get("model")), text(r.get("samples")),
+             fixed(r.get("without"), 3), fixed(r.get("with"), 3),
+             pct(r["with"] / r["without"] - 1 if r.get("without") else None, 1)] for r in rows_of(get(d, "fits"))]
+    return lines + table(["seed", "texture", "model", "samples", "without (s)", "with (s)", "overhead"], rows)
+
+
 def sec_unknown(d):
     if isinstance(d, dict):
         return [f"Layout not known to `validation/results_doc.py`; top-level keys: "
@@ -935,6 +980,9 @@ LAYOUTS = {
     "uncertainty_measure": ("Skin's intervals on the default capture, measured on the true shapes", "SIMULATED",
                             sec_uncertainty_measure),
     "truths": ("`mifaces measure` on truths the fit cannot copy", "SIMULATED", sec_truths),
+    "uncertainty_texel_albedo": ("Coverage of the intervals: the region fit against the fit with an albedo per "
+                                 "texel", "SIMULATED", sec_uncertainty_texel_albedo),
+    "uncertainty_cost": ("The intervals' cost", "timing (SIMULATED)", sec_uncertainty_cost),
 }
 
 

@@ -495,7 +495,7 @@ def read_records(name: str = "uncertainty_records.json") -> list:
     return [dict(zip(data["fields"], row)) for row in data["rows"]]
 
 
-TEXEL_RESULT, TEXEL_RECORDS = "uncertainty_texel_albedo.json", "uncertainty_texel_albedo_records.json"
+TEXEL_RESULT, TEXEL_RECORDS = "uncertainty_texel_albedo.json", "uncertainty_records_texel_albedo.json"
 
 
 def texel_table(args, tmp: Path, t0: float) -> None:
@@ -540,10 +540,12 @@ def main() -> None:
                              "measured on the true geometry (uncertainty_measure.json)")
     parser.add_argument("--interreflection", action="store_true",
                         help="with --measure-check: measure --interreflection (uncertainty_measure_interreflection.json)")
-    parser.add_argument("--texel-albedo", action="store_true",
-                        help="with --measure-check: measure --texel-albedo (uncertainty_measure[_interreflection]"
-                             "_texel_albedo.json); without: the coverage table of the region fit beside the "
-                             "fit with an albedo per texel (uncertainty_texel_albedo.json)")
+    parser.add_argument("--texel-albedo", action=argparse.BooleanOptionalAction, default=None,
+                        help="with --measure-check: measure --texel-albedo or --no-texel-albedo (unsaid: the "
+                             "library's default), the first written uncertainty_measure[_interreflection]"
+                             "_texel_albedo.json, the second without the suffix; with --cost: the fit with an albedo "
+                             "per texel (uncertainty_cost_texel_albedo.json); alone: the coverage table of the region "
+                             "fit beside the fit with an albedo per texel (uncertainty_texel_albedo.json)")
     parser.add_argument("--summarize", action="store_true",
                         help="only the tables and the figure again, from the records uncertainty.json holds")
     parser.add_argument("--cost", type=int, default=0, metavar="N",
@@ -568,12 +570,14 @@ def main() -> None:
             write_json(RESULTS / name, cost(range(args.cost), tmp, **options))
             return
         if args.measure_check:
+            texel = FitOptions().texel_albedo if args.texel_albedo is None else args.texel_albedo
             extra = (("--interreflection",) if args.interreflection else ()) + \
-                (("--texel-albedo",) if args.texel_albedo else ())
-            name = "uncertainty_measure" + "".join(f"_{flag[2:].replace('-', '_')}" for flag in extra) + ".json"
+                (("--texel-albedo",) if texel else ("--no-texel-albedo",))
+            name = "uncertainty_measure" + "".join(f"_{flag[2:].replace('-', '_')}" for flag in extra
+                                                   if not flag.startswith("--no-")) + ".json"
             write_json(RESULTS / name, measure_check(range(args.measure_check), tmp, extra))
             return
-        if args.texel_albedo:
+        if args.texel_albedo:  # alone
             texel_table(args, tmp, t0)
             return
         if args.tune_tiles:

@@ -52,8 +52,9 @@ class FitOptions:
         Alternations of the region fit with the per-texel albedo: each refits the
         regions on the reflectance less each sample's albedo offset from its
         region's mean (:func:`mifaces.reflectance.maps.diffuse.albedo_offsets`), the
-        albedo map refitted with the last round's glossy parts. 0: the paper's
-        one region fit. (With ``normals``, whose rounds do the same, ignored.)
+        albedo map refitted with the last round's glossy parts. 0: none (the fit
+        ``texel_albedo`` chooses). Given, it replaces ``texel_albedo``'s fit. (With
+        ``normals``, whose rounds do the same, ignored.)
         The offsets are each texel's mean (not shrunk); the last round's intervals
         re-estimate them in every jackknife or sandwich replicate
         (:mod:`mifaces.reflectance.fit.uncertainty`), and still hold the truth less often
@@ -66,7 +67,9 @@ class FitOptions:
         one fit; the intervals are then estimated by one more such round started at that
         optimum (skipped without ``uncertainty``), re-estimating each texel's offset per
         replicate, over tiles of
-        :data:`~mifaces.reflectance.fit.uncertainty.TEXEL_TILE_AT_128`. Ignored with ``normals``.
+        :data:`~mifaces.reflectance.fit.uncertainty.TEXEL_TILE_AT_128`. On by default
+        (``docs/uncertainty.md`` says why); False: the paper's one albedo per region.
+        Ignored with ``normals`` or ``albedo_rounds``.
     balance_lights : bool
         Correct the given lights' relative intensities by the face's one albedo before
         fitting (:func:`mifaces.reflectance.light_balance.balance_given_lights`; the mean
@@ -92,7 +95,7 @@ class FitOptions:
     specular_maps: bool = False
     uncertainty: str | None = METHODS[0]
     albedo_rounds: int = 0
-    texel_albedo: bool = False
+    texel_albedo: bool = True
     balance_lights: bool = False
     interreflection: bool = False
 

@@ -82,7 +82,7 @@ class BRDFEstimate:
         renders' depth, width and samples per pixel, the seconds it took); None where it was not.
     texel_albedo : bool
         Whether the glossy parts were fitted with an albedo per texel
-        (``FitOptions(texel_albedo=True)``); ``brdf.json`` says so where they were.
+        (``FitOptions(texel_albedo=True)``, the default); ``brdf.json`` says which (``"texel_albedo"``).
     """
 
     model: str
@@ -137,7 +137,7 @@ class BRDFEstimate:
                 **({} if self.lighting is None else {"lighting": self.lighting}),
                 **({} if self.light_balance is None else {"light_balance": self.light_balance}),
                 **({} if self.interreflection is None else {"interreflection": self.interreflection}),
-                **({"texel_albedo": True} if self.texel_albedo else {}),
+                "texel_albedo": bool(self.texel_albedo),
                 **({} if self.normals is None else {"normals": FILES["normals"],
                                                     "normal_refinement": self.normal_refinement}),
                 **({} if self.specular is None else {"specular": FILES["specular"], "specular_shrinkage": {
