@@ -15,14 +15,20 @@
    single texels, the Laplace approximation, the bootstrap). The tile size was
    chosen on the tuning seeds (:data:`TUNING_SEEDS`), which the coverage
    tables leave out.
+   Items 1-3 use the region fit (one albedo per region, ``texel_albedo=False``).
 4. **Cost** (``--cost N``). The region fits' time with and without the
    default estimate, on N Cook-Torrance captures, texture 128², 256² and 512²
-   (fit_brdf's default).
+   (fit_brdf's default); with ``--texel-albedo``, of the fit with an albedo per texel.
+5. **The default fit** (``--texel-albedo`` alone). The same seeds and truths, the
+   jackknife of the region fit beside that of the fit with an albedo per texel
+   (``FitOptions(texel_albedo=True)``, the default, over its own tiles).
 
 Run:  python validation/uncertainty.py [--seeds 20] [--other-seeds 20] [--out-seeds 6] [--tune] [--cost N]
+      [--texel-albedo]
 Writes validation/results/uncertainty.json (the tables), uncertainty_records.json
 (every interval checked) and uncertainty.png (with
-``--tune``, uncertainty_tuning.json; with ``--cost``, uncertainty_cost.json).
+``--tune``, uncertainty_tuning.json; with ``--cost``, uncertainty_cost[_texel_albedo].json;
+with ``--texel-albedo`` alone, uncertainty_texel_albedo.json and uncertainty_records_texel_albedo.json).
 Simulated captures go to a temporary folder.
 """
 

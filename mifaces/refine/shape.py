@@ -422,7 +422,7 @@ def refine_lit(capture, shapes: dict, face_model, samples, brdf: str = FIT_SHAPE
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the quick fit's warnings are the final fits' too
         estimate = fit_brdf(capture, brdf, shapes, face_model=face_model, samples=samples, progress=False,
-                            options=FitOptions(resolution=resolution))
+                            options=FitOptions(resolution=resolution, uncertainty=None))  # lights, not reports
     return refine_shape(capture, shapes, face_model, estimate, schedule, progress=progress)
 
 
