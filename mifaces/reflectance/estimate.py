@@ -144,14 +144,15 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     texel_albedo = options.texel_albedo and not normals and not rounds
     fits = fit_regions(brdf, on_face, names, **region_fit,
                        uncertainty=None if normals or rounds or texel_albedo else uncertainty)
-    if texel_albedo:  # the glossy parts with an albedo per texel; then, for the intervals, a last round from them
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # the first fit has warned already
-            fits = fit_regions(brdf, on_face, names, **region_fit, uncertainty=None, texel_albedo=True,
-                               starts=_measured(fits))
+    if texel_albedo:  # the glossy parts with an albedo per texel, and their intervals over larger tiles
         region_fit["cluster"] = tile_clusters(on_face.texel, resolution, label=on_face.label,
                                               tile=max(1, round(TEXEL_TILE_AT_128 * resolution / 128)))
-        rounds = 1 if uncertainty else 0
+        refits = uncertainty == "bootstrap"  # which does not refit albedos per texel: a last round does
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the first fit has warned already
+            fits = fit_regions(brdf, on_face, names, **region_fit, uncertainty=None if refits else uncertainty,
+                               texel_albedo=True, starts=_measured(fits))
+        rounds = 1 if refits else 0
     for round_ in range(rounds):
         by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
         # unshrunk: the texel means (a texel effect per texel, consistent for the glossy part); shrunk

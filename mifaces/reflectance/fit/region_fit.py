@@ -154,8 +154,9 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         problem (:meth:`~mifaces.reflectance.fit.problem.Problem.system`), so that the glossy
         part is measured from each texel's variation between photographs, whatever the albedo
         texture; the region's ``diffuse_reflectance`` is the weighted mean of the texels' albedos.
-        No uncertainty is estimated (``uncertainty`` must be None): :func:`fit_brdf` estimates it
-        on the samples corrected by these albedos (``FitOptions(texel_albedo=True)``).
+        Its intervals come from the projected sums, over ``cluster`` (which must hold each texel's
+        samples whole; :mod:`mifaces.reflectance.fit.texel_uncertainty`); not with the bootstrap or
+        ``offsets``.
 
     Returns
     -------
@@ -180,9 +181,9 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         start = {**linear_start(model, light, view, reflectance, sigma, fixed, seed=seed), **(start or {})}
     order = np.random.default_rng(seed).permutation(len(sigma))
     if texel is not None:
-        if uncertainty is not None:
-            raise ValueError("a fit with a free albedo per texel (texel=...) estimates no uncertainty: "
-                             "pass uncertainty=None")
+        if offsets is not None or uncertainty == "bootstrap":
+            raise ValueError("a fit with a free albedo per texel (texel=...) takes no albedo offsets and no "
+                             "bootstrap: its albedos are its own")
         if np.shape(texel) != np.shape(sigma):
             raise ValueError(f"texel must have shape {np.shape(sigma)}, got {np.shape(texel)}")
         fixed = {**fixed, DIFFUSE_PARAMETER.name: [0.0, 0.0, 0.0]}  # per texel instead, eliminated from the problem
@@ -232,7 +233,7 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     if uncertainty is not None:
         data = (light, view, reflectance, sigma)
         intervals = region_uncertainty(space, problem, params, pruned, cluster, uncertainty, data, seed,
-                                       offsets=offsets)
+                                       offsets=offsets, texel=texel)
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=loss,
                      samples=len(sigma), seconds=time.perf_counter() - t0, status=status,
                      reason=reason, iterations=iterations, history=history, uncertainty=intervals)

@@ -1,0 +1,91 @@
+"""The uncertainty of a fit with an albedo per texel (``fit_region(texel=...)``), from the fit itself.
+
+The fit eliminates each texel's albedo a_t (variable projection,
+:meth:`mifaces.reflectance.fit.problem.Problem.system`): its sums are JᵀJ − Σ_t S_t S_tᵀ/W_t and
+Jᵀρ − Σ_t S_t A_t/W_t, with W_t, A_t and S_t texel t's sums
+(:meth:`~mifaces.reflectance.fit.problem.Problem.texel_sums`). Where every texel's samples lie in one
+cluster, both are sums over the clusters of the same per-cluster terms. The cluster estimates of
+:func:`mifaces.reflectance.fit.uncertainty.covariance` then apply to them as they stand
+(:func:`projected_sums`). In the jackknife, leaving a cluster out leaves its texels' albedos out
+with it, and each other texel's albedo follows the glossy part, at no extra cost. These are the
+intervals of the albedo offsets re-estimated per replicate
+(:mod:`mifaces.reflectance.fit.offset_uncertainty`) at the alternation's fixed point, without
+refitting to reach it.
+
+The region's albedo is not a parameter of that fit but a summary of it: the texels' weighted mean
+ā = Σ_t A_t / Σ_t W_t. Its interval is the jackknife's over the same clusters
+(:func:`texel_albedo_interval`): replicate g is (A − A_g + (S − S_g)·d_g) / (W − W_g), with d_g
+the glossy part's one-step change when cluster g is left out.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.stats
+
+from .intervals import LEVEL, NOT_IDENTIFIED, Covariance
+
+
+def _per_group(values: np.ndarray, home: np.ndarray, groups: int) -> np.ndarray:
+    """The sums over each group of ``values`` (T, ...) whose row t lies in group ``home[t]``."""
+    flat = values.reshape(len(values), -1)
+    sums = np.stack([np.bincount(home, weights=flat[:, j], minlength=groups) for j in range(flat.shape[1])], axis=1)
+    return sums.reshape((groups,) + values.shape[1:])
+
+
+def projected_sums(problem, x, index: np.ndarray, groups: int, texel) -> tuple:
+    """Per cluster, the projected score u_g (G, P) and H_g (G, P, P), the projected loss, and the
+    region albedo's sums per cluster (W_g (G,), A_g (G, 3), S_g (G, 3, P)), at ``x`` of ``problem``
+    (a fit with an albedo per ``texel``, (N,)); ``index`` (N,) numbers the clusters 0 … ``groups`` - 1.
+
+    Raises
+    ------
+    ValueError
+        If a texel's samples lie in more than one cluster.
+    """
+    u, hg, loss = problem.cluster_sums(x, index, groups)
+    _, tex = np.unique(np.asarray(texel), return_inverse=True)
+    weight, a, s = problem.texel_sums(x, tex, int(tex.max()) + 1 if len(tex) else 0)
+    home = np.zeros(len(weight), np.int64)
+    home[tex] = index
+    if np.any(home[tex] != index):
+        raise ValueError("the intervals of a fit with an albedo per texel need every texel's samples in one cluster")
+    scaled = s / weight[:, None, None]  # S_t / W_t per channel, (T, 3, P)
+    u = u - _per_group(np.einsum("tcp,tc->tp", scaled, a), home, groups)
+    hg = hg - _per_group(np.einsum("tcp,tcq->tpq", scaled, s), home, groups)
+    loss = loss - 0.5 * float(np.sum(a * a / weight[:, None]))
+    albedo = (np.bincount(home, weights=weight, minlength=groups), _per_group(a, home, groups),
+              _per_group(s, home, groups))
+    return u, hg, loss, albedo
+
+
+def texel_albedo_interval(cov: Covariance, u: np.ndarray, hg: np.ndarray, albedo: tuple, bounds: tuple,
+                          level: float = LEVEL) -> dict:
+    """The region albedo's ``{"std", "interval95"}`` (lists per channel) by the jackknife over the
+    clusters (module docstring): ā ± t·std, Student's t at G - 1 degrees of freedom, clipped to
+    ``bounds`` (lower, upper); ``{"status": "not_identified"}`` with fewer than two clusters with
+    samples, or where a replicate leaves nothing. ``cov`` gives the held entries of the glossy part."""
+    weight, a, s = albedo
+    used = weight > 0
+    if used.sum() < 2 or np.any(weight.sum() - weight[used] <= 0):
+        return {"status": NOT_IDENTIFIED}
+    free = ~np.asarray(cov.held, bool)
+    h = hg.sum(axis=0)
+    mean = a.sum(axis=0) / weight.sum()
+    replicates = []
+    for g in np.flatnonzero(used):
+        d = np.zeros(h.shape[0])
+        if free.any():
+            d[free] = np.linalg.lstsq((h - hg[g])[np.ix_(free, free)], u[g][free], rcond=None)[0]
+        rest = a.sum(axis=0) - a[g] + (s.sum(axis=0) - s[g]) @ d
+        replicates.append(rest / (weight.sum() - weight[g]))
+    g = len(replicates)
+    std = np.sqrt((g - 1) / g * np.sum(np.square(np.array(replicates) - mean), axis=0))
+    if not np.all(np.isfinite(std)):
+        return {"status": NOT_IDENTIFIED}
+    q = float(scipy.stats.t.ppf(0.5 + level / 2, g - 1))
+    lo, hi = np.clip(mean - q * std, *bounds), np.clip(mean + q * std, *bounds)
+    return {"std": [float(v) for v in std], "interval95": [[float(v) for v in lo], [float(v) for v in hi]]}
+
+
+__all__ = ["projected_sums", "texel_albedo_interval"]
