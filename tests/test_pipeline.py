@@ -83,6 +83,30 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
         measure(tmp_path / "x", capture_dir, geometry="guess")
 
 
+def test_two_photographs_too_few_for_the_texel_fit_keep_the_region_fit(capture_dir, tmp_path):
+    """Two photographs at texture 64²: most texels are seen once, and the fit with an albedo per texel
+    (the default) finds no lobe on skin. The fit then says so and keeps the region fit, whose skin lobe it
+    reports with intervals, and brdf.json says no texel albedo was used."""
+    import mifaces
+    from mifaces.capture import load_capture
+    from mifaces.reflectance import fit_brdf
+    from mifaces.shape.io import load_geometry
+
+    mifaces.set_variant("llvm_ad_rgb")
+    capture = load_capture(capture_dir)
+    face, shapes = load_geometry(capture, "ground-truth")
+    with pytest.warns(UserWarning, match="measured no lobe on skin"):
+        default = fit_brdf(capture, "ward", shapes, face_model=face, progress=False, out=tmp_path / "w",
+                           options=FitOptions(resolution=64))
+    region = fit_brdf(capture, "ward", shapes, face_model=face, progress=False,
+                      options=FitOptions(resolution=64, texel_albedo=False))
+    skin = default.fits["skin"]
+    np.testing.assert_allclose(skin.params["specular_reflectance"], region.fits["skin"].params["specular_reflectance"],
+                               rtol=1e-3, atol=1e-4)  # refitted from it
+    assert np.max(skin.params["specular_reflectance"]) > 0 and "alpha" in skin.uncertainty
+    assert json.loads((tmp_path / "w" / "brdf.json").read_text())["texel_albedo"] is False
+
+
 def test_cli_measure_prints_skin_and_errors(capture_dir, tmp_path):
     """The main job's command line: each model's skin parameters with their ground-truth error, and the report."""
     from click.testing import CliRunner

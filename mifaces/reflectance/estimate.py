@@ -150,9 +150,20 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         refits = uncertainty == "bootstrap"  # which does not refit albedos per texel: a last round does
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the first fit has warned already
-            fits = fit_regions(brdf, on_face, names, **region_fit, uncertainty=None if refits else uncertainty,
-                               texel_albedo=True, starts=_measured(fits))
+            per_texel = fit_regions(brdf, on_face, names, **region_fit, uncertainty=None if refits else uncertainty,
+                                    texel_albedo=True, starts=_measured(fits))
         rounds = 1 if refits else 0
+        lost = _lost_skin(fits, per_texel)
+        if lost:  # too few photographs per texel to see the lobe (two, say): the region fit, with its intervals
+            warnings.warn(f"the glossy fit with an albedo per texel measured no lobe on skin ({lost}): every region "
+                          "keeps the region fit, one albedo per region", stacklevel=2)
+            texel_albedo, rounds = False, 0
+            region_fit["cluster"] = tile_clusters(on_face.texel, resolution, label=on_face.label)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # the first fit has warned already
+                fits = fit_regions(brdf, on_face, names, **region_fit, uncertainty=uncertainty, starts=_measured(fits))
+        else:
+            fits = per_texel
     for round_ in range(rounds):
         by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
         # unshrunk: the texel means (a texel effect per texel, consistent for the glossy part); shrunk
@@ -196,6 +207,15 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     if out is not None:
         write_fitted(estimate, out, capture, face, shapes, force=force)
     return estimate
+
+
+def _lost_skin(region: dict, per_texel: dict) -> str | None:
+    """The texel fit's status and reason where its skin measured no lobe (no converged fit, none kept at a
+    bound) and the region fit's skin did; None otherwise."""
+    skin = per_texel.get("skin")
+    if skin is None or "skin" not in _measured(region) or skin.status in (CONVERGED, AT_BOUND):
+        return None
+    return f"{skin.status}: {skin.reason.split('; ')[-1]}"
 
 
 def _measured(fits: dict) -> dict:

@@ -64,12 +64,14 @@ class FitOptions:
         from the problem (``fit_region(texel=...)``): the glossy part is then measured from
         how each texel changes between photographs, and the albedo texture no longer leaks
         into it. The same optimum as ``albedo_rounds`` alternated to convergence, reached in
-        one fit; the intervals are then estimated by one more such round started at that
-        optimum (skipped without ``uncertainty``), re-estimating each texel's offset per
-        replicate, over tiles of
+        one fit; its intervals come from its own projected sums, each texel's albedo
+        following the lobe in every replicate (the bootstrap: one more such round from
+        that optimum), over tiles of
         :data:`~mifaces.reflectance.fit.uncertainty.TEXEL_TILE_AT_128`. On by default
         (``docs/uncertainty.md`` says why); False: the paper's one albedo per region.
-        Ignored with ``normals`` or ``albedo_rounds``.
+        Ignored with ``normals`` or ``albedo_rounds``. Where it measures no lobe on skin and
+        the region fit does (too few photographs per texel), the region fit is kept, with a
+        warning.
     balance_lights : bool
         Correct the given lights' relative intensities by the face's one albedo before
         fitting (:func:`mifaces.reflectance.light_balance.balance_given_lights`; the mean
