@@ -46,6 +46,7 @@ class Problem:
         self._sums = _FROZEN[key]
         #: with ``texel`` (N,): each texel's albedo is its own free parameter, eliminated (see :meth:`system`)
         self.texel_index, self.texels = None, 0
+        self._texel_cache: dict = {}  # the texel sums of the last two points (:meth:`texel_sums`)
         if texel is not None:
             if np.shape(texel) != np.shape(sigma):
                 raise ValueError(f"texel must have shape {np.shape(sigma)}, got {np.shape(texel)}")
@@ -117,9 +118,16 @@ class Problem:
         texels 0 … ``groups`` - 1. What the offsets' part of the uncertainty needs
         (:func:`mifaces.reflectance.fit.offset_uncertainty.offset_sums`) and the fit with an albedo
         per texel (:meth:`system`): one kernel as :meth:`cluster_sums`'s."""
+        own = texel is self.texel_index
+        key = np.round(np.asarray(x, np.float64), 10).tobytes()  # x read back from its values: equal to ~1e-16
+        if own and key in self._texel_cache:  # the last steps' points: the fit's optimum is one of them
+            return self._texel_cache[key]
         p = len(x)
         sums = self._group_sums("texels", _texel_sums, x, texel, groups, 4 + 3 * p)
-        return sums[:, 0], sums[:, 1:4], sums[:, 4:].reshape(groups, 3, p)
+        out = sums[:, 0], sums[:, 1:4], sums[:, 4:].reshape(groups, 3, p)
+        if own:
+            self._texel_cache = {k: v for k, v in list(self._texel_cache.items())[-1:]} | {key: out}
+        return out
 
     def _group_sums(self, name: str, kernel, x, group: np.ndarray, groups: int, width: int) -> np.ndarray:
         """``kernel(space, arrays, u, groups)``'s per-group sums at ``x`` for the samples' ``group``

@@ -26,13 +26,6 @@ import scipy.stats
 from .intervals import LEVEL, NOT_IDENTIFIED, Covariance
 
 
-def _per_group(values: np.ndarray, home: np.ndarray, groups: int) -> np.ndarray:
-    """The sums over each group of ``values`` (T, ...) whose row t lies in group ``home[t]``."""
-    flat = values.reshape(len(values), -1)
-    sums = np.stack([np.bincount(home, weights=flat[:, j], minlength=groups) for j in range(flat.shape[1])], axis=1)
-    return sums.reshape((groups,) + values.shape[1:])
-
-
 def projected_sums(problem, x, index: np.ndarray, groups: int, texel) -> tuple:
     """Per cluster, the projected score u_g (G, P) and H_g (G, P, P), the projected loss, and the
     region albedo's sums per cluster (W_g (G,), A_g (G, 3), S_g (G, 3, P)), at ``x`` of ``problem``
@@ -44,19 +37,27 @@ def projected_sums(problem, x, index: np.ndarray, groups: int, texel) -> tuple:
         If a texel's samples lie in more than one cluster.
     """
     u, hg, loss = problem.cluster_sums(x, index, groups)
-    _, tex = np.unique(np.asarray(texel), return_inverse=True)
+    tex = problem.texel_index if problem.texel_index is not None and len(problem.texel_index) == len(index) \
+        else np.unique(np.asarray(texel), return_inverse=True)[1]
     weight, a, s = problem.texel_sums(x, tex, int(tex.max()) + 1 if len(tex) else 0)
     home = np.zeros(len(weight), np.int64)
     home[tex] = index
     if np.any(home[tex] != index):
         raise ValueError("the intervals of a fit with an albedo per texel need every texel's samples in one cluster")
+    p = s.shape[2]
     scaled = s / weight[:, None, None]  # S_t / W_t per channel, (T, 3, P)
-    u = u - _per_group(np.einsum("tcp,tc->tp", scaled, a), home, groups)
-    hg = hg - _per_group(np.einsum("tcp,tcq->tpq", scaled, s), home, groups)
+    u, hg = u.copy(), hg.copy()
+    wg, ag, sg = np.zeros(groups), np.zeros((groups, 3)), np.zeros((groups, 3, p))
+    order = np.argsort(home, kind="stable")  # each cluster's texels: a slice of ``order``
+    ends = np.searchsorted(home[order], np.arange(groups + 1))
+    for g in range(groups):
+        mine = order[ends[g]:ends[g + 1]]
+        rows, own = scaled[mine].reshape(-1, p), s[mine]
+        u[g] -= rows.T @ a[mine].reshape(-1)
+        hg[g] -= rows.T @ own.reshape(-1, p)
+        wg[g], ag[g], sg[g] = weight[mine].sum(), a[mine].sum(axis=0), own.sum(axis=0)
     loss = loss - 0.5 * float(np.sum(a * a / weight[:, None]))
-    albedo = (np.bincount(home, weights=weight, minlength=groups), _per_group(a, home, groups),
-              _per_group(s, home, groups))
-    return u, hg, loss, albedo
+    return u, hg, loss, (wg, ag, sg)
 
 
 def texel_albedo_interval(cov: Covariance, u: np.ndarray, hg: np.ndarray, albedo: tuple, bounds: tuple,
