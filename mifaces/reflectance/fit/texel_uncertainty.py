@@ -45,17 +45,19 @@ def projected_sums(problem, x, index: np.ndarray, groups: int, texel) -> tuple:
     if np.any(home[tex] != index):
         raise ValueError("the intervals of a fit with an albedo per texel need every texel's samples in one cluster")
     p = s.shape[2]
-    scaled = s / weight[:, None, None]  # S_t / W_t per channel, (T, 3, P)
+    root = 1.0 / np.sqrt(weight)[:, None]
+    rows, values = (s * root[:, :, None]).reshape(-1, p), (a * root).reshape(-1)  # S_t, A_t over √W_t
     u, hg = u.copy(), hg.copy()
     wg, ag, sg = np.zeros(groups), np.zeros((groups, 3)), np.zeros((groups, 3, p))
     order = np.argsort(home, kind="stable")  # each cluster's texels: a slice of ``order``
     ends = np.searchsorted(home[order], np.arange(groups + 1))
     for g in range(groups):
         mine = order[ends[g]:ends[g + 1]]
-        rows, own = scaled[mine].reshape(-1, p), s[mine]
-        u[g] -= rows.T @ a[mine].reshape(-1)
-        hg[g] -= rows.T @ own.reshape(-1, p)
-        wg[g], ag[g], sg[g] = weight[mine].sum(), a[mine].sum(axis=0), own.sum(axis=0)
+        channels = (3 * mine[:, None] + np.arange(3)).reshape(-1)  # their rows, one per channel
+        own = rows[channels]
+        u[g] -= own.T @ values[channels]
+        hg[g] -= own.T @ own
+        wg[g], ag[g], sg[g] = weight[mine].sum(), a[mine].sum(axis=0), s[mine].sum(axis=0)
     loss = loss - 0.5 * float(np.sum(a * a / weight[:, None]))
     return u, hg, loss, (wg, ag, sg)
 
