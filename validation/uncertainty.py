@@ -28,7 +28,7 @@ Run:  python validation/uncertainty.py [--seeds 20] [--other-seeds 20] [--out-se
 Writes validation/results/uncertainty.json (the tables), uncertainty_records.json
 (every interval checked) and uncertainty.png (with
 ``--tune``, uncertainty_tuning.json; with ``--cost``, uncertainty_cost[_texel_albedo].json;
-with ``--texel-albedo`` alone, uncertainty_texel_albedo.json and uncertainty_records_texel_albedo.json).
+with ``--texel-albedo`` alone, uncertainty_texel_albedo.{json,png} and uncertainty_records_texel_albedo.json).
 Simulated captures go to a temporary folder.
 """
 
@@ -529,8 +529,43 @@ def texel_table(args, tmp: Path, t0: float) -> None:
         result["seeds"][name] = args.out_seeds
         records += out_of_family(name, range(args.out_seeds), tmp, TEXEL_VARIANTS)
         save()
+    texel_figure(result, RESULTS / TEXEL_RESULT.replace(".json", ".png"))
     print(json.dumps({t: {m: {v: (e["pooled"]["coverage"], e["small"]["coverage"]) for v, e in d.items()}
                           for m, d in table.items()} for t, table in result["coverage"].items()}, indent=1))
+
+
+def texel_figure(result: dict, path: Path) -> None:
+    """Coverage of the region fit and of the fit with an albedo per texel (the default) per truth and
+    model: bars pooled, dots skin, dashes lips and eyebrows; the 85-99 % band shaded."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    table = result["coverage"]
+    truths = [t for t in (*MODELS, *OUT_OF_FAMILY) if t in table]
+    cells = [(t, m) for t in truths for m in MODELS if m in table[t] and (t == m or t in OUT_OF_FAMILY)]
+    fig, ax = plt.subplots(figsize=(14, 4.8))
+    width = 0.38
+    for i, (variant, label) in enumerate((("region", "region fit (one albedo per region)"),
+                                          ("texel_albedo", "default: an albedo per texel"))):
+        xs = np.arange(len(cells)) + (i - 0.5) * width
+        entries = [table[t][m][variant] for t, m in cells]
+        ax.bar(xs, [e["pooled"]["coverage"] for e in entries], width, color=f"C{i}", label=label)
+        ax.plot(xs, [e["regions"].get("skin", {}).get("coverage", np.nan) for e in entries], "ko", ms=3,
+                label="skin" if i else None)
+        ax.plot(xs, [e["small"]["coverage"] if e["small"]["coverage"] is not None else np.nan for e in entries],
+                "k_", ms=8, label="lips and eyebrows" if i else None)
+    ax.axhspan(0.85, 0.99, color="0.9", zorder=0)
+    ax.axhline(0.95, color="k", lw=0.8)
+    ax.set_xticks(np.arange(len(cells)), [m if t == m else f"{m}\n({t})" for t, m in cells], fontsize=7)
+    ax.set_ylim(0.5, 1.02)
+    ax.set_ylabel("coverage of the 95 % intervals")
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=4)
+    ax.set_title("SIMULATED captures: how often the 95 % interval holds the true value; same family (left), "
+                 "out of family (truth in brackets); band 85-99 %", fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=90)
 
 
 def main() -> None:
