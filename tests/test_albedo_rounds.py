@@ -58,13 +58,12 @@ def test_the_texel_albedo_takes_the_skin_lobe_nearer_the_truth(small_capture, tm
         skin = estimate.fits["skin"]
         errors[name] = (abs(np.mean(skin.params["specular_reflectance"]) / truth["specular_reflectance"][0] - 1),
                         abs(skin.params["roughness"] / truth["roughness"] - 1))
-        assert "interval95" in skin.uncertainty["roughness"]  # estimated on the last round's fit
+        assert "interval95" in skin.uncertainty["roughness"]  # estimated on the last fit
         assert json.loads((tmp_path / name / "brdf.json").read_text()).get("texel_albedo", False) is (name == "texel")
         last, cluster = clusters[-1]
         tile = (unc.TEXEL_TILE_AT_128 if name == "texel" else unc.TILE_AT_128) * 96 // 128
         np.testing.assert_array_equal(cluster, unc.tile_clusters(last.texel, 96, tile=tile, label=last.labels()))
-    # without intervals there is no last round (the region fit, then the texel fit), and the lobe is the one
-    # the last round started from and stayed at
+    # without intervals: the same two fits (the region fit, then the texel fit), the same lobe
     calls = len(clusters)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -72,9 +71,9 @@ def test_the_texel_albedo_takes_the_skin_lobe_nearer_the_truth(small_capture, tm
                         options=FitOptions(resolution=96, texel_albedo=True, uncertainty=None))
     assert len(clusters) == calls + 2
     for name in ("specular_reflectance", "roughness"):
-        np.testing.assert_allclose(bare.fits["skin"].params[name], skin.params[name], rtol=2e-3)
+        np.testing.assert_allclose(bare.fits["skin"].params[name], skin.params[name], rtol=1e-6)
     assert bare.fits["skin"].uncertainty == {}
     assert errors["rounds"][0] < 0.75 * errors["one"][0], errors
-    assert errors["rounds"][1] < errors["one"][1] + 0.02, errors
+    assert errors["rounds"][1] < errors["one"][1], errors  # m: measured 8.9 % -> 3.8 % (rounds), 3.1 % (texel)
     assert errors["texel"][0] < 0.5 * errors["one"][0], errors
-    assert errors["texel"][1] < errors["one"][1] + 0.02, errors
+    assert errors["texel"][1] < errors["one"][1], errors

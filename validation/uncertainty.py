@@ -96,8 +96,8 @@ def shown_variants() -> dict:
 #: Estimates compared: name -> (method, tile at resolution 128 or None, fewest tiles per region or None).
 VARIANTS = ({tiled(m, t, f): (m, t, f) for t, f in TILE_CANDIDATES for m in ("jackknife", "sandwich", "bootstrap")}
             | {"sandwich_texel": ("sandwich", 1, 1), "laplace": ("laplace", None, None)})
-#: With ``--texel-albedo`` (uncertainty_texel_albedo.json): the default region fit beside the fit with an
-#: albedo per texel (``FitOptions(texel_albedo=True)``, its own tiles); name -> (method, tile, floor, options).
+#: With ``--texel-albedo`` (uncertainty_texel_albedo.json): the region fit beside the fit with an albedo per
+#: texel (``FitOptions(texel_albedo=True)``, the default, its own tiles); name -> (method, tile, floor, options).
 TEXEL_VARIANTS = {"region": (unc.METHODS[0], None, None, {"texel_albedo": False}),
                   "texel_albedo": (unc.METHODS[0], None, None, {"texel_albedo": True})}
 MODELS = ("cooktorrance", "phong", "ward", "lafortune")
@@ -505,31 +505,38 @@ TEXEL_RESULT, TEXEL_RECORDS = "uncertainty_texel_albedo.json", "uncertainty_reco
 
 
 def texel_table(args, tmp: Path, t0: float) -> None:
-    """The coverage table of :data:`TEXEL_VARIANTS` (the default region fit and the fit with an albedo per
+    """The coverage table of :data:`TEXEL_VARIANTS` (the region fit and the default fit with an albedo per
     texel) on the same seeds as uncertainty.json, to :data:`TEXEL_RESULT` and :data:`TEXEL_RECORDS`,
     saved after each truth."""
     result = {"variants": {k: [m, t, f, o] for k, (m, t, f, o) in TEXEL_VARIANTS.items()}, "image": IMAGE,
               "measurements": MEASUREMENTS, "spp": SPP, "texture": TEXTURE, "reference_spp": REFERENCE_SPP,
               "tile_at_128": {"region": unc.TILE_AT_128, "texel_albedo": unc.TEXEL_TILE_AT_128},
               "min_tiles": unc.MIN_TILES, "skin_ranges": SKIN_RANGES, "seeds": {}}
-    records = []
 
-    def save():
+    def save(records):
         result.update(coverage=summary(records), seconds=time.perf_counter() - t0,
                       skin_check={v: skin_check(records, v) for v in TEXEL_VARIANTS})
         write_json(RESULTS / TEXEL_RESULT, result)
         write_records(records, TEXEL_RECORDS, set(TEXEL_VARIANTS))
 
+    run_tables(args, tmp, TEXEL_VARIANTS, result, save)
+    texel_figure(result, RESULTS / TEXEL_RESULT.replace(".json", ".png"))
+
+
+def run_tables(args, tmp: Path, variants: dict, result: dict, save) -> None:
+    """Every same-family truth (``--seeds`` Cook-Torrance and Phong captures, ``--other-seeds`` Ward and
+    Lafortune), then every out-of-family truth (``--out-seeds`` each), fitted with ``variants``; the seeds
+    counted in ``result["seeds"]``, ``save(records)`` after each truth, the pooled coverage printed."""
+    records = []
     for model in MODELS:
         n = args.seeds if model in ("cooktorrance", "phong") else args.other_seeds
         result["seeds"][model] = n
-        records += same_family(model, range(n), tmp, TEXEL_VARIANTS)
-        save()
+        records += same_family(model, range(n), tmp, variants)
+        save(records)
     for name in OUT_OF_FAMILY:
         result["seeds"][name] = args.out_seeds
-        records += out_of_family(name, range(args.out_seeds), tmp, TEXEL_VARIANTS)
-        save()
-    texel_figure(result, RESULTS / TEXEL_RESULT.replace(".json", ".png"))
+        records += out_of_family(name, range(args.out_seeds), tmp, variants)
+        save(records)
     print(json.dumps({t: {m: {v: (e["pooled"]["coverage"], e["small"]["coverage"]) for v, e in d.items()}
                           for m, d in table.items()} for t, table in result["coverage"].items()}, indent=1))
 
@@ -647,25 +654,14 @@ def main() -> None:
                   "texture": TEXTURE,
                   "reference_spp": REFERENCE_SPP, "tile_at_128": unc.TILE_AT_128, "min_tiles": unc.MIN_TILES, "skin_ranges": SKIN_RANGES,
                   "variants": {k: list(v) for k, v in VARIANTS.items()}, "seeds": {}}
-        records = []
 
-        def save():
+        def save(records):
             result.update(coverage=summary(records), skin_check=skin_check(records), seconds=time.perf_counter() - t0)
             write_json(RESULTS / "uncertainty.json", result)
             write_records(records)
 
-        for model in MODELS:
-            n = args.seeds if model in ("cooktorrance", "phong") else args.other_seeds
-            result["seeds"][model] = n
-            records += same_family(model, range(n), tmp)
-            save()
-        for name in OUT_OF_FAMILY:
-            result["seeds"][name] = args.out_seeds
-            records += out_of_family(name, range(args.out_seeds), tmp)
-            save()
+        run_tables(args, tmp, VARIANTS, result, save)
     figure(result, RESULTS / "uncertainty.png")
-    print(json.dumps({t: {m: {v: (e["pooled"]["coverage"], e["small"]["coverage"]) for v, e in d.items()}
-                          for m, d in table.items()} for t, table in result["coverage"].items()}, indent=1))
 
 
 if __name__ == "__main__":

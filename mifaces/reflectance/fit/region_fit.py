@@ -233,7 +233,7 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     if uncertainty is not None:
         data = (light, view, reflectance, sigma)
         intervals = region_uncertainty(space, problem, params, pruned, cluster, uncertainty, data, seed,
-                                       offsets=offsets, texel=texel)
+                                       offsets=offsets)
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=loss,
                      samples=len(sigma), seconds=time.perf_counter() - t0, status=status,
                      reason=reason, iterations=iterations, history=history, uncertainty=intervals)

@@ -26,10 +26,11 @@ import scipy.stats
 from .intervals import LEVEL, NOT_IDENTIFIED, Covariance
 
 
-def projected_sums(problem, x, index: np.ndarray, groups: int, texel) -> tuple:
+def projected_sums(problem, x, index: np.ndarray, groups: int) -> tuple:
     """Per cluster, the projected score u_g (G, P) and H_g (G, P, P), the projected loss, and the
     region albedo's sums per cluster (W_g (G,), A_g (G, 3), S_g (G, 3, P)), at ``x`` of ``problem``
-    (a fit with an albedo per ``texel``, (N,)); ``index`` (N,) numbers the clusters 0 … ``groups`` - 1.
+    (a fit with an albedo per texel, ``Problem(texel=...)``); ``index`` (N,) numbers the clusters
+    0 … ``groups`` - 1.
 
     Raises
     ------
@@ -37,9 +38,8 @@ def projected_sums(problem, x, index: np.ndarray, groups: int, texel) -> tuple:
         If a texel's samples lie in more than one cluster.
     """
     u, hg, loss = problem.cluster_sums(x, index, groups)
-    tex = problem.texel_index if problem.texel_index is not None and len(problem.texel_index) == len(index) \
-        else np.unique(np.asarray(texel), return_inverse=True)[1]
-    weight, a, s = problem.texel_sums(x, tex, int(tex.max()) + 1 if len(tex) else 0)
+    tex = problem.texel_index
+    weight, a, s = problem.texel_sums(x, tex, problem.texels)
     home = np.zeros(len(weight), np.int64)
     home[tex] = index
     if np.any(home[tex] != index):

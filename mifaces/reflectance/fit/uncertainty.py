@@ -330,18 +330,17 @@ def _jackknife(h: np.ndarray, hg: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 
 def region_uncertainty(space: ParameterSpace, problem: Problem, params: dict, pruned: list, cluster,
-                       method: str, data: tuple, seed: int = 0, offsets: AlbedoOffsets | None = None,
-                       texel=None) -> dict:
+                       method: str, data: tuple, seed: int = 0, offsets: AlbedoOffsets | None = None) -> dict:
     """The parameters' uncertainty at the optimum ``params`` of ``problem`` (all
     the region's samples), by ``method``
     (:mod:`mifaces.reflectance.fit.uncertainty`): the clusters' sums (and JᵀJ, E) from
     one kernel pass at the optimum; the bootstrap refits instead.
     ``pruned`` lobes' scales and exponents get the status ``pruned``; ``data``
     is the region's (light, view, reflectance, sigma), for the bootstrap; ``offsets``
-    the albedo offsets the reflectance was corrected by (:func:`fit_region`). With ``texel``
-    (N,), ``problem`` has an albedo per texel: the sums are the projected ones and the region's
-    albedo gets the jackknife's interval (:mod:`mifaces.reflectance.fit.texel_uncertainty`;
-    not with the bootstrap)."""
+    the albedo offsets the reflectance was corrected by (:func:`fit_region`). Where ``problem``
+    has an albedo per texel (``Problem(texel=...)``), the sums are the projected ones and the
+    region's albedo gets the jackknife's interval (:mod:`mifaces.reflectance.fit.texel_uncertainty`;
+    :func:`fit_region` refuses the bootstrap there)."""
     x = space.vector(params)
     held = held_entries(space, x)
     model, statuses = space.model, {}
@@ -360,13 +359,10 @@ def region_uncertainty(space: ParameterSpace, problem: Problem, params: dict, pr
                 if f.name == width and not held[k]:
                     held[k], statuses[k] = True, NOT_IDENTIFIED
     if method == "bootstrap":
-        if texel is not None:
-            raise ValueError("the bootstrap does not refit an albedo per texel: use the jackknife, the sandwich "
-                             "or the Laplace approximation")
         cov = bootstrap_covariance(space, x, held, cluster, data, seed=seed)
-    elif texel is not None:
+    elif problem.texel_index is not None:
         index, groups = cluster_index(independent_clusters(problem.n) if cluster is None else cluster)
-        u, hg, loss, albedo = projected_sums(problem, x, index, groups, texel)
+        u, hg, loss, albedo = projected_sums(problem, x, index, groups)
         cov = covariance(x, hg.sum(axis=0), loss, problem.n, u, hg, held, method)
         out = parameter_intervals(space, cov, statuses)
         out[DIFFUSE.name] = texel_albedo_interval(cov, u, hg, albedo, (DIFFUSE.lower, DIFFUSE.upper))
