@@ -27,7 +27,7 @@ from mifaces.render import mitsuba_sensor
 from mifaces.model.geometry import rotation_matrix
 from mifaces.shape import (ShapeFitError, ShapeOptions, ShapeSchedule, Weights, feature_targets, fit_measurement,
                            fit_shape, light_direction, load_fitted_shapes, rotation_centre, shapes_in_world)
-from mifaces.shape.fitter import Fitter
+from mifaces.shape.fitter import FACING_MIN, Fitter, sample_normals
 from mifaces.status import CONVERGED, DIVERGED, NOT_CONVERGED
 
 SIZE = 128
@@ -191,6 +191,27 @@ def test_gradients_finite_and_match_differences(model, camera, posed):
         fd = (fitter.energy.evaluate(plus, 1.0, 1.0, grad=False)[0]["E"] -
               fitter.energy.evaluate(minus, 1.0, 1.0, grad=False)[0]["E"]) / (2 * h)
         assert fd == pytest.approx(g[index], rel=0.1, abs=1e-2 * max(1.0, abs(fd)))
+
+
+def test_samples_seen_near_their_silhouette_are_left_out_of_the_image_term(model, camera, posed):
+    """E_I counts a sample only where the camera sees it within 60 degrees of its normal: nearer the
+    silhouette the photograph's blur mixes the background into it (a bias towards a smaller, hence
+    farther, face). Those samples must be there, unoccluded, and get no weight."""
+    _, _, _, m = posed
+    fitter = Fitter(model, camera, {"point": m.image.pixels}, feature_targets(m, model), Weights(), SCHEDULE,
+                    np.random.default_rng(0))
+    fitter.set_samples(2000)
+    theta = fitter.initial()
+    fitter.update_visibility(theta)
+    verts = fitter.vertices_camera(theta)
+    p = verts[fitter.samples]
+    n = sample_normals(verts, model.triangles, fitter.arrays.adjacency[fitter.samples])
+    facing = np.sum(n * -p / np.linalg.norm(p, axis=1)[:, None], axis=1)
+    seen = np.asarray(fitter.energy.dr_visible) > 0
+    grazing = (facing > 0.05) & (facing < FACING_MIN - 0.05)
+    assert grazing.sum() > 50  # the face has such samples in this view
+    assert not seen[grazing].any()
+    assert seen[facing > FACING_MIN + 0.05].mean() > 0.8  # the rest is seen, but for what the nose hides
 
 
 def test_feature_point_errors(model, camera, posed, tmp_path):
