@@ -855,6 +855,31 @@ def sec_shape_depth(d):
     notes = ["", f"With the calibrated focal length held (`fit_focal=False`): world error up to "
              f"{fixed(held.get('max_world_mm'), 2)} mm, size off by up to {fixed(held.get('max_abs_scale_pct'), 2)} %.",
              ""]
+    variants = (("default fit (one identity)", ()), ("focal length held", ("focal_held",)),
+                ("true identity held, each photograph on its own", ("true_identity",)),
+                ("true identity and expression held (the pose fit's floor)", ("true_face",)),
+                ("default fit, near-silhouette samples counted", ("without_facing_cut", "default")),
+                ("true face held, near-silhouette samples counted", ("without_facing_cut", "true_face")))
+    what = []
+    for label, path in variants:
+        for run in rows_of(get(d, "runs")):
+            r = run
+            for key in path:
+                r = get(r, key) or {}
+            e = get(r, "shape_errors") or {}
+            if not e:
+                continue
+            depths = [v.get("depth_mm") for k, v in items(e) if k != "summary"]
+            summary = e.get("summary") or {}
+            what.append([text(label), text(run.get("seed")), fixed(summary.get("mean_world_mm"), 2),
+                         fixed(summary.get("max_world_mm"), 2),
+                         fixed(sum(depths) / len(depths) if depths else None, 2),
+                         fixed(summary.get("mean_aligned_mm"), 2)])
+    if len(what) > len(rows_of(get(d, "runs"))):
+        notes += [f"What limits the depth (image-term cut: samples seen with a cosine above "
+                  f"{fixed(get(d, 'facing_min'), 2)}; mm, means over the photographs):", ""]
+        notes += table(["fit", "seed", "world mean", "world max", "mean depth offset", "after rigid alignment"],
+                       what) + [""]
     return lines + table(["seed", "photograph", "world", "depth", "size", "after that size",
                           "after rigid alignment"], rows) + (notes if held else [])
 
@@ -962,6 +987,8 @@ LAYOUTS = {
     "refine_seeds": ("The refinement's schedule on training and test captures", "SIMULATED", sec_refine_seeds),
     "refine_shape_default": ("Shape refinement on the default capture", "SIMULATED", sec_refine_shape_default),
     "shape_depth": ("Where the fitted faces lie in depth", "SIMULATED", sec_shape_depth),
+    "shape_depth_tuning": ("Where the fitted faces lie in depth: the seeds the image term's cut was chosen on",
+                           "SIMULATED", sec_shape_depth),
     "unknown_lights": ("Lights nobody measured: the Yale face database with its lights hidden", "real photographs",
                        sec_unknown_lights),
     "environment_lights": ("Environment maps nobody measured: simulated captures under the studio and the sky",
