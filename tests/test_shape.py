@@ -27,7 +27,7 @@ from mifaces.render import mitsuba_sensor
 from mifaces.model.geometry import rotation_matrix
 from mifaces.shape import (ShapeFitError, ShapeOptions, ShapeSchedule, Weights, feature_targets, fit_measurement,
                            fit_shape, light_direction, load_fitted_shapes, rotation_centre, shapes_in_world)
-from mifaces.shape.fitter import FACING_MIN, Fitter, sample_normals
+from mifaces.shape.fitter import Fitter, sample_normals
 from mifaces.status import CONVERGED, DIVERGED, NOT_CONVERGED
 
 SIZE = 128
@@ -193,25 +193,29 @@ def test_gradients_finite_and_match_differences(model, camera, posed):
         assert fd == pytest.approx(g[index], rel=0.1, abs=1e-2 * max(1.0, abs(fd)))
 
 
-def test_samples_seen_near_their_silhouette_are_left_out_of_the_image_term(model, camera, posed):
-    """E_I counts a sample only where the camera sees it within 60 degrees of its normal: nearer the
-    silhouette the photograph's blur mixes the background into it (a bias towards a smaller, hence
-    farther, face). Those samples must be there, unoccluded, and get no weight."""
+def test_facing_min_leaves_samples_seen_near_their_silhouette_out_of_the_image_term(model, camera, posed):
+    """``ShapeOptions.facing_min``: E_I counts a sample only where the camera sees it at a cosine above
+    it (0.5: within 60 degrees of its normal). The default, 0, counts every sample the camera sees.
+    Samples between must be there, unoccluded, and get weight only under the default."""
     _, _, _, m = posed
-    fitter = Fitter(model, camera, {"point": m.image.pixels}, feature_targets(m, model), Weights(), SCHEDULE,
-                    np.random.default_rng(0))
-    fitter.set_samples(2000)
-    theta = fitter.initial()
-    fitter.update_visibility(theta)
+    seen = {}
+    for cut in (ShapeOptions().facing_min, 0.5):
+        fitter = Fitter(model, camera, {"point": m.image.pixels}, feature_targets(m, model), Weights(), SCHEDULE,
+                        np.random.default_rng(0), facing_min=cut)
+        fitter.set_samples(2000)
+        theta = fitter.initial()
+        fitter.update_visibility(theta)
+        seen[cut] = np.asarray(fitter.energy.dr_visible) > 0
     verts = fitter.vertices_camera(theta)
     p = verts[fitter.samples]
     n = sample_normals(verts, model.triangles, fitter.arrays.adjacency[fitter.samples])
     facing = np.sum(n * -p / np.linalg.norm(p, axis=1)[:, None], axis=1)
-    seen = np.asarray(fitter.energy.dr_visible) > 0
-    grazing = (facing > 0.05) & (facing < FACING_MIN - 0.05)
+    grazing = (facing > 0.05) & (facing < 0.45)
+    assert ShapeOptions().facing_min == 0.0
     assert grazing.sum() > 50  # the face has such samples in this view
-    assert not seen[grazing].any()
-    assert seen[facing > FACING_MIN + 0.05].mean() > 0.8  # the rest is seen, but for what the nose hides
+    assert not seen[0.5][grazing].any()
+    assert seen[0.0][grazing].mean() > 0.5  # counted by default, but for what the nose hides
+    assert seen[0.5][facing > 0.55].mean() > 0.8 and np.array_equal(seen[0.5][facing > 0.55], seen[0.0][facing > 0.55])
 
 
 def test_feature_point_errors(model, camera, posed, tmp_path):

@@ -858,8 +858,8 @@ def sec_shape_depth(d):
     variants = (("default fit (one identity)", ()), ("focal length held", ("focal_held",)),
                 ("true identity held, each photograph on its own", ("true_identity",)),
                 ("true identity and expression held (the pose fit's floor)", ("true_face",)),
-                ("default fit, near-silhouette samples counted", ("without_facing_cut", "default")),
-                ("true face held, near-silhouette samples counted", ("without_facing_cut", "true_face")))
+                ("default fit, near-silhouette samples left out", ("with_facing_cut", "default")),
+                ("true face held, near-silhouette samples left out", ("with_facing_cut", "true_face")))
     what = []
     for label, path in variants:
         for run in rows_of(get(d, "runs")):
@@ -874,11 +874,13 @@ def sec_shape_depth(d):
             what.append([text(label), text(run.get("seed")), fixed(summary.get("mean_world_mm"), 2),
                          fixed(summary.get("max_world_mm"), 2),
                          fixed(sum(depths) / len(depths) if depths else None, 2),
+                         fixed(summary.get("mean_scaled_mm"), 2),
                          fixed(summary.get("mean_aligned_mm"), 2)])
     if len(what) > len(rows_of(get(d, "runs"))):
-        notes += [f"What limits the depth (image-term cut: samples seen with a cosine above "
-                  f"{fixed(get(d, 'facing_min'), 2)}; mm, means over the photographs):", ""]
-        notes += table(["fit", "seed", "world mean", "world max", "mean depth offset", "after rigid alignment"],
+        notes += [f"What limits the depth (the cut leaves out samples the camera sees at a cosine below "
+                  f"{fixed(get(d, 'facing_cut'), 2)}; mm, means over the photographs):", ""]
+        notes += table(["fit", "seed", "world mean", "world max", "mean depth offset", "after that size",
+                              "after rigid alignment"],
                        what) + [""]
     return lines + table(["seed", "photograph", "world", "depth", "size", "after that size",
                           "after rigid alignment"], rows) + (notes if held else [])

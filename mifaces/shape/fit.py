@@ -143,7 +143,8 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
         fixed = tuple(fixed) + tuple(held)
     fitter = Fitter(model, camera, images, targets, weights, schedule, np.random.default_rng(options.seed),
                     light_world=positions, fit_focal=options.fit_focal, initial_color=initial_color,
-                    initial=initial, fixed=fixed, distances=distances)
+                    initial=initial, fixed=fixed, distances=distances,
+                    facing_min=options.facing_min)
     greyscale = bool(used) and all(getattr(image, "greyscale", False) for image in used.values())
     fitter.energy.greyscale = greyscale  # read by Energy._shade
     own_bar = progress is True
@@ -205,7 +206,8 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
               use_diffuse: bool = True, fit_focal: bool = True, seed: int = 0,
               max_feature_error: float = MAX_FEATURE_ERROR, fixed=(), feature_noise: float = FEATURE_NOISE,
               shape_modes: int | None = None, one_identity: bool = True,
-              max_image_rms: float = MAX_IMAGE_RMS) -> list[ShapeFit]:
+              max_image_rms: float = MAX_IMAGE_RMS,
+              facing_min: float = ShapeOptions.facing_min) -> list[ShapeFit]:
     """Fit the morphable model to every pose of a capture, independently (paper sec. 4.2).
 
     Measurements sharing a ``pose`` label (one pose of the subject photographed
@@ -251,6 +253,9 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
         The convergence limit of the feature points (see :func:`feature_limit`).
     max_image_rms : float
         The convergence limit of the photometric residual (:func:`fit_measurement`).
+    facing_min : float
+        Samples the camera sees at a cosine below this are left out of the image term
+        (:attr:`ShapeOptions.facing_min`).
     fixed : iterable of str
         Parameter blocks held at their start values (see :func:`fit_measurement`).
     shape_modes : int, optional
@@ -304,7 +309,8 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     shared = dict(weights=weights, distances=capture.distances, progress=progress,
                   options=ShapeOptions(use_diffuse=use_diffuse, fit_focal=fit_focal, seed=seed,
                                        max_feature_error=max_feature_error, feature_noise=feature_noise,
-                                       max_image_rms=max_image_rms, ambient=capture.ambient_light))
+                                       max_image_rms=max_image_rms, ambient=capture.ambient_light,
+                                       facing_min=facing_min))
     for leader, *others in groups:
         light = capture.light(leader.light) if leader.light else None
         fit = fit_measurement(leader, capture.camera, model, light=light, schedule=schedule,

@@ -22,7 +22,7 @@ from ..status import DIVERGED, NOT_CONVERGED
 from .adam import COLUMNS, DeviceAdam
 from .energy import POINT, Energy, directed
 from .layout import Layout, adjacency
-from .result import ShapeFit, ShapeSchedule, Weights
+from .result import ShapeFit, ShapeOptions, ShapeSchedule, Weights
 from .targets import (FRONTAL, light_direction, metric_distances, normalised, rotation_centre, start_light,
                       start_translation)
 
@@ -30,12 +30,6 @@ from .targets import (FRONTAL, light_direction, metric_distances, normalised, ro
 CHUNK = 10
 #: Sample vertices are kept this far (mm) from the mesh's open border.
 BORDER_MARGIN = 6.0
-#: E_I uses only samples the camera sees within 60 degrees of their normal (cosine above this):
-#: nearer the silhouette the photograph's blur mixes the background and the surface behind into
-#: them, and a smaller face in the image fits that mixture better. With the true face held
-#: (identity and expression), counting them left the fitted faces 4.7 and 2.0 mm from the truth on
-#: average (tuning seeds 12 and 11); without them 2.0 and 1.6 mm (``docs/shape_estimation.md``).
-FACING_MIN = 0.5
 
 
 def distance_from_border(model) -> np.ndarray:
@@ -94,9 +88,11 @@ class Fitter:
     """One fit: the start, the sample sets, visibility, and Adam over the schedule's stages."""
 
     def __init__(self, model, camera, images: dict, targets, weights: Weights, schedule: ShapeSchedule, rng,
-                 light_world=None, fit_focal=True, initial_color=None, initial=None, fixed=(), distances=()):
+                 light_world=None, fit_focal=True, initial_color=None, initial=None, fixed=(), distances=(),
+                 facing_min: float = ShapeOptions.facing_min):
         self.model, self.camera, self.weights, self.schedule, self.rng = model, camera, weights, schedule, rng
         self.fit_focal = fit_focal
+        self.facing_min = float(facing_min)  # ShapeOptions.facing_min
         _, self.feature_vertices, self.feature_pixels = targets
         self.scale_px = camera.height / 512.0  # px per "512-px pixel"
         self.images, self.image_scale = {}, {}
@@ -213,7 +209,7 @@ class Fitter:
                        mi.Vector3f(*[mi.Float(direction[:, k]) for k in range(3)]))
         ray.maxt = mi.Float(np.concatenate(lengths).astype(np.float32))
         occluded = np.asarray(scene.ray_test(ray), bool).reshape(-1, len(p))
-        seen = ~occluded[0] & (np.sum(n * d, axis=1) > FACING_MIN)
+        seen = ~occluded[0] & (np.sum(n * d, axis=1) > self.facing_min)
         lit = {key: ~occluded[1 + i] for i, key in enumerate(self.light_distance)}
         self.energy.set_visibility(seen, lit)
         dr.eval()

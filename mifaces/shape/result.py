@@ -127,6 +127,12 @@ class ShapeOptions:
         the capture says no other light reaches the face (``Capture.ambient_light``), and an
         ambient term would only trade against the light's frontal part (``docs/unknown_lights.md``).
         The diffuse-light companion keeps its ambient: that is its light.
+    facing_min : float
+        E_I counts a sample only where the cosine between its normal and the direction to the
+        camera exceeds this. 0 (the default) counts every sample the camera sees; 0.5 (within 60°)
+        leaves out those near the silhouette, whose pixels the blur mixes with the background: it
+        removes a pull towards a smaller, farther face, but fits the face's outline worse
+        (``docs/shape_estimation.md``, "What limits the depth").
     """
 
     use_diffuse: bool = True
@@ -139,6 +145,7 @@ class ShapeOptions:
     lr: tuple = (0.1, 0.01)
     visibility_interval: int = 50
     ambient: bool = True
+    facing_min: float = 0.0
 
 
 @dataclass
