@@ -169,7 +169,7 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
 @click.option("--force", is_flag=True, help="Write over the fits in --out (those not fitted again are kept).")
 @click.option("--refine-shape/--no-refine-shape", default=False, show_default=True,
               help="Refine the fitted faces beyond the model by differentiable rendering, lit by a quick Phong fit "
-                   "(minutes; kept only where it lowers the loss on held-out pixels).")
+                   "(minutes; for poses lit by several lamps: with one it fits shading errors as shape).")
 def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[str, ...], iterations: float | None,
               no_diffuse: bool, fixed_focal: bool, force: bool, refine_shape: bool) -> None:
     """Fit the face model to every photograph of CAPTURE (paper sec. 4.2)."""
@@ -267,8 +267,8 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolut
 @click.option("--specular-maps/--no-specular-maps", default=default(FitOptions, "specular_maps"),
               show_default=True, help="Estimate the specular reflectance per texel (specular.exr; renders read it).")
 @click.option("--refine-shape/--no-refine-shape", default=default(measure_capture, "refine_shape"), show_default=True,
-              help="Refine the fitted faces beyond the model by differentiable rendering (minutes; kept only where "
-                   "it lowers the loss on held-out pixels).")
+              help="Refine the fitted faces beyond the model by differentiable rendering (minutes; for poses lit "
+                   "by several lamps: with one it fits shading errors as shape; docs/refine_shape.md).")
 @click.option("--balance-lights/--no-balance-lights", default=default(FitOptions, "balance_lights"),
               show_default=True, help="Correct the given lights' relative intensities by the face's one albedo before "
                                       "the BRDF fits (a lamp a percent off biases the glossy fit).")

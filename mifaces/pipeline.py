@@ -156,7 +156,9 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
         lights the faces, one displacement along the normals is fitted against
         every photograph, and it is kept only if it lowers the loss on pixels it
         did not fit; the samples are then taken on the refined faces. Off by
-        default: it costs minutes (``docs/refine_shape.md``).
+        default: it costs minutes, and on a capture with one lamp per pose (the
+        simulated default) it fits shading errors as shape, so the faces relight
+        worse (``docs/refine_shape.md``).
     **deprecated
         ``resolution=``, ``normals=``, ``specular_maps=``, ``balance_lights=`` as separate
         keywords, as before :class:`~mifaces.reflectance.FitOptions`: still accepted, with a

@@ -56,7 +56,11 @@ def run(out: Path, home: Path, cache: Path, extra: list[str]) -> dict:
             # the true reflectance on the fitted shapes, and the truth against itself with other random numbers
             "shape_floor": (report.get("validation") or {}).get("shape_floor"),
             "noise_floor": (report.get("validation") or {}).get("noise_floor"),
-            "shapes": report.get("shapes")}
+            "shapes": report.get("shapes"),
+            # with --refine-shape: whether the refined faces were kept, and how far they lie from the truth
+            **({"shape_refinement": {k: report["shape_refinement"].get(k)
+                                     for k in ("accepted", "reason", "loss_before", "loss_after", "displacement_mm")},
+                "shape_errors_refined": report.get("shape_errors_refined")} if "shape_refinement" in report else {})}
 
 
 def figure(results: dict, path: Path) -> None:

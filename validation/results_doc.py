@@ -280,6 +280,12 @@ def sec_bench_pipeline(d):
                                         if get(s, "status") == "converged")) + " / "
                                + text(len(get(r, "shapes") or {})) for _, r in runs]],
     ])
+    refined = [(name, r) for name, r in runs if get(r, "shape_refinement")]
+    if refined:
+        lines += ["With `--refine-shape`:", ""]
+        lines += table(["run", "refinement", "mean world error of the refined faces (mm)"],
+                       [[name, text(get(r, "shape_refinement", "reason")),
+                         fixed(get(r, "shape_errors_refined", "mean_world_mm"), 2)] for name, r in refined])
     stages = []
     for _, run in runs:
         for stage in get(run, "stages_s") or {}:
@@ -886,6 +892,32 @@ def sec_shape_depth(d):
                           "after rigid alignment"], rows) + (notes if held else [])
 
 
+def sec_silhouette_depth(d):
+    s = get(d, "summary") or {}
+    lines = [f"Default capture (512², six photographs), seeds {text(', '.join(map(str, get(d, 'seeds') or [])))}; "
+             "per photograph, the depth offset `dz` along the camera's ray (mm; positive: farther) at which the "
+             "face's outline best matches the diffuse-light photograph's foreground (pixels where they disagree, "
+             "rows above the mouth), for the fitted face and the true face, beside the fitted face's depth error. "
+             "An outline that pinned depth would give the true face 0 and the fitted face minus its depth error.", "",
+             f"Means: |true face's dz| {fixed(s.get('mean_abs_true_best_dz_mm'), 2)} mm; fitted face's dz "
+             f"{fixed(s.get('mean_fitted_best_dz_mm'), 1)} mm, off its depth error by "
+             f"{fixed(s.get('mean_abs_fitted_dz_error_mm'), 1)} mm against a mean |depth error| of "
+             f"{fixed(s.get('mean_abs_depth_mm'), 2)} mm; disagreement at dz 0: fitted face "
+             f"{fixed(s.get('mean_fitted_disagreement_px'), 0)} px, true face "
+             f"{fixed(s.get('mean_true_disagreement_px'), 0)} px. The least disagreement lay at an end of the "
+             f"scan (it may lie beyond) for {text(s.get('fitted_at_scan_end'))} of {text(s.get('photographs'))} "
+             f"fitted faces and {text(s.get('true_at_scan_end'))} true faces.", ""]
+    rows = []
+    for run in rows_of(get(d, "runs")):
+        for name, r in items(get(run, "photographs")):
+            rows.append([text(run.get("seed")), text(name), fixed(r.get("depth_mm"), 2),
+                         fixed(r.get("fitted_best_dz_mm"), 1), fixed(r.get("true_best_dz_mm"), 2),
+                         fixed(r.get("fitted_disagreement_px"), 0), fixed(r.get("fitted_least_disagreement_px"), 0),
+                         fixed(r.get("true_disagreement_px"), 0)])
+    return lines + table(["seed", "photograph", "depth error", "outline's dz, fitted face", "outline's dz, true face",
+                          "disagreement (px), fitted", "least, fitted", "true face"], rows)
+
+
 def sec_uncertainty_measure(d):
     lines = [f"`{text(get(d, 'command'))}` on the default simulated capture (512², six photographs, 64 spp) per "
              "seed, the Cook–Torrance truth's skin drawn per seed: skin's fitted parameters and their 95 % "
@@ -989,6 +1021,8 @@ LAYOUTS = {
     "refine_seeds": ("The refinement's schedule on training and test captures", "SIMULATED", sec_refine_seeds),
     "refine_shape_default": ("Shape refinement on the default capture", "SIMULATED", sec_refine_shape_default),
     "shape_depth": ("Where the fitted faces lie in depth", "SIMULATED", sec_shape_depth),
+    "silhouette_depth": ("Whether the head's outline could pin each photograph's depth", "SIMULATED",
+                         sec_silhouette_depth),
     "shape_depth_tuning": ("Where the fitted faces lie in depth: the seeds the image term's cut was chosen on",
                            "SIMULATED", sec_shape_depth),
     "unknown_lights": ("Lights nobody measured: the Yale face database with its lights hidden", "real photographs",
