@@ -897,7 +897,7 @@ def sec_silhouette_depth(d):
     lines = [f"Default capture (512², six photographs), seeds {text(', '.join(map(str, get(d, 'seeds') or [])))}; "
              "per photograph, the depth offset `dz` along the camera's ray (mm; positive: farther) at which the "
              "face's outline best matches the diffuse-light photograph's foreground (pixels where they disagree, "
-             "rows above the mouth), for the fitted face and the true face, beside the fitted face's depth error. "
+             "rows above the middle of the nose), for the fitted face and the true face, beside the fitted face's depth error. "
              "An outline that pinned depth would give the true face 0 and the fitted face minus its depth error.", "",
              f"Means: |true face's dz| {fixed(s.get('mean_abs_true_best_dz_mm'), 2)} mm; fitted face's dz "
              f"{fixed(s.get('mean_fitted_best_dz_mm'), 1)} mm, off its depth error by "

@@ -6,9 +6,10 @@ photograph's depth to 0.08 % (1 mm at 1.2 m). For each seed this simulates the d
 fits its faces with the defaults (:func:`mifaces.shape.fit_shape`) and, for every photograph,
 moves the fitted face and the true face along the camera's ray through the face's centre by
 ``dz`` (a depth change with the size held: the outline grows or shrinks in the image) and counts
-the pixels where the face's coverage (rasterised at 4x4 samples per pixel) and the photograph's
-foreground (darker than halfway between the background and the skin) disagree, over the rows
-above the mouth (the neck and shoulders are left out). The ``dz`` of least disagreement is what
+the pixels where the face's coverage (the share of 4x4 sub-pixel rays that hit it) and the
+photograph's foreground (darker than halfway between the background and the skin) disagree, over
+the rows above the middle of the nose (:data:`ROWS_PERCENTILE`: the jaw, neck and shoulders are
+left out). The ``dz`` of least disagreement is what
 an outline term would move the face by; the true face's should be 0, the fitted face's minus its
 depth error (``depth_mm``, positive: farther than the truth).
 
@@ -26,15 +27,17 @@ import argparse
 import sys
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import mifaces  # first: libLLVM  # isort: skip
 
 import numpy as np
-from skimage.draw import polygon
 
 from mifaces.atomic import save_figure, write_json
 from mifaces.capture import load_capture
+from mifaces.face_pixels import face_pixels
+from mifaces.render import FaceScene
 from mifaces.shape import fit_shape, shapes_in_world
 from mifaces.shape.io import load_geometry
 from mifaces.shape_errors import capture_shape_errors
@@ -46,62 +49,61 @@ SUPERSAMPLE = 4
 #: Depth offsets scanned (mm) for the fitted face and for the true face.
 FIT_OFFSETS = np.arange(-24.0, 24.01, 3.0)
 TRUE_OFFSETS = np.arange(-4.0, 4.01, 1.0)
+#: The rows scored: above this percentile of the fitted face's projected vertices' rows (about row 290 of
+#: 512, between the eyes and the nose's tip; the jaw, neck and shoulders are left out).
+ROWS_PERCENTILE = 60
 
 
-def coverage(triangles, pixels, shape) -> np.ndarray:
-    """Fraction of each pixel covered by the mesh whose vertices project to ``pixels`` (V, 2)."""
-    height, width = shape
-    covered = np.zeros((height * SUPERSAMPLE, width * SUPERSAMPLE), bool)
-    points = (pixels + 0.5) * SUPERSAMPLE - 0.5  # pixel centres at integers, at the finer grid
-    for tri in triangles:
-        rr, cc = polygon(points[tri, 1], points[tri, 0], shape=covered.shape)
-        covered[rr, cc] = True
-    return covered.reshape(height, SUPERSAMPLE, width, SUPERSAMPLE).mean(axis=(1, 3))
+def coverage(face, vertices, camera) -> np.ndarray:
+    """Fraction of each pixel of ``camera`` that the face ``vertices`` cover: the share of its
+    SUPERSAMPLE² sub-pixel centres whose rays hit the face (:func:`mifaces.face_pixels.face_pixels`
+    on a camera SUPERSAMPLE times finer)."""
+    s = SUPERSAMPLE
+    fine = replace(camera, width=camera.width * s, height=camera.height * s, fx=camera.fx * s, fy=camera.fy * s,
+                   cx=(camera.cx + 0.5) * s - 0.5, cy=(camera.cy + 0.5) * s - 0.5)
+    hit = face_pixels(FaceScene(face, np.asarray(vertices, np.float32)), fine, spp=None)
+    return hit.reshape(camera.height, s, camera.width, s).mean(axis=(1, 3))
 
 
-def least(offsets, disagreement) -> float:
-    """The offset of least disagreement, refined by a parabola through its neighbours; the scan's end
-    where the least lies there (:func:`at_end`)."""
+def least(offsets, disagreement) -> tuple[float, bool]:
+    """The offset of least disagreement, refined by a parabola through its neighbours, and whether it
+    lies at an end of the scan (then the end itself: the least may lie beyond)."""
     i = int(np.argmin(disagreement))
     if i in (0, len(offsets) - 1):
-        return float(offsets[i])
+        return float(offsets[i]), True
     y0, y1, y2 = disagreement[i - 1:i + 2]
     curvature = y0 - 2 * y1 + y2
     step = offsets[1] - offsets[0]
-    return float(offsets[i] + (0.5 * (y0 - y2) / curvature * step if curvature > 0 else 0.0))
+    return float(offsets[i] + (0.5 * (y0 - y2) / curvature * step if curvature > 0 else 0.0)), False
 
 
-def at_end(offsets, disagreement) -> bool:
-    """Whether the least disagreement lies at an end of the scanned offsets (it may lie beyond)."""
-    return int(np.argmin(disagreement)) in (0, len(offsets) - 1)
-
-
-def scan(triangles, vertices, camera, foreground, rows, offsets) -> np.ndarray:
+def scan(face, vertices, camera, foreground, rows, offsets) -> np.ndarray:
     centre = vertices.mean(axis=0)
     ray = (centre - camera.position) / np.linalg.norm(centre - camera.position)
-    return np.array([np.abs(coverage(triangles, camera.project(vertices + dz * ray), foreground.shape)
-                            - foreground)[:rows].sum() for dz in offsets])
+    return np.array([np.abs(coverage(face, vertices + dz * ray, camera) - foreground)[:rows].sum()
+                     for dz in offsets])
 
 
 def photograph_row(face, measurement, camera, fitted, true, error) -> tuple[dict, dict]:
     grey = measurement.diffuse.pixels.mean(axis=-1)
     border = np.concatenate([grey[0], grey[-1], grey[:, 0], grey[:, -1]])
     background = float(np.median(border))
-    true_coverage = coverage(face.triangles, camera.project(true), grey.shape)
+    true_coverage = coverage(face, true, camera)
     skin = float(np.median(grey[true_coverage > 0.99]))
     foreground = (grey < 0.5 * (background + skin)).astype(float)
-    rows = int(np.percentile(camera.project(fitted)[:, 1], 60))  # above the mouth
-    fit_scan = scan(face.triangles, fitted, camera, foreground, rows, FIT_OFFSETS)
-    true_scan = scan(face.triangles, true, camera, foreground, rows, TRUE_OFFSETS)
+    rows = int(np.percentile(camera.project(fitted)[:, 1], ROWS_PERCENTILE))
+    fit_scan = scan(face, fitted, camera, foreground, rows, FIT_OFFSETS)
+    true_scan = scan(face, true, camera, foreground, rows, TRUE_OFFSETS)
+    (fitted_dz, fitted_end), (true_dz, true_end) = least(FIT_OFFSETS, fit_scan), least(TRUE_OFFSETS, true_scan)
     row = {"depth_mm": error["depth_mm"], "world_mm": error["world_mm"],
-           "fitted_best_dz_mm": least(FIT_OFFSETS, fit_scan), "true_best_dz_mm": least(TRUE_OFFSETS, true_scan),
-           "fitted_at_scan_end": at_end(FIT_OFFSETS, fit_scan), "true_at_scan_end": at_end(TRUE_OFFSETS, true_scan),
+           "fitted_best_dz_mm": fitted_dz, "true_best_dz_mm": true_dz,
+           "fitted_at_scan_end": fitted_end, "true_at_scan_end": true_end,
            "fitted_disagreement_px": float(fit_scan[len(FIT_OFFSETS) // 2]),
            "fitted_least_disagreement_px": float(fit_scan.min()),
            "true_disagreement_px": float(true_scan[len(TRUE_OFFSETS) // 2]),
            "rows": rows, "background": background, "skin": skin}
     picture = {"foreground": foreground, "true": true_coverage,
-               "fitted": coverage(face.triangles, camera.project(fitted), grey.shape)}
+               "fitted": coverage(face, fitted, camera)}
     return row, picture
 
 
