@@ -141,15 +141,24 @@ def _dask(*args, cwd: Path) -> subprocess.Popen:
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
+def _scheduler_address(file: Path, scheduler: subprocess.Popen) -> str:
+    """The address in Dask's scheduler file, once it is whole: Dask creates the file, then writes it."""
+    deadline = time.monotonic() + TIMEOUT
+    while time.monotonic() < deadline:
+        assert scheduler.poll() is None, f"dask scheduler exited with code {scheduler.returncode}"
+        try:
+            return json.loads(file.read_text())["address"]
+        except (FileNotFoundError, json.JSONDecodeError, KeyError):
+            time.sleep(0.1)
+    raise AssertionError(f"dask scheduler wrote no address to {file} within {TIMEOUT} s")
+
+
 def test_batch_on_a_separate_scheduler(captures, tmp_path):
     file = tmp_path / "scheduler.json"
     processes = [_dask("scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard", "--scheduler-file",
                        str(file), cwd=tmp_path)]
     try:
-        deadline = time.monotonic() + TIMEOUT
-        while not file.exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        address = json.loads(file.read_text())["address"]
+        address = _scheduler_address(file, processes[0])
         assert address.startswith("tcp://127.0.0.1:")
         processes.append(_dask("worker", address, "--host", "127.0.0.1", "--nthreads", "1", "--nworkers", "1",
                                "--no-dashboard", "--local-directory", str(tmp_path), cwd=tmp_path))
