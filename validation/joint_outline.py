@@ -36,7 +36,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -48,17 +47,16 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from mifaces.atomic import write_json
-from mifaces.capture import load_capture
 from mifaces.capture.ground_truth import read_ground_truth
 from mifaces.face_pixels import face_pixels
 from mifaces.model.geometry import vertex_normals
 from mifaces.render import FaceScene
-from mifaces.shape import fit_shape, shapes_in_world
-from mifaces.shape.io import load_geometry
 from mifaces.shape.result import FEATURE_NOISE
 from mifaces.shape.targets import feature_targets, metric_distances
 from mifaces.shape_errors import capture_shape_errors
-from mifaces.studio import simulate
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from shape_depth import fitted_shapes, simulated_default  # noqa: E402  (the captures of validation/shape_depth.py)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Sub-pixels per pixel side of the outlines' distance maps.
@@ -232,17 +230,9 @@ def scored(face, shapes, truth, camera, extra=None) -> dict:
 
 
 def seed_run(seed: int, work: Path) -> dict:
-    folder = work / f"capture_{seed}"
-    simulate(folder, seed=seed, progress=False, force=True)
-    capture = load_capture(folder)
-    face = mifaces.load_model()
-    _, truth = load_geometry(capture, "ground-truth")
-    t = time.perf_counter()
-    fits = fit_shape(capture, face, progress=False)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a failed fit is left out, and its status says so
-        out = {"seed": seed, "default": scored(face, shapes_in_world(fits, capture), truth, capture.camera,
-                                               {"seconds": time.perf_counter() - t})}
+    capture, face, truth = simulated_default(seed, work)
+    fits, shapes, seconds = fitted_shapes(capture, face)
+    out = {"seed": seed, "default": scored(face, shapes, truth, capture.camera, {"seconds": seconds})}
     names = from_fits(capture, face, fits, False).names
     for start, outline in [("from_default_fit", False), ("from_default_fit", True), ("from_truth", False),
                            ("from_truth", True), ("from_truth_exact_points", True)]:

@@ -85,12 +85,30 @@ def true_fit(capture, face, truth, expression: bool, facing_min: float = ShapeOp
     return scored(fits, capture, face, truth, time.perf_counter() - t)
 
 
-def seed_run(seed: int, work: Path) -> dict:
+def simulated_default(seed: int, work: Path):
+    """The default capture simulated with ``seed`` under ``work``: ``(capture, face, truth)``, the
+    built-in model and the true faces' world-frame vertices per photograph (also for
+    ``silhouette_depth.py`` and ``joint_outline.py``)."""
     folder = work / f"capture_{seed}"
     simulate(folder, seed=seed, progress=False, force=True)
     capture = load_capture(folder)
-    face = mifaces.load_model()
     _, truth = load_geometry(capture, "ground-truth")
+    return capture, mifaces.load_model(), truth
+
+
+def fitted_shapes(capture, face) -> tuple[list, dict, float]:
+    """The default fit (:func:`mifaces.shape.fit_shape`): its fits, the converged ones' world-frame
+    vertices, and its seconds."""
+    t = time.perf_counter()
+    fits = fit_shape(capture, face, progress=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a failed fit is left out, and its status says so
+        shapes = shapes_in_world(fits, capture)
+    return fits, shapes, time.perf_counter() - t
+
+
+def seed_run(seed: int, work: Path) -> dict:
+    capture, face, truth = simulated_default(seed, work)
     distance = float(np.mean([np.linalg.norm(v.mean(axis=0) - capture.camera.position) for v in truth.values()]))
     out = {"seed": seed, "camera_distance_mm": distance}
     out.update(default_fit(capture, face, truth))

@@ -25,8 +25,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
-import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -35,13 +33,12 @@ import mifaces  # first: libLLVM  # isort: skip
 import numpy as np
 
 from mifaces.atomic import save_figure, write_json
-from mifaces.capture import load_capture
 from mifaces.face_pixels import face_pixels
 from mifaces.render import FaceScene
-from mifaces.shape import fit_shape, shapes_in_world
-from mifaces.shape.io import load_geometry
 from mifaces.shape_errors import capture_shape_errors
-from mifaces.studio import simulate
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from shape_depth import fitted_shapes, simulated_default  # noqa: E402  (the captures of validation/shape_depth.py)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Coverage samples per pixel side.
@@ -108,18 +105,10 @@ def photograph_row(face, measurement, camera, fitted, true, error) -> tuple[dict
 
 
 def seed_run(seed: int, work: Path) -> tuple[dict, dict]:
-    folder = work / f"capture_{seed}"
-    simulate(folder, seed=seed, progress=False, force=True)
-    capture = load_capture(folder)
-    face = mifaces.load_model()
-    _, truth = load_geometry(capture, "ground-truth")
-    t = time.perf_counter()
-    fits = fit_shape(capture, face, progress=False)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a failed fit is left out, and its status says so
-        shapes = shapes_in_world(fits, capture)
+    capture, face, truth = simulated_default(seed, work)
+    _, shapes, seconds = fitted_shapes(capture, face)
     errors = capture_shape_errors(face, shapes, truth, capture.camera)
-    out, first = {"seed": seed, "fit_seconds": time.perf_counter() - t, "photographs": {}}, None
+    out, first = {"seed": seed, "fit_seconds": seconds, "photographs": {}}, None
     for m in capture.measurements:
         if m.name not in shapes or m.diffuse is None:
             continue
