@@ -45,6 +45,14 @@ def test_camera_projects_as_opencv():
     np.testing.assert_allclose(camera.to_world(camera.to_camera(point)), point, atol=1e-9)
 
 
+def test_a_scaled_camera_sees_the_same_picture_finer():
+    camera, points = _camera(()), np.random.default_rng(1).normal(0.0, 80.0, (20, 3))
+    fine = camera.scaled(4)
+    assert (fine.width, fine.height) == (2560, 1920)
+    np.testing.assert_allclose(fine.project(points), (camera.project(points) + 0.5) * 4 - 0.5, atol=1e-9)
+    np.testing.assert_allclose(fine.position, camera.position)
+
+
 def test_pixel_rays_invert_projection():
     camera = _camera()
     rng = np.random.default_rng(0)

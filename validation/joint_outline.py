@@ -131,14 +131,14 @@ class JointFit:
         self.offsets = [np.zeros(0)] * len(names)
 
     def _expression(self, coefficients) -> np.ndarray:
+        """The expression's offset from the neutral face (model space, mm)."""
         if not self.face.has_expressions or coefficients is None or not len(coefficients):
             return np.zeros_like(self.mean)
-        d = np.zeros(self.face.expression_dim)
-        d[:len(coefficients)] = coefficients
-        return (self.face.expression_basis.astype(np.float64) @ (np.sqrt(self.face.expression_variance) * d)
-                ).reshape(-1, 3)
+        return self.face.shape(expression=coefficients).astype(np.float64) - self.face.shape().astype(np.float64)
 
     def identity(self, alpha, index=slice(None)) -> np.ndarray:
+        """:meth:`~mifaces.model.MorphableModel.shape` without expression, at the vertices ``index``
+        only (the residuals need a few hundred of the 15,798, hundreds of times per Jacobian)."""
         return self.mean[index] + self.basis[index] @ (self.sd * alpha)
 
     def camera_points(self, x, p: int, index=slice(None)) -> np.ndarray:
@@ -148,16 +148,15 @@ class JointFit:
         return (self.identity(alpha, index) + self.expression[p][index] - self.centre) @ rotation.T + centre + pose[3:]
 
     def project(self, points) -> np.ndarray:
-        c = self.camera
-        return np.stack([c.fx * points[:, 0] / points[:, 2] + c.cx, c.fy * points[:, 1] / points[:, 2] + c.cy], -1)
+        """Pixels of camera-space points (:meth:`mifaces.capture.Camera.project`, lens distortion included)."""
+        return self.camera.project(self.camera.to_world(points))
 
     def world(self, x) -> dict[str, np.ndarray]:
         return {n: self.camera.to_world(self.camera_points(x, p)).astype(np.float32) for p, n in enumerate(self.names)}
 
     def choose_contours(self, x) -> None:
-        c, s = self.camera, UPSAMPLE
-        fine = replace(c, width=c.width * s, height=c.height * s, fx=c.fx * s, fy=c.fy * s,
-                       cx=(c.cx + 0.5) * s - 0.5, cy=(c.cy + 0.5) * s - 0.5)
+        c = self.camera
+        fine = c.scaled(UPSAMPLE)
         for p, m in enumerate(self.measurements):
             points = self.camera_points(x, p)
             scene = FaceScene(self.face, c.to_world(points).astype(np.float32))

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import mifaces  # first: libLLVM  # isort: skip
@@ -56,9 +55,7 @@ def coverage(face, vertices, camera) -> np.ndarray:
     SUPERSAMPLE² sub-pixel centres whose rays hit the face (:func:`mifaces.face_pixels.face_pixels`
     on a camera SUPERSAMPLE times finer)."""
     s = SUPERSAMPLE
-    fine = replace(camera, width=camera.width * s, height=camera.height * s, fx=camera.fx * s, fy=camera.fy * s,
-                   cx=(camera.cx + 0.5) * s - 0.5, cy=(camera.cy + 0.5) * s - 0.5)
-    hit = face_pixels(FaceScene(face, np.asarray(vertices, np.float32)), fine, spp=None)
+    hit = face_pixels(FaceScene(face, np.asarray(vertices, np.float32)), camera.scaled(s), spp=None)
     return hit.reshape(camera.height, s, camera.width, s).mean(axis=(1, 3))
 
 

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -39,6 +39,14 @@ class Camera:
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
     translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
     calibrated: bool = True
+
+    def scaled(self, factor: float) -> Camera:
+        """This camera with its image ``factor`` times as many pixels along each side (the same field
+        of view and frame; pixel centres stay at integers, so pixel ``u`` here is ``(u + 0.5) factor
+        - 0.5`` there)."""
+        return replace(self, width=max(1, int(round(self.width * factor))),
+                       height=max(1, int(round(self.height * factor))), fx=self.fx * factor, fy=self.fy * factor,
+                       cx=(self.cx + 0.5) * factor - 0.5, cy=(self.cy + 0.5) * factor - 0.5)
 
     @property
     def matrix(self) -> np.ndarray:

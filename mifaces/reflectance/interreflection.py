@@ -22,7 +22,6 @@ photograph's size, is the bounced light in each pixel; :func:`~mifaces.reflectan
 
 from __future__ import annotations
 
-import dataclasses
 
 import mitsuba as mi
 import numpy as np
@@ -45,10 +44,7 @@ INDIRECT_BLUR = 1.0
 def coarse_camera(camera, width: int):
     """``camera`` with its image scaled to ``width`` pixels (at most its own; same field of view and
     frame; pixel centres at integers, as :class:`~mifaces.capture.Camera` has them)."""
-    f = max(1.0, camera.width / float(width))
-    return dataclasses.replace(camera, width=max(1, int(round(camera.width / f))),
-                               height=max(1, int(round(camera.height / f))), fx=camera.fx / f, fy=camera.fy / f,
-                               cx=(camera.cx + 0.5) / f - 0.5, cy=(camera.cy + 0.5) / f - 0.5)
+    return camera.scaled(1.0 / max(1.0, camera.width / float(width)))
 
 
 def _upsample(image: np.ndarray, small, camera) -> np.ndarray:
