@@ -54,6 +54,7 @@ from pathlib import Path
 import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 
 import numpy as np
+from skimage.transform import resize
 
 from mifaces.brdf.materials import REFRACTIVE_INDEX
 from mifaces.capture import read_ground_truth
@@ -94,7 +95,7 @@ def run_truth(name: str, work: Path, size: int, spp: int) -> dict:
                          "validation": validation}
     fitted_skin_albedo(folder, models)
     return {"truth": truth.description, "truth_brdf_skin": truth.brdf["regions"]["skin"],
-            "truth_albedo_skin_mean": _skin_albedo(truth), "simulate_options": options,
+            "simulate_options": options,
             "simulate_seconds": simulated, "measure_seconds": report["seconds"], "models": models,
             "ranking": report["ranking"], "shape_floor": report["validation"]["shape_floor"],
             "noise_floor": report["validation"].get("noise_floor"),
@@ -102,19 +103,21 @@ def run_truth(name: str, work: Path, size: int, spp: int) -> dict:
 
 
 def fitted_skin_albedo(folder: Path, models: dict) -> None:
-    """Add to each model's entry the mean of its fitted albedo map over the skin texels (RGB), from
-    ``folder/measure/brdf/<model>/albedo.exr``: against the truth's, the bias per channel."""
+    """Add to each model's entry the mean of its fitted albedo map
+    (``folder/measure/brdf/<model>/albedo.exr``) over the skin texels the fit filled, and the truth's
+    mean over the same texels (``truth_albedo_skin_mean``): against each other, the bias per
+    channel. Texels no photograph saw (the back of the head: about a third of the skin) hold 0 in the
+    fitted map and are left out of both, and ``skin_texels_filled`` says what fraction remains."""
     model = load_model("builtin")
+    truth = read_ground_truth(folder / "capture").albedo
     for name, entry in models.items():
         albedo = read_exr(folder / "measure" / "brdf" / name / "albedo.exr")
-        labels = texel_regions(model, albedo.shape[0])
-        entry["albedo_skin_mean"] = [round(float(x), 5) for x in albedo[labels == REGIONS["skin"]].mean(axis=0)]
-
-
-def _skin_albedo(truth) -> list[float]:
-    """Mean of the truth's albedo map over the skin texels (RGB)."""
-    labels = texel_regions(load_model(truth.model), truth.albedo.shape[0])
-    return [round(float(x), 5) for x in truth.albedo[labels == REGIONS["skin"]].mean(axis=0)]
+        true = truth if truth.shape == albedo.shape else resize(truth, albedo.shape, order=1, anti_aliasing=True)
+        skin = texel_regions(model, albedo.shape[0]) == REGIONS["skin"]
+        filled = skin & (albedo.sum(axis=-1) > 0)
+        entry["albedo_skin_mean"] = [round(float(x), 5) for x in albedo[filled].mean(axis=0)]
+        entry["truth_albedo_skin_mean"] = [round(float(x), 5) for x in true[filled].mean(axis=0)]
+        entry["skin_texels_filled"] = round(float(filled.sum() / skin.sum()), 4)
 
 
 def figure(results: dict, path: Path) -> None:
@@ -174,7 +177,7 @@ def table(results: dict) -> str:
                          f"{_percent(v.get('environment_rmse_true_shape'))} | "
                          f"{_percent((v.get('brdf_rmse') or {}).get('skin'))} | {m['albedo']['rmse_sampled']:.4f} | "
                          f"{_percent(m['image_relative_rmse_first_photo_training'])} | "
-                         f"{_rgb(m.get('albedo_skin_mean'))} ({_rgb(entry.get('truth_albedo_skin_mean'))}) | {skin} |")
+                         f"{_rgb(m.get('albedo_skin_mean'))} ({_rgb(m.get('truth_albedo_skin_mean'))}) | {skin} |")
     lines += ["", "| truth | shape floor (held-out, environments) | ranking by held-out lights, true shape "
               "| ranking by environments, true shape |", "|---|---|---|---|"]
     for name, entry in results["truths"].items():
@@ -199,7 +202,7 @@ def main() -> None:
     if args.summarize:
         for key, entry in results["truths"].items():
             fitted_skin_albedo(args.work / key, entry["models"])
-            entry["truth_albedo_skin_mean"] = _skin_albedo(read_ground_truth(args.work / key / "capture"))
+            entry.pop("truth_albedo_skin_mean", None)  # over every skin texel, seen or not: see fitted_skin_albedo
         write_json(path, results)
         figure(results, RESULTS / "truths.png")
         print(table(results))
