@@ -41,7 +41,7 @@ from .reflectance import FitOptions, fit_brdf as fit_brdf_model, render_fitted
 from .reflectance.fit.uncertainty import METHODS as UNCERTAINTY_METHODS
 from .reflectance.io import KIND as BRDF_KIND, write_fitted
 from .refine import refine_estimate
-from .refine.shape import refine_fits
+from .refine.shape import ShapeRefineSchedule, refine_fits
 from .report import RANKED, format_value
 from .shape import fit_shape as fit_shapes
 from .shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
@@ -169,9 +169,12 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
 @click.option("--force", is_flag=True, help="Write over the fits in --out (those not fitted again are kept).")
 @click.option("--refine-shape/--no-refine-shape", default=False, show_default=True,
               help="Refine the fitted faces beyond the model by differentiable rendering, lit by a quick Phong fit "
-                   "(minutes; for poses lit by several lamps: with one it fits shading errors as shape).")
+                   "(minutes; kept only if it lowers the loss on pixels it did not fit: docs/refine_shape.md).")
+@click.option("--refine-shape-judged", default=ShapeRefineSchedule.judged, show_default=True, type=click.IntRange(0),
+              help="Photographs held out of --refine-shape to judge it by (the last ones; 0: held-out pixels only; "
+                   "docs/refine_shape.md).")
 def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[str, ...], iterations: float | None,
-              no_diffuse: bool, fixed_focal: bool, force: bool, refine_shape: bool) -> None:
+              no_diffuse: bool, fixed_focal: bool, force: bool, refine_shape: bool, refine_shape_judged: int) -> None:
     """Fit the face model to every photograph of CAPTURE (paper sec. 4.2)."""
     check_writable(out_dir)
     if (Path(out_dir) / SHAPES_INDEX).exists() and not force:
@@ -181,7 +184,7 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
                progress=True, use_diffuse=not no_diffuse, fit_focal=not fixed_focal)
     if refine_shape:
         loaded, model = load_capture(capture), load_model(face_model).truncated(load_model(face_model).fit_shape_modes)
-        fits, refinement = refine_fits(loaded, fits, model)
+        fits, refinement = refine_fits(loaded, fits, model, schedule=ShapeRefineSchedule(judged=refine_shape_judged))
         click.echo(f"shape refinement: {'kept' if refinement.accepted else 'not kept'}: {refinement.reason}")
         if refinement.accepted:
             for f in fits:
@@ -267,8 +270,11 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolut
 @click.option("--specular-maps/--no-specular-maps", default=default(FitOptions, "specular_maps"),
               show_default=True, help="Estimate the specular reflectance per texel (specular.exr; renders read it).")
 @click.option("--refine-shape/--no-refine-shape", default=default(measure_capture, "refine_shape"), show_default=True,
-              help="Refine the fitted faces beyond the model by differentiable rendering (minutes; for poses lit "
-                   "by several lamps: with one it fits shading errors as shape; docs/refine_shape.md).")
+              help="Refine the fitted faces beyond the model by differentiable rendering (minutes; kept only if it "
+                   "lowers the loss on pixels it did not fit: docs/refine_shape.md).")
+@click.option("--refine-shape-judged", default=ShapeRefineSchedule.judged, show_default=True, type=click.IntRange(0),
+              help="Photographs held out of --refine-shape to judge it by (the last ones; 0: held-out pixels only; "
+                   "docs/refine_shape.md).")
 @click.option("--balance-lights/--no-balance-lights", default=default(FitOptions, "balance_lights"),
               show_default=True, help="Correct the given lights' relative intensities by the face's one albedo before "
                                       "the BRDF fits (a lamp a percent off biases the glossy fit).")
@@ -277,12 +283,12 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolut
                                       "(a second fit; bounced light biases skin's lobe low).")
 @fit_flag("texel_albedo", TEXEL_ALBEDO_HELP)
 def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int,
-            refine: bool, normals: bool, specular_maps: bool, refine_shape: bool, balance_lights: bool,
-            interreflection: bool, texel_albedo: bool) -> None:
+            refine: bool, normals: bool, specular_maps: bool, refine_shape: bool, refine_shape_judged: int,
+            balance_lights: bool, interreflection: bool, texel_albedo: bool) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
     check_writable(out_dir)
     report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, refine=refine,
-                             refine_shape=refine_shape,
+                             refine_shape=refine_shape and ShapeRefineSchedule(judged=refine_shape_judged),
                              options=FitOptions(resolution=resolution, normals=normals, specular_maps=specular_maps,
                                                 balance_lights=balance_lights, interreflection=interreflection,
                                                 texel_albedo=texel_albedo))

@@ -45,7 +45,7 @@ from .reflectance import BRDFEstimate, FitOptions, capture_samples, fit_brdf, wr
 from .reflectance.light_balance import balance_given_lights
 from .reflectance.options import fit_options
 from .refine import refine_estimate
-from .refine.shape import refine_lit, refined_fits
+from .refine.shape import ShapeRefineSchedule, refine_lit, refined_fits
 from .emitters import light_record
 from .render import FaceScene
 from .report import ranking, write_fit_picture, write_markdown, write_uncertainty_picture, write_validation_picture
@@ -105,7 +105,7 @@ class FittedModel:
 
 
 def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, options: FitOptions | None = None,
-            refine: bool = False, refine_shape: bool = False, shape_iterations: float | None = None, spp: int = 64,
+            refine: bool = False, refine_shape: bool | ShapeRefineSchedule = False, shape_iterations: float | None = None, spp: int = 64,
             face_model="builtin", progress: bool = True, **deprecated) -> dict:
     """Measure the reflectance of the face in ``capture``, writing everything to ``out``.
 
@@ -149,16 +149,17 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
     refine : bool
         Refine each fit by differentiable rendering against the photographs
         (:func:`mifaces.refine.refine_estimate`).
-    refine_shape : bool
+    refine_shape : bool or ShapeRefineSchedule
         Refine the fitted faces beyond the model's span by differentiable
-        rendering (:func:`mifaces.refine.shape.refine_shape`): a
-        first fit of the first model in ``models`` on the model-fitted shapes
-        lights the faces, one displacement along the normals is fitted against
-        every photograph, and it is kept only if it lowers the loss on pixels it
-        did not fit; the samples are then taken on the refined faces. Off by
-        default: it costs minutes, and on a capture with one lamp per pose (the
-        simulated default) it fits shading errors as shape, so the faces relight
-        worse (``docs/refine_shape.md``).
+        rendering (:func:`mifaces.refine.shape.refine_shape`, with this
+        schedule where one is given): a first fit of the first model in
+        ``models`` on the model-fitted shapes lights the faces, one displacement
+        along the normals is fitted against the photographs, and it is kept only
+        if it lowers the loss on pixels it did not fit (and, with
+        :attr:`~mifaces.refine.shape.ShapeRefineSchedule.judged`, on photographs
+        it left out); the samples are then taken on the kept faces. Off by
+        default: it costs minutes, and on the default capture the faces it
+        keeps relight worse (``docs/refine_shape.md``).
     **deprecated
         ``resolution=``, ``normals=``, ``specular_maps=``, ``balance_lights=`` as separate
         keywords, as before :class:`~mifaces.reflectance.FitOptions`: still accepted, with a
@@ -254,8 +255,9 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
                             "estimates": [e for e in lights_document(capture)["lights"] if e["estimated"]]}
         write_lights_picture(out / LIGHTS_PICTURE, capture)
     if refine_shape:
+        schedule = refine_shape if isinstance(refine_shape, ShapeRefineSchedule) else None
         shapes, samples = _refine_shapes(out, capture, face, shapes, fits, samples, models[0], resolution, report,
-                                         timings, progress)
+                                         timings, progress, schedule)
     first = next(m for m in capture.measurements if m.name in shapes)
     novel = novel_light(capture, np.asarray(shapes[first.name]).mean(axis=0))
     scene = FaceScene(face, shapes[first.name])  # the first photograph's face, built once for every model
@@ -342,14 +344,14 @@ def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iter
 
 
 def _refine_shapes(out: Path, capture: Capture, face, shapes: dict, fits, samples, model: str, resolution: int,
-                   report: dict, timings: dict, progress: bool):
-    """The faces refined by differentiable rendering (kept only where the held-out loss falls) and
+                   report: dict, timings: dict, progress: bool, schedule: ShapeRefineSchedule | None = None):
+    """The faces refined by differentiable rendering (kept only where the held-out losses fall) and
     their samples; ``report['shape_refinement']`` says what happened, and on a simulated capture
     ``report['shape_errors_refined']`` how far the refined faces lie from the truth. Refined fitted
     faces are written to ``out/shapes_refined`` (:data:`REFINED_SHAPES`, the layout of
     ``out/shapes``), the geometry the BRDFs are then fitted on."""
     t = time.perf_counter()
-    result = refine_lit(capture, shapes, face, samples, model, resolution, progress=progress)
+    result = refine_lit(capture, shapes, face, samples, model, resolution, schedule=schedule, progress=progress)
     report["shape_refinement"] = {"accepted": result.accepted, "reason": result.reason, "model": model,
                                   "seconds": time.perf_counter() - t,
                                   **{k: v for k, v in result.record.items() if k not in ("loss_per_iteration",)}}

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -219,15 +220,17 @@ def test_measure_refines_the_shapes_when_asked(capture_dir, tmp_path, monkeypatc
     calls = []
 
     def short(capture, shapes, face, samples, model, resolution, schedule=None, **kw):
-        calls.append(model)
+        calls.append((model, schedule))
         return refine_lit(capture, shapes, face, samples, model, resolution,
-                          ShapeRefineSchedule(iterations=2, downsample=4), **kw)
+                          dataclasses.replace(schedule, iterations=2, downsample=4), **kw)
 
     monkeypatch.setattr(pipeline, "refine_lit", short)
+    asked = ShapeRefineSchedule(judged=1)  # as --refine-shape-judged 1 asks
     report = pipeline.measure(tmp_path / "m", capture_dir, models=("phong",), geometry="ground-truth", spp=2,
-                              progress=False, refine_shape=True, options=FitOptions(resolution=64))
-    assert calls == ["phong"]
+                              progress=False, refine_shape=asked, options=FitOptions(resolution=64))
+    assert calls == [("phong", asked)]
     refinement = report["shape_refinement"]
+    assert refinement["judged_photographs"] == []  # two photographs: none to spare for judging
     assert isinstance(refinement["accepted"], bool) and refinement["reason"] and refinement["model"] == "phong"
     assert report["seconds"]["refine_shape"] > 0
     if refinement["accepted"]:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 
 import dataclasses
+import types
 
 import mitsuba as mi
 import numpy as np
@@ -15,7 +16,7 @@ import pytest
 
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.model.geometry import vertex_normals, welded_normals
-from mifaces.refine.shape import ShapeRefineSchedule, _mesh_normals, refine_shape
+from mifaces.refine.shape import ShapeRefineSchedule, _mesh_normals, _verdict, judged_photographs, refine_shape
 from mifaces.studio.detail import cheek_bump
 from mifaces.studio.simulate import simulate
 
@@ -26,8 +27,8 @@ PEAK_RTOL = 0.4
 #: The mean vertex error over the bump (vertices above half its peak) falls at least by this factor.
 ERROR_FALL = 0.5
 #: Schedule of the recovery test: the defaults' but fewer iterations and no silhouette samples (the
-#: test's time; the bump is inside the face, away from silhouettes).
-SCHEDULE = ShapeRefineSchedule(iterations=24, spp_silhouette=0)
+#: test's time; the bump is inside the face, away from silhouettes), and the last photograph judged.
+SCHEDULE = ShapeRefineSchedule(iterations=24, spp_silhouette=0, judged=1)
 
 
 @dataclasses.dataclass
@@ -60,13 +61,14 @@ def face_model():
 
 @pytest.fixture(scope="module")
 def bumped(tmp_path_factory, face_model):
-    """A 3-photograph capture (128², 16 spp, seed 7: not the seed the defaults
-    were chosen on) of a face with a cheek bump the model cannot express, and
-    the true shapes without the bump."""
+    """A 4-photograph capture (128², 16 spp, seed 7: not the seed the defaults
+    were chosen on; three poses under one lamp, fitted, and the front under a
+    second lamp, judged) of a face with a cheek bump the model cannot express,
+    and the true shapes without the bump."""
     bump = cheek_bump(face_model, face_model.shape_mean, BUMP_MM, BUMP_SIGMA_MM)
     model = dataclasses.replace(face_model, shape_mean=(face_model.shape_mean + bump).astype(np.float32))
     out = tmp_path_factory.mktemp("bump") / "capture"
-    simulate(out, model=model, measurements=3, resolution=(128, 128), spp=16, albedo_resolution=256, seed=7,
+    simulate(out, model=model, measurements=4, resolution=(128, 128), spp=16, albedo_resolution=256, seed=7,
              progress=False)
     capture = load_capture(out)
     truth = read_ground_truth(capture)
@@ -99,10 +101,65 @@ def test_welded_normals_keep_seam_copies_together(face_model):
 
 @pytest.mark.parametrize("field, value", [("iterations", 0), ("spp", 0), ("learning_rate", 0.0),
                                           ("smoothing", -1.0), ("holdout", 1.0), ("spp_silhouette", -1),
-                                          ("decay", 0.0)])
+                                          ("decay", 0.0), ("judged", -1), ("carry_over", 1.5)])
 def test_schedule_rejects_bad_values(field, value):
     with pytest.raises(ValueError, match=f"ShapeRefineSchedule.{field}"):
         ShapeRefineSchedule(**{field: value})
+
+
+def test_judged_photographs_are_the_last_and_leave_two_to_fit():
+    names = ["m00", "m01", "m02", "m03"]
+    assert judged_photographs(names, 1) == ["m03"]
+    assert judged_photographs(names, 2) == ["m02", "m03"]
+    assert judged_photographs(names, 3) == []  # one left to fit: none judged
+    assert judged_photographs(names[:2], 1) == []
+    assert judged_photographs(names, 0) == []
+
+
+def test_verdict_needs_the_gain_to_carry_over_to_the_judged_photograph():
+    before = {"fit": 1.0, "heldout": 1.0, "judged": 1.0}
+    kept, reason = _verdict(before, {"fit": 0.8, "heldout": 0.9, "judged": 0.95}, ["m05"], 0.5)
+    assert kept and "held-out photograph m05 1 -> 0.95 (-5.0 %)" in reason and "kept" in reason
+    # the held-out pixels fell by 10 %, the photograph no fit saw by 1 %: the model fit stays
+    kept, reason = _verdict(before, {"fit": 0.8, "heldout": 0.9, "judged": 0.99}, ["m05"], 0.5)
+    assert not kept and "did not carry over to the held-out photograph m05" in reason
+    kept, _ = _verdict(before, {"fit": 0.8, "heldout": 0.9, "judged": 0.99}, ["m05"], 0.1)
+    assert kept
+    kept, reason = _verdict(before, {"fit": 0.8, "heldout": 1.1, "judged": 0.9}, ["m05"], 0.5)
+    assert not kept and "did not fall, the model fit is kept" in reason
+    # no photograph to judge on: the pixels decide
+    kept, _ = _verdict(dict(before, judged=None), {"fit": 0.8, "heldout": 0.9, "judged": None}, [], 0.5)
+    assert kept
+
+
+def test_refine_lit_keeps_the_judged_photograph_out_of_its_fits(monkeypatch):
+    """The quick fit that lights the refinement, and the refit that judges it, never see the judged
+    photograph (a fit that saw it would favour the faces it was made on); without one judged, the
+    samples given light the faces."""
+    import mifaces.refine.shape as module
+
+    names = ["m00", "m01", "m02", "m03"]
+    capture = types.SimpleNamespace(measurements=[types.SimpleNamespace(name=n) for n in names])
+    shapes = {n: np.zeros((3, 3), np.float32) for n in names}
+    seen = []
+    monkeypatch.setattr(module, "capture_samples",
+                        lambda capture, faces, *a, **k: seen.append(("samples", sorted(faces))) or "samples")
+    monkeypatch.setattr(module, "fit_brdf", lambda capture, brdf, faces, samples=None, **k:
+                        seen.append(("fit", sorted(faces), samples)) or "estimate")
+
+    def refine(capture, faces, face_model, estimate, schedule, refit=None, progress=True):
+        seen.append(("refine", sorted(faces), estimate))
+        refit({n: faces[n] for n in names[:3]})  # refine_shape refits on the refined fitted faces
+        return "result"
+
+    monkeypatch.setattr(module, "refine_shape", refine)
+    judged = ShapeRefineSchedule(judged=1)
+    assert module.refine_lit(capture, shapes, None, "given", schedule=judged, progress=False) == "result"
+    assert seen == [("samples", names[:3]), ("fit", names[:3], "samples"), ("refine", names, "estimate"),
+                    ("samples", names[:3]), ("fit", names[:3], "samples")]
+    seen.clear()
+    module.refine_lit(capture, shapes, None, "given", progress=False)  # the default: none judged
+    assert seen[:2] == [("fit", names, "given"), ("refine", names, "estimate")]
 
 
 def test_bad_shapes_are_named(bumped, face_model):
@@ -122,14 +179,23 @@ def test_recovers_cheek_bump(bumped, face_model):
     peak = int(np.argmax(height))
     assert abs(result.displacement[peak] - BUMP_MM) < PEAK_RTOL * BUMP_MM, result.displacement[peak]
     region = height > 0.5 * BUMP_MM
-    for t in truth.measurements:
+    displaced = {name: v + result.displacement[:, None] * welded_normals(v, face_model.triangles)
+                 for name, v in flat.items()}
+    for t in truth.measurements:  # the judged photograph's face too: one displacement for all
         before = np.linalg.norm(flat[t.name] - t.vertices, axis=1)[region].mean()
-        after = np.linalg.norm(result.shapes[t.name] - t.vertices, axis=1)[region].mean()
+        after = np.linalg.norm(displaced[t.name] - t.vertices, axis=1)[region].mean()
         assert after < ERROR_FALL * before, (t.name, before, after)
     record = result.record
-    assert result.accepted, result.reason
     assert record["loss_after"]["fit"] < record["loss_before"]["fit"]
     assert record["loss_after"]["heldout"] < record["loss_before"]["heldout"]
+    # the last photograph judged, unfitted; the verdict is the rule's on the recorded losses
+    assert record["judged_photographs"] == [capture.measurements[-1].name]
+    assert capture.measurements[-1].name not in record["photographs"]
+    judged_fall = 1 - record["loss_after"]["judged"] / record["loss_before"]["judged"]
+    pixels_fall = 1 - record["loss_after"]["heldout"] / record["loss_before"]["heldout"]
+    assert result.accepted == (judged_fall >= SCHEDULE.carry_over * pixels_fall), (result.reason, judged_fall)
+    for name, v in (displaced if result.accepted else flat).items():
+        np.testing.assert_allclose(result.shapes[name], v, atol=1e-3)
     assert len(record["history"]) == SCHEDULE.iterations
     assert sum(h[3] for h in record["history"][2:]) == 0, "kernels recompiled after the first iterations"
 

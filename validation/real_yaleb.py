@@ -72,6 +72,7 @@ from mifaces.shape.io import load_geometry
 from mifaces.importers.yaleb import default_split, import_subject, read_subject
 from mifaces.pipeline import SHAPES, measure
 from mifaces.reflectance import FitOptions, fit_brdf, load_estimate
+from mifaces.refine.shape import ShapeRefineSchedule
 from mifaces.render import FaceScene
 from mifaces.reflectance.io import write_fitted
 from mifaces.refine import refine_estimate
@@ -138,7 +139,7 @@ def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> 
 
 
 def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shadow_angle: float,
-                resolution: int, normals: bool = False, refine: bool = False, refine_shape: bool = False,
+                resolution: int, normals: bool = False, refine: bool = False, refine_shape=False,
                 unknown_lights: bool = False, interreflection: bool = False, texel_albedo: bool | None = None) -> dict:
     """Import, measure and relight one subject; its errors and timings. With ``unknown_lights`` the
     capture hides its light directions (``mifaces import yaleb --unknown-lights``) and ``measure``
@@ -369,6 +370,9 @@ def main(argv=None) -> int:
                         help="also refine each fit by differentiable rendering and score it beside the unrefined")
     parser.add_argument("--refine-shape", action="store_true",
                         help="refine the fitted faces by differentiable rendering (measure --refine-shape)")
+    parser.add_argument("--refine-shape-judged", type=int, default=ShapeRefineSchedule.judged,
+                        help="photographs held out of the shape refinement to judge it by (measure "
+                             "--refine-shape-judged); above 0 the results' name ends in _judged")
     args = parser.parse_args(argv)
     if not args.data.is_dir():
         print(f"no Yale data at {args.data}: nothing to validate", file=sys.stderr)
@@ -386,17 +390,20 @@ def main(argv=None) -> int:
         print(f"== {subject}", flush=True)
         results.append(subject_run(args.data / subject, args.out / subject, args.train, models, args.spp,
                                    args.shadow_angle, args.resolution, refine=args.refine,
-                                   refine_shape=args.refine_shape))
+                                   refine_shape=args.refine_shape
+                                   and ShapeRefineSchedule(judged=args.refine_shape_judged)))
         print({k: round(v["all"], 4) for k, v in results[-1]["relative_rmse"].items()}, flush=True)
     overall = summary(results, models)
     document = {"data": "Extended Yale Face Database B (cropped), real photographs", "train_lights": args.train,
                 "models": list(models), "spp": args.spp, "texture_resolution": args.resolution,
                 "shadow_angle_deg": args.shadow_angle, "refine": args.refine, "refine_shape": args.refine_shape,
+                "refine_shape_judged": args.refine_shape_judged if args.refine_shape else None,
                 "command": "python validation/real_yaleb.py " + " ".join(argv if argv is not None else sys.argv[1:]),
                 "overall": overall,
                 "subjects": [{k: v for k, v in r.items() if k != "errors"} for r in results]}
     suffix = (("" if args.train == 8 else f"_train{args.train}") + ("_refine" if args.refine else "")
-              + ("_refine_shape" if args.refine_shape else ""))
+              + ("_refine_shape" if args.refine_shape else "")
+              + ("_judged" if args.refine_shape and args.refine_shape_judged else ""))
     write_json(args.results / f"real_yaleb{suffix}.json", document)
     figure(results, args.results / f"real_yaleb{suffix}.png", args.data, args.out, overall["best_model"])
     print(f"best model {overall['best_model']}: {overall['relative_rmse'][overall['best_model']]['all']:.4f} "

@@ -5,11 +5,13 @@ after, as ``mifaces fit-shape --refine-shape`` runs it.
 Simulates the default capture (seed 0, 6 photographs) at ``--resolution`` (256² by default: the
 refinement's cost grows with the pixels), fits the shapes with the defaults
 (:func:`mifaces.shape.fit_shape`), refines them (:func:`mifaces.refine.shape.refine_fits`,
-lit by a quick per-region fit) and scores both by :func:`mifaces.shape_errors.capture_shape_errors`.
+lit by a quick per-region fit) and scores both by :func:`mifaces.shape_errors.capture_shape_errors`:
+the faces it returns (``refined``: the model fit where the refinement was not kept) and the faces
+displaced by its displacement whether kept or not (``displaced``).
 
-    python validation/refine_shape_default.py [--resolution 256] [--work DIR]
+    python validation/refine_shape_default.py [--resolution 256] [--work DIR] [--judged 1]
 
-Writes ``validation/results/refine_shape_default.json``.
+Writes ``validation/results/refine_shape_default{,_judged}.json``.
 """
 
 from __future__ import annotations
@@ -24,8 +26,9 @@ import mifaces  # first: libLLVM  # isort: skip
 
 from mifaces.capture import load_capture
 from mifaces.atomic import write_json
+from mifaces.model.geometry import welded_normals
 from mifaces.shape.io import load_geometry
-from mifaces.refine.shape import refine_fits
+from mifaces.refine.shape import ShapeRefineSchedule, refine_fits
 from mifaces.shape import fit_shape, shapes_in_world
 from mifaces.shape_errors import capture_shape_errors
 from mifaces.studio import simulate
@@ -45,6 +48,9 @@ def main(argv=None) -> int:
     parser.add_argument("--resolution", type=int, default=256)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--work", type=Path, default=Path("out/refine_shape_default"))
+    parser.add_argument("--judged", type=int, default=ShapeRefineSchedule.judged,
+                        help="photographs held out of the refinement to judge it by; above 0 the result's name "
+                             "ends in _judged")
     args = parser.parse_args(argv)
     mifaces.set_variant("llvm_ad_rgb")
     folder = args.work / f"capture_{args.resolution}_{args.seed}"
@@ -57,16 +63,25 @@ def main(argv=None) -> int:
     fitted = time.perf_counter() - t
     before = errors(fits, capture, face, truth)
     t = time.perf_counter()
-    refined, result = refine_fits(capture, fits, face, progress=True)
+    refined, result = refine_fits(capture, fits, face, schedule=ShapeRefineSchedule(judged=args.judged),
+                                  progress=True)
     refining = time.perf_counter() - t
     after = errors(refined, capture, face, truth)
-    write_json(RESULTS / "refine_shape_default.json", {
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        start = shapes_in_world(fits, capture)
+    displaced = capture_shape_errors(face, {name: v + result.displacement[:, None] * welded_normals(v, face.triangles)
+                                            for name, v in start.items()}, truth, capture.camera)
+    write_json(RESULTS / f"refine_shape_default{'_judged' if args.judged else ''}.json", {
         "label": "SIMULATED", "command": "python validation/refine_shape_default.py " + " ".join(argv or sys.argv[1:]),
         "resolution": args.resolution, "seed": args.seed, "accepted": result.accepted, "reason": result.reason,
         "heldout_loss": {"before": result.record["loss_before"]["heldout"],
                          "after": result.record["loss_after"]["heldout"]},
+        "judged_photographs": result.record["judged_photographs"],
+        "judged_loss": {"before": result.record["loss_before"].get("judged"),
+                        "after": result.record["loss_after"].get("judged")},
         "seconds": {"fit_shape": fitted, "refine": refining},
-        "shape_errors": {"model_fit": before, "refined": after}})
+        "shape_errors": {"model_fit": before, "refined": after, "displaced": displaced}})
     print(f"{result.reason}; world-frame mean {before['summary']['mean_world_mm']:.2f} -> "
           f"{after['summary']['mean_world_mm']:.2f} mm, aligned {before['summary']['mean_aligned_mm']:.2f} -> "
           f"{after['summary']['mean_aligned_mm']:.2f} mm ({refining:.0f} s)")

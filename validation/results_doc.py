@@ -835,8 +835,11 @@ def sec_refine_shape_default(d):
              f"{fixed(get(d, 'seconds', 'refine'), 0)} s to refine. World-frame errors of the faces against the "
              "truth (mm, front of the face):", ""]
     rows = []
-    for label, key in (("model fit", "model_fit"), ("refined", "refined")):
+    for label, key in (("model fit", "model_fit"), ("returned by the refinement", "refined"),
+                       ("displaced, kept or not", "displaced")):
         summary_ = get(d, "shape_errors", key, "summary") or {}
+        if not summary_:
+            continue
         rows.append([label, fixed(summary_.get("mean_world_mm"), 2), fixed(summary_.get("max_world_mm"), 2),
                      fixed(summary_.get("mean_aligned_mm"), 2), fixed(summary_.get("max_abs_depth_mm"), 2)])
     return lines + table(["faces", "world, mean", "world, max", "after rigid alignment, mean",
