@@ -33,7 +33,7 @@ from .gallery import render_gallery
 from .importers.diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
 from .importers.yaleb import SPLIT, import_subject
 from .capture.detector import NoFaceError, detect_landmarks
-from .cli_options import default, fit_flag, renamed, width_x_height
+from .cli_options import default, fit_flag, refine_shape_options, renamed, width_x_height
 from .model import load_model
 from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
 from .shape.io import load_geometry
@@ -41,7 +41,8 @@ from .reflectance import FitOptions, fit_brdf as fit_brdf_model, render_fitted
 from .reflectance.fit.uncertainty import METHODS as UNCERTAINTY_METHODS
 from .reflectance.io import KIND as BRDF_KIND, write_fitted
 from .refine import refine_estimate
-from .refine.shape import ShapeRefineSchedule, refine_fits
+from .refine.shape import ShapeRefineSchedule
+from .refine.shape_lit import refine_fits
 from .report import RANKED, format_value
 from .shape import fit_shape as fit_shapes
 from .shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
@@ -167,12 +168,7 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
 @click.option("--no-diffuse", is_flag=True, help="Ignore the companion diffuse-light pictures.")
 @click.option("--fixed-focal", is_flag=True, help="Keep the calibrated focal length.")
 @click.option("--force", is_flag=True, help="Write over the fits in --out (those not fitted again are kept).")
-@click.option("--refine-shape/--no-refine-shape", default=False, show_default=True,
-              help="Refine the fitted faces beyond the model by differentiable rendering, lit by a quick Phong fit "
-                   "(minutes; kept only if it lowers the loss on pixels it did not fit: docs/refine_shape.md).")
-@click.option("--refine-shape-judged", default=ShapeRefineSchedule.judged, show_default=True, type=click.IntRange(0),
-              help="Photographs held out of --refine-shape to judge it by (the last ones; 0: held-out pixels only; "
-                   "docs/refine_shape.md).")
+@refine_shape_options(False)
 def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[str, ...], iterations: float | None,
               no_diffuse: bool, fixed_focal: bool, force: bool, refine_shape: bool, refine_shape_judged: int) -> None:
     """Fit the face model to every photograph of CAPTURE (paper sec. 4.2)."""
@@ -269,12 +265,7 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolut
               help="Estimate a normal per texel alternating with each fit.")
 @click.option("--specular-maps/--no-specular-maps", default=default(FitOptions, "specular_maps"),
               show_default=True, help="Estimate the specular reflectance per texel (specular.exr; renders read it).")
-@click.option("--refine-shape/--no-refine-shape", default=default(measure_capture, "refine_shape"), show_default=True,
-              help="Refine the fitted faces beyond the model by differentiable rendering (minutes; kept only if it "
-                   "lowers the loss on pixels it did not fit: docs/refine_shape.md).")
-@click.option("--refine-shape-judged", default=ShapeRefineSchedule.judged, show_default=True, type=click.IntRange(0),
-              help="Photographs held out of --refine-shape to judge it by (the last ones; 0: held-out pixels only; "
-                   "docs/refine_shape.md).")
+@refine_shape_options(default(measure_capture, "refine_shape"))
 @click.option("--balance-lights/--no-balance-lights", default=default(FitOptions, "balance_lights"),
               show_default=True, help="Correct the given lights' relative intensities by the face's one albedo before "
                                       "the BRDF fits (a lamp a percent off biases the glossy fit).")

@@ -10,6 +10,7 @@ import inspect
 import click
 
 from .reflectance.options import FitOptions
+from .refine.shape import ShapeRefineSchedule
 
 
 def default(function, name: str):
@@ -22,6 +23,20 @@ def fit_flag(name: str, help: str):
     (``texel_albedo``: ``--texel-albedo``), its default the field's."""
     flag = name.replace("_", "-")
     return click.option(f"--{flag}/--no-{flag}", default=default(FitOptions, name), show_default=True, help=help)
+
+
+def refine_shape_options(default_on: bool):
+    """``--refine-shape/--no-refine-shape`` and ``--refine-shape-judged N`` of ``measure`` and
+    ``fit-shape`` (the judged count's default :class:`~mifaces.refine.shape.ShapeRefineSchedule`'s)."""
+    def apply(command):
+        command = click.option("--refine-shape-judged", default=ShapeRefineSchedule.judged, show_default=True,
+                               type=click.IntRange(0), help="Photographs held out of --refine-shape to judge it by "
+                               "(the last ones; 0: held-out pixels only; docs/refine_shape.md).")(command)
+        return click.option("--refine-shape/--no-refine-shape", default=default_on, show_default=True,
+                            help="Refine the fitted faces beyond the model by differentiable rendering, lit by a "
+                                 "quick Phong fit (minutes; kept only if it lowers the loss on pixels it did not "
+                                 "fit: docs/refine_shape.md).")(command)
+    return apply
 
 
 def width_x_height(ctx, param, value: str) -> tuple[int, int]:

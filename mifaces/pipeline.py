@@ -45,7 +45,8 @@ from .reflectance import BRDFEstimate, FitOptions, capture_samples, fit_brdf, wr
 from .reflectance.light_balance import balance_given_lights
 from .reflectance.options import fit_options
 from .refine import refine_estimate
-from .refine.shape import ShapeRefineSchedule, refine_lit, refined_fits
+from .refine.shape import ShapeRefineSchedule
+from .refine.shape_lit import refine_lit, refined_fits
 from .emitters import light_record
 from .render import FaceScene
 from .report import ranking, write_fit_picture, write_markdown, write_uncertainty_picture, write_validation_picture
@@ -105,8 +106,9 @@ class FittedModel:
 
 
 def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, options: FitOptions | None = None,
-            refine: bool = False, refine_shape: bool | ShapeRefineSchedule = False, shape_iterations: float | None = None, spp: int = 64,
-            face_model="builtin", progress: bool = True, **deprecated) -> dict:
+            refine: bool = False, refine_shape: bool | ShapeRefineSchedule = False,
+            shape_iterations: float | None = None, spp: int = 64, face_model="builtin", progress: bool = True,
+            **deprecated) -> dict:
     """Measure the reflectance of the face in ``capture``, writing everything to ``out``.
 
     The stages hand their results to each other in memory: the face model is

@@ -214,7 +214,8 @@ def test_measure_refines_the_shapes_when_asked(capture_dir, tmp_path, monkeypatc
     photographs and the report says whether it was kept and why (a short schedule here)."""
     import mifaces
     import mifaces.pipeline as pipeline
-    from mifaces.refine.shape import ShapeRefineSchedule, refine_lit
+    from mifaces.refine.shape import ShapeRefineSchedule
+    from mifaces.refine.shape_lit import refine_lit
 
     mifaces.set_variant("llvm_ad_rgb")
     calls = []

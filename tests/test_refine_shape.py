@@ -136,7 +136,7 @@ def test_refine_lit_keeps_the_judged_photograph_out_of_its_fits(monkeypatch):
     """The quick fit that lights the refinement, and the refit that judges it, never see the judged
     photograph (a fit that saw it would favour the faces it was made on); without one judged, the
     samples given light the faces."""
-    import mifaces.refine.shape as module
+    import mifaces.refine.shape_lit as module
 
     names = ["m00", "m01", "m02", "m03"]
     capture = types.SimpleNamespace(measurements=[types.SimpleNamespace(name=n) for n in names])

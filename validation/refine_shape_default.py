@@ -4,7 +4,7 @@ after, as ``mifaces fit-shape --refine-shape`` runs it.
 
 Simulates the default capture (seed 0, 6 photographs) at ``--resolution`` (256² by default: the
 refinement's cost grows with the pixels), fits the shapes with the defaults
-(:func:`mifaces.shape.fit_shape`), refines them (:func:`mifaces.refine.shape.refine_fits`,
+(:func:`mifaces.shape.fit_shape`), refines them (:func:`mifaces.refine.shape_lit.refine_fits`,
 lit by a quick per-region fit) and scores both by :func:`mifaces.shape_errors.capture_shape_errors`:
 the faces it returns (``refined``: the model fit where the refinement was not kept) and the faces
 displaced by its displacement whether kept or not (``displaced``).
@@ -28,7 +28,8 @@ from mifaces.capture import load_capture
 from mifaces.atomic import write_json
 from mifaces.model.geometry import welded_normals
 from mifaces.shape.io import load_geometry
-from mifaces.refine.shape import ShapeRefineSchedule, refine_fits
+from mifaces.refine.shape import ShapeRefineSchedule
+from mifaces.refine.shape_lit import refine_fits
 from mifaces.shape import fit_shape, shapes_in_world
 from mifaces.shape_errors import capture_shape_errors
 from mifaces.studio import simulate
