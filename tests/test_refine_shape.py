@@ -16,7 +16,8 @@ import pytest
 
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.model.geometry import vertex_normals, welded_normals
-from mifaces.refine.shape import ShapeRefineSchedule, _mesh_normals, _verdict, judged_photographs, refine_shape
+from mifaces.refine.shape import (ShapeRefineSchedule, _mesh_normals, _verdict, displaced, judged_photographs,
+                                  refine_shape)
 from mifaces.studio.detail import cheek_bump
 from mifaces.studio.simulate import simulate
 
@@ -179,11 +180,10 @@ def test_recovers_cheek_bump(bumped, face_model):
     peak = int(np.argmax(height))
     assert abs(result.displacement[peak] - BUMP_MM) < PEAK_RTOL * BUMP_MM, result.displacement[peak]
     region = height > 0.5 * BUMP_MM
-    displaced = {name: v + result.displacement[:, None] * welded_normals(v, face_model.triangles)
-                 for name, v in flat.items()}
+    moved = {name: displaced(v, result.displacement, face_model.triangles) for name, v in flat.items()}
     for t in truth.measurements:  # the judged photograph's face too: one displacement for all
         before = np.linalg.norm(flat[t.name] - t.vertices, axis=1)[region].mean()
-        after = np.linalg.norm(displaced[t.name] - t.vertices, axis=1)[region].mean()
+        after = np.linalg.norm(moved[t.name] - t.vertices, axis=1)[region].mean()
         assert after < ERROR_FALL * before, (t.name, before, after)
     record = result.record
     assert record["loss_after"]["fit"] < record["loss_before"]["fit"]
@@ -194,7 +194,7 @@ def test_recovers_cheek_bump(bumped, face_model):
     judged_fall = 1 - record["loss_after"]["judged"] / record["loss_before"]["judged"]
     pixels_fall = 1 - record["loss_after"]["heldout"] / record["loss_before"]["heldout"]
     assert result.accepted == (judged_fall >= SCHEDULE.carry_over * pixels_fall), (result.reason, judged_fall)
-    for name, v in (displaced if result.accepted else flat).items():
+    for name, v in (moved if result.accepted else flat).items():
         np.testing.assert_allclose(result.shapes[name], v, atol=1e-3)
     assert len(record["history"]) == SCHEDULE.iterations
     assert sum(h[3] for h in record["history"][2:]) == 0, "kernels recompiled after the first iterations"

@@ -26,9 +26,8 @@ import mifaces  # first: libLLVM  # isort: skip
 
 from mifaces.capture import load_capture
 from mifaces.atomic import write_json
-from mifaces.model.geometry import welded_normals
 from mifaces.shape.io import load_geometry
-from mifaces.refine.shape import ShapeRefineSchedule
+from mifaces.refine.shape import ShapeRefineSchedule, displaced
 from mifaces.refine.shape_lit import refine_fits
 from mifaces.shape import fit_shape, shapes_in_world
 from mifaces.shape_errors import capture_shape_errors
@@ -71,8 +70,8 @@ def main(argv=None) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         start = shapes_in_world(fits, capture)
-    displaced = capture_shape_errors(face, {name: v + result.displacement[:, None] * welded_normals(v, face.triangles)
-                                            for name, v in start.items()}, truth, capture.camera)
+    moved = capture_shape_errors(face, {name: displaced(v, result.displacement, face.triangles)
+                                        for name, v in start.items()}, truth, capture.camera)
     write_json(RESULTS / f"refine_shape_default{'_judged' if args.judged else ''}.json", {
         "label": "SIMULATED", "command": "python validation/refine_shape_default.py " + " ".join(argv or sys.argv[1:]),
         "resolution": args.resolution, "seed": args.seed, "accepted": result.accepted, "reason": result.reason,
@@ -82,7 +81,7 @@ def main(argv=None) -> int:
         "judged_loss": {"before": result.record["loss_before"].get("judged"),
                         "after": result.record["loss_after"].get("judged")},
         "seconds": {"fit_shape": fitted, "refine": refining},
-        "shape_errors": {"model_fit": before, "refined": after, "displaced": displaced}})
+        "shape_errors": {"model_fit": before, "refined": after, "displaced": moved}})
     print(f"{result.reason}; world-frame mean {before['summary']['mean_world_mm']:.2f} -> "
           f"{after['summary']['mean_world_mm']:.2f} mm, aligned {before['summary']['mean_aligned_mm']:.2f} -> "
           f"{after['summary']['mean_aligned_mm']:.2f} mm ({refining:.0f} s)")

@@ -43,10 +43,10 @@ fit, rendered before and after with the same seed (common random numbers):
 blocks of the face's pixels held out of E (a fixed random fraction,
 :attr:`ShapeRefineSchedule.holdout`), and a whole photograph held out of E
 (:attr:`ShapeRefineSchedule.judged`, :func:`judged_photographs`): a lamp (and,
-where each photograph has its own, a pose) the refinement never saw, where asked. Its loss must fall by at least
-:attr:`ShapeRefineSchedule.carry_over` of the pixels' relative fall, the
-refined faces lit by the reflectance fitted again on them (``refit``), as the
-pipeline goes on to use them. Held-out pixels alone do not catch the
+where each photograph has its own, a pose) the refinement never saw, where
+asked. Its loss must fall by at least :attr:`ShapeRefineSchedule.carry_over`
+of the pixels' relative fall, the refined faces lit by the reflectance fitted
+again on them (``refit``), as the pipeline goes on to use them. Held-out pixels alone do not catch the
 refinement's usual failure: the displacement trades against the albedo and
 the light the direct-light renders leave out, and the traded shape fits the
 held-out pixels of the same photographs as well as the fitted ones; under a
@@ -55,6 +55,7 @@ lamp it did not see, it relights the face worse.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import asdict, dataclass, field
 
@@ -283,17 +284,23 @@ class ShapeProblem:
                                    specular=appearance["specular"], sample_border=True)
             self.light_kinds.add(view.light_kind)
             keys = {key: mi.UInt32(np.ascontiguousarray(part.index, np.uint32)) for key, part in face.meshes.items()}
-            normals = welded_normals(vertices, face_model.triangles)
-            start = (m.name, view, mi.Point3f(np.ascontiguousarray(vertices.T)),
-                     mi.Vector3f(np.ascontiguousarray(normals.T, np.float32)), keys)
             held = holdout_pixels(view.mask, schedule.holdout, schedule.holdout_block, rng)
-            self.views.append(_View(*start, mask_weight(view.mask & ~held), mask_weight(held)))
+            normals = welded_normals(vertices, face_model.triangles)
+            self.views.append(_View(m.name, view, mi.Point3f(np.ascontiguousarray(vertices.T)),
+                                    mi.Vector3f(np.ascontiguousarray(normals.T, np.float32)), keys,
+                                    mask_weight(view.mask & ~held), mask_weight(held)))
+        self.direction = self.views[0].normals  # the frame of d: the first photograph's normals
+
+    @functools.cached_property
+    def steps(self):
+        """Mitsuba's LargeSteps on the first photograph's face (built when first stepped: a problem
+        only evaluated, as the judged photographs', does not factor it)."""
         try:
-            self.steps = mi.ad.LargeSteps(mi.Float(np.ravel(self.shapes[names[0]])),
-                                          mi.UInt(np.ravel(triangles).astype(np.uint32)), float(schedule.smoothing))
+            return mi.ad.LargeSteps(mi.Float(np.ravel(next(iter(self.shapes.values())))),
+                                    mi.UInt(np.ravel(self.face_model.triangles).astype(np.uint32)),
+                                    float(self.schedule.smoothing))
         except ImportError as error:
             raise ImportError("refine_shape needs cholespy (pip install cholespy) for Mitsuba's LargeSteps") from error
-        self.direction = self.views[0].normals  # the frame of d: the first photograph's normals
 
     def latent_zero(self) -> mi.Float:
         """u of the zero displacement."""
@@ -322,8 +329,9 @@ class ShapeProblem:
         return image_loss(image * view.view.scale, view.view.target, weight, self.schedule.epsilon)
 
     def evaluate(self, h: mi.Float, seed: int) -> dict:
-        """Mean E_k over the photographs on the fitted and on the held-out pixels (no gradients)."""
-        fit, held = [], []
+        """Mean E_k over the photographs on the fitted (``fit``), the held-out (``heldout``) and all
+        (``all``) face pixels (no gradients)."""
+        fit, held, every = [], [], []
         with dr.suspend_grad():
             h = mi.Float(dr.detach(h))
             for i, view in enumerate(self.views):
@@ -332,23 +340,20 @@ class ShapeProblem:
                 image = image * view.view.scale
                 fit.append(image_loss(image, view.view.target, view.fit_weight, self.schedule.epsilon)[0])
                 held.append(image_loss(image, view.view.target, view.heldout_weight, self.schedule.epsilon)[0])
-        return {"fit": float(np.mean(fit)), "heldout": float(np.mean(held))}
-
-    def photograph_loss(self, seed: int) -> float:
-        """Mean E_k (no gradients) over all the face's pixels of every photograph, undisplaced."""
-        losses = []
-        with dr.suspend_grad():
-            for i, view in enumerate(self.views):
-                self.set(view, dr.zeros(mi.Float, self.face_model.vertex_count))
-                image = mi.render(view.view.scene, spp=self.schedule.evaluation_spp, seed=seed + 2 * i)
-                losses.append(image_loss(image * view.view.scale, view.view.target, mask_weight(view.view.mask),
-                                         self.schedule.epsilon)[0])
-        return float(np.mean(losses))
+                every.append(image_loss(image, view.view.target, mask_weight(view.view.mask),
+                                        self.schedule.epsilon)[0])
+        return {"fit": float(np.mean(fit)), "heldout": float(np.mean(held)), "all": float(np.mean(every))}
 
     def displaced(self, h: np.ndarray) -> dict[str, np.ndarray]:
         """Measurement -> (V, 3) float32 world vertices displaced by ``h`` along their welded normals."""
-        return {view.name: (self.shapes[view.name] + h[:, None] * np.asarray(view.normals).T).astype(np.float32)
-                for view in self.views}
+        return {name: displaced(v, h, self.face_model.triangles) for name, v in self.shapes.items()}
+
+
+def displaced(vertices: np.ndarray, h: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """``vertices`` (V, 3) moved by ``h`` (V,) mm along their welded normals, float32: a face as the
+    refinement's displacement field moves it (the normals every photograph's view is displaced along)."""
+    vertices = np.asarray(vertices, np.float32)
+    return (vertices + np.asarray(h, np.float32)[:, None] * welded_normals(vertices, triangles)).astype(np.float32)
 
 
 def judged_photographs(names: list[str], count: int) -> list[str]:
@@ -439,15 +444,14 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
     after = problem.evaluate(h, evaluation_seed)
     h_np = np.asarray(h, np.float32)
     refined = problem.displaced(h_np)
-    for name in judged:  # one displacement for all: the judged faces move with the others
-        start = np.asarray(shapes[name], np.float32)
-        refined[name] = (start + h_np[:, None] * welded_normals(start, face_model.triangles)).astype(np.float32)
-    if judged:
-        def judge(faces, lit):
-            return ShapeProblem(capture, {n: faces[n] for n in judged}, face_model, lit, schedule, lamp_radius,
-                                judged, seed).photograph_loss(evaluation_seed + 7)
-        before["judged"] = judge(shapes, estimate)
-        after["judged"] = judge(refined, refit({n: refined[n] for n in problem.shapes}) if refit else estimate)
+    if judged:  # one displacement for all: the judged faces move with the others
+        unmoved = dr.zeros(mi.Float, face_model.vertex_count)
+        judge = ShapeProblem(capture, shapes, face_model, estimate, schedule, lamp_radius, judged, seed)
+        before["judged"] = judge.evaluate(unmoved, evaluation_seed + 7)["all"]
+        refined.update(judge.displaced(h_np))
+        lit = refit({name: refined[name] for name in problem.shapes}) if refit else estimate
+        judge = ShapeProblem(capture, refined, face_model, lit, schedule, lamp_radius, judged, seed)
+        after["judged"] = judge.evaluate(unmoved, evaluation_seed + 7)["all"]
     accepted, reason = _verdict(before, after, judged, schedule.carry_over)
     t_end = time.perf_counter()
     record = {
@@ -487,4 +491,5 @@ def _verdict(before: dict, after: dict, judged: list[str], carry_over: float) ->
                    f"of the held-out pixels' needed), the model fit is kept")
 
 
-__all__ = ["ShapeRefineSchedule", "ShapeRefinement", "ShapeProblem", "judged_photographs", "refine_shape"]
+__all__ = ["ShapeRefineSchedule", "ShapeRefinement", "ShapeProblem", "displaced", "judged_photographs",
+           "refine_shape"]
