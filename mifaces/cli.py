@@ -170,7 +170,8 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
 @click.option("--force", is_flag=True, help="Write over the fits in --out (those not fitted again are kept).")
 @refine_shape_options(False)
 def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[str, ...], iterations: float | None,
-              no_diffuse: bool, fixed_focal: bool, force: bool, refine_shape: bool, refine_shape_judged: int) -> None:
+              no_diffuse: bool, fixed_focal: bool, force: bool, refine_shape: bool, refine_shape_judged: int,
+              refine_shape_early_stop: bool) -> None:
     """Fit the face model to every photograph of CAPTURE (paper sec. 4.2)."""
     check_writable(out_dir)
     if (Path(out_dir) / SHAPES_INDEX).exists() and not force:
@@ -180,7 +181,8 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
                progress=True, use_diffuse=not no_diffuse, fit_focal=not fixed_focal)
     if refine_shape:
         loaded, model = load_capture(capture), load_model(face_model).truncated(load_model(face_model).fit_shape_modes)
-        fits, refinement = refine_fits(loaded, fits, model, schedule=ShapeRefineSchedule(judged=refine_shape_judged))
+        schedule = ShapeRefineSchedule(judged=refine_shape_judged, early_stop=refine_shape_early_stop)
+        fits, refinement = refine_fits(loaded, fits, model, schedule=schedule)
         click.echo(f"shape refinement: {'kept' if refinement.accepted else 'not kept'}: {refinement.reason}")
         if refinement.accepted:
             for f in fits:
@@ -275,11 +277,12 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolut
 @fit_flag("texel_albedo", TEXEL_ALBEDO_HELP)
 def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int,
             refine: bool, normals: bool, specular_maps: bool, refine_shape: bool, refine_shape_judged: int,
-            balance_lights: bool, interreflection: bool, texel_albedo: bool) -> None:
+            refine_shape_early_stop: bool, balance_lights: bool, interreflection: bool, texel_albedo: bool) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
     check_writable(out_dir)
     report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, refine=refine,
-                             refine_shape=refine_shape and ShapeRefineSchedule(judged=refine_shape_judged),
+                             refine_shape=refine_shape and ShapeRefineSchedule(judged=refine_shape_judged,
+                                                                           early_stop=refine_shape_early_stop),
                              options=FitOptions(resolution=resolution, normals=normals, specular_maps=specular_maps,
                                                 balance_lights=balance_lights, interreflection=interreflection,
                                                 texel_albedo=texel_albedo))

@@ -26,9 +26,14 @@ def fit_flag(name: str, help: str):
 
 
 def refine_shape_options(default_on: bool):
-    """``--refine-shape/--no-refine-shape`` and ``--refine-shape-judged N`` of ``measure`` and
-    ``fit-shape`` (the judged count's default :class:`~mifaces.refine.shape.ShapeRefineSchedule`'s)."""
+    """``--refine-shape/--no-refine-shape``, ``--refine-shape-judged N`` and
+    ``--refine-shape-early-stop/--no-refine-shape-early-stop`` of ``measure`` and ``fit-shape`` (their
+    defaults :class:`~mifaces.refine.shape.ShapeRefineSchedule`'s)."""
     def apply(command):
+        command = click.option("--refine-shape-early-stop/--no-refine-shape-early-stop",
+                               default=ShapeRefineSchedule.early_stop, show_default=True,
+                               help="Let half of --refine-shape's held-out pixels choose its iteration, the other "
+                                    "half judge it (docs/refine_shape.md).")(command)
         command = click.option("--refine-shape-judged", default=ShapeRefineSchedule.judged, show_default=True,
                                type=click.IntRange(0), help="Photographs held out of --refine-shape to judge it by "
                                "(the last ones; 0: held-out pixels only; docs/refine_shape.md).")(command)

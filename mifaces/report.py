@@ -163,12 +163,12 @@ def shapes_markdown(report: dict) -> list[str]:
                 + ", so it lies outside the fitted span by construction" if "truth_shape_modes" in face else "")
              + ".", "", "| photograph | status | feature RMS (px) | photometric residual | world error (mm) "
                         "| after rigid alignment (mm) | depth (mm) | size against the truth (%) "
-                        "| after that size about the camera (mm) |", "|---|---|---|---|---|---|---|---|---|"]
+                        "| after that size about the camera (mm) | normals (°) |", "|---" * 10 + "|"]
     for name, entry in report["shapes"].items():
         e = entry.get("errors") or {}
         cells = [f"{e[k]:.2f}" if k in e else "" for k in ("world_mm", "aligned_mm", "depth_mm")]
         cells += [f"{e['scale_pct']:+.2f}" if "scale_pct" in e else "", f"{e['scaled_mm']:.2f}" if "scaled_mm" in e
-                  else ""]
+                  else "", f"{e['normal_deg']:.2f}" if "normal_deg" in e else ""]
         fit = [f"{entry[k]:.{d}f}" if entry.get(k) is not None else "" for k, d in (("feature_rms_px", 2),
                                                                                    ("image_rms", 3))]
         lines.append(f"| {name} | {entry['status']} | " + " | ".join(fit + cells) + " |")

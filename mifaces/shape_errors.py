@@ -23,12 +23,18 @@ neck and the back of the head may stay coarse):
   off in depth at 1.2 m. Where ``scaled_mm`` is far below ``world_mm``, the
   world error is that ambiguity; a face of the right size at the wrong depth
   leaves ``scaled_mm`` equal to ``world_mm`` (``docs/shape_estimation.md``).
+* ``normal_deg``: the mean angle between the fitted and the true vertex
+  normals, in the world frame: what shading sees. A face moved along its
+  depth keeps it, a turned face or a bent surface does not. Vertex distances
+  hide a surface that is bent by a fraction of a mm over a few mm: it shades
+  wrong, as the shape refinement's displacement can (``docs/refine_shape.md``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .model.geometry import vertex_normals
 from .model.regions import REGIONS
 
 
@@ -53,9 +59,14 @@ def rigid_alignment(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray,
     return rotation, mt - rotation @ ms
 
 
-def shape_errors(fitted: np.ndarray, true: np.ndarray, mask: np.ndarray, camera) -> dict:
+def shape_errors(fitted: np.ndarray, true: np.ndarray, mask: np.ndarray, camera, triangles=None) -> dict:
     """World-frame errors of one fitted face against the true one (both (V, 3) world mm, the same
-    model's vertices), over the vertices ``mask`` selects; ``camera`` gives the viewing axis."""
+    model's vertices), over the vertices ``mask`` selects; ``camera`` gives the viewing axis; with the
+    model's ``triangles``, the normals' error too."""
+    out = {}
+    if triangles is not None:
+        cosine = np.sum(vertex_normals(fitted, triangles) * vertex_normals(true, triangles), axis=1)[mask]
+        out["normal_deg"] = float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))).mean())
     f, t = np.asarray(fitted, np.float64)[mask], np.asarray(true, np.float64)[mask]
     rotation, translation = rigid_alignment(f, t)
     axis = np.asarray(camera.rotation, np.float64)[2]  # world direction of the camera's +z (forward)
@@ -66,7 +77,7 @@ def shape_errors(fitted: np.ndarray, true: np.ndarray, mask: np.ndarray, camera)
             "depth_mm": float(np.mean((f - t) @ axis)),
             "scale_pct": 100.0 * (scale - 1.0),
             "scaled_mm": float(np.linalg.norm(f - centre - scale * (t - centre), axis=1).mean()),
-            "vertices": int(mask.sum())}
+            **out, "vertices": int(mask.sum())}
 
 
 def capture_shape_errors(face_model, shapes: dict, true_shapes: dict, camera) -> dict:
@@ -76,10 +87,11 @@ def capture_shape_errors(face_model, shapes: dict, true_shapes: dict, camera) ->
     for name, fitted in shapes.items():
         if name in true_shapes:
             mask = front_of_face(face_model, true_shapes[name] - true_shapes[name].mean(axis=0))
-            out[name] = shape_errors(fitted, true_shapes[name], mask, camera)
+            out[name] = shape_errors(fitted, true_shapes[name], mask, camera, face_model.triangles)
     if out:
         out["summary"] = {f"{stat}_{key}": float(fn([e[key] for e in out.values()]))
-                          for key in ("world_mm", "aligned_mm", "scaled_mm") for stat, fn in (("max", np.max), ("mean", np.mean))}
+                          for key in ("world_mm", "aligned_mm", "scaled_mm", "normal_deg")
+                          for stat, fn in (("max", np.max), ("mean", np.mean))}
         out["summary"]["max_abs_depth_mm"] = float(max(abs(e["depth_mm"]) for k, e in out.items() if k != "summary"))
         out["summary"]["max_abs_scale_pct"] = float(max(abs(e["scale_pct"]) for k, e in out.items()
                                                         if k != "summary"))

@@ -102,3 +102,14 @@ def test_help_names_the_new_options_only(command):
     assert result.exit_code == 0
     assert "--model" not in result.output
     assert ("--face-model" if command in ("simulate", "fit-shape") else "--brdf") in result.output
+
+
+@pytest.mark.parametrize("flags, judged, early_stop", [
+    (["--refine-shape"], 0, False),
+    (["--refine-shape", "--refine-shape-judged", "1", "--refine-shape-early-stop"], 1, True)])
+def test_measure_passes_the_shape_refinement_schedule(run, tmp_path, flags, judged, early_stop):
+    result, (_, kwargs) = run("measure", *_arguments("measure", tmp_path), *flags)
+    schedule = kwargs["refine_shape"]
+    assert (schedule.judged, schedule.early_stop) == (judged, early_stop)
+    result, (_, kwargs) = run("measure", *_arguments("measure", tmp_path))
+    assert kwargs["refine_shape"] is False  # off unless asked

@@ -16,8 +16,8 @@ import pytest
 
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.model.geometry import vertex_normals, welded_normals
-from mifaces.refine.shape import (ShapeRefineSchedule, _mesh_normals, _verdict, displaced, judged_photographs,
-                                  refine_shape)
+from mifaces.refine.shape import ShapeRefineSchedule, _mesh_normals, displaced, refine_shape
+from mifaces.refine.shape_choice import chosen_iteration, judged_photographs, verdict
 from mifaces.studio.detail import cheek_bump
 from mifaces.studio.simulate import simulate
 
@@ -119,17 +119,17 @@ def test_judged_photographs_are_the_last_and_leave_two_to_fit():
 
 def test_verdict_needs_the_gain_to_carry_over_to_the_judged_photograph():
     before = {"fit": 1.0, "heldout": 1.0, "judged": 1.0}
-    kept, reason = _verdict(before, {"fit": 0.8, "heldout": 0.9, "judged": 0.95}, ["m05"], 0.5)
+    kept, reason = verdict(before, {"fit": 0.8, "heldout": 0.9, "judged": 0.95}, ["m05"], 0.5)
     assert kept and "held-out photograph m05 1 -> 0.95 (-5.0 %)" in reason and "kept" in reason
     # the held-out pixels fell by 10 %, the photograph no fit saw by 1 %: the model fit stays
-    kept, reason = _verdict(before, {"fit": 0.8, "heldout": 0.9, "judged": 0.99}, ["m05"], 0.5)
+    kept, reason = verdict(before, {"fit": 0.8, "heldout": 0.9, "judged": 0.99}, ["m05"], 0.5)
     assert not kept and "did not carry over to the held-out photograph m05" in reason
-    kept, _ = _verdict(before, {"fit": 0.8, "heldout": 0.9, "judged": 0.99}, ["m05"], 0.1)
+    kept, _ = verdict(before, {"fit": 0.8, "heldout": 0.9, "judged": 0.99}, ["m05"], 0.1)
     assert kept
-    kept, reason = _verdict(before, {"fit": 0.8, "heldout": 1.1, "judged": 0.9}, ["m05"], 0.5)
+    kept, reason = verdict(before, {"fit": 0.8, "heldout": 1.1, "judged": 0.9}, ["m05"], 0.5)
     assert not kept and "did not fall, the model fit is kept" in reason
     # no photograph to judge on: the pixels decide
-    kept, _ = _verdict(dict(before, judged=None), {"fit": 0.8, "heldout": 0.9, "judged": None}, [], 0.5)
+    kept, _ = verdict(dict(before, judged=None), {"fit": 0.8, "heldout": 0.9, "judged": None}, [], 0.5)
     assert kept
 
 
@@ -197,7 +197,8 @@ def test_recovers_cheek_bump(bumped, face_model):
     for name, v in (moved if result.accepted else flat).items():
         np.testing.assert_allclose(result.shapes[name], v, atol=1e-3)
     assert len(record["history"]) == SCHEDULE.iterations
-    assert sum(h[3] for h in record["history"][2:]) == 0, "kernels recompiled after the first iterations"
+    compiled = record["history_keys"].index("compiled")
+    assert sum(h[compiled] for h in record["history"][2:]) == 0, "kernels recompiled after the first iterations"
 
 
 @pytest.mark.slow
@@ -205,10 +206,25 @@ def test_keeps_model_fit_when_held_out_loss_rises(bumped, face_model):
     capture, truth, _, _ = bumped
     true = {t.name: t.vertices for t in truth.measurements}
     # steps far too large from the true shape: the held-out loss can only rise
-    schedule = ShapeRefineSchedule(iterations=2, learning_rate=200.0, evaluation_spp=8)  # 50x the default
+    schedule = ShapeRefineSchedule(iterations=3, learning_rate=200.0, evaluation_spp=8, early_stop=False)  # 50x
     result = refine_shape(capture, true, face_model, TrueEstimate(truth), schedule, seed=1, progress=False)
     assert not result.accepted
     assert "did not fall" in result.reason
     for name, v in true.items():
         np.testing.assert_array_equal(result.shapes[name], v)
     assert np.abs(result.displacement).max() > 1.0
+    # choosing the iteration by the held-out blocks, the start (no displacement) is chosen
+    chosen = refine_shape(capture, true, face_model, TrueEstimate(truth),
+                          dataclasses.replace(schedule, early_stop=True), seed=1, progress=False)
+    assert chosen.record["chosen_iteration"] == 0
+    assert np.abs(chosen.displacement).max() < 1e-5
+    assert not chosen.accepted
+
+
+def test_chosen_iteration_averages_out_one_lucky_iteration():
+    losses = [5.0, 4.0, 3.0, 2.5, 2.6, 3.0, 3.5, 4.0, 4.5, 1.0]  # the last: one render's luck
+    assert chosen_iteration(losses) == 4  # averaged over 5: (3.0 + 2.5 + 2.6 + 3.0 + 3.5) / 5 the lowest
+    assert chosen_iteration(losses, window=1) == 9
+    assert chosen_iteration([2.0, 1.0, 1.0], window=1) == 1  # the earliest of equals
+    with pytest.raises(ValueError, match="one loss per iteration"):
+        chosen_iteration([])

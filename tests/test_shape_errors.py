@@ -7,11 +7,17 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+import mifaces
 from mifaces.model.geometry import rotation_matrix
 from mifaces.shape_errors import shape_errors
 
 #: A camera 1200 mm in front of the face, looking along -z of the world (its +z row is world -z).
 CAMERA = SimpleNamespace(position=np.array([0.0, 0.0, 1200.0]), rotation=np.diag([1.0, -1.0, -1.0]))
+
+
+@pytest.fixture(scope="module")
+def face_model():
+    return mifaces.load_model()
 
 
 def _face(n=2000, seed=0):
@@ -44,3 +50,20 @@ def test_a_turned_and_shifted_face_is_a_rigid_error():
     mask = np.zeros(len(true), bool)
     mask[:10] = True
     assert shape_errors(fitted, true, mask, CAMERA)["vertices"] == 10
+
+
+def test_normals_error_sees_a_turn_and_a_bend_but_not_a_shift(face_model):
+    """``normal_deg``: 0 for the true face moved along its depth, the turn's angle for a turned face,
+    and above 0 for a face bent by a bump that moves no vertex by more than 1.5 mm."""
+    true = face_model.shape_mean.astype(np.float64)
+    mask, triangles = np.ones(len(true), bool), face_model.triangles
+    shifted = shape_errors(true + np.array([0.0, 0.0, 5.0]), true, mask, CAMERA, triangles)
+    assert shifted["world_mm"] == pytest.approx(5.0) and shifted["normal_deg"] < 0.01
+    turned = shape_errors(true @ rotation_matrix(0.0, 4.0, 0.0).T, true, mask, CAMERA, triangles)
+    assert 2.0 < turned["normal_deg"] <= 4.0 + 1e-3  # a normal turns by 4 degrees at most (along the axis: 0)
+    centre = true[np.argmax(true[:, 2])]  # the tip of the nose
+    bump = 1.5 * np.exp(-np.sum((true - centre) ** 2, axis=1) / (2 * 6.0 ** 2))
+    area = bump > 0.1  # over the bump: its slopes reach 0.15 (8.5 degrees)
+    bent = shape_errors(true + bump[:, None] * face_model.vertex_normals(true), true, area, CAMERA, triangles)
+    assert bent["world_mm"] < 1.0 and bent["normal_deg"] > 2.0
+    assert "normal_deg" not in shape_errors(true, true, mask, CAMERA)  # no triangles, no normals

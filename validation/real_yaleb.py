@@ -373,6 +373,9 @@ def main(argv=None) -> int:
     parser.add_argument("--refine-shape-judged", type=int, default=ShapeRefineSchedule.judged,
                         help="photographs held out of the shape refinement to judge it by (measure "
                              "--refine-shape-judged); above 0 the results' name ends in _judged")
+    parser.add_argument("--refine-shape-early-stop", action="store_true",
+                        help="half of the shape refinement's held-out pixels choose its iteration (measure "
+                             "--refine-shape-early-stop); the results' name ends in _early_stop")
     args = parser.parse_args(argv)
     if not args.data.is_dir():
         print(f"no Yale data at {args.data}: nothing to validate", file=sys.stderr)
@@ -391,19 +394,22 @@ def main(argv=None) -> int:
         results.append(subject_run(args.data / subject, args.out / subject, args.train, models, args.spp,
                                    args.shadow_angle, args.resolution, refine=args.refine,
                                    refine_shape=args.refine_shape
-                                   and ShapeRefineSchedule(judged=args.refine_shape_judged)))
+                                   and ShapeRefineSchedule(judged=args.refine_shape_judged,
+                                                           early_stop=args.refine_shape_early_stop)))
         print({k: round(v["all"], 4) for k, v in results[-1]["relative_rmse"].items()}, flush=True)
     overall = summary(results, models)
     document = {"data": "Extended Yale Face Database B (cropped), real photographs", "train_lights": args.train,
                 "models": list(models), "spp": args.spp, "texture_resolution": args.resolution,
                 "shadow_angle_deg": args.shadow_angle, "refine": args.refine, "refine_shape": args.refine_shape,
                 "refine_shape_judged": args.refine_shape_judged if args.refine_shape else None,
+                "refine_shape_early_stop": args.refine_shape_early_stop if args.refine_shape else None,
                 "command": "python validation/real_yaleb.py " + " ".join(argv if argv is not None else sys.argv[1:]),
                 "overall": overall,
                 "subjects": [{k: v for k, v in r.items() if k != "errors"} for r in results]}
     suffix = (("" if args.train == 8 else f"_train{args.train}") + ("_refine" if args.refine else "")
               + ("_refine_shape" if args.refine_shape else "")
-              + ("_judged" if args.refine_shape and args.refine_shape_judged else ""))
+              + ("_judged" if args.refine_shape and args.refine_shape_judged else "")
+              + ("_early_stop" if args.refine_shape and args.refine_shape_early_stop else ""))
     write_json(args.results / f"real_yaleb{suffix}.json", document)
     figure(results, args.results / f"real_yaleb{suffix}.png", args.data, args.out, overall["best_model"])
     print(f"best model {overall['best_model']}: {overall['relative_rmse'][overall['best_model']]['all']:.4f} "

@@ -9,9 +9,11 @@ lit by a quick per-region fit) and scores both by :func:`mifaces.shape_errors.ca
 the faces it returns (``refined``: the model fit where the refinement was not kept) and the faces
 displaced by its displacement whether kept or not (``displaced``).
 
-    python validation/refine_shape_default.py [--resolution 256] [--work DIR] [--judged 1]
+    python validation/refine_shape_default.py [--resolution 256] [--seed 0] [--work DIR] [--judged 1]
+                                              [--early-stop] [--brdf phong] [--out FILE]
 
-Writes ``validation/results/refine_shape_default{,_judged}.json``.
+Writes ``validation/results/refine_shape_default{,_judged}{,_early_stop}.json`` (or ``--out``): per set of faces
+the errors of :func:`~mifaces.shape_errors.capture_shape_errors`, the normals' among them.
 """
 
 from __future__ import annotations
@@ -28,7 +30,8 @@ from mifaces.capture import load_capture
 from mifaces.atomic import write_json
 from mifaces.shape.io import load_geometry
 from mifaces.refine.shape import ShapeRefineSchedule, displaced
-from mifaces.refine.shape_lit import refine_fits
+from mifaces.brdf import NAMES as BRDF_MODELS
+from mifaces.refine.shape_lit import FIT_SHAPE_BRDF, refine_fits
 from mifaces.shape import fit_shape, shapes_in_world
 from mifaces.shape_errors import capture_shape_errors
 from mifaces.studio import simulate
@@ -51,6 +54,12 @@ def main(argv=None) -> int:
     parser.add_argument("--judged", type=int, default=ShapeRefineSchedule.judged,
                         help="photographs held out of the refinement to judge it by; above 0 the result's name "
                              "ends in _judged")
+    parser.add_argument("--early-stop", action="store_true",
+                        help="ShapeRefineSchedule(early_stop=True); the result's name ends in _early_stop")
+    parser.add_argument("--brdf", default=FIT_SHAPE_BRDF, choices=sorted(BRDF_MODELS),
+                        help="the model of the quick fit that lights the refinement")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="the result file (default validation/results/refine_shape_default{,_judged}.json)")
     args = parser.parse_args(argv)
     mifaces.set_variant("llvm_ad_rgb")
     folder = args.work / f"capture_{args.resolution}_{args.seed}"
@@ -63,7 +72,8 @@ def main(argv=None) -> int:
     fitted = time.perf_counter() - t
     before = errors(fits, capture, face, truth)
     t = time.perf_counter()
-    refined, result = refine_fits(capture, fits, face, schedule=ShapeRefineSchedule(judged=args.judged),
+    refined, result = refine_fits(capture, fits, face, brdf=args.brdf,
+                                  schedule=ShapeRefineSchedule(judged=args.judged, early_stop=args.early_stop),
                                   progress=True)
     refining = time.perf_counter() - t
     after = errors(refined, capture, face, truth)
@@ -72,19 +82,22 @@ def main(argv=None) -> int:
         start = shapes_in_world(fits, capture)
     moved = capture_shape_errors(face, {name: displaced(v, result.displacement, face.triangles)
                                         for name, v in start.items()}, truth, capture.camera)
-    write_json(RESULTS / f"refine_shape_default{'_judged' if args.judged else ''}.json", {
+    name = f"refine_shape_default{'_judged' if args.judged else ''}{'_early_stop' if args.early_stop else ''}.json"
+    write_json(args.out or RESULTS / name, {
         "label": "SIMULATED", "command": "python validation/refine_shape_default.py " + " ".join(argv or sys.argv[1:]),
-        "resolution": args.resolution, "seed": args.seed, "accepted": result.accepted, "reason": result.reason,
+        "resolution": args.resolution, "seed": args.seed, "lit_by": args.brdf, "accepted": result.accepted, "reason": result.reason,
         "heldout_loss": {"before": result.record["loss_before"]["heldout"],
                          "after": result.record["loss_after"]["heldout"]},
         "judged_photographs": result.record["judged_photographs"],
+        "chosen_iteration": result.record["chosen_iteration"],
         "judged_loss": {"before": result.record["loss_before"].get("judged"),
                         "after": result.record["loss_after"].get("judged")},
         "seconds": {"fit_shape": fitted, "refine": refining},
         "shape_errors": {"model_fit": before, "refined": after, "displaced": moved}})
     print(f"{result.reason}; world-frame mean {before['summary']['mean_world_mm']:.2f} -> "
           f"{after['summary']['mean_world_mm']:.2f} mm, aligned {before['summary']['mean_aligned_mm']:.2f} -> "
-          f"{after['summary']['mean_aligned_mm']:.2f} mm ({refining:.0f} s)")
+          f"{after['summary']['mean_aligned_mm']:.2f} mm, normals {before['summary']['mean_normal_deg']:.2f} -> "
+          f"{after['summary']['mean_normal_deg']:.2f} deg ({refining:.0f} s)")
     return 0
 
 

@@ -841,9 +841,10 @@ def sec_refine_shape_default(d):
         if not summary_:
             continue
         rows.append([label, fixed(summary_.get("mean_world_mm"), 2), fixed(summary_.get("max_world_mm"), 2),
-                     fixed(summary_.get("mean_aligned_mm"), 2), fixed(summary_.get("max_abs_depth_mm"), 2)])
+                     fixed(summary_.get("mean_aligned_mm"), 2), fixed(summary_.get("max_abs_depth_mm"), 2),
+                     fixed(summary_.get("mean_normal_deg"), 2)])
     return lines + table(["faces", "world, mean", "world, max", "after rigid alignment, mean",
-                          "largest depth offset"], rows)
+                          "largest depth offset", "normals, mean (°)"], rows)
 
 
 def sec_shape_depth(d):

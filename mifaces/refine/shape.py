@@ -69,6 +69,7 @@ from ..model.geometry import welded_normals
 from .kernels import kernel_counts, kernel_history
 from .photograph import LAMP_RADIUS_KEY, image_loss, mask_weight, photograph_view
 from .schedule import HOLDOUT, HOLDOUT_BLOCK, holdout_pixels
+from .shape_choice import chosen_iteration, judged_photographs, verdict
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,14 @@ class ShapeRefineSchedule:
         the fit, to judge the result on.
     holdout_block : int
         Side of those blocks (render pixels).
+    early_stop : bool
+        Half of the held-out blocks (drawn at random) choose the iteration:
+        their loss is read off every iteration's renders, and the displacement
+        of the iteration where it was lowest (:func:`~mifaces.refine.shape_choice.chosen_iteration`)
+        is the result; the other half alone judges it. Off (the default): the
+        last iteration's, judged on all the held-out blocks. On the tuning
+        captures (``docs/refine_shape.md``) it cut the harm to the normals of
+        faces near the model's span, and recovered less of a bump beyond it on one of two.
     judged : int
         Photographs held out of the fit entirely, to judge the result under
         lamps the refinement did not see (:func:`judged_photographs`); none
@@ -142,6 +151,7 @@ class ShapeRefineSchedule:
     evaluation_spp: int = 32
     holdout: float = HOLDOUT
     holdout_block: int = HOLDOUT_BLOCK
+    early_stop: bool = False
     judged: int = 0
     carry_over: float = 0.5
 
@@ -225,6 +235,7 @@ class _View:
     keys: dict
     fit_weight: mi.TensorXf
     heldout_weight: mi.TensorXf
+    stop_weight: mi.TensorXf | None
 
 
 def _appearance(estimate) -> dict:
@@ -285,10 +296,14 @@ class ShapeProblem:
             self.light_kinds.add(view.light_kind)
             keys = {key: mi.UInt32(np.ascontiguousarray(part.index, np.uint32)) for key, part in face.meshes.items()}
             held = holdout_pixels(view.mask, schedule.holdout, schedule.holdout_block, rng)
+            # half of the held-out blocks choose the iteration, the others judge the result
+            stop = holdout_pixels(held, 0.5, schedule.holdout_block, rng) if schedule.early_stop else None
             normals = welded_normals(vertices, face_model.triangles)
             self.views.append(_View(m.name, view, mi.Point3f(np.ascontiguousarray(vertices.T)),
                                     mi.Vector3f(np.ascontiguousarray(normals.T, np.float32)), keys,
-                                    mask_weight(view.mask & ~held), mask_weight(held)))
+                                    mask_weight(view.mask & ~held),
+                                    mask_weight(held if stop is None else held & ~stop),
+                                    None if stop is None else mask_weight(stop)))
         self.direction = self.views[0].normals  # the frame of d: the first photograph's normals
 
     @functools.cached_property
@@ -322,11 +337,18 @@ class ShapeProblem:
             params[f"{key}.vertex_normals"] = dr.ravel(dr.gather(mi.Vector3f, normals, index))
         params.update()
 
-    def loss(self, view: _View, h: mi.Float, weight: mi.TensorXf, seed: int, spp: int = 0) -> mi.Float:
-        """E_k of ``view`` displaced by ``h`` over ``weight`` (``spp`` 0: the schedule's samples)."""
+    def loss(self, view: _View, h: mi.Float, seed: int, spp: int = 0) -> tuple[mi.Float, mi.Float | None]:
+        """E_k of ``view`` displaced by ``h`` over its fitted pixels (``spp`` 0: the schedule's
+        samples), and, read off the same render without gradients, over the blocks that choose the
+        iteration (None without :attr:`ShapeRefineSchedule.early_stop`)."""
         self.set(view, h)
         image = mi.render(view.view.scene, view.view.params, spp=spp, seed=seed, seed_grad=seed + 1)
-        return image_loss(image * view.view.scale, view.view.target, weight, self.schedule.epsilon)
+        image = image * view.view.scale
+        stop = None
+        if view.stop_weight is not None:
+            stop = image_loss(dr.detach(image), view.view.target, view.stop_weight, self.schedule.epsilon)
+            dr.schedule(stop)
+        return image_loss(image, view.view.target, view.fit_weight, self.schedule.epsilon), stop
 
     def evaluate(self, h: mi.Float, seed: int) -> dict:
         """Mean E_k over the photographs on the fitted (``fit``), the held-out (``heldout``) and all
@@ -354,13 +376,6 @@ def displaced(vertices: np.ndarray, h: np.ndarray, triangles: np.ndarray) -> np.
     refinement's displacement field moves it (the normals every photograph's view is displaced along)."""
     vertices = np.asarray(vertices, np.float32)
     return (vertices + np.asarray(h, np.float32)[:, None] * welded_normals(vertices, triangles)).astype(np.float32)
-
-
-def judged_photographs(names: list[str], count: int) -> list[str]:
-    """The photographs :func:`refine_shape` holds out of its fit to judge the result on: the last
-    ``count`` of ``names`` (the capture's order); none where that would leave fewer than two to fit."""
-    count = int(count)
-    return list(names[-count:]) if count > 0 and len(names) >= count + 2 else []
 
 
 def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSchedule | None = None, *,
@@ -421,25 +436,31 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
     evaluation_seed = seed * 7919 + (1 << 20)
     before = problem.evaluate(dr.zeros(mi.Float, face_model.vertex_count), evaluation_seed)
     t_before = time.perf_counter()
-    history = []
+    history, latents = [], []  # latents: each iteration's u, where the blocks that choose pick one
     bar = progress_bar(range(schedule.iterations), desc="refining shape", unit="it", enabled=progress)
     with kernel_history():
         for it in bar:
             t = time.perf_counter()
-            total = 0.0
+            total, chooser = 0.0, 0.0
+            u = dr.detach(opt["u"])
             for i, view in enumerate(problem.views):
-                loss = problem.loss(view, problem.height(opt["u"]), view.fit_weight,
-                                    seed=seed * 7919 + 2 * (it * len(problem.views) + i))
+                loss, stop = problem.loss(view, problem.height(opt["u"]),
+                                          seed=seed * 7919 + 2 * (it * len(problem.views) + i))
                 dr.backward(loss)
                 total += float(loss[0])
+                chooser += float(stop[0]) if stop is not None else 0.0
+            if schedule.early_stop:
+                latents.append(u)
             opt.step()
             opt.set_learning_rate(schedule.rate(it + 1))
             dr.eval(opt["u"])
-            history.append([round(time.perf_counter() - t, 4), total / len(problem.views), *kernel_counts()])
+            history.append([round(time.perf_counter() - t, 4), total / len(problem.views),
+                            chooser / len(problem.views) if schedule.early_stop else None, *kernel_counts()])
             bar.set_postfix_str(f"loss {total / len(problem.views):.4g}")
     t_iterate = time.perf_counter()
+    chosen = chosen_iteration([r[2] for r in history]) if schedule.early_stop else schedule.iterations
     with dr.suspend_grad():
-        h = problem.height(mi.Float(dr.detach(opt["u"])))
+        h = problem.height(mi.Float(latents[chosen] if schedule.early_stop else dr.detach(opt["u"])))
         dr.eval(h)
     after = problem.evaluate(h, evaluation_seed)
     h_np = np.asarray(h, np.float32)
@@ -452,7 +473,9 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
         lit = refit({name: refined[name] for name in problem.shapes}) if refit else estimate
         judge = ShapeProblem(capture, refined, face_model, lit, schedule, lamp_radius, judged, seed)
         after["judged"] = judge.evaluate(unmoved, evaluation_seed + 7)["all"]
-    accepted, reason = _verdict(before, after, judged, schedule.carry_over)
+    accepted, reason = verdict(before, after, judged, schedule.carry_over)
+    if schedule.early_stop:
+        reason += f" (iteration {chosen} of {schedule.iterations}, chosen by the other half of the held-out blocks)"
     t_end = time.perf_counter()
     record = {
         "method": "direct_projective + LargeSteps", "schedule": asdict(schedule),
@@ -461,7 +484,9 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
         "judged_refit": bool(judged and refit),
         "loss_before": before, "loss_after": after,
         "displacement_mm": {"max_abs": float(np.abs(h_np).max()), "rms": float(np.sqrt(np.mean(h_np ** 2)))},
-        "history_keys": ["seconds", "loss", "launches", "compiled", "compile_seconds"], "history": history,
+        "chosen_iteration": chosen,
+        "history_keys": ["seconds", "loss", "loss_choosing", "launches", "compiled", "compile_seconds"],
+        "history": history,
         "seconds": {"build": t_build - t0, "loss_before": t_before - t_build, "iterations": t_iterate - t_before,
                     "per_iteration": (t_iterate - t_before) / schedule.iterations,
                     "per_iteration_after_first": float(np.mean([r[0] for r in history[1:]]))
@@ -472,24 +497,4 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
     return ShapeRefinement(shapes_out, h_np, bool(accepted), reason, record)
 
 
-def _verdict(before: dict, after: dict, judged: list[str], carry_over: float) -> tuple[bool, str]:
-    """Whether the refined shape is kept, and why in words: the loss fell on the fitted photographs'
-    held-out pixels and, where there are judged photographs, fell on them too by at least
-    ``carry_over`` times the held-out pixels' relative fall."""
-    gain = 1.0 - after["heldout"] / before["heldout"]
-    words = f"held-out pixels {before['heldout']:.5g} -> {after['heldout']:.5g} ({-100 * gain:+.1f} %)"
-    if gain <= 0:
-        return False, f"loss on {words}: did not fall, the model fit is kept"
-    if not judged:
-        return True, f"loss on {words}: fell, the refined shape is kept"
-    carried = 1.0 - after["judged"] / before["judged"]
-    label = f"held-out photograph{'s' * (len(judged) > 1)} {', '.join(judged)}"
-    words += f"; {label} {before['judged']:.5g} -> {after['judged']:.5g} ({-100 * carried:+.1f} %)"
-    if carried >= carry_over * gain:
-        return True, f"loss on {words}: fell on both, the refined shape is kept"
-    return False, (f"loss on {words}: the fall did not carry over to the {label} (at least {carry_over:g} "
-                   f"of the held-out pixels' needed), the model fit is kept")
-
-
-__all__ = ["ShapeRefineSchedule", "ShapeRefinement", "ShapeProblem", "displaced", "judged_photographs",
-           "refine_shape"]
+__all__ = ["ShapeRefineSchedule", "ShapeRefinement", "ShapeProblem", "displaced", "refine_shape"]

@@ -14,7 +14,8 @@ from ..reflectance import FitOptions
 from ..reflectance.estimate import fit_brdf
 from ..reflectance.samples import capture_samples
 from ..shape import shapes_in_world
-from .shape import ShapeRefinement, ShapeRefineSchedule, judged_photographs, refine_shape
+from .shape import ShapeRefinement, ShapeRefineSchedule, refine_shape
+from .shape_choice import judged_photographs
 
 
 #: The BRDF model that lights the faces when shapes are refined without a fitted reflectance
