@@ -218,7 +218,9 @@ def test_keeps_model_fit_when_held_out_loss_rises(bumped, face_model):
                           dataclasses.replace(schedule, early_stop=True), seed=1, progress=False)
     assert chosen.record["chosen_iteration"] == 0
     assert np.abs(chosen.displacement).max() < 1e-5
-    assert not chosen.accepted
+    assert not chosen.accepted and "chose the start" in chosen.reason
+    for name, v in true.items():
+        np.testing.assert_array_equal(chosen.shapes[name], v)
 
 
 def test_chosen_iteration_averages_out_one_lucky_iteration():

@@ -436,21 +436,19 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
     evaluation_seed = seed * 7919 + (1 << 20)
     before = problem.evaluate(dr.zeros(mi.Float, face_model.vertex_count), evaluation_seed)
     t_before = time.perf_counter()
-    history, latents = [], []  # latents: each iteration's u, where the blocks that choose pick one
+    history, latents = [], []  # latents: each iteration's u, of which the blocks that choose pick one
     bar = progress_bar(range(schedule.iterations), desc="refining shape", unit="it", enabled=progress)
     with kernel_history():
         for it in bar:
             t = time.perf_counter()
             total, chooser = 0.0, 0.0
-            u = dr.detach(opt["u"])
+            latents.append(dr.detach(opt["u"]))
             for i, view in enumerate(problem.views):
                 loss, stop = problem.loss(view, problem.height(opt["u"]),
                                           seed=seed * 7919 + 2 * (it * len(problem.views) + i))
                 dr.backward(loss)
                 total += float(loss[0])
                 chooser += float(stop[0]) if stop is not None else 0.0
-            if schedule.early_stop:
-                latents.append(u)
             opt.step()
             opt.set_learning_rate(schedule.rate(it + 1))
             dr.eval(opt["u"])
@@ -474,7 +472,9 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
         judge = ShapeProblem(capture, refined, face_model, lit, schedule, lamp_radius, judged, seed)
         after["judged"] = judge.evaluate(unmoved, evaluation_seed + 7)["all"]
     accepted, reason = verdict(before, after, judged, schedule.carry_over)
-    if schedule.early_stop:
+    if schedule.early_stop and chosen == 0:  # no displacement: its losses differ from the start's by rounding
+        accepted, reason = False, "the held-out blocks that choose the iteration chose the start: the model fit is kept"
+    elif schedule.early_stop:
         reason += f" (iteration {chosen} of {schedule.iterations}, chosen by the other half of the held-out blocks)"
     t_end = time.perf_counter()
     record = {
