@@ -67,3 +67,33 @@ def test_normals_error_sees_a_turn_and_a_bend_but_not_a_shift(face_model):
     bent = shape_errors(true + bump[:, None] * face_model.vertex_normals(true), true, area, CAMERA, triangles)
     assert bent["world_mm"] < 1.0 and bent["normal_deg"] > 2.0
     assert "normal_deg" not in shape_errors(true, true, mask, CAMERA)  # no triangles, no normals
+
+
+def test_floor_depth_separates_the_depth_from_the_shape():
+    """validation/floor_depth.py's faces: a fitted face turned 2 degrees and moved 4 mm away from the
+    camera and 1 mm aside. Removing its depth offset leaves no depth and its own shape error; the
+    rigid alignment leaves nothing; the true face moved by the fitted depth has that depth and no
+    shape error; the 1 mm face is 1 mm deeper."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "validation"))
+    from floor_depth import VARIANTS, variants
+
+    true = _face()
+    mask = np.ones(len(true), bool)
+    forward = CAMERA.rotation[2]
+    fitted = (true - true.mean(axis=0)) @ rotation_matrix(0.0, 2.0, 0.0).T + true.mean(axis=0)
+    fitted = fitted + 4.0 * forward + np.array([1.0, 0.0, 0.0])
+    faces = variants(fitted, true, mask, CAMERA)
+    assert tuple(faces) == VARIANTS
+    errors = {key: shape_errors(v, true, mask, CAMERA) for key, v in faces.items()}
+    assert errors["fitted"]["depth_mm"] == pytest.approx(4.0, abs=1e-6)
+    assert abs(errors["depth_removed"]["depth_mm"]) < 1e-9
+    assert errors["depth_removed"]["aligned_mm"] == pytest.approx(errors["fitted"]["aligned_mm"], abs=1e-6)
+    assert errors["depth_removed"]["world_mm"] < errors["fitted"]["world_mm"] - 1.0
+    assert errors["aligned"]["world_mm"] < 1e-6
+    assert errors["truth_at_fitted_depth"]["aligned_mm"] < 1e-6
+    assert errors["truth_at_fitted_depth"]["depth_mm"] == pytest.approx(4.0, abs=1e-6)
+    assert errors["truth_1mm_deeper"]["depth_mm"] == pytest.approx(1.0, abs=1e-9)
+    assert errors["truth_1mm_deeper"]["world_mm"] == pytest.approx(1.0, abs=1e-9)

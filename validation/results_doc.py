@@ -847,6 +847,28 @@ def sec_refine_shape_default(d):
                           "largest depth offset", "normals, mean (°)"], rows)
 
 
+def sec_floor_depth(d):
+    lines = [f"Default capture (512², six photographs), seeds {text(', '.join(map(str, get(d, 'seeds') or [])))}; "
+             "the shape floor (the true reflectance on a face, in a novel pose under the held-out lights; the "
+             "report validates the first photograph) of each photograph's fitted face, of that face moved along "
+             "the camera's axis by its depth offset, of it rigidly aligned onto the truth, and of the true face "
+             f"moved by the fitted depth offset. Aim: {pct(get(d, 'floor_target'), 0)}.", ""]
+    rows, sums = [], []
+    for run in rows_of(get(d, "runs")):
+        for name, p in items(get(run, "photographs")):
+            rows.append([text(run.get("seed")), text(name), fixed(get(p, "fitted", "depth_mm"), 2),
+                         *(pct(get(p, key, "shape_floor"), 1) for key in
+                           ("fitted", "depth_removed", "aligned", "truth_at_fitted_depth", "truth_1mm_deeper")),
+                         pct(get(p, "noise_floor"), 1)])
+        for key, s in items(get(run, "summary")):
+            sums.append([text(run.get("seed")), text(key), pct(s.get("mean_shape_floor"), 1),
+                         pct(s.get("max_shape_floor"), 1)])
+    return (lines + table(["seed", "photograph", "depth offset (mm)", "as fitted", "depth offset removed",
+                           "rigidly aligned", "true face at the fitted depth", "true face 1 mm deeper",
+                           "noise floor"], rows)
+            + ["", "Over the photographs:", ""] + table(["seed", "face", "mean", "largest"], sums))
+
+
 def sec_shape_depth(d):
     lines = [f"Default capture (512², six photographs), seeds {text(', '.join(map(str, get(d, 'seeds') or [])))}; "
              "the fitted faces against the truth over the front of the face (mm). `size`: the fitted face's size "
@@ -1052,6 +1074,7 @@ LAYOUTS = {
     "refine_seeds": ("The refinement's schedule on training and test captures", "SIMULATED", sec_refine_seeds),
     "refine_shape_default": ("Shape refinement on the default capture", "SIMULATED", sec_refine_shape_default),
     "shape_depth": ("Where the fitted faces lie in depth", "SIMULATED", sec_shape_depth),
+    "floor_depth": ("How much of the shape floor is each photograph's depth", "SIMULATED", sec_floor_depth),
     "silhouette_depth": ("Whether the head's outline could pin each photograph's depth", "SIMULATED",
                          sec_silhouette_depth),
     "joint_outline": ("One identity over all photographs, with the head's outline", "SIMULATED", sec_joint_outline),
