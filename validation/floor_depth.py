@@ -51,7 +51,7 @@ def variants(fitted: np.ndarray, true: np.ndarray, mask: np.ndarray, camera) -> 
     """The faces :data:`VARIANTS` names, world mm, from one photograph's fitted and true faces."""
     f, t = np.asarray(fitted, np.float64), np.asarray(true, np.float64)
     axis = np.asarray(camera.rotation, np.float64)[2]  # the camera's forward axis in the world
-    depth = float(np.mean((f - t)[mask] @ axis))
+    depth = shape_errors(f, t, mask, camera)["depth_mm"]
     rotation, translation = rigid_alignment(f[mask], t[mask])
     return {"fitted": f, "depth_removed": f - depth * axis, "aligned": f @ rotation.T + translation,
             "truth_at_fitted_depth": t + depth * axis, "truth_1mm_deeper": t + WORLD_TARGET_MM * axis}

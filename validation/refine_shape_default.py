@@ -85,7 +85,8 @@ def main(argv=None) -> int:
     name = f"refine_shape_default{'_judged' if args.judged else ''}{'_early_stop' if args.early_stop else ''}.json"
     write_json(args.out or RESULTS / name, {
         "label": "SIMULATED", "command": "python validation/refine_shape_default.py " + " ".join(argv or sys.argv[1:]),
-        "resolution": args.resolution, "seed": args.seed, "lit_by": args.brdf, "accepted": result.accepted, "reason": result.reason,
+        "resolution": args.resolution, "seed": args.seed, "lit_by": args.brdf, "accepted": result.accepted,
+        "reason": result.reason,
         "heldout_loss": {"before": result.record["loss_before"]["heldout"],
                          "after": result.record["loss_after"]["heldout"]},
         "judged_photographs": result.record["judged_photographs"],
