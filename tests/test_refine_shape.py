@@ -16,7 +16,8 @@ import pytest
 
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.model.geometry import vertex_normals, welded_normals
-from mifaces.refine.shape import ShapeRefineSchedule, _mesh_normals, displaced, refine_shape
+from mifaces.refine import shape_schedule
+from mifaces.refine.shape import ShapeProblem, ShapeRefineSchedule, _mesh_normals, displaced, refine_shape
 from mifaces.refine.shape_choice import chosen_iteration, judged_photographs, verdict
 from mifaces.studio.detail import cheek_bump
 from mifaces.studio.simulate import simulate
@@ -161,6 +162,32 @@ def test_refine_lit_keeps_the_judged_photograph_out_of_its_fits(monkeypatch):
     seen.clear()
     module.refine_lit(capture, shapes, None, "given", progress=False)  # the default: none judged
     assert seen[:2] == [("fit", names, "given"), ("refine", names, "estimate")]
+
+
+def test_render_downsample_brings_the_longer_side_to_render_side():
+    camera = types.SimpleNamespace(width=512, height=512)
+    assert shape_schedule.RENDER_SIDE == 256
+    assert ShapeRefineSchedule().factor(camera) == 2
+    assert ShapeRefineSchedule().factor(types.SimpleNamespace(width=192, height=168)) == 1  # Yale: as it is
+    assert ShapeRefineSchedule().factor(types.SimpleNamespace(width=4000, height=3000)) == 16  # 250 x 187
+    assert ShapeRefineSchedule().factor(types.SimpleNamespace(width=257, height=100)) == 2
+    assert ShapeRefineSchedule(downsample=1).factor(camera) == 1  # asked for: full resolution
+    with pytest.raises(ValueError, match="ShapeRefineSchedule.downsample"):
+        ShapeRefineSchedule(downsample=0)
+
+
+def test_renders_are_downsampled_by_default(bumped, face_model, monkeypatch):
+    capture, truth, _, flat = bumped
+    full = ShapeProblem(capture, flat, face_model, TrueEstimate(truth), ShapeRefineSchedule())
+    monkeypatch.setattr(shape_schedule, "RENDER_SIDE", 64)  # the 128² capture then renders at 64²
+    half = ShapeProblem(capture, flat, face_model, TrueEstimate(truth), ShapeRefineSchedule())
+    for a, b in zip(full.views, half.views):
+        film = b.view.scene.sensors()[0].film()
+        assert tuple(film.size()) == (64, 64)
+        assert tuple(film.crop_size()) == b.view.mask.shape[::-1]
+        assert b.view.mask.shape[0] <= (a.view.mask.shape[0] + 1) // 2
+        assert b.view.mask.shape[1] <= (a.view.mask.shape[1] + 1) // 2
+        assert tuple(a.view.scene.sensors()[0].film().size()) == (128, 128)
 
 
 def test_bad_shapes_are_named(bumped, face_model):

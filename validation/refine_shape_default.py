@@ -10,7 +10,15 @@ the faces it returns (``refined``: the model fit where the refinement was not ke
 displaced by its displacement whether kept or not (``displaced``).
 
     python validation/refine_shape_default.py [--resolution 256] [--seed 0] [--work DIR] [--judged 1]
-                                              [--early-stop] [--brdf phong] [--out FILE]
+                                              [--early-stop] [--brdf phong] [--downsample K] [--out FILE]
+
+The render resolution's default (:data:`mifaces.refine.shape_schedule.RENDER_SIDE`) was chosen on the
+tuning seed 11 at 512², rendered at full resolution and at the default::
+
+    python validation/refine_shape_default.py --resolution 512 --seed 11 --downsample 1 \
+        --out validation/results/refine_shape_default_512_tuning_full.json
+    python validation/refine_shape_default.py --resolution 512 --seed 11 \
+        --out validation/results/refine_shape_default_512_tuning.json
 
 Writes ``validation/results/refine_shape_default{,_judged}{,_early_stop}.json`` (or ``--out``): per set of faces
 the errors of :func:`~mifaces.shape_errors.capture_shape_errors`, the normals' among them.
@@ -58,6 +66,9 @@ def main(argv=None) -> int:
                         help="ShapeRefineSchedule(early_stop=True); the result's name ends in _early_stop")
     parser.add_argument("--brdf", default=FIT_SHAPE_BRDF, choices=sorted(BRDF_MODELS),
                         help="the model of the quick fit that lights the refinement")
+    parser.add_argument("--downsample", type=int, default=ShapeRefineSchedule.downsample,
+                        help="render at 1/K of the photographs' resolution (default: the schedule's, "
+                             "the longer side at most RENDER_SIDE pixels)")
     parser.add_argument("--out", type=Path, default=None,
                         help="the result file (default validation/results/refine_shape_default{,_judged}.json)")
     args = parser.parse_args(argv)
@@ -73,7 +84,8 @@ def main(argv=None) -> int:
     before = errors(fits, capture, face, truth)
     t = time.perf_counter()
     refined, result = refine_fits(capture, fits, face, brdf=args.brdf,
-                                  schedule=ShapeRefineSchedule(judged=args.judged, early_stop=args.early_stop),
+                                  schedule=ShapeRefineSchedule(judged=args.judged, early_stop=args.early_stop,
+                                                               downsample=args.downsample),
                                   progress=True)
     refining = time.perf_counter() - t
     after = errors(refined, capture, face, truth)
@@ -86,6 +98,7 @@ def main(argv=None) -> int:
     write_json(args.out or RESULTS / name, {
         "label": "SIMULATED", "command": "python validation/refine_shape_default.py " + " ".join(argv or sys.argv[1:]),
         "resolution": args.resolution, "seed": args.seed, "lit_by": args.brdf, "accepted": result.accepted,
+        "downsample": result.record["downsample"],
         "reason": result.reason,
         "heldout_loss": {"before": result.record["loss_before"]["heldout"],
                          "after": result.record["loss_after"]["heldout"]},

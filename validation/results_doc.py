@@ -830,7 +830,9 @@ def sec_albedo_rounds_exact(d):
 
 
 def sec_refine_shape_default(d):
-    lines = [f"Capture {text(get(d, 'resolution'))}², seed {text(get(d, 'seed'))}; refinement "
+    k = get(d, "downsample")
+    lines = [f"Capture {text(get(d, 'resolution'))}², seed {text(get(d, 'seed'))}"
+             + ("" if k is None else f", rendered at 1/{k} of its resolution") + "; refinement "
              f"{'kept' if get(d, 'accepted') else 'not kept'}: {text(get(d, 'reason'))}; "
              f"{fixed(get(d, 'seconds', 'refine'), 0)} s to refine. World-frame errors of the faces against the "
              "truth (mm, front of the face):", ""]

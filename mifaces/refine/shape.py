@@ -68,120 +68,9 @@ from ..render import FaceScene
 from ..model.geometry import welded_normals
 from .kernels import kernel_counts, kernel_history
 from .photograph import LAMP_RADIUS_KEY, image_loss, mask_weight, photograph_view
-from .schedule import HOLDOUT, HOLDOUT_BLOCK, holdout_pixels
+from .schedule import holdout_pixels
 from .shape_choice import chosen_iteration, judged_photographs, verdict
-
-
-@dataclass(frozen=True)
-class ShapeRefineSchedule:
-    """How :func:`refine_shape` runs.
-
-    Attributes
-    ----------
-    iterations : int
-        Adam steps; each renders every photograph forward and backward.
-    learning_rate : float
-        The step of UniformAdam (Nicolet et al. 2021, sec. 5: one step size
-        for all vertices, the largest second moment's) in LargeSteps' latent
-        variable u = (I + λL) d, mm: the largest change of u per step (a
-        bump a few edges wide has u several times its height).
-    smoothing : float
-        λ of LargeSteps' ``I + λL``: larger, smoother steps (the paper's
-        advice: grow it with the mesh's resolution).
-    spp : int
-        Samples per pixel of the continuous derivatives (``sppc``) and of the primal.
-    spp_silhouette : int
-        Samples per pixel of the primary-visibility derivatives (``sppp``: silhouettes).
-    spp_shadow : int
-        Samples per pixel of the indirect-visibility derivatives (``sppi``:
-        cast shadows of an area lamp; 0 leaves them out, as a point light's
-        hard shadows have no projective samples).
-    downsample : int
-        Render at 1/``downsample`` of the camera's resolution (the image scale).
-    decay : float
-        The learning rate falls to ``decay`` times its value over the
-        iterations (half a cosine).
-    epsilon : float
-        ε of the Charbonnier penalty, relative to the photograph's mean.
-    evaluation_spp : int
-        Samples per pixel of the held-out loss before and after.
-    holdout : float
-        Fraction of the blocks of each photograph's face pixels left out of
-        the fit, to judge the result on.
-    holdout_block : int
-        Side of those blocks (render pixels).
-    early_stop : bool
-        Half of the held-out blocks (drawn at random) choose the iteration:
-        their loss is read off every iteration's renders, and the displacement
-        of the iteration where it was lowest (:func:`~mifaces.refine.shape_choice.chosen_iteration`)
-        is the result; the other half alone judges it. Off (the default): the
-        last iteration's, judged on all the held-out blocks. On the tuning
-        captures (``docs/refine_shape.md``) it cut the harm to the normals of
-        faces near the model's span, and recovered less of a bump beyond it on one of two.
-    judged : int
-        Photographs held out of the fit entirely, to judge the result under
-        lamps the refinement did not see (:func:`judged_photographs`); none
-        where fewer than ``judged + 2`` photographs have shapes. 0 (the
-        default): the held-out pixels judge alone; ``docs/refine_shape.md``
-        measures both (the held-out photograph rejected the refinements that
-        relit Yale's held-out lights better, and kept one that relights the
-        default capture worse).
-    carry_over : float
-        The judged photographs' loss must fall by at least this fraction of
-        the relative fall on the fitted photographs' held-out pixels: a
-        refinement whose gain does not carry over to a photograph it did not
-        see has fitted the photographs, not the face. Half the gain: a round
-        value, not tuned. Of the verdicts in ``docs/refine_shape.md`` two
-        depend on it: the 256² default capture's (kept below 0.13) and Yale
-        subject B03's (kept below 0.39).
-
-    The defaults were chosen on simulated captures with seeds other than the
-    default (0), see ``docs/refine_shape.md``.
-    """
-
-    iterations: int = 32
-    learning_rate: float = 4.0
-    smoothing: float = 20.0
-    spp: int = 8
-    spp_silhouette: int = 4
-    spp_shadow: int = 0
-    downsample: int = 1
-    decay: float = 0.5
-    epsilon: float = 0.02
-    evaluation_spp: int = 32
-    holdout: float = HOLDOUT
-    holdout_block: int = HOLDOUT_BLOCK
-    early_stop: bool = False
-    judged: int = 0
-    carry_over: float = 0.5
-
-    def __post_init__(self):
-        for name in ("iterations", "spp", "downsample", "evaluation_spp", "holdout_block"):
-            if isinstance(getattr(self, name), bool) or int(getattr(self, name)) < 1:
-                raise ValueError(f"ShapeRefineSchedule.{name} must be an integer >= 1, got {getattr(self, name)!r}")
-        for name in ("spp_silhouette", "spp_shadow", "judged"):
-            if isinstance(getattr(self, name), bool) or int(getattr(self, name)) < 0:
-                raise ValueError(f"ShapeRefineSchedule.{name} must be >= 0, got {getattr(self, name)!r}")
-        for name in ("learning_rate", "smoothing", "epsilon"):
-            if not float(getattr(self, name)) > 0:
-                raise ValueError(f"ShapeRefineSchedule.{name} must be > 0, got {getattr(self, name)!r}")
-        if not 0.0 < self.holdout < 1.0:
-            raise ValueError(f"ShapeRefineSchedule.holdout must be in (0, 1), got {self.holdout!r}")
-        if not 0.0 <= self.carry_over <= 1.0:
-            raise ValueError(f"ShapeRefineSchedule.carry_over must be in [0, 1], got {self.carry_over!r}")
-        if not 0.0 < self.decay <= 1.0:
-            raise ValueError(f"ShapeRefineSchedule.decay must be in (0, 1], got {self.decay!r}")
-
-    def rate(self, iteration: int) -> float:
-        """Adam's learning rate at ``iteration``: from :attr:`learning_rate`
-        down to ``decay`` times it by half a cosine."""
-        t = iteration / max(self.iterations - 1, 1)
-        return self.learning_rate * (self.decay + (1 - self.decay) * 0.5 * (1 + np.cos(np.pi * t)))
-
-    def integrator(self) -> dict:
-        """The Mitsuba integrator of the renders."""
-        return {"type": "direct_projective", "sppc": int(self.spp), "sppp": int(self.spp_silhouette),
-                "sppi": int(self.spp_shadow), "hide_emitters": True}
+from .shape_schedule import RENDER_SIDE, ShapeRefineSchedule
 
 
 @dataclass
@@ -290,7 +179,7 @@ class ShapeProblem:
             vertices = self.shapes[m.name]
             face = FaceScene(face_model, vertices)
             view = photograph_view(capture, m, face, appearance["brdf"], appearance["albedo"],
-                                   face_model.region_map, scale, lamp_radius, schedule.downsample, schedule.spp,
+                                   face_model.region_map, scale, lamp_radius, schedule.factor(capture.camera), schedule.spp,
                                    schedule.integrator(), normals=appearance["normals"],
                                    specular=appearance["specular"], sample_border=True)
             self.light_kinds.add(view.light_kind)
@@ -479,6 +368,7 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
     t_end = time.perf_counter()
     record = {
         "method": "direct_projective + LargeSteps", "schedule": asdict(schedule),
+        "downsample": schedule.factor(capture.camera),
         "lamp_radius_mm": float(lamp_radius) if lamp_radius else None, "lights": sorted(problem.light_kinds),
         "photographs": [v.name for v in problem.views], "judged_photographs": judged,
         "judged_refit": bool(judged and refit),
@@ -497,4 +387,4 @@ def refine_shape(capture, shapes, face_model, estimate, schedule: ShapeRefineSch
     return ShapeRefinement(shapes_out, h_np, bool(accepted), reason, record)
 
 
-__all__ = ["ShapeRefineSchedule", "ShapeRefinement", "ShapeProblem", "displaced", "refine_shape"]
+__all__ = ["RENDER_SIDE", "ShapeRefineSchedule", "ShapeRefinement", "ShapeProblem", "displaced", "refine_shape"]
