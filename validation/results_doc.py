@@ -849,6 +849,24 @@ def sec_refine_shape_default(d):
                           "largest depth offset", "normals, mean (°)"], rows)
 
 
+def sec_light_balance_measure(d):
+    seeds = ", ".join(text(r.get("seed")) for r in rows_of(d.get("seeds")))
+    lines = [f"Seeds {seeds or DASH} "
+             f"({text(d.get('role'))}); `mifaces measure` on the default capture with the lights as given and balanced "
+             "(`--balance-lights`). Means over the seeds; in brackets, on how many seeds the balance lowered the "
+             "figure.", ""]
+    given, balanced = get(d, "summary", "given") or {}, get(d, "summary", "balanced") or {}
+    lower = get(d, "summary", "balanced_lower_on_seeds") or {}
+    rows = []
+    for model, g in items(given):
+        b, n = balanced.get(model) or {}, lower.get(model) or {}
+        rows.append([text(model)] + [f"{pct(g.get(k), 2)} → {pct(b.get(k), 2)} ({text(n.get(k))})"
+                                     for k in ("skin_brdf_rmse", "heldout_rmse", "environment_rmse",
+                                               "heldout_rmse_true_shape")])
+    return lines + table(["model", "skin BRDF error", "held-out lights", "environments",
+                          "held-out lights, true shape"], rows)
+
+
 def sec_floor_depth(d):
     lines = [f"Default capture (512², six photographs), seeds {text(', '.join(map(str, get(d, 'seeds') or [])))}; "
              "the shape floor (the true reflectance on a face, in a novel pose under the held-out lights; the "
@@ -1072,6 +1090,7 @@ LAYOUTS = {
     "refine": ("Refinement by differentiable rendering", "SIMULATED", sec_refine),
     "light_calibration_bias": ("The texture-space fit with calibrated and true lights", "SIMULATED",
                                sec_light_calibration_bias),
+    "light_balance_measure": ("The main job with the given lights balanced", "SIMULATED", sec_light_balance_measure),
     "refine_gradient": ("The refinement loss's gradient at the truth", "SIMULATED", sec_refine_gradient),
     "refine_seeds": ("The refinement's schedule on training and test captures", "SIMULATED", sec_refine_seeds),
     "refine_shape_default": ("Shape refinement on the default capture", "SIMULATED", sec_refine_shape_default),
