@@ -179,8 +179,8 @@ class ShapeProblem:
             vertices = self.shapes[m.name]
             face = FaceScene(face_model, vertices)
             view = photograph_view(capture, m, face, appearance["brdf"], appearance["albedo"],
-                                   face_model.region_map, scale, lamp_radius, schedule.factor(capture.camera), schedule.spp,
-                                   schedule.integrator(), normals=appearance["normals"],
+                                   face_model.region_map, scale, lamp_radius, schedule.factor(capture.camera),
+                                   schedule.spp, schedule.integrator(), normals=appearance["normals"],
                                    specular=appearance["specular"], sample_border=True)
             self.light_kinds.add(view.light_kind)
             keys = {key: mi.UInt32(np.ascontiguousarray(part.index, np.uint32)) for key, part in face.meshes.items()}

@@ -17,7 +17,7 @@ RENDER_SIDE = 256
 
 @dataclass(frozen=True)
 class ShapeRefineSchedule:
-    """How :func:`refine_shape` runs.
+    """How :func:`~mifaces.refine.shape.refine_shape` runs.
 
     Attributes
     ----------
@@ -65,7 +65,7 @@ class ShapeRefineSchedule:
         faces near the model's span, and recovered less of a bump beyond it on one of two.
     judged : int
         Photographs held out of the fit entirely, to judge the result under
-        lamps the refinement did not see (:func:`judged_photographs`); none
+        lamps the refinement did not see (:func:`~mifaces.refine.shape_choice.judged_photographs`); none
         where fewer than ``judged + 2`` photographs have shapes. 0 (the
         default): the held-out pixels judge alone; ``docs/refine_shape.md``
         measures both (the held-out photograph rejected the refinements that
