@@ -21,11 +21,11 @@ Writes ``validation/results/light_balance_measure_{tuning,test}.json`` (or ``--o
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import sys
 import time
 import warnings
-from dataclasses import replace
 from pathlib import Path
 
 import mifaces  # first: libLLVM  # isort: skip
@@ -84,7 +84,7 @@ def main(argv=None) -> int:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # the reports keep the fits' warnings
                 report = measure(args.work / f"measure_{seed}_{setting}", capture=folder, progress=False,
-                                 options=replace(FitOptions(), balance_lights=balance))
+                                 options=FitOptions(balance_lights=balance))
             runs[setting] = run_entry(report, time.perf_counter() - t)
             skin = {m: round(100 * e["skin_brdf_rmse"], 2) for m, e in runs[setting]["models"].items()}
             print(f"seed {seed}, lights {setting}: skin BRDF error (%) {skin}", flush=True)
@@ -94,7 +94,7 @@ def main(argv=None) -> int:
         "command": "python validation/light_balance_measure.py " + " ".join(argv or sys.argv[1:]),
         "what": "mifaces measure on the default capture (512², fitted shapes) with the lights as given and "
                 "balanced (FitOptions.balance_lights); figures from each report's validation",
-        "machine": {"cpus": len(__import__("os").sched_getaffinity(0)), "platform": platform.platform()},
+        "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
         "settings": SETTINGS, "seeds": seeds, "summary": summary(seeds)})
     return 0
 

@@ -11,7 +11,8 @@ from .schedule import HOLDOUT, HOLDOUT_BLOCK
 
 #: The longest side (pixels) the refinement renders at by default (:attr:`ShapeRefineSchedule.downsample`):
 #: the resolutions its schedule was chosen at (128² and 256²). On a tuning capture at 512², full resolution
-#: took 2.2 times as long for the same shape errors (docs/refine_shape.md, "Render resolution").
+#: took 2.2 times as long for the same distances and normals 0.1° closer (docs/refine_shape.md, "Render
+#: resolution").
 RENDER_SIDE = 256
 
 
