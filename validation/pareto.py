@@ -19,6 +19,12 @@ validation's own renders (reported apart). The Pareto front of each error
 against time is drawn, and the README's defaults (:data:`DEFAULT`) are
 marked, with whether they lie on the front.
 
+Every grid point is run on each of ``--seeds`` (each seed simulates another
+face, poses, lamps and noise): the errors are given as the mean over the
+seeds with their range, and the fronts are drawn through the means, so a
+difference between two settings counts only beside the spread one setting
+has from seed to seed.
+
     python validation/pareto.py                       # the full grid (hours on 2 cores)
     python validation/pareto.py --measurements 2 6 --resolutions 256 512 --spp 16 64 --geometry ground-truth
 
@@ -55,21 +61,24 @@ RESOLUTIONS = (256, 512, 1024)
 SPP = (16, 64, 256)
 #: The README's defaults: ``mifaces measure`` simulates this capture (mifaces.studio.simulate's defaults).
 DEFAULT = {"measurements": 6, "resolution": 512, "spp": 64}
+#: The seeds each grid point is run on.
+SEEDS = (3, 4, 5)
 #: The errors read from each model's validation, and their labels.
 ERRORS = {"brdf_skin": "BRDF RMSE (skin, relative)", "albedo_rmse": "albedo RMSE",
           "environment_rmse": "environment-lit image RMSE (relative)"}
 
 
-def point(work: Path, measurements: int, resolution: int, spp: int, args) -> dict:
+def point(work: Path, measurements: int, resolution: int, spp: int, seed: int, args) -> dict:
     """Simulate one capture, measure it, and return its errors and times."""
-    capture = work / f"capture_{measurements}_{resolution}_{spp}"
+    name = f"{measurements}_{resolution}_{spp}_seed{seed}"
+    capture = work / f"capture_{name}"
     t = time.perf_counter()
-    simulate(capture, measurements=measurements, resolution=(resolution, resolution), spp=spp, seed=args.seed,
+    simulate(capture, measurements=measurements, resolution=(resolution, resolution), spp=spp, seed=seed,
              progress=False, force=True)
     simulate_s = time.perf_counter() - t
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        report = measure(work / f"measure_{measurements}_{resolution}_{spp}", capture, models=args.models,
+        report = measure(work / f"measure_{name}", capture, models=args.models,
                          geometry=args.geometry, progress=False, options=FitOptions(resolution=args.texture))
     seconds = report["seconds"]
     validation_s = sum(v for k, v in seconds.items() if k.startswith("validation"))
@@ -79,7 +88,7 @@ def point(work: Path, measurements: int, resolution: int, spp: int, args) -> dic
         models[model] = {"brdf_skin": v["brdf_rmse"].get("skin"), "brdf_rmse": v["brdf_rmse"],
                          "albedo_rmse": v["albedo_rmse"], "heldout_rmse": v["heldout_rmse"],
                          "environment_rmse": v["environment_rmse"], "training_rmse": entry["training_rmse"]}
-    return {"measurements": measurements, "resolution": resolution, "spp": spp,
+    return {"measurements": measurements, "resolution": resolution, "spp": spp, "seed": seed,
             "wall_s": simulate_s + seconds["total"] - validation_s, "simulate_s": simulate_s,
             "measure_s": seconds["total"] - validation_s, "validation_s": validation_s,
             "shape_floor": report["validation"]["shape_floor"],
@@ -97,14 +106,37 @@ def pareto_front(times: np.ndarray, errors: np.ndarray) -> np.ndarray:
     return np.array(front, int)
 
 
-def fronts(points: list[dict], model: str) -> dict:
-    """Per error: the front's points (as grid keys) and whether the default lies on it."""
-    times = np.array([p["wall_s"] for p in points])
+def grid_key(p: dict) -> tuple[int, int, int]:
+    """A point's setting: measurements, resolution, spp."""
+    return p["measurements"], p["resolution"], p["spp"]
+
+
+def summary(points: list[dict], model: str) -> list[dict]:
+    """Per setting (in the order first run): the seeds run, the mean wall time, and per error
+    (:data:`ERRORS` and the held-out lights') the mean, least and largest over the seeds."""
+    settings: dict = {}
+    for p in points:
+        settings.setdefault(grid_key(p), []).append(p)
+    out = []
+    for (measurements, resolution, spp), runs in settings.items():
+        entry = {"measurements": measurements, "resolution": resolution, "spp": spp,
+                 "seeds": [r.get("seed") for r in runs], "wall_s": float(np.mean([r["wall_s"] for r in runs]))}
+        for key in (*ERRORS, "heldout_rmse"):
+            values = np.array([r["models"][model][key] for r in runs], float)
+            entry[key] = {"mean": float(values.mean()), "min": float(values.min()), "max": float(values.max())}
+        out.append(entry)
+    return out
+
+
+def fronts(settings: list[dict]) -> dict:
+    """Per error: the front's settings (as grid keys) through the means over the seeds, and whether
+    the default lies on it."""
+    times = np.array([p["wall_s"] for p in settings])
     out = {}
     for key in ERRORS:
-        errors = np.array([p["models"][model][key] for p in points], float)
+        errors = np.array([p[key]["mean"] for p in settings], float)
         front = pareto_front(times, errors)
-        keys = [(p["measurements"], p["resolution"], p["spp"]) for p in points]
+        keys = [grid_key(p) for p in settings]
         default = (DEFAULT["measurements"], DEFAULT["resolution"], DEFAULT["spp"])
         out[key] = {"front": [list(keys[i]) for i in front],
                     "default_on_front": bool(keys.index(default) in front) if default in keys else None}
@@ -117,16 +149,18 @@ def figure(result: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    points, model = result["points"], result["model"]
-    times = np.array([p["wall_s"] for p in points])
-    fig, axes = plt.subplots(1, len(ERRORS), figsize=(5 * len(ERRORS), 4.2))
-    markers = {r: m for r, m in zip(sorted({p["resolution"] for p in points}), "os^D")}
-    counts = sorted({p["measurements"] for p in points})
+    settings, model = result["summary"], result["model"]
+    times = np.array([p["wall_s"] for p in settings])
+    fig, axes = plt.subplots(1, len(ERRORS), figsize=(5 * len(ERRORS), 4.5))
+    markers = {r: m for r, m in zip(sorted({p["resolution"] for p in settings}), "os^D")}
+    counts = sorted({p["measurements"] for p in settings})
     colours = dict(zip(counts, plt.cm.viridis(np.linspace(0, 0.85, len(counts)))))
     for ax, (key, label) in zip(axes, ERRORS.items()):
-        errors = np.array([p["models"][model][key] for p in points], float)
-        for p, t, e in zip(points, times, errors):
+        errors = np.array([p[key]["mean"] for p in settings], float)
+        for p, t, e in zip(settings, times, errors):
             colour = colours[p["measurements"]]
+            ax.errorbar(t, e, yerr=[[e - p[key]["min"]], [p[key]["max"] - e]], color=colour, lw=0.8, capsize=2,
+                        zorder=2)
             ax.scatter(t, e, marker=markers[p["resolution"]], s=20 + 30 * np.log2(p["spp"] / 8), color=colour,
                        edgecolor="k", linewidth=0.5, zorder=3)
             ax.annotate(f"{p['measurements']}/{p['resolution']}/{p['spp']}", (t, e), fontsize=6,
@@ -140,9 +174,10 @@ def figure(result: dict, path: Path) -> None:
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
+    seeds = ", ".join(str(s) for s in result["seeds"])
     fig.suptitle(f"SIMULATED captures (truth Cook–Torrance, built-in face), model {model}, geometry "
-                 f"{result['options']['geometry']}; labels: measurements/resolution/spp; marker: resolution, "
-                 "size: spp", fontsize=9)
+                 f"{result['options']['geometry']}; labels: measurements/resolution/spp; marker: resolution, size: spp\n"
+                 f"each point the mean over seeds {seeds}, its bar the least and largest", fontsize=9)
     fig.tight_layout()
     save_figure(fig, path, dpi=110)
 
@@ -155,7 +190,7 @@ def main() -> None:
     parser.add_argument("--models", nargs="+", default=["cooktorrance"], help="BRDF models to fit")
     parser.add_argument("--geometry", default="fitted", choices=("fitted", "ground-truth"))
     parser.add_argument("--texture", type=int, default=512, help="texture resolution R of the measurement")
-    parser.add_argument("--seed", type=int, default=3)
+    parser.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS))
     parser.add_argument("--work", type=Path, default=None, help="keep the captures and reports here")
     parser.add_argument("--out", type=Path, default=RESULTS / "pareto.json")
     parser.add_argument("--replot", action="store_true", help="only draw the figure of an existing --out")
@@ -163,8 +198,9 @@ def main() -> None:
     if args.replot:
         figure(json.loads(args.out.read_text()), args.out.with_suffix(".png"))
         return
-    options = {"models": args.models, "geometry": args.geometry, "texture": args.texture, "seed": args.seed}
-    result = {"label": "SIMULATED", "model": args.models[0], "options": options, "default": DEFAULT,
+    options = {"models": args.models, "geometry": args.geometry, "texture": args.texture}
+    result = {"label": "SIMULATED", "model": args.models[0], "options": options, "seeds": args.seeds,
+              "default": DEFAULT,
               "grid": {"measurements": args.measurements, "resolutions": args.resolutions, "spp": args.spp},
               "full_grid": {"measurements": MEASUREMENTS, "resolutions": RESOLUTIONS, "spp": SPP},
               "machine": {"platform": platform.platform(), "variant": mi.variant(), "cores": os.cpu_count()}, "points": []}
@@ -172,18 +208,21 @@ def main() -> None:
         previous = json.loads(args.out.read_text())
         if previous.get("options") == options:
             result["points"] = previous["points"]
-    done = {(p["measurements"], p["resolution"], p["spp"]) for p in result["points"]}
-    grid = [(k, r, s) for k in args.measurements for r in args.resolutions for s in args.spp if (k, r, s) not in done]
-    grid.sort(key=lambda c: (c[0] * c[1] ** 2, c[2]))  # cheapest first: an interrupted run keeps a usable front
+            result["seeds"] = sorted(set(args.seeds) | {p["seed"] for p in result["points"]})
+    done = {(*grid_key(p), p["seed"]) for p in result["points"]}
+    grid = [(k, r, s, seed) for k in args.measurements for r in args.resolutions for s in args.spp
+            for seed in args.seeds if (k, r, s, seed) not in done]
+    grid.sort(key=lambda c: (c[0] * c[1] ** 2, c[2], c[3]))  # cheapest first: an interrupted run keeps a usable front
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
-        for measurements, resolution, spp in grid:
-            p = point(work, measurements, resolution, spp, args)
+        for n, (measurements, resolution, spp, seed) in enumerate(grid, 1):
+            p = point(work, measurements, resolution, spp, seed, args)
             result["points"].append(p)
             errors = ", ".join(f"{k} {p['models'][result['model']][k]:.4f}" for k in ERRORS)
-            print(f"{measurements:3d} photos {resolution:5d} px {spp:4d} spp: {p['wall_s']:7.1f} s; {errors}",
-                  flush=True)
-            result["fronts"] = fronts(result["points"], result["model"])
+            print(f"[{n}/{len(grid)}] {measurements:3d} photos {resolution:5d} px {spp:4d} spp seed {seed}: "
+                  f"{p['wall_s']:7.1f} s; {errors}", flush=True)
+            result["summary"] = summary(result["points"], result["model"])
+            result["fronts"] = fronts(result["summary"])
             write_json(args.out, result)
             figure(result, args.out.with_suffix(".png"))
 

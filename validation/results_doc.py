@@ -199,6 +199,8 @@ def pareto_command(data) -> str | None:
     geometry = get(data, "options", "geometry")
     if isinstance(geometry, str):
         parts.append(f"--geometry {geometry}")
+    if isinstance(data.get("seeds"), list):
+        parts.append("--seeds " + " ".join(str(v) for v in data["seeds"]))
     return " ".join(parts)
 
 
@@ -434,19 +436,27 @@ def sec_pareto(d):
     options = d.get("options") or {}
     lines = [f"Grid: measurements {text(grid.get('measurements'))} × resolution {text(grid.get('resolutions'))} × "
              f"spp {text(grid.get('spp'))}; geometry {text(options.get('geometry'))}, texture "
-             f"{text(options.get('texture'))}², model {text(model)}. The defaults: {text(default.get('measurements'))} / "
-             f"{text(default.get('resolution'))} / {text(default.get('spp'))}.", ""]
+             f"{text(options.get('texture'))}², model {text(model)}; each setting on the seeds "
+             f"{text(d.get('seeds'))} (each seed another face, poses, lamps and noise). The defaults: "
+             f"{text(default.get('measurements'))} / {text(default.get('resolution'))} / {text(default.get('spp'))}. "
+             "Errors: the mean over the seeds, the least and largest in brackets; wall time: the mean. A front "
+             "through the means of a few seeds orders two settings only where their ranges do not overlap.", ""]
+
+    def spread(entry, key, as_pct, decimals):
+        show = (lambda x: pct(x, decimals)) if as_pct else (lambda x: fixed(x, decimals))
+        e = get(entry, key)
+        return f"{show(get(e, 'mean'))} ({show(get(e, 'min'))}–{show(get(e, 'max'))})"
+
     rows = []
-    for p in rows_of(d.get("points")):
-        m = get(p, "models", model) if model else None
+    for p in rows_of(d.get("summary")):
         key = f"{text(p.get('measurements'))} / {text(p.get('resolution'))} / {text(p.get('spp'))}"
         if all(p.get(k) == default.get(k) for k in ("measurements", "resolution", "spp")) and default:
             key += " (defaults)"
-        rows.append([key, fixed(p.get("wall_s"), 0), pct(get(m, "brdf_skin"), 2), fixed(get(m, "albedo_rmse"), 4),
-                     pct(get(m, "heldout_rmse")), pct(get(m, "environment_rmse"))])
+        rows.append([key, fixed(p.get("wall_s"), 0), spread(p, "brdf_skin", True, 2), spread(p, "albedo_rmse", False, 4),
+                     spread(p, "heldout_rmse", True, 1), spread(p, "environment_rmse", True, 1)])
     lines += table(["measurements / px / spp", "wall (s)", "skin BRDF RMSE", "albedo RMSE", "held-out RMSE",
                     "environment RMSE"], rows)
-    lines += table(["error", "front (measurements / px / spp)", "defaults on it"],
+    lines += table(["error", "front through the means (measurements / px / spp)", "defaults on it"],
                    [[name, "; ".join(" / ".join(text(v) for v in point) for point in (get(f, "front") or []))
                      or DASH, text(get(f, "default_on_front"))] for name, f in items(d.get("fronts"))])
     return lines
