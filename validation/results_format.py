@@ -93,3 +93,9 @@ def items(x):
 def rows_of(x):
     """The dicts of a list, or nothing."""
     return [r for r in x if isinstance(r, dict)] if isinstance(x, list) else []
+
+
+def listed(label: str, pairs) -> list[str]:
+    """A sentence ``label: key: value; ...`` of a dict's pairs, or nothing where it has none."""
+    pairs = items(pairs)
+    return [f"{label}: " + "; ".join(f"{k}: {text(v)}" for k, v in pairs) + ".", ""] if pairs else []

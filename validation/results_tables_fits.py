@@ -3,7 +3,7 @@ rounds and the uncertainty (one function per result layout, used by ``validation
 
 from __future__ import annotations
 
-from results_format import DASH, fixed, get, items, mean, num, pct, rows_of, table, text
+from results_format import DASH, fixed, get, items, listed, mean, num, pct, rows_of, table, text
 
 
 def sec_refine(d):
@@ -30,10 +30,7 @@ def sec_refine(d):
         ["seconds", fixed(get(d, "cost", "texture_space_fit_seconds"), 1),
          fixed(get(d, "cost", "refine_seconds", "total"), 1)],
     ])
-    met = items(d.get("targets_met"))
-    if met:
-        lines += ["Targets met: " + "; ".join(f"{k}: {text(v)}" for k, v in met) + ".", ""]
-    return lines
+    return lines + listed("Targets met", d.get("targets_met"))
 
 
 def sec_light_calibration_bias(d):
@@ -150,10 +147,7 @@ def sec_shape_estimation(d):
                        [[text(s.get("resolution")), text(s.get("factor")), text(s.get("iterations")),
                          fixed(s.get("seconds"), 2), fixed(s.get("landmark_px"), 2), fixed(s.get("normal_deg"), 2),
                          fixed(s.get("vertex_rms_aligned_mm"), 2)] for s in sweep])
-    targets = items(d.get("targets"))
-    if targets:
-        lines += ["Targets: " + "; ".join(f"{k}: {text(v)}" for k, v in targets) + ".", ""]
-    return lines
+    return lines + listed("Targets", d.get("targets"))
 
 
 def sec_truths(d):
