@@ -33,10 +33,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from results_format import DASH, get  # noqa: E402  (the formatting helpers)
 from results_tables_fits import (  # noqa: E402  (one function per result layout)
-    sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_floor_depth, sec_joint_outline,
-    sec_light_balance_measure, sec_light_calibration_bias, sec_refine, sec_refine_gradient, sec_refine_seeds,
-    sec_refine_shape_default, sec_shape_depth, sec_shape_estimation, sec_silhouette_depth, sec_truths,
-    sec_uncertainty_cost, sec_uncertainty_measure, sec_uncertainty_texel_albedo, sec_unknown,
+    sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_depth_cameras, sec_floor_depth,
+    sec_joint_outline, sec_light_balance_measure, sec_light_calibration_bias, sec_refine, sec_refine_gradient,
+    sec_refine_seeds, sec_refine_shape_default, sec_shape_depth, sec_shape_estimation, sec_silhouette_depth,
+    sec_truths, sec_uncertainty_cost, sec_uncertainty_measure, sec_uncertainty_texel_albedo, sec_unknown,
 )
 from results_tables_pipeline import (  # noqa: E402  (one function per result layout)
     sec_bench_brdf_fit, sec_bench_bsdf, sec_bench_face_render, sec_bench_pipeline, sec_bench_shape_kernels,
@@ -180,6 +180,7 @@ LAYOUTS = {
     "refine_shape_default": ("Shape refinement on the default capture", "SIMULATED", sec_refine_shape_default),
     "shape_depth": ("Where the fitted faces lie in depth", "SIMULATED", sec_shape_depth),
     "floor_depth": ("How much of the shape floor is each photograph's depth", "SIMULATED", sec_floor_depth),
+    "depth_cameras": ("What the clicks pin of a face's depth, with one camera or two", "SIMULATED", sec_depth_cameras),
     "silhouette_depth": ("Whether the head's outline could pin each photograph's depth", "SIMULATED",
                          sec_silhouette_depth),
     "joint_outline": ("One identity over all photographs, with the head's outline", "SIMULATED", sec_joint_outline),

@@ -287,6 +287,21 @@ def sec_floor_depth(d):
             + ["", "Over the photographs:", ""] + table(["seed", "face", "mean", "largest"], sums))
 
 
+def sec_depth_cameras(d):
+    settings = d.get("settings") or {}
+    seen = [n for r in rows_of(d.get("runs")) for n in (r.get("feature_points_seen") or [])]
+    lines = [f"Seeds {text([r.get('seed') for r in rows_of(d.get('runs'))])}, {text(settings.get('measurements'))} "
+             f"poses each, {text(seen and min(seen))}–{text(seen and max(seen))} feature points clicked with "
+             f"{text(settings.get('click_px_at_512'))} px noise at {text(settings.get('resolution'))}², "
+             f"{text(settings.get('draws'))} draws; the second camera turned by the angle about the head's vertical "
+             f"axis at the same {text(settings.get('camera_distance_mm'))} mm. Errors of the feature points' "
+             "centroid along the first camera's axis, mean over the seeds.", ""]
+    rows = [[text(key), fixed(e.get("depth_sd_mm"), 2), fixed(e.get("depth_mean_abs_mm"), 2),
+             fixed(e.get("point_error_mm"), 2)] for key, e in items(d.get("mean_over_seeds"))]
+    return lines + table(["estimate", "depth, standard deviation (mm)", "depth, mean absolute (mm)",
+                          "feature points, mean error (mm)"], rows)
+
+
 def sec_shape_depth(d):
     lines = [f"Default capture (512², six photographs), seeds {text(', '.join(map(str, get(d, 'seeds') or [])))}; "
              "the fitted faces against the truth over the front of the face (mm). `size`: the fitted face's size "
