@@ -47,6 +47,7 @@ from mifaces.studio.subject import head_pose, make_subject
 RESULTS = Path(__file__).resolve().parent / "results"
 #: The simulator's click noise (px per coordinate at 512 px width; mifaces.studio.photograph.annotate).
 CLICK_PX = 0.5
+#: The photographs' side (px): the default capture's, the resolution the click noise is given at.
 SIDE = 512
 MEASUREMENTS = 6
 #: A feature point is clicked where its vertex normal faces the camera by at least this cosine.
@@ -118,23 +119,22 @@ def run_seed(face_model, seed: int, angles: list[float], draws: int) -> dict:
     vertices = [face_model.ibug_landmarks[FEATURE_POINTS[n]] for n in names]
     records: dict[str, list] = {}
     counts = []
+    first = camera(subject.head, 0.0)
+    axis = first[0][2]  # the first camera's viewing axis in the world frame
     for turn in head_turns(MEASUREMENTS, rng):
         pose = head_pose(face_model, subject, turn, rng)
         normals = trimesh.Trimesh(pose.vertices, face_model.triangles, process=False).vertex_normals[vertices]
         truth = pose.vertices[vertices]
-        first = camera(subject.head, 0.0)
-        axis = first[0][2]  # the first camera's viewing axis in the world frame
         seen = visible(first, truth, normals)
         counts.append(int(seen.sum()))
-        noise = CLICK_PX * SIDE / 512
         for _ in range(draws):
-            click1 = project(first, truth[seen]) + rng.normal(0.0, noise, (seen.sum(), 2))
+            click1 = project(first, truth[seen]) + rng.normal(0.0, CLICK_PX, (seen.sum(), 2))
             fit = pose_on_clicks(truth[seen], [first], [click1], [np.ones(seen.sum(), bool)])
             records.setdefault("one_camera", []).append(errors(fit, truth[seen], axis))
             for angle in angles:
                 second = camera(subject.head, angle)
                 both = (seen & visible(second, truth, normals))[seen]  # of the points the first camera sees
-                click2 = project(second, truth[seen][both]) + rng.normal(0.0, noise, (both.sum(), 2))
+                click2 = project(second, truth[seen][both]) + rng.normal(0.0, CLICK_PX, (both.sum(), 2))
                 fit = pose_on_clicks(truth[seen], [first, second], [click1, click2],
                                      [np.ones(seen.sum(), bool), both])
                 records.setdefault(f"two_cameras_{angle:g}", []).append(errors(fit, truth[seen], axis))

@@ -102,9 +102,10 @@ class ShapeRefineSchedule:
     carry_over: float = 0.5
 
     def __post_init__(self):
-        for name in ("iterations", "spp", "downsample", "evaluation_spp", "holdout_block"):
-            if name == "downsample" and self.downsample is None:
-                continue
+        counts = ["iterations", "spp", "evaluation_spp", "holdout_block"]
+        if self.downsample is not None:  # None: chosen per camera (factor)
+            counts.append("downsample")
+        for name in counts:
             if isinstance(getattr(self, name), bool) or int(getattr(self, name)) < 1:
                 raise ValueError(f"ShapeRefineSchedule.{name} must be an integer >= 1, got {getattr(self, name)!r}")
         for name in ("spp_silhouette", "spp_shadow", "judged"):
