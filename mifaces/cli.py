@@ -43,7 +43,7 @@ from .reflectance.io import KIND as BRDF_KIND, write_fitted
 from .refine import refine_estimate
 from .refine.shape import ShapeRefineSchedule
 from .refine.shape_lit import refine_fits
-from .report import RANKED, format_value
+from .report import RANKED, format_value, ranking_sentence
 from .shape import fit_shape as fit_shapes
 from .shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
 from .status import CONVERGED
@@ -301,8 +301,8 @@ def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry
                        f" (fitted faces {errors['mean_world_mm']:.1f} mm from the truth on average, "
                        f"{errors['mean_aligned_mm']:.1f} mm after a rigid alignment)" if errors else ""))
     for key, order in report.get("ranking", {}).items():
-        click.echo(f"ranked by {RANKED[key]} (novel pose, relative image RMSE): " + " < ".join(
-            f"{m} {100 * report['models'][m]['validation'][key]:.1f}%" for m in order))
+        click.echo(f"ranked by {RANKED[key]} (novel pose, relative image RMSE; ≈: within the renders' noise): "
+                   + ranking_sentence(report["models"], order, report.get("ties", {}).get(key, []), key))
     click.echo(f"done in {report['seconds']['total']:.0f} s; report: {out_dir}/report.md, report.png and report.html")
 
 

@@ -49,7 +49,8 @@ from .refine.shape import ShapeRefineSchedule
 from .refine.shape_lit import refine_lit, refined_fits
 from .emitters import light_record
 from .render import FaceScene
-from .report import ranking, write_fit_picture, write_markdown, write_uncertainty_picture, write_validation_picture
+from .report import (ranking, ties, write_fit_picture, write_markdown, write_uncertainty_picture,
+                     write_validation_picture)
 from .report_html import write_html
 from .shape import fit_shape, shapes_in_world
 from .shape.io import model_source, write_fit, write_index
@@ -284,6 +285,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
     report["novel_light"] = light_record(novel)
     if validator is not None:
         report["ranking"] = ranking(report["models"])
+        report["ties"] = ties(report["models"], report["ranking"])
     write_json(out / "report.json", report)
     if validator is not None:
         write_validation_picture(out / "report.png", validator.truth, validation_images, report)

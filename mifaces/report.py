@@ -28,6 +28,31 @@ def ranking(models: dict) -> dict:
             if all(key in entry["validation"] for entry in models.values())}
 
 
+def ties(models: dict, order: dict) -> dict:
+    """Measure -> one record per neighbouring pair of ``order`` (:func:`ranking`): ``better``, ``worse``,
+    ``margin`` (the worse model's error less the better's) and ``noise``, and ``tie``.
+
+    Each image error is measured twice, with every render's random numbers drawn anew the second time
+    (the validation's ``replicate``), so each pair's difference is measured twice. ``noise`` is how far
+    the two measurements of it disagree, twice the standard error of their mean; a pair is a ``tie``
+    when the mean difference is not larger than that (a second draw could order the two the other way).
+    A validation without ``replicate`` (older reports) has ``noise`` None and no ties."""
+    out = {}
+    for key, names in order.items():
+        pairs = []
+        for better, worse in zip(names, names[1:]):
+            a, b = models[better]["validation"], models[worse]["validation"]
+            margin = b[key] - a[key]
+            again = (b["replicate"][key] - a["replicate"][key]
+                     if key in a.get("replicate", {}) and key in b.get("replicate", {}) else None)
+            noise = None if again is None else abs(margin - again)
+            mean = margin if again is None else 0.5 * (margin + again)
+            pairs.append({"better": better, "worse": worse, "margin": margin, "noise": noise,
+                          "tie": noise is not None and mean <= noise})
+        out[key] = pairs
+    return out
+
+
 def _show(ax, image, title, scale) -> None:
     ax.imshow(np.clip(np.clip(image * scale, 0, 1) ** (1 / 2.2), 0, 1))
     ax.set_title(title, fontsize=8)
@@ -225,16 +250,30 @@ def validation_markdown(report: dict) -> list[str]:
         lines.append(f"| {model} | {skin} | {regions} | {v['albedo_rmse']:.4f} | {100 * v['heldout_rmse']:.2f}% | "
                      f"{100 * v['environment_rmse']:.2f}% | {true_shape} | {100 * entry['training_rmse']:.2f}% |")
     lines.append("")
+    pairs = report.get("ties") or ties(report["models"], report["ranking"])
     for key, order in report["ranking"].items():
-        label = RANKED[key]
-        errors = [report["models"][m]["validation"][key] for m in order]
-        text = " < ".join(f"{m} {100 * e:.2f}%" for m, e in zip(order, errors))
-        margin = (f"; {order[0]} wins by {100 * (errors[1] - errors[0]):.2f} points "
-                  f"({100 * (errors[1] - errors[0]) / errors[1]:.0f}% less error than {order[1]})"
-                  if len(order) > 1 else "")
-        lines.append(f"- Ranked by {label}: {text}{margin}.")
+        sentence = ranking_sentence(report["models"], order, pairs.get(key, []), key)
+        lines.append(f"- Ranked by {RANKED[key]}: {sentence}.")
     lines += ["", "![training photograph](report_training.png)"]
     return lines
+
+
+def ranking_sentence(models: dict, order: list, pairs: list, key: str) -> str:
+    """``a 14.20% < b 14.43% = c 14.50% …`` (``=``: within the noise, :func:`ties`), and who wins by how much."""
+    errors = [models[m]["validation"][key] for m in order]
+    text = f"{order[0]} {100 * errors[0]:.2f}%"
+    for pair, model, error in zip(pairs, order[1:], errors[1:]):
+        text += f" {'≈' if pair['tie'] else '<'} {model} {100 * error:.2f}%"
+    if not pairs:
+        return text
+    first = pairs[0]
+    noise = "" if first["noise"] is None else f", Monte Carlo noise {100 * first['noise']:.2f} points"
+    if first["tie"]:
+        return (f"{text}; {order[0]} and {order[1]} tie: {100 * first['margin']:.2f} points apart, within the "
+                f"noise of the renders ({100 * first['noise']:.2f} points: the same comparison with other random "
+                "numbers moves by that much)")
+    return (f"{text}; {order[0]} wins by {100 * first['margin']:.2f} points "
+            f"({100 * first['margin'] / errors[1]:.0f}% less error than {order[1]}{noise})")
 
 
 def half_width(value, entry: dict | None):

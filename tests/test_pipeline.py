@@ -46,6 +46,11 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
         order = saved["ranking"][key]
         assert sorted(order) == ["cooktorrance", "phong"]
         assert saved["models"][order[0]]["validation"][key] <= saved["models"][order[1]]["validation"][key]
+        # each pair of the ranking measured twice, with other random numbers the second time: a tie or not
+        (pair,) = saved["ties"][key]
+        again = [saved["models"][m]["validation"]["replicate"][key] for m in order]
+        assert pair["noise"] == pytest.approx(abs(pair["margin"] - (again[1] - again[0])))
+        assert pair["tie"] == (pair["margin"] + again[1] - again[0] <= 2 * pair["noise"])
     # every fitted parameter's uncertainty, in report.json and brdf.json alike
     skin_fit = saved["models"]["cooktorrance"]["regions"]["skin"]
     skin_unc = saved["models"]["cooktorrance"]["uncertainty"]["skin"]

@@ -83,6 +83,11 @@ def test_validation_keys_present_and_finite(validator, estimate):
     # the true shape was used: the shape floor is exactly 0, and the reflectance's own error is the image error
     assert validator.summary["shape_floor"]["heldout_rmse"] == 0.0
     assert entry["heldout_rmse_true_shape"] == entry["heldout_rmse"]
+    # the same errors with the random numbers drawn again: close (the renders' noise), not the same
+    again = entry["replicate"]
+    assert set(again) == {"heldout_rmse", "environment_rmse", "heldout_rmse_true_shape", "environment_rmse_true_shape"}
+    assert again["heldout_rmse"] != entry["heldout_rmse"]
+    assert again["heldout_rmse"] == pytest.approx(entry["heldout_rmse"], rel=0.5)
 
 
 def test_noise_floor_is_the_renders_monte_carlo_noise(validator, capture):
@@ -195,3 +200,32 @@ def test_report_gives_each_fitted_shape_its_errors_and_the_modes_used():
     assert "| m00 | converged | 0.81 | 0.031 | 2.50 | 1.20 | -2.25 | -0.19 | 1.30 |" in text
     assert "| m01 | not_converged | 0.70 | 0.200 |  |  |  |  |  |" in text
     assert shapes_markdown({"shapes": {}}) == []  # true shapes: nothing fitted, no section
+
+
+def _validated(heldout: float, again: float) -> dict:
+    return {"validation": {"heldout_rmse": heldout, "replicate": {"heldout_rmse": again}}}
+
+
+def test_ranking_calls_a_tie_within_the_renders_noise():
+    from mifaces.report import ranking, ranking_sentence, ties
+
+    # a and b: 0.2 points apart, but the second draw of random numbers orders them the other way: a tie;
+    # b and c: 3 points apart in both draws: c is worse
+    models = {"a": _validated(0.140, 0.143), "b": _validated(0.142, 0.141), "c": _validated(0.172, 0.170)}
+    order = ranking(models)
+    assert order == {"heldout_rmse": ["a", "b", "c"]}
+    pairs = ties(models, order)["heldout_rmse"]
+    assert [(p["better"], p["worse"], p["tie"]) for p in pairs] == [("a", "b", True), ("b", "c", False)]
+    assert pairs[0]["margin"] == pytest.approx(0.002) and pairs[0]["noise"] == pytest.approx(0.004)
+    assert pairs[1]["noise"] == pytest.approx(0.001)
+    sentence = ranking_sentence(models, order["heldout_rmse"], pairs, "heldout_rmse")
+    assert sentence.startswith("a 14.00% ≈ b 14.20% < c 17.20%; a and b tie: 0.20 points apart")
+    # the same margin measured alike twice is no tie, and the winner is named
+    models["b"] = _validated(0.150, 0.151)
+    pairs = ties(models, ranking(models))["heldout_rmse"]
+    assert not pairs[0]["tie"]
+    assert "a wins by 1.00 points" in ranking_sentence(models, ["a", "b", "c"], pairs, "heldout_rmse")
+    # a report without replicates (written before them): no ties claimed, no noise made up
+    old = {m: {"validation": {"heldout_rmse": e}} for m, e in (("a", 0.1), ("b", 0.2))}
+    assert ties(old, ranking(old))["heldout_rmse"][0] == {"better": "a", "worse": "b", "margin": 0.1, "noise": None,
+                                                          "tie": False}

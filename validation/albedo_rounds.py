@@ -39,6 +39,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import uncertainty as U  # noqa: E402  (the captures and checks of validation/uncertainty.py)
+from roles import SIMULATED, refuse_report_data  # noqa: E402
 
 from mifaces.atomic import write_json  # noqa: E402
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf  # noqa: E402
@@ -277,8 +278,7 @@ def main(argv=None) -> int:
                              "seed and model and the last number of rounds")
     args = parser.parse_args(argv)
     U.IMAGE, U.TEXTURE = (args.image, args.image), args.texture  # the captures' and fits' sizes
-    if any(s not in U.TUNING_SEEDS for s in args.seeds):
-        parser.error(f"--seeds: the tuning seeds are {list(U.TUNING_SEEDS)} (the others are reported on)")
+    refuse_report_data(parser, SIMULATED, args.seeds, "the albedo rounds and the texel albedo (--seeds)")
     command = "python validation/albedo_rounds.py " + " ".join(argv if argv is not None else sys.argv[1:])
     if args.cost:
         write_json(RESULTS / "albedo_rounds_cost.json", {

@@ -52,6 +52,7 @@ from mifaces.studio import simulate
 from mifaces.studio.environment_light import ENVIRONMENTS
 from mifaces.reflectance import FitOptions, fit_brdf
 from mifaces.refine import RefineSchedule, refine_estimate
+from roles import SIMULATED, refuse_report_data
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Target of issue 26: the hidden-light run's held-out error over the given-map run's.
@@ -254,6 +255,7 @@ def main(argv=None) -> int:
                              "(environment_lights_tuning.json)")
     args = parser.parse_args(argv)
     if args.tuning:
+        refuse_report_data(parser, SIMULATED, [TUNING_SEED], "restart_under_maps (--tuning)")
         command = "python validation/environment_lights.py " + " ".join(argv if argv is not None else sys.argv[1:])
         document = {"simulated": True, "command": command, "model": MODEL, "seed": TUNING_SEED,
                     "geometry": "ground-truth", "measurements": MEASUREMENTS, "image": IMAGE, "spp": SPP,

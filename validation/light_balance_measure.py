@@ -36,6 +36,7 @@ from mifaces.atomic import write_json
 from mifaces.pipeline import measure
 from mifaces.reflectance import FitOptions
 from mifaces.studio import simulate
+from roles import SIMULATED, refuse_report_data
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: The report's per-model figures kept, and how a run is summarised over the seeds.
@@ -73,6 +74,8 @@ def main(argv=None) -> int:
     parser.add_argument("--work", type=Path, default=Path("out/light_balance_measure"))
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
+    if args.role == "tuning":
+        refuse_report_data(parser, SIMULATED, args.seeds, "--balance-lights' default (--role tuning)")
     mifaces.set_variant("llvm_ad_rgb")
     seeds = []
     for seed in args.seeds:

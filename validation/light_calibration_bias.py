@@ -31,6 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import uncertainty as U  # noqa: E402  (the captures and checks of validation/uncertainty.py)
+from roles import SIMULATED, refuse_report_data  # noqa: E402
 
 from mifaces.capture import with_true_lights  # noqa: E402
 from mifaces.atomic import write_json  # noqa: E402
@@ -115,6 +116,8 @@ def main() -> None:
     parser.add_argument("--out", default=str(RESULTS / "light_calibration_bias.json"))
     parser.add_argument("--role", default="tuning seeds of validation/uncertainty.py")
     args = parser.parse_args()
+    if args.role.startswith("tuning"):  # the balance's threshold is chosen on these
+        refuse_report_data(parser, SIMULATED, args.seeds, "the lights' balance threshold (--role tuning…)")
     work = Path(tempfile.mkdtemp(prefix="light_bias_"))
     rows = [row for seed in args.seeds for row in run(seed, work)]
     result = {"label": "SIMULATED", "command": "python validation/light_calibration_bias.py "

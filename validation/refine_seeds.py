@@ -52,6 +52,7 @@ from mifaces.studio.simulate import simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from refine import novel_light_errors, region_errors  # noqa: E402  (validation/refine.py)
+from roles import SIMULATED, refuse_report_data  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results"
 #: The variants compared: name -> changes to the default schedule.
@@ -138,6 +139,8 @@ def main() -> None:
                         help="training seeds choose the defaults; test seeds only report")
     parser.add_argument("--out", required=True)
     args = parser.parse_args()
+    if args.role == "training":
+        refuse_report_data(parser, SIMULATED, args.seeds, "the refinement's defaults (--role training)")
     work = Path(tempfile.mkdtemp(prefix="refine_seeds_"))
     seeds = [run_seed(seed, args.image, args.resolution, args.variants, work) for seed in args.seeds]
     result = {

@@ -43,6 +43,7 @@ from mifaces.refine.shape_lit import FIT_SHAPE_BRDF, refine_fits
 from mifaces.shape import fit_shape, shapes_in_world
 from mifaces.shape_errors import capture_shape_errors
 from mifaces.studio import simulate
+from roles import SIMULATED, refuse_report_data
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -72,6 +73,8 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=None,
                         help="the result file (default validation/results/refine_shape_default{,_judged}.json)")
     args = parser.parse_args(argv)
+    if args.out is not None and "tuning" in args.out.name:  # a run that chooses the schedule's defaults
+        refuse_report_data(parser, SIMULATED, [args.seed], "the shape refinement's schedule (--out …tuning…)")
     mifaces.set_variant("llvm_ad_rgb")
     folder = args.work / f"capture_{args.resolution}_{args.seed}"
     simulate(folder, resolution=(args.resolution, args.resolution), seed=args.seed, progress=False, force=True)

@@ -219,9 +219,35 @@ def layout_for(stem: str):
     return best
 
 
-#: The list of result files made before a change of the setup they depend on (the face model, say) and
-#: not rerun since, with why: each gets a warning at the top of its section.
-STALE = "stale.json"
+#: Written by ``validation/reproduce.py``: the result files that were never reproduced, whose rerun differed
+#: or whose code changed since (with why: each gets a warning at the top of its section), and when each
+#: file was last reproduced and at which commit.
+STALE, REPRODUCED = "stale.json", "reproduced.json"
+
+
+def read_files(path: Path) -> dict:
+    """The ``files`` entry of one of reproduce.py's records (empty when absent or unreadable)."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8")).get("files", {})
+    except (OSError, ValueError):
+        return {}
+
+
+#: reproduce.py's status of a rerun, in words.
+OUTCOMES = {"matches": "it matched the committed file", "rerun": "the committed file is that rerun",
+            "differs": "it differed from the committed file", "failed": "it failed"}
+
+
+def reproduced_line(name: str, stale: dict, reproduced: dict) -> str:
+    """When ``name`` was last reproduced, and whether it is stale."""
+    last = reproduced.get(name)
+    done = "never rerun by `validation/reproduce.py`"
+    if last:
+        done = (f"rerun by `python validation/reproduce.py {Path(name).stem}` on {last['date']} at commit "
+                f"`{(last.get('commit') or '?')[:7]}`: {OUTCOMES.get(last['status'], last['status'])}")
+    if name in stale:
+        return f"**Stale**: {stale[name]}. **Reproduced**: {done}."
+    return f"**Reproduced**: {done}; its code has not changed since."
 
 
 def anchor(title: str) -> str:
@@ -251,17 +277,17 @@ def render(results: Path, out: Path) -> str:
              "[validation/README.md](../validation/README.md).*", "",
              "Labels: **SIMULATED** — rendered captures whose ground truth is known; **real photographs** — public "
              "data sets (Extended Yale B, DiLiGenT); timings are on the machine each file names.", ""]
+    stale, reproduced = read_files(results / STALE), read_files(results / REPRODUCED)
+    names = [p.name for p in sorted(results.glob("*.json")) if p.name not in (STALE, REPRODUCED)]
+    current = [n for n in names if n in reproduced and n not in stale]
+    lines += [f"**Reproduction** (`validation/reproduce.py`, which reruns a result's command in a copy of the tree "
+              f"and compares): {len(current)} of {len(names)} result files were reproduced at their current code; "
+              f"{len(stale)} are stale (never reproduced, their rerun differed, or their code changed since). "
+              "Each section says which, when and at which commit.", ""]
     sections = []
-    stale = {}
-    stale_file = results / STALE
-    if stale_file.is_file():
-        try:
-            stale = json.loads(stale_file.read_text(encoding="utf-8")).get("files", {})
-        except (OSError, ValueError):
-            stale = {}
     for path in sorted(results.glob("*.json")):
         stem = path.stem
-        if path.name == STALE:
+        if path.name in (STALE, REPRODUCED):
             continue
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
@@ -276,9 +302,7 @@ def render(results: Path, out: Path) -> str:
             title = f"{title}: `{stem}.json`"
         else:
             title, default_label, section = f"`{stem}.json`", "not labelled", sec_unknown
-        body = []
-        if path.name in stale:
-            body += [f"**Not rerun since the setup changed**: {stale[path.name]}", ""]
+        body = [reproduced_line(path.name, stale, reproduced), ""]
         what = summary(doc)
         if what:
             body.append(f"**What**: {what}")

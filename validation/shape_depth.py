@@ -45,6 +45,7 @@ from mifaces.shape.io import load_geometry
 from mifaces.shape import ShapeOptions, fit_measurement, fit_shape, shapes_in_world
 from mifaces.shape_errors import capture_shape_errors
 from mifaces.studio import simulate
+from roles import SIMULATED, refuse_report_data
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: The world-frame aim of issue 22 (mean over the face, without alignment).
@@ -129,6 +130,8 @@ def main(argv=None) -> int:
                         help="file name in validation/results (shape_depth_tuning.json: seeds 11 and 12, on which "
                              "FACING_CUT was chosen)")
     args = parser.parse_args(argv)
+    if "tuning" in args.out:  # a run that chooses FACING_CUT
+        refuse_report_data(parser, SIMULATED, args.seeds, "the image term's silhouette cut (--out …tuning…)")
     mifaces.set_variant("llvm_ad_rgb")
     runs = []
     for seed in args.seeds:

@@ -55,6 +55,7 @@ from mifaces.reflectance.fit import intervals
 from mifaces.reflectance.fit import uncertainty as unc
 from mifaces.status import DEFAULTS, PRIOR
 from mifaces.studio import photograph, simulate
+from roles import SIMULATED, refuse_report_data
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Capture size: photographs (px), measurements, samples per pixel, texture resolution.
@@ -599,6 +600,10 @@ def main() -> None:
     parser.add_argument("--cost", type=int, default=0, metavar="N",
                         help="only the cost: fit times with and without the default estimate on N captures")
     args = parser.parse_args()
+    if args.tune_tiles:
+        refuse_report_data(parser, SIMULATED, TILE_TUNING_SEEDS, "the intervals' tiling (--tune-tiles)")
+    if args.tune:
+        refuse_report_data(parser, SIMULATED, TUNING_SEEDS, "the first tile size (--tune)")
     t0 = time.perf_counter()
     if args.summarize:
         result = json.loads((RESULTS / "uncertainty.json").read_text())

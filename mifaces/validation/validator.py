@@ -185,9 +185,12 @@ class Validator:
         truth = self.ground_truth.brdf
         true_meshes = self._true_face(truth_model, self.truth_scene, turned(true_vertices, rotation, centre))
         self.truth = {name: self._render_truth(true_meshes, light) for name, light in self.conditions.items()}
-        # the Monte Carlo noise of these renders: the truth against itself rendered with another seed
-        noise = {name: relative_rmse(self._render_truth(true_meshes, light, NOISE_SEED), self.truth[name],
-                                     self.truth_mask) for name, light in self.conditions.items()}
+        # the Monte Carlo noise of these renders: the truth against itself rendered with another seed; every
+        # fit is compared with that second render too (``replicate``), which tells a ranking's ties
+        self.truth_replicate = {name: self._render_truth(true_meshes, light, NOISE_SEED)
+                                for name, light in self.conditions.items()}
+        noise = {name: relative_rmse(self.truth_replicate[name], self.truth[name], self.truth_mask)
+                 for name in self.conditions}
         floor = self._shape_floor(truth_model, face_model, true_vertices, fit_vertices, rotation, centre)
         # where the shapes differ but share a texture space, the fitted reflectance is also judged on the true shape
         self._true_shape = None if floor is None else any(v > 0 for v in floor.values())
@@ -274,7 +277,9 @@ class Validator:
             ``heldout_rmse_true_shape``, ``environment_rmse_true_shape`` and
             ``per_condition_true_shape``: the fitted BRDF and albedo
             rendered on the *true* shape (the reflectance alone; equal to
-            the others where the fit used the true shape).
+            the others where the fit used the true shape). ``replicate``: the same pooled image
+            errors with every render's random numbers drawn again (:data:`NOISE_SEED`), so that
+            two models' difference can be told from Monte Carlo noise (:func:`mifaces.report.ties`).
         images : dict
             Condition name -> the fitted face's image (H, W, 3).
         """
@@ -295,23 +300,28 @@ class Validator:
                                           albedo[texels].mean(axis=0), uv, truth_maps=self._truth_maps,
                                           scale=scale)
         errors = ground_truth_errors(estimate, self.capture, self.ground_truth, albedo_scale=scale)
-        images, per_condition = {}, {}
+        images, per_condition, replicate = {}, {}, {}
+
+        def error(scene, name, light, seed, mask):
+            image = scale * scene.render(fit, albedo, self.camera, spp=self.spp, seed=seed, **light, **maps)
+            truth = self.truth if seed == SEED else self.truth_replicate
+            return image, relative_rmse(image, truth[name], mask)
+
         for name, light in self.conditions.items():
-            images[name] = scale * self.fit_scene.render(fit, albedo, self.camera, spp=self.spp, seed=SEED, **light,
-                                                         **maps)
-            per_condition[name] = relative_rmse(images[name], self.truth[name], self.mask)
+            images[name], per_condition[name] = error(self.fit_scene, name, light, SEED, self.mask)
+            replicate[name] = error(self.fit_scene, name, light, NOISE_SEED, self.mask)[1]
         entry = {"brdf_rmse": regions, "albedo_rmse": errors["albedo"]["rmse_sampled"], **self._pooled(per_condition),
-                 "per_condition": per_condition, "reflectance_scale": scale}
+                 "per_condition": per_condition, "reflectance_scale": scale, "replicate": self._pooled(replicate)}
         if self._true_shape is not None:
-            on_truth = per_condition
+            on_truth, again = per_condition, replicate
             if self._true_shape:
-                on_truth = {name: relative_rmse(scale * self.truth_scene.render(fit, albedo, self.camera,
-                                                                                spp=self.spp, seed=SEED, **light,
-                                                                                **maps),
-                                                self.truth[name], self.truth_mask)
+                on_truth = {name: error(self.truth_scene, name, light, SEED, self.truth_mask)[1]
                             for name, light in self.conditions.items()}
+                again = {name: error(self.truth_scene, name, light, NOISE_SEED, self.truth_mask)[1]
+                         for name, light in self.conditions.items()}
             entry.update({f"{k}{TRUE_SHAPE}": v for k, v in self._pooled(on_truth).items()})
             entry[f"per_condition{TRUE_SHAPE}"] = on_truth
+            entry["replicate"].update({f"{k}{TRUE_SHAPE}": v for k, v in self._pooled(again).items()})
         entry["seconds"] = time.perf_counter() - t
         return entry, images
 
