@@ -35,7 +35,13 @@ SHARED = REPO.parent / "shared"
 
 
 def file_hash(path: Path) -> str:
+    """SHA-256 of a file's bytes; of a folder, over its files' names and hashes (sorted)."""
+    path = Path(path)
     digest = hashlib.sha256()
+    if path.is_dir():
+        for item in sorted(p for p in path.rglob("*") if p.is_file()):
+            digest.update(f"{item.relative_to(path)}\0{file_hash(item)}\n".encode())
+        return digest.hexdigest()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             digest.update(block)

@@ -75,6 +75,7 @@ class Entry:
     atol: float = 0.0
     ignore: tuple[str, ...] = ()
     minutes: float = 0.0  # what a rerun takes on 2 cores, roughly (0: under a minute)
+    inputs: tuple[str, ...] = ()  # data it reads from outside the code, repository-relative (../shared/…)
 
     @property
     def script(self) -> Path:
@@ -85,6 +86,7 @@ def _py(script: str, *args: str) -> tuple[str, ...]:
     return ("python", f"validation/{script}.py", *args)
 
 
+_YALE, _DILIGENT, _SFM = "../shared/data/yaleb", "../shared/data/diligent_ball", "../shared/models/sfm_3448"
 _F32 = dict(rtol=1e-4, atol=1e-7)   # float32 reductions over threads
 _FIT = dict(rtol=1e-3, atol=1e-6)   # fits whose float32 sums may end an iteration earlier or later
 
@@ -93,7 +95,7 @@ _FIT = dict(rtol=1e-3, atol=1e-6)   # fits whose float32 sums may end an iterati
 REGISTRY: tuple[Entry, ...] = (
     # quick: rerun by CI
     Entry("model_span", _py("model_span", "--out", "validation/results/model_span.json"), ("model_span.json",),
-          quick=True, kind="deterministic", rtol=1e-9, atol=1e-12),
+          quick=True, kind="deterministic", rtol=1e-9, atol=1e-12, inputs=(_SFM,)),
     Entry("brdf_energy", _py("brdf_energy"), ("brdf_energy.json",), quick=True, kind="deterministic", **_F32),
     Entry("brdf_fit_stiff", _py("brdf_fit_stiff"), ("brdf_fit_stiff.json",), quick=True, kind="deterministic",
           ignore=("iterations", "reason"), **_FIT),
@@ -213,12 +215,12 @@ REGISTRY: tuple[Entry, ...] = (
                                                        "{work}"), ("unknown_lights_simulated_ambient_none.json",),
           minutes=10, **_FIT),
     # real photographs (../shared/data)
-    Entry("real_diligent", _py("real_diligent", "--data", "../shared/data/diligent_ball", "--out", "{work}"),
-          ("real_diligent.json",), minutes=15, **_FIT),
-    Entry("unknown_lights", _py("unknown_lights", "--data", "../shared/data/yaleb", "--out", "{work}"),
-          ("unknown_lights.json",), minutes=30, **_FIT),
-    *(Entry(f"real_yaleb{suffix}", _py("real_yaleb", "--data", "../shared/data/yaleb", "--out", "{work}", *flags),
-            (f"real_yaleb{suffix}.json",), minutes=30, **_FIT)
+    Entry("real_diligent", _py("real_diligent", "--data", _DILIGENT, "--out", "{work}"),
+          ("real_diligent.json",), minutes=15, inputs=(_DILIGENT,), **_FIT),
+    Entry("unknown_lights", _py("unknown_lights", "--data", _YALE, "--out", "{work}"),
+          ("unknown_lights.json",), minutes=30, inputs=(_YALE,), **_FIT),
+    *(Entry(f"real_yaleb{suffix}", _py("real_yaleb", "--data", _YALE, "--out", "{work}", *flags),
+            (f"real_yaleb{suffix}.json",), minutes=30, inputs=(_YALE,), **_FIT)
       for suffix, flags in (("", ()), ("_train4", ("--train", "4")), ("_refine", ("--refine",)),
                             ("_normals", ("--normals",)), ("_interreflection", ("--interreflection",)),
                             ("_texel_albedo", ("--texel-albedo",)), ("_refine_shape", ("--refine-shape",)),
@@ -296,6 +298,21 @@ def rerun(entry: Entry, main: Path, log) -> tuple[int, float]:
     return done.returncode, time.perf_counter() - start
 
 
+def stamp(data, entry: Entry):
+    """``data`` with the ``provenance`` of a rerun of ``entry`` (validation/provenance.py) where the
+    script wrote none; a result that is a list, not an object, is returned as it is."""
+    if not isinstance(data, dict) or entry.argv[0] != "python":
+        return data
+    seeds = data.get("seeds") if isinstance(data.get("seeds"), list) else None
+    subjects = ([s.get("subject") if isinstance(s, dict) else s for s in data["subjects"]]
+                if isinstance(data.get("subjects"), list) else None)
+    record = provenance.provenance(entry.script, seeds=seeds if seeds and all(isinstance(s, int) for s in seeds)
+                                   else None, subjects=subjects, inputs=[REPO / i for i in entry.inputs],
+                                   argv=[entry.argv[1].replace("validation/", str(REPO / "validation") + "/", 1),
+                                         *[a.replace("{work}", "WORK") for a in entry.argv[2:]]])
+    return {**data, "provenance": data.get("provenance") or record}
+
+
 def reproduce(entries, *, repo: Path = REPO, keep: Path | None = None, plant=None, update: bool = False,
               echo=print) -> list[dict]:
     """Rerun ``entries`` in a scratch copy of ``repo`` and compare their files with ``repo``'s.
@@ -329,12 +346,13 @@ def reproduce(entries, *, repo: Path = REPO, keep: Path | None = None, plant=Non
                     differences = compare(json.loads(made.read_text()), old, entry)
                     record.update(status="differs" if differences else "matches", differences=differences[:20],
                                   n_differences=len(differences))
-                    if differences and update:
-                        shutil.copy2(made, committed)
+                    if update:  # the rerun's values where they differ; its provenance either way
+                        new = stamp(json.loads((made if differences else committed).read_text()), entry)
+                        provenance.write_json(committed, new)
                         picture = made.with_suffix(".png")
-                        if picture.exists():
+                        if differences and picture.exists():
                             shutil.copy2(picture, committed.with_suffix(".png"))
-                        record["status"] = "rerun"
+                        record["status"] = "rerun" if differences else "matches"
                 echo(f"  {name}: {record['status']} ({seconds:.0f} s)"
                      + "".join(f"\n    {d}" for d in record["differences"][:8]))
                 records.append(record)
