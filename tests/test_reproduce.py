@@ -40,16 +40,18 @@ def test_quick_results_reproduce(reproduce):
 
 
 def test_a_planted_change_in_the_library_is_caught(reproduce):
-    """A wrong translation in the Kabsch alignment that model_span.py's landmark fit uses."""
-    def plant(main: Path):
-        path = main / "mifaces" / "shape_errors.py"
-        source = path.read_text()
-        assert source.count("return rotation, mt - rotation @ ms") == 1
-        path.write_text(source.replace("return rotation, mt - rotation @ ms", "return rotation, mt - ms"))
+    """Phong's normalisation (n+2)/2π written (n+1)/2π, in the library that brdf_energy.py integrates."""
+    old, bug = "lobe = (n + 2.0) * dr.inv_two_pi", "lobe = (n + 1.0) * dr.inv_two_pi"
 
-    records = reproduce.reproduce([reproduce.BY_NAME["model_span"]], plant=plant, echo=lambda line: None)
+    def plant(main: Path):
+        path = main / "mifaces" / "brdf" / "phong.py"
+        source = path.read_text()
+        assert source.count(old) == 1
+        path.write_text(source.replace(old, bug))
+
+    records = reproduce.reproduce([reproduce.BY_NAME["brdf_energy"]], plant=plant, echo=lambda line: None)
     assert [r["status"] for r in records] == ["differs"]
-    assert any("mean_residual_mm" in d for d in records[0]["differences"])
+    assert any(d.startswith("/variants[0]/albedo") for d in records[0]["differences"])
 
 
 def test_compare_tolerances_and_ignored_keys(reproduce):

@@ -77,3 +77,16 @@ def test_a_changed_layout_does_not_crash(tmp_path):
     text = out.read_text()
     assert "## Held-out relighting on the Yale face database: `real_yaleb.json`" in text
     assert "Not readable as JSON" in text
+
+
+def test_rankings_over_subjects_call_ties_within_their_spread(monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT / "validation"))
+    import results_format as f
+
+    # b beats a by 0.01 on every subject: no tie; c is 0.001 better than b on average but worse on one
+    # subject of three, with a spread that covers the gap: a tie
+    per = {"a": [0.30, 0.31, 0.29], "b": [0.29, 0.30, 0.28], "c": [0.30, 0.291, 0.275]}
+    assert f.ranked_with_ties(per) == "c 0.289 ≈ b 0.290 < a 0.300"
+    assert f.spread([1.0, 3.0]) == (2.0, 2 ** 0.5) and f.spread([1.0]) is None
+    # a difference alike on every subject is never a tie, however small
+    assert f.ranked_with_ties({"x": [0.1, 0.2, 0.3], "y": [0.1001, 0.2001, 0.3002]}, 4) == "x 0.2000 < y 0.2001"

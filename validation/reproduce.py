@@ -107,8 +107,6 @@ REGISTRY: tuple[Entry, ...] = (
     Entry("bench_shape_kernels", _py("bench_shape_kernels"), ("bench_shape_kernels.json",), kind="benchmark",
           minutes=15),
     Entry("bench_pipeline", _py("bench_pipeline"), ("bench_pipeline.json",), kind="benchmark", minutes=10),
-    Entry("bench_pipeline_warm", _py("bench_pipeline", "--no-cold", "--name", "bench_pipeline_warm"),
-          ("bench_pipeline_warm.json",), kind="benchmark", minutes=5),
     Entry("bench_pipeline_refine_shape", _py("bench_pipeline", "--args", "--refine-shape", "--name",
                                              "bench_pipeline_refine_shape"),
           ("bench_pipeline_refine_shape.json",), kind="benchmark", minutes=15),
@@ -334,8 +332,10 @@ def reproduce(entries, *, repo: Path = REPO, keep: Path | None = None, plant=Non
             with open(log_path, "w") as log:
                 code, seconds = rerun(entry, main, log)
             for name in entry.outputs:
+                script = repo / entry.argv[1] if entry.argv[0] == "python" else None
                 record = {"file": name, "entry": entry.name, "seconds": round(seconds, 1),
-                          "code": provenance.code_hash(repo / entry.argv[1]) if entry.argv[0] == "python" else None}
+                          "code": None if script is None else provenance.code_hash(script),
+                          "dirty": None if script is None else provenance.dirty(provenance.dependencies(script))}
                 made = main / "validation" / "results" / name
                 if code != 0 or not made.exists():
                     tail = log_path.read_text()[-2000:]
@@ -397,9 +397,8 @@ def record(records: list[dict], results: Path = RESULTS) -> None:
     commit = provenance._git("rev-parse", "HEAD")
     date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d")
     for r in records:
-        reproduced[r["file"]] = {"date": date, "commit": commit, "dirty": provenance.dirty([Path("mifaces"),
-                                 Path("plugins"), Path("validation")]), "status": r["status"], "code": r["code"],
-                                 "seconds": r["seconds"]}
+        reproduced[r["file"]] = {"date": date, "commit": commit, "dirty": r.get("dirty"), "status": r["status"],
+                                 "code": r["code"], "seconds": r["seconds"]}
     provenance.write_json(results / "reproduced.json", {
         "note": "Per result file: when validation/reproduce.py last reran it, at which commit, against which "
                 "code hash (validation/provenance.py) and whether it matched the committed file.",

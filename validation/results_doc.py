@@ -15,7 +15,11 @@ from a known layout shows as "—". The tables are drawn by one function per lay
 Run:  python validation/results_doc.py [--results DIR] [--out FILE] [--check]
 
 ``--check`` writes nothing and exits 1 when FILE differs from what would be
-written (for CI and ``tests/test_results_doc.py``). Standard library only.
+written (for CI and ``tests/test_results_doc.py``), or when a figure of the
+hand-written pages beside FILE (``README.md`` above its folder, the other pages
+in it) is backed by no result in DIR its section names, is no setting it names,
+and is not marked as a citation (``doc_figures.py``, ``tests/test_doc_figures.py``).
+Standard library only.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+import doc_figures  # noqa: E402  (the figures of the hand-written docs, checked with --check)
 from results_format import DASH, get  # noqa: E402  (the formatting helpers)
 from results_tables_fits import (  # noqa: E402  (one function per result layout)
     sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_depth_cameras, sec_floor_depth,
@@ -359,10 +364,15 @@ def main(argv: list[str] | None = None) -> int:
             current = args.out.read_text(encoding="utf-8")
         except OSError:
             current = None
-        if current != content:
+        failed = current != content
+        if failed:
             print(f"{args.out} is out of date: run python validation/results_doc.py", file=sys.stderr)
-            return 1
-        return 0
+        unbacked = doc_figures.check(doc_figures.pages_beside(args.out), args.results)
+        if unbacked:
+            print(f"{len(unbacked)} figure(s) in the hand-written docs backed by no result their section names "
+                  f"(validation/doc_figures.py says how to back or mark one):\n{doc_figures.report(unbacked)}",
+                  file=sys.stderr)
+        return 1 if failed or unbacked else 0
     write_atomic(args.out, content)
     return 0
 

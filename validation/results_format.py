@@ -99,3 +99,30 @@ def listed(label: str, pairs) -> list[str]:
     """A sentence ``label: key: value; ...`` of a dict's pairs, or nothing where it has none."""
     pairs = items(pairs)
     return [f"{label}: " + "; ".join(f"{k}: {text(v)}" for k, v in pairs) + ".", ""] if pairs else []
+
+
+def spread(values) -> tuple[float, float] | None:
+    """Mean and sample standard deviation of the finite ``values`` (None with fewer than two)."""
+    v = [float(x) for x in values if finite(x)]
+    if len(v) < 2:
+        return None
+    m = sum(v) / len(v)
+    return m, math.sqrt(sum((x - m) ** 2 for x in v) / (len(v) - 1))
+
+
+def ranked_with_ties(per_item: dict, decimals: int = 3) -> str:
+    """``a 0.284 ≈ b 0.285 < c 0.301``: names ordered by their mean over the items (subjects or seeds);
+    ``≈`` where the paired difference to the next is within twice its standard error over the items
+    (the spread of the items, not a ranking's single draw). ``per_item``: name -> list of values, one per
+    item, in the same item order for every name."""
+    means = {k: mean(v) for k, v in per_item.items() if mean(v) is not None}
+    order = sorted(means, key=means.get)
+    out = ""
+    for i, name in enumerate(order):
+        if i:
+            pairs = [(a, b) for a, b in zip(per_item[order[i - 1]], per_item[name]) if finite(a) and finite(b)]
+            diff = spread([b - a for a, b in pairs])
+            tie = diff is None or diff[0] <= 2 * diff[1] / math.sqrt(len(pairs))
+            out += " ≈ " if tie else " < "
+        out += f"{name} {fixed(means[name], decimals)}"
+    return out

@@ -4,7 +4,8 @@ result layout, used by ``validation/results_doc.py``)."""
 
 from __future__ import annotations
 
-from results_format import DASH, finite, fixed, get, items, mean, num, pct, rows_of, table, text
+from results_format import (DASH, finite, fixed, get, items, mean, num, pct, ranked_with_ties, rows_of, spread,
+                            table, text)
 
 
 def sec_bench_brdf_fit(d):
@@ -181,15 +182,48 @@ def sec_export(d):
 
 
 def sec_model_span(d):
+    target, met = d.get("target") or {}, d.get("target_met") or {}
     lines = [f"Model {text(d.get('model'))} ({text(d.get('model_modes'))} modes) fitted to {text(d.get('faces'))} "
-             f"random faces of {text(d.get('reference'))} on {text(d.get('landmarks'))} landmarks; modes chosen on the "
-             f"training faces: {text(d.get('chosen_on_train'))}; the shape fit's default: "
-             f"{text(d.get('fit_shape_modes'))} modes. Test faces:", ""]
+             f"random faces of {text(d.get('reference'))}: test seed {text(d.get('test_seed'))}, on which the figures "
+             f"are reported; training seed {text(d.get('train_seed'))}, on which the mode counts are chosen (the "
+             f"fewest within {text(d.get('enough_mm'))} mm of all {text(d.get('model_modes'))}). Target "
+             f"({text(target.get('from'))}): a mean of at most {text(target.get('mean_mm'))} mm with no coefficient "
+             f"beyond {text(target.get('max_abs_coefficient_sd'))} sd on the test faces.", "",
+             f"**Landmarks** ({text(d.get('landmarks'))} landmarks, prior weight {text(d.get('prior_weight_mm2'))} "
+             "mm²): "
+             f"modes chosen on the training faces: {text(d.get('chosen_on_train'))}; the shape fit's default: "
+             f"{text(d.get('fit_shape_modes'))} modes ({text(d.get('fit_shape_modes_note'))}) Target met, by modes: "
+             f"{text(met.get('landmarks'))}. Test faces:", ""]
     rows = [[k, fixed(get(v, "mean_residual_mm"), 2), fixed(get(v, "inner_mean_residual_mm"), 2),
              fixed(get(v, "worst_face_residual_mm"), 2), fixed(get(v, "mean_max_abs_coefficient_sd"), 2),
              fixed(get(v, "max_abs_coefficient_sd"), 2)] for k, v in items(d.get("test"))]
-    return lines + table(["modes", "mean residual (mm)", "inner points (mm)", "worst face (mm)",
-                          "mean largest coefficient (sd)", "largest coefficient (sd)"], rows)
+    lines += table(["modes", "mean residual (mm)", "inner points (mm)", "worst face (mm)",
+                    "mean largest coefficient (sd)", "largest coefficient (sd)"], rows)
+    surface = d.get("surface")
+    if not isinstance(surface, dict):
+        return lines
+    region, weights = surface.get("region") or {}, surface.get("prior_weight_mm2") or {}
+    fits = list(weights)
+    lines += [f"**Surface**: from the landmark fit, the identity and a rigid pose fitted to the Surrey face's "
+              f"surface ({text(surface.get('rounds'))} point-to-plane rounds) over the face region: "
+              f"{text(region.get('vertices'))} vertices, {fixed(region.get('area_mm2'), 0)} mm², labels "
+              f"{text(region.get('labels'))}, whose closest "
+              f"point on the Surrey mean face lies within {text(region.get('depth_mm'))} mm and at least "
+              f"{text(region.get('margin_mm'))} mm from its border. Reported: the area-weighted mean distance from "
+              "the fitted face to the Surrey surface, with each prior weight (mm²): "
+              f"{text(weights)}. Modes chosen on the training faces: {text(surface.get('chosen_on_train'))}. Target "
+              "met, by modes: " + "; ".join(f"{name}: {text(met.get('surface_' + name))}" for name in fits)
+              + ". Test faces (`border`: the largest share of the region's area whose closest point lies on the "
+              "Surrey mesh's border, on any face):", ""]
+    rows = [[k, fixed(get(v, "landmark_fit_distance_mm"), 2),
+             *[cell for name in fits for cell in (fixed(get(v, name, "mean_distance_mm"), 2),
+                                                   fixed(get(v, name, "worst_face_distance_mm"), 2),
+                                                   fixed(get(v, name, "max_abs_coefficient_sd"), 2),
+                                                   pct(get(v, name, "max_border_area_share")))]]
+            for k, v in items(surface.get("test"))]
+    header = [f"{name}: {label}" for name in fits
+              for label in ("mean (mm)", "worst face (mm)", "largest coefficient (sd)", "border")]
+    return lines + table(["modes", "after the landmark fit (mm)", *header], rows)
 
 
 def sec_mutations(d):
@@ -262,15 +296,25 @@ def sec_real_diligent(d):
 
 
 def _yale_table(overall, subjects):
-    """Rows per predictor: all / small / large shadows, then each subject's all."""
+    """Rows per predictor: all / small / large shadows, the mean and spread over the subjects, then each
+    subject's all; below, the predictors ranked by their mean over the subjects, with ties."""
     names = [text(s.get("subject", key)) if isinstance(s, dict) else key for key, s in subjects]
-    rows = []
+    rows, per_subject = [], {}
     for predictor, r in items(get(overall, "relative_rmse")):
+        values = [get(s, "relative_rmse", predictor, "all") if get(s, "relative_rmse") is not None
+                  else get(s, predictor, "all") for _, s in subjects]
+        per_subject[predictor] = values
+        over = spread(values)
         rows.append([predictor, fixed(get(r, "all"), 3), fixed(get(r, "small_shadows"), 3),
                      fixed(get(r, "large_shadows"), 3),
-                     *[fixed(get(s, "relative_rmse", predictor, "all") if get(s, "relative_rmse") is not None
-                             else get(s, predictor, "all"), 3) for _, s in subjects]])
-    return table(["predictor", "all held-out", "small shadows", "large shadows", *names], rows)
+                     DASH if over is None else f"{over[0]:.3f} ± {over[1]:.3f}", *[fixed(v, 3) for v in values]])
+    lines = table(["predictor", "all held-out", "small shadows", "large shadows", "mean ± sd over subjects",
+                   *names], rows)
+    full = {k: v for k, v in per_subject.items() if not k.endswith("_diffuse_only")}
+    if len(subjects) > 1 and full:
+        lines += [f"Ranked by the mean over the {len(subjects)} subjects: {ranked_with_ties(full)} (≈: the "
+                  "paired difference over the subjects is within twice its standard error: a tie).", ""]
+    return lines
 
 
 def sec_real_yaleb(d):

@@ -41,7 +41,8 @@ YALE = Roles("Extended Yale B subject", frozenset(f"yaleB{i:02d}" for i in range
 #: Scripts that choose a default, and what they choose. Each calls :func:`require_development` on the
 #: data the choice is made on.
 CHOOSERS = {
-    "validation/model_span.py": "the shape fit's mode count (training faces)",
+    "validation/model_span.py": "the mode counts it records as chosen on its training faces (the shape fit's "
+                                "default, 50, predates it)",
     "validation/albedo_rounds.py": "the albedo rounds and the texel albedo",
     "validation/uncertainty.py": "the intervals' tiling (--tune, --tune-tiles)",
     "validation/environment_lights.py": "restart_under_maps (--tuning)",
