@@ -70,7 +70,7 @@ from mifaces.atomic import save_figure, write_json
 from mifaces.image_files import write_exr, write_png
 from mifaces.shape.io import load_geometry
 from mifaces.importers.yaleb import default_split, import_subject, read_subject
-from mifaces.pipeline import SHAPES, measure
+from mifaces.pipeline import SHAPES, NoUsableShapeError, measure
 from mifaces.reflectance import FitOptions, fit_brdf, load_estimate
 from mifaces.refine.shape import ShapeRefineSchedule
 from mifaces.render import FaceScene
@@ -388,15 +388,23 @@ def main(argv=None) -> int:
         return comparison(args, subjects, models, argv, "interreflection")
     if args.texel_albedo:
         return comparison(args, subjects, models, argv, "texel_albedo")
-    results = []
+    results, failed = [], []
     for subject in subjects:
         print(f"== {subject}", flush=True)
-        results.append(subject_run(args.data / subject, args.out / subject, args.train, models, args.spp,
-                                   args.shadow_angle, args.resolution, refine=args.refine,
-                                   refine_shape=args.refine_shape
-                                   and ShapeRefineSchedule(judged=args.refine_shape_judged,
-                                                           early_stop=args.refine_shape_early_stop)))
+        try:
+            results.append(subject_run(args.data / subject, args.out / subject, args.train, models, args.spp,
+                                       args.shadow_angle, args.resolution, refine=args.refine,
+                                       refine_shape=args.refine_shape
+                                       and ShapeRefineSchedule(judged=args.refine_shape_judged,
+                                                               early_stop=args.refine_shape_early_stop)))
+        except NoUsableShapeError as error:  # one subject's failure is recorded; the others go on
+            failed.append({"subject": subject, "error": str(error).split("; ")[0][:400]})
+            print(f"{subject}: no usable face shape, left out: {failed[-1]['error']}", flush=True)
+            continue
         print({k: round(v["all"], 4) for k, v in results[-1]["relative_rmse"].items()}, flush=True)
+    if not results:
+        print("no subject could be measured", file=sys.stderr)
+        return 1
     overall = summary(results, models)
     document = {"data": "Extended Yale Face Database B (cropped), real photographs", "train_lights": args.train,
                 "models": list(models), "spp": args.spp, "texture_resolution": args.resolution,
@@ -404,7 +412,7 @@ def main(argv=None) -> int:
                 "refine_shape_judged": args.refine_shape_judged if args.refine_shape else None,
                 "refine_shape_early_stop": args.refine_shape_early_stop if args.refine_shape else None,
                 "command": "python validation/real_yaleb.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-                "overall": overall,
+                "overall": overall, "failed_subjects": failed,
                 "subjects": [{k: v for k, v in r.items() if k != "errors"} for r in results]}
     suffix = (("" if args.train == 8 else f"_train{args.train}") + ("_refine" if args.refine else "")
               + ("_refine_shape" if args.refine_shape else "")

@@ -336,6 +336,10 @@ def sec_real_yaleb(d):
              f"best model {text(overall.get('best_model'))}, {fixed(overall.get('best_vs_photometric_stereo'), 2)}× "
              "photometric stereo's error.", ""]
     lines += _yale_table(overall, subjects)
+    failed = rows_of(d.get("failed_subjects"))
+    if failed:
+        lines += ["Left out, their faces not fitted (`mifaces measure` stops on them too): "
+                  + "; ".join(f"{text(f.get('subject'))}: {text(f.get('error'))}" for f in failed) + ".", ""]
     ratios = items(overall.get("refined_vs_unrefined"))
     if ratios:
         lines += ["Refined over unrefined error:", ""]
