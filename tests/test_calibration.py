@@ -119,6 +119,15 @@ def test_a_sphere_without_highlight_is_left_out(studio):
     ground_truth = read_ground_truth(studio)
     head, position = ground_truth.head_center, ground_truth.light("L00").position
     assert np.linalg.norm(cal.position - position) < 0.03 * np.linalg.norm(position - head)
+    # in the shadow it shows only a faint reflection (a twentieth of the brightest highlight): a highlight
+    # find_highlight finds, which calibrate_light leaves out by its peak
+    spot = np.exp(-((cols - first.center_px[0] - 0.3 * first.radius_px) ** 2
+                    + (rows - first.center_px[1] + 0.2 * first.radius_px) ** 2) / (2 * 1.5 ** 2))
+    faint = dataclasses.replace(highlight, pixels=highlight.pixels + (0.05 * spheres.highlight.pixels.max() * spot
+                                                                      * disc)[..., None])
+    cal = calibrate_light(dataclasses.replace(spheres, highlight=faint), capture.camera)
+    assert len(cal.spheres) == 3 and len(cal.rejected) == 1
+    np.testing.assert_allclose(cal.rejected[0].center, first.center)
     # with one sphere left there is nothing to triangulate
     dark = dataclasses.replace(spheres.highlight, pixels=np.full_like(spheres.highlight.pixels, 1e-3))
     dark.pixels[int(first.center_px[1]), int(first.center_px[0])] = 1.0

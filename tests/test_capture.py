@@ -7,11 +7,12 @@ Corruption tests change a hard-linked copy of the shared simulated capture
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from mifaces.capture import (FEATURE_POINT_RANGE, MANIFEST, Camera, CaptureError, WhiteTarget, decode,
+from mifaces.capture import (FEATURE_POINT_RANGE, MANIFEST, Camera, Capture, CaptureError, WhiteTarget, decode,
                              load_capture, read_image)
 from mifaces.image_files import read_exr, write_exr, write_png
 from test_simulate import STUDIO, copy_capture, studio  # noqa: F401  (studio: the shared session fixture)
@@ -95,12 +96,17 @@ def test_read_image_divides_by_the_exposure_and_flags_clipping(tmp_path):
 
 
 def test_white_target_reflectance_scale():
-    """r = s R d^2 / (I cos): a Lambertian target of reflectance rho lit frontally by intensity I at d
-    shows radiance rho I / (pi d^2); s is chosen so r = rho (independently: s = pi)."""
-    intensity, d, rho = np.array([1e6, 2e6, 3e6]), 1500.0, 0.9
-    value = rho * intensity / (np.pi * d ** 2)
-    target = WhiteTarget(value, rho, d, intensity)
-    np.testing.assert_allclose(target.reflectance_scale(), np.pi)
+    """r = s R d^2 / (I cos): a Lambertian target of reflectance rho lit by intensity I at d and
+    incidence cosine cos shows radiance rho I cos / (pi d^2); s is chosen so r = rho (independently:
+    s = pi), frontal or tilted, near or far. A capture without a target takes s = pi (reflectance
+    relative to the lights' stated intensities)."""
+    intensity, rho = np.array([1e6, 2e6, 3e6]), 0.9
+    for d, cos in ((1500.0, 1.0), (700.0, 0.6)):
+        value = rho * intensity * cos / (np.pi * d ** 2)
+        target = WhiteTarget(value, rho, d, intensity, cos)
+        np.testing.assert_allclose(target.reflectance_scale(), np.pi)
+        assert Capture(Path("c"), _camera(), (), (), (), target).reflectance_scale() == pytest.approx([np.pi] * 3)
+    np.testing.assert_array_equal(Capture(Path("c"), _camera(), (), (), (), None).reflectance_scale(), np.pi)
 
 
 # --------------------------------------------------------------------------------------------

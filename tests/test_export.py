@@ -180,6 +180,116 @@ def test_obj_and_usd_are_written_and_open(measured, tmp_path):
     assert (tmp_path / texture.path).is_file()
 
 
+def _srgb(linear):
+    """The sRGB transfer function (IEC 61966-2-1), written out: linear [0, 1] -> encoded."""
+    linear = np.clip(linear, 0.0, 1.0)
+    return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
+
+
+def _linear(encoded):
+    """The inverse of :func:`_srgb`."""
+    return np.where(encoded <= 0.04045, encoded / 12.92, ((encoded + 0.055) / 1.055) ** 2.4)
+
+
+def _png(data: bytes) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(data)), np.float64) / 255.0
+
+
+#: Two regions' Cook-Torrance lobes: the specular scale large enough that the base colour's division by
+#: 1 - f0 shows, roughness and index unlike each other.
+CONVENTIONS = {"model": "cooktorrance", "options": {},
+               "regions": {"skin": {"specular_reflectance": [4.0, 3.5, 3.0], "roughness": 0.3, "eta": 1.45},
+                           "lips": {"specular_reflectance": [2.0, 1.5, 1.0], "roughness": 0.55, "eta": 1.38}}}
+
+
+def test_each_format_writes_its_texture_conventions(tmp_path):
+    """glTF, OBJ and USD of one face with known lobes, read back: base colour sRGB-encoded and divided
+    by 1 - max f0, roughness √α linear in G (B, metallic, 0), glTF's F0(η_material) × specular colour ×
+    f90 the lobe's f0, texture v = 0 the top row in glTF and counted from the bottom in OBJ and USD,
+    USD's colour spaces and channels; every value from the lobe's parameters written out here."""
+    import pygltflib
+    from pxr import Usd, UsdShade
+
+    from mifaces.brdf.materials import SKIN_REFRACTIVE_INDEX
+    from mifaces.export.face import ExportedFace, material_textures
+    from mifaces.export.gltf import write_gltf
+    from mifaces.export.obj import write_obj
+    from mifaces.export.usd import write_usd
+    from mifaces.model import load_model
+    from mifaces.model.regions import REGIONS, texel_regions_of_mesh
+
+    model = load_model("builtin")
+    r = 32
+    rows, cols = np.mgrid[:r, :r]
+    albedo = np.stack([0.1 + 0.6 * cols / r, 0.1 + 0.5 * rows / r, np.full((r, r), 0.3)], axis=2)
+    labels = texel_regions_of_mesh(model.region_map, model.uv, model.triangles, r)
+    textures, color_scale, _ = material_textures(CONVENTIONS, albedo, labels)
+    tangent, _, normal = model.tangent_frames()
+    face = ExportedFace(model.shape_mean / 1000, normal, np.concatenate([tangent, np.ones((len(tangent), 1))], 1),
+                        model.uv, model.triangles.astype(np.uint32), textures, color_scale)
+    expected = {}  # region -> (base colour (texels, 3) linear, roughness, f0 (3,))
+    for name, params in CONVENTIONS["regions"].items():
+        where = labels == REGIONS[name]
+        f0 = np.array(params["specular_reflectance"]) * ((params["eta"] - 1) / (params["eta"] + 1)) ** 2
+        expected[name] = (where, np.clip(albedo[where] / (1 - f0.max()), 0, 1), np.sqrt(params["roughness"]), f0)
+    assert all(where.sum() > 5 for where, *_ in expected.values())
+
+    def check_base_and_roughness(base, rough):
+        for name, (where, colour, roughness, _) in expected.items():
+            np.testing.assert_allclose(base[where][:, :3], _srgb(colour), atol=0.6 / 255, err_msg=name)
+            np.testing.assert_allclose(rough[where][:, 1], roughness, atol=0.6 / 255, err_msg=name)
+            assert not rough[where][:, [0, 2]].any()  # metallic 0 (B), R unused
+
+    # glTF: images by their names, texture coordinates as the model's
+    (path,) = write_gltf(face, tmp_path / "face.glb")
+    document = pygltflib.GLTF2().load(str(path))
+    blob = document.binary_blob()
+
+    def view(index):
+        v = document.bufferViews[index]
+        return blob[v.byteOffset:v.byteOffset + v.byteLength]
+
+    images = {image.name: _png(view(image.bufferView)) for image in document.images}
+    check_base_and_roughness(images["base_color"], images["metallic_roughness"])
+    material = document.materials[0]
+    specular = material.extensions["KHR_materials_specular"]
+    factor = np.asarray(specular["specularColorFactor"])
+    eta = material.extensions["KHR_materials_ior"]["ior"]
+    assert eta == SKIN_REFRACTIVE_INDEX
+    for name, (where, _, _, f0) in expected.items():
+        texels = images["specular"][where]
+        f90 = texels[:, 3]  # linear
+        # glTF: f0 = f90 · min(F0(ior) · specularColor, 1)
+        rendered = f90[:, None] * np.minimum(((eta - 1) / (eta + 1)) ** 2 * _linear(texels[:, :3]) * factor, 1.0)
+        np.testing.assert_allclose(rendered, np.broadcast_to(f0, rendered.shape), rtol=0.02, err_msg=name)
+    accessor = document.accessors[document.meshes[0].primitives[0].attributes.TEXCOORD_0]
+    uv = np.frombuffer(view(accessor.bufferView), np.float32).reshape(-1, 2)
+    np.testing.assert_allclose(uv, model.uv, atol=1e-7)  # glTF: v = 0 the texture's top row
+    # OBJ: vt counted from the bottom; its colour texture the sRGB base colour
+    written = write_obj(face, tmp_path / "face.obj")
+    vt = np.array([line.split()[1:3] for line in (tmp_path / "face.obj").read_text().splitlines()
+                   if line.startswith("vt ")], np.float64)
+    assert len(vt) == model.vertex_count
+    np.testing.assert_allclose(vt, np.column_stack([model.uv[:, 0], 1 - model.uv[:, 1]]), atol=1e-6)
+    assert {p.name for p in written} == {"face.obj", "face.mtl", "face.png"}
+    np.testing.assert_allclose(_png((tmp_path / "face.png").read_bytes())[..., :3], images["base_color"][..., :3])
+    # USD: st counted from the bottom, the base colour read as sRGB, roughness from G of a raw texture
+    write_usd(face, tmp_path / "face.usda")
+    stage = Usd.Stage.Open(str(tmp_path / "face.usda"))
+    check_base_and_roughness(*(_png((tmp_path / f"face_{n}.png").read_bytes()) for n in ("base_color",
+                                                                                       "metallic_roughness")))
+    shaders = {name: UsdShade.Shader(stage.GetPrimAtPath(f"/Face/Material/{name}"))
+               for name in ("Surface", "BaseColor", "MetallicRoughness")}
+    assert shaders["BaseColor"].GetInput("sourceColorSpace").Get() == "sRGB"
+    assert shaders["MetallicRoughness"].GetInput("sourceColorSpace").Get() == "raw"
+    source, output, _ = shaders["Surface"].GetInput("roughness").GetConnectedSource()
+    assert source.GetPath() == shaders["MetallicRoughness"].GetPath() and output == "g"
+    source, output, _ = shaders["Surface"].GetInput("diffuseColor").GetConnectedSource()
+    assert source.GetPath() == shaders["BaseColor"].GetPath() and output == "rgb"
+
+
 def test_cli_exports_the_fitted_shape_of_a_measurement(measured, tmp_path):
     from click.testing import CliRunner
 
@@ -273,6 +383,21 @@ def test_normal_map_is_converted_to_gltfs_tangent_frame(tmp_path):
     world_raw /= np.linalg.norm(world_raw, axis=1, keepdims=True)
     raw = np.degrees(np.arccos(np.clip(np.sum(world_raw * world_true, axis=1), -1, 1)))
     assert np.percentile(angle, 99) <= np.percentile(raw, 99) + 0.5  # the conversion is no worse where frames differ
+
+
+def test_exported_tangents_are_the_frame_the_normal_map_is_written_in(measured):
+    """The exported face's tangents are ∂p/∂u made orthogonal to the normal with w = +1, so glTF's
+    bitangent n × t · w is the model's tangent frame's, the one :func:`gltf_normals` re-expresses the
+    normal map in (the round trip above)."""
+    from mifaces.export import exported_face
+    from mifaces.model import load_model
+
+    face = exported_face(measured / "brdf" / "cooktorrance")
+    tangent, bitangent, normal = load_model("builtin").tangent_frames()
+    np.testing.assert_allclose(face.tangents[:, :3], tangent, atol=1e-6)
+    np.testing.assert_allclose(face.normals, normal, atol=1e-6)
+    np.testing.assert_allclose(np.cross(face.normals, face.tangents[:, :3]) * face.tangents[:, 3:], bitangent,
+                               atol=1e-5)
 
 
 # --------------------------------------------------------------------------------------------

@@ -34,10 +34,30 @@ def test_lambertian_sphere_is_recovered_exactly():
     mask, normals, albedo = _sphere()
     directions = _directions()
     images = np.stack([ps.predict(albedo, normals, d) for d in directions])
+    # a pixel turned away from a light is dark, never negative
+    assert images.min() == 0.0 and (images[:, mask] == 0).any()
     rho, n = ps.fit(images, directions, mask)
     np.testing.assert_allclose(n[mask], normals[mask], atol=1e-9)
     np.testing.assert_allclose(rho, albedo, atol=1e-9)
     assert not n[~mask].any() and not rho[~mask].any()
+
+
+def test_shadows_are_judged_against_each_pixels_brightest():
+    """Light that does not come from the lamps (ambient, 1 % of the brightest) lifts the shadows off
+    zero: they are left out as shadowed however bright or dim the photographs are (the same fit of
+    the images scaled by 10⁻³), and kept they would bias the normals."""
+    mask, normals, albedo = _sphere()
+    directions = _directions(count=16, seed=3)
+    images = np.stack([ps.predict(albedo, normals, d) for d in directions])
+    lit = np.all(images[:, mask].mean(axis=2) > 0.05 * images[:, mask].mean(axis=2).max(axis=0), axis=0)
+    images = images + 0.01 * images.max()
+    rho, n = ps.fit(images, directions, mask)
+    dim_rho, dim_n = ps.fit(images * 1e-3, directions, mask)
+    np.testing.assert_allclose(dim_n, n, atol=1e-9)
+    np.testing.assert_allclose(dim_rho, rho * 1e-3, rtol=1e-9, atol=1e-15)
+    _, kept = ps.fit(images, directions, mask, shadow=0.0)
+    error, kept_error = (ps.angular_error(m, normals, mask) for m in (n, kept))
+    assert (~lit).sum() > 10 and np.median(kept_error[~lit]) > 2 * np.median(error[~lit])
 
 
 def test_grey_images_give_a_grey_albedo():
@@ -57,6 +77,7 @@ def test_saturated_observations_are_left_out():
     saturated = np.any(images >= 0.6, axis=3)
     rho, n = ps.fit(clipped, directions, mask, saturated)
     np.testing.assert_allclose(n[mask], normals[mask], atol=1e-9)
+    np.testing.assert_allclose(rho, albedo, atol=1e-9)
     wrong, _ = ps.fit(clipped, directions, mask)  # the clipped values, kept, bias the fit
     assert np.abs(wrong - albedo).max() > 0.01
 

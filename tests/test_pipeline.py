@@ -127,7 +127,8 @@ def test_cli_measure_prints_skin_and_errors(capture_dir, tmp_path):
     assert "skin:" in line and "alpha=" in line and "specular_reflectance=[" in line
     assert "vs ground truth" not in line  # the truth is Cook-Torrance: no parameter errors for Ward
     assert f"report: {out}/report.md" in result.output
-    assert "ranked by held-out lights (novel pose, relative image RMSE): ward " in result.output
+    assert ("ranked by held-out lights (novel pose, relative image RMSE; ≈: within the renders' noise): ward "
+            in result.output)
     assert json.loads((out / "report.json").read_text())["models"].keys() == {"ward"}
 
 

@@ -174,6 +174,87 @@ def test_covariance_rejects_bad_input():
                    np.ones(20), cluster=np.zeros(3))
 
 
+def _linear_problem(rng, samples=40, clusters=6):
+    """A linear least-squares problem ρ = J x - y, three rows (channels) per sample, with a shared
+    error per cluster: x̂, J (N, 3, P), ρ (N, 3) at x̂ and the clusters."""
+    jac = rng.normal(size=(samples, 3, 3))
+    cluster = np.arange(samples) % clusters
+    y = jac @ np.array([0.3, -1.2, 0.7]) + rng.normal(0, 0.1, (samples, 3)) + rng.normal(0, 0.2, (clusters, 1))[cluster]
+    x = np.linalg.lstsq(jac.reshape(-1, 3), y.ravel(), rcond=None)[0]
+    return x, jac, jac @ x - y, y, cluster
+
+
+def test_covariance_estimates_match_their_definitions_on_a_linear_problem():
+    """Where one Newton step is exact (a linear problem): the jackknife is (G-1)/G Σ_g d_g d_gᵀ over the
+    refits d_g = x̂_{-g} - x̂ with cluster g left out (MacKinnon and White 1985), the sandwich
+    c H⁻¹ (Σ_g u_g u_gᵀ) H⁻¹ with c = G/(G-1)·(N-1)/(N-P) (Cameron and Miller 2015, eq. 11), Laplace
+    |ρ|²/(3N-P) H⁻¹; the t quantiles have G-1 and 3N-P degrees of freedom."""
+    rng = np.random.default_rng(3)
+    x, jac, res, y, cluster = _linear_problem(rng)
+    n, p, g = len(res), len(x), cluster.max() + 1
+    scores = np.stack([np.einsum("ncp,nc->p", jac[cluster == k], res[cluster == k]) for k in range(g)])
+    hessians = np.stack([np.einsum("ncp,ncq->pq", jac[cluster == k], jac[cluster == k]) for k in range(g)])
+    h = hessians.sum(axis=0)
+    loss, held = 0.5 * np.sum(res ** 2), np.zeros(p, bool)
+    refits = np.array([np.linalg.lstsq(jac[cluster != k].reshape(-1, p), y[cluster != k].ravel(), rcond=None)[0]
+                       for k in range(g)]) - x
+    inverse = np.linalg.inv(h)
+    expected = {"jackknife": ((g - 1) / g * refits.T @ refits, g - 1),
+                "sandwich": (g / (g - 1) * (n - 1) / (n - p) * inverse @ scores.T @ scores @ inverse, g - 1),
+                "laplace": (np.sum(res ** 2) / (3 * n - p) * inverse, 3 * n - p)}
+    for method, (cov, dof) in expected.items():
+        estimate = covariance(x, h, loss, n, scores, hessians, held, method)
+        np.testing.assert_allclose(estimate.covariance, cov, rtol=1e-8, err_msg=method)
+        assert estimate.dof == dof, method
+
+
+def test_intervals_are_t_quantiles_of_the_covariance_mapped_back():
+    """x̂_k ± t_{0.975, dof} √Cov_kk in the fit's coordinates, mapped to the parameter's units; std by the
+    delta method |∂p/∂x| √Cov_kk; fixed and held parameters get a status instead."""
+    from scipy.stats import t
+
+    from mifaces.reflectance.fit.intervals import Covariance, parameter_intervals
+
+    space = ParameterSpace(brdf_models.model("cooktorrance"), FIXED)
+    x = space.vector({**TRUTH, "specular_reflectance": [0.8, 0.05, 0.8]})
+    var = np.array([0.01, 0.04, 0.09, 0.02, 0.5, 0.03, 0.06])
+    held = np.arange(len(x)) == 5  # the specular scale's blue channel
+    out = parameter_intervals(space, Covariance(x, np.diag(np.where(held, 0.0, var)), held, 4.0, "jackknife"))
+    q = t.ppf(0.975, 4)
+    assert out["eta"] == {"status": "fixed"}
+    assert out["specular_reflectance"]["status"] == ["estimated", "estimated", "at_bound"]
+    for k, f in enumerate(space.free):
+        if held[k]:
+            continue
+        u = out[f.name]
+        ends = u["interval95"]
+        lo, hi = ends if f.channel is None else (ends[0][f.channel], ends[1][f.channel])
+        std = u["std"] if f.channel is None else u["std"][f.channel]
+        half = q * np.sqrt(var[k])
+        assert (lo, hi) == pytest.approx((space.entry_value(f, x[k] - half), space.entry_value(f, x[k] + half)),
+                                         rel=1e-9), f
+        slope = (space.entry_value(f, x[k] + 1e-5) - space.entry_value(f, x[k] - 1e-5)) / 2e-5
+        assert std == pytest.approx(abs(slope) * np.sqrt(var[k]), rel=1e-5), f
+        assert f.lower <= lo < space.entry_value(f, x[k]) < hi <= f.upper
+
+
+def test_a_lafortune_coefficients_interval_stays_within_its_energy_bound():
+    """A coefficient the fit scales by its lobe's energy bound c_max(n) gets value ± t·std, clipped to
+    ±c_max."""
+    from mifaces.reflectance.fit.intervals import Covariance, parameter_intervals
+
+    model = brdf_models.model("lafortune")
+    space = ParameterSpace(model)
+    x = np.zeros(len(space))
+    x[[k for k, f in enumerate(space.free) if f.name == "cz"]] = 3.0  # 0.9 of the bound
+    out = parameter_intervals(space, Covariance(x, np.eye(len(x)), np.zeros(len(x), bool), 50.0, "jackknife"))
+    values = space.values(x)
+    bound = float(model.coefficient_bound(values["exponent"], np.log, np.exp))
+    (lo, hi), std = out["cz"]["interval95"], out["cz"]["std"]
+    assert hi == pytest.approx([bound] * 3) and all(v + 2 * s > bound for v, s in zip(values["cz"], std))
+    assert lo == pytest.approx([v - 2.0086 * s for v, s in zip(values["cz"], std)], rel=1e-3)
+
+
 def test_cluster_sums_match_the_per_sample_jacobian():
     """The kernel's per-cluster u_g and H_g equal sums of the host-side residuals and Jacobian; they
     add up to the fit's own JᵀJ, and its loss is the fit's."""

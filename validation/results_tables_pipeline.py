@@ -230,11 +230,19 @@ def sec_mutations(d):
     mutations = rows_of(d.get("mutations"))
     caught = sum(1 for m in mutations if m.get("caught") is True)
     missed = d.get("missed")
-    lines = [f"Tests run: {text(d.get('tests'))}. {caught} of {len(mutations)} mutations caught; missed: "
-             f"{text(missed) if missed else 'none'}.", ""]
-    return lines + table(["id", "file", "mutation", "caught"],
-                         [[text(m.get("id")), f"`{text(m.get('file'))}`", text(m.get("mutation")), text(m.get("caught"))]
-                          for m in mutations])
+    lines = [f"{caught} of {len(mutations)} mutations caught; missed: {text(missed) if missed else 'none'}."]
+    if "tests" in d:  # (a file of the BRDF-only layout: one list of tests for every mutation)
+        lines[0] = f"Tests run: {text(d.get('tests'))}. " + lines[0]
+    lines.append("")
+    if items(d.get("areas")):
+        lines += ["Per area: what it covers, the tests run against its mutants, and how many they caught.", ""]
+        lines += table(["area", "what", "tests", "mutations", "caught", "kill rate", "missed"],
+                       [[name, text(get(a, "what")), ", ".join(f"`{t}`" for t in get(a, "tests") or []) or DASH,
+                         text(get(a, "mutations")), text(get(a, "caught")), pct(get(a, "kill_rate"), 0),
+                         ", ".join(get(a, "missed") or []) or "none"] for name, a in items(d.get("areas"))])
+    return lines + table(["id", "area", "file", "mutation", "caught"],
+                         [[text(m.get("id")), text(m.get("area")), f"`{text(m.get('file'))}`", text(m.get("mutation")),
+                           text(m.get("caught"))] for m in mutations])
 
 
 def sec_normals_faces(d):

@@ -1,0 +1,95 @@
+"""validation/real_yaleb.py's error measure: the pooled relative RMSE sqrt(Σ err² / Σ photo²) over the
+face's unsaturated pixels of every held-out photograph, pooled over subjects, the best model picked by
+its training error (:func:`mifaces.validation.validator.relative_rmse`), never by the held-out one;
+each against sums written out here."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
+
+import numpy as np
+import pytest
+
+from mifaces.validation.validator import relative_rmse
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def real_yaleb():
+    spec = importlib.util.spec_from_file_location("real_yaleb", ROOT / "validation" / "real_yaleb.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _held_out(rng, count=3, shape=(12, 10)):
+    """Photographs, predictions and valid masks; outside the mask the prediction is far off."""
+    photos = [rng.uniform(0.1, 0.9, shape) for _ in range(count)]
+    valid = [rng.uniform(size=shape) > 0.3 for _ in range(count)]
+    predictions = [np.where(v, p + rng.normal(0, 0.05 * (k + 1), shape), 5.0) for k, (p, v) in
+                   enumerate(zip(photos, valid))]
+    return photos, predictions, valid
+
+
+def test_relative_rmse_is_pooled_over_the_valid_pixels(real_yaleb):
+    rng = np.random.default_rng(0)
+    photos, predictions, valid = _held_out(rng)
+    groups = ["small_shadows", "large_shadows", "large_shadows"]
+    errors = real_yaleb.Errors()
+    for prediction, photo, v, group in zip(predictions, photos, valid, groups):
+        errors.add("model", group, prediction, photo, v)
+
+    def pooled(indices):
+        e = sum(np.sum((predictions[i][valid[i]] - photos[i][valid[i]]) ** 2) for i in indices)
+        return np.sqrt(e / sum(np.sum(photos[i][valid[i]] ** 2) for i in indices))
+
+    result = errors.relative_rmse()["model"]
+    assert result["all"] == pytest.approx(pooled([0, 1, 2]), rel=1e-12)
+    assert result["large_shadows"] == pytest.approx(pooled([1, 2]), rel=1e-12)
+    assert result["small_shadows"] == pytest.approx(pooled([0]), rel=1e-12)
+    # pooled, not the mean of the photographs' own ratios
+    assert result["all"] != pytest.approx(np.mean([pooled([i]) for i in range(3)]), rel=1e-3)
+
+
+def test_summary_pools_subjects_and_picks_the_best_model_by_its_training_error(real_yaleb):
+    rng = np.random.default_rng(1)
+    models = ["phong", "ward"]
+    results, sums = [], {}
+    for subject, training in (("a", {"phong": 0.10, "ward": 0.12}), ("b", {"phong": 0.11, "ward": 0.12})):
+        photos, predictions, valid = _held_out(rng, count=2)
+        errors = real_yaleb.Errors()
+        for key, scale in (("phong", 2.0), ("ward", 1.0), ("photometric_stereo", 1.5)):
+            for prediction, photo, v in zip(predictions, photos, valid):
+                prediction = photo + scale * (prediction - photo)  # phong's held-out error the largest
+                errors.add(key, "small_shadows", prediction, photo, v)
+                e, p = sums.get(key, (0.0, 0.0))
+                sums[key] = (e + np.sum((prediction[v] - photo[v]) ** 2), p + np.sum(photo[v] ** 2))
+        results.append({"subject": subject, "errors": errors, "training_rmse": training,
+                        "fitted_yaw_pitch_roll_deg": {}})
+    out = real_yaleb.summary(results, models)
+    for key, (e, p) in sums.items():
+        assert out["relative_rmse"][key]["all"] == pytest.approx(np.sqrt(e / p), rel=1e-12)
+    assert out["best_model"] == "phong" and out["lowest_heldout_model"] == "ward"
+    assert out["best_vs_photometric_stereo"] == pytest.approx(np.sqrt(sums["phong"][0] / sums["phong"][1])
+                                                             / np.sqrt(sums["photometric_stereo"][0]
+                                                                       / sums["photometric_stereo"][1]))
+    assert out["best_vs_photometric_stereo"] > 1
+
+
+def test_only_the_largest_code_counts_as_saturated(real_yaleb):
+    """The photographs are 8-bit codes / 255: 255 is saturated, 254 is not."""
+    assert 254 / 255 < real_yaleb.SATURATED <= 255 / 255
+
+
+def test_training_rmse_is_the_rms_error_over_the_mean_truth():
+    rng = np.random.default_rng(2)
+    truth = rng.uniform(0.2, 0.8, (9, 8, 3))
+    mask = rng.uniform(size=(9, 8)) > 0.4
+    image = truth + rng.normal(0.0, 0.1, truth.shape) * rng.uniform(0, 2, (9, 8, 1))
+    image[~mask] = 7.0
+    error = image[mask] - truth[mask]
+    assert relative_rmse(image, truth, mask) == pytest.approx(np.sqrt(np.mean(error ** 2)) / truth[mask].mean())
