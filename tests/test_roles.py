@@ -55,6 +55,7 @@ def test_every_chooser_refuses_report_data(roles):
     ("refine_shape_default", ["--seed", "0", "--out", "refine_shape_default_512_tuning.json"]),
     ("refine_seeds", ["--seeds", "1", "--role", "training", "--out", "refine_seeds_train.json"]),
     ("light_calibration_bias", ["--seeds", "4"]),
+    ("refine_judge", ["--seeds", "100", "0"]),
 ])
 def test_a_tuning_run_on_report_seeds_stops_before_any_work(roles, monkeypatch, capsys, tmp_path, script, argv):
     monkeypatch.chdir(tmp_path)  # anything written would land here

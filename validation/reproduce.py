@@ -89,6 +89,11 @@ def _py(script: str, *args: str) -> tuple[str, ...]:
 _YALE, _DILIGENT, _SFM = "../shared/data/yaleb", "../shared/data/diligent_ball", "../shared/models/sfm_3448"
 _F32 = dict(rtol=1e-4, atol=1e-7)   # float32 reductions over threads
 _FIT = dict(rtol=1e-3, atol=1e-6)   # fits whose float32 sums may end an iteration earlier or later
+#: The shape refinement by differentiable rendering: its gradients are scatter-added by several threads, in
+#: an order that changes from run to run, so two runs of one commit differ by up to about 0.7 % in the faces'
+#: errors (refine_shape_default.json, rerun at 9e56701 and 9a56297); its verdict (kept or not) is compared
+#: exactly, its reason (the losses in words) not.
+_REFINE = dict(rtol=2e-2, atol=1e-3, ignore=("reason",))
 
 #: Every result file's command. ``tests/test_reproduce.py`` checks that each JSON in
 #: ``validation/results/`` is some entry's output.
@@ -97,6 +102,8 @@ REGISTRY: tuple[Entry, ...] = (
     Entry("model_span", _py("model_span", "--out", "validation/results/model_span.json"), ("model_span.json",),
           quick=True, kind="deterministic", rtol=1e-6, atol=1e-12, inputs=(_SFM,)),
     Entry("brdf_energy", _py("brdf_energy"), ("brdf_energy.json",), quick=True, kind="deterministic", **_F32),
+    Entry("design_metrics", _py("design_metrics"), ("design_metrics.json",), quick=True, kind="deterministic",
+          ignore=("line", "lines")),
     Entry("brdf_fit_stiff", _py("brdf_fit_stiff"), ("brdf_fit_stiff.json",), quick=True, kind="deterministic",
           ignore=("iterations", "reason"), **_FIT),
     # BRDF fits, plugins and benchmarks
@@ -130,19 +137,21 @@ REGISTRY: tuple[Entry, ...] = (
           **_FIT),
     Entry("joint_outline", _py("joint_outline", "--work", "{work}"), ("joint_outline.json",), minutes=30, **_FIT),
     Entry("refine_shape_default", _py("refine_shape_default", "--work", "{work}"), ("refine_shape_default.json",),
-          minutes=10, **_FIT),
+          minutes=10, **_REFINE),
     Entry("refine_shape_default_early_stop", _py("refine_shape_default", "--work", "{work}", "--early-stop"),
-          ("refine_shape_default_early_stop.json",), minutes=10, **_FIT),
+          ("refine_shape_default_early_stop.json",), minutes=10, **_REFINE),
     Entry("refine_shape_default_judged", _py("refine_shape_default", "--work", "{work}", "--judged", "1"),
-          ("refine_shape_default_judged.json",), minutes=10, **_FIT),
+          ("refine_shape_default_judged.json",), minutes=10, **_REFINE),
+    Entry("refine_judge", _py("refine_judge", "--work", "{work}"), ("refine_judge.json",), minutes=30,
+          **_REFINE),
     Entry("refine_shape_default_512_tuning",
           _py("refine_shape_default", "--resolution", "512", "--seed", "11", "--work", "{work}", "--out",
               "validation/results/refine_shape_default_512_tuning.json"),
-          ("refine_shape_default_512_tuning.json",), minutes=10, **_FIT),
+          ("refine_shape_default_512_tuning.json",), minutes=10, **_REFINE),
     Entry("refine_shape_default_512_tuning_full",
           _py("refine_shape_default", "--resolution", "512", "--seed", "11", "--downsample", "1", "--work", "{work}",
               "--out", "validation/results/refine_shape_default_512_tuning_full.json"),
-          ("refine_shape_default_512_tuning_full.json",), minutes=15, **_FIT),
+          ("refine_shape_default_512_tuning_full.json",), minutes=15, **_REFINE),
     # reflectance on simulated captures
     Entry("truths", _py("truths", "--work", "{work}"), ("truths.json",), minutes=60, **_FIT),
     Entry("pareto", _py("pareto", "--measurements", "2", "6", "--resolutions", "256", "512", "--spp", "16", "64",
@@ -218,7 +227,8 @@ REGISTRY: tuple[Entry, ...] = (
     Entry("unknown_lights", _py("unknown_lights", "--data", _YALE, "--out", "{work}"),
           ("unknown_lights.json",), minutes=30, inputs=(_YALE,), **_FIT),
     *(Entry(f"real_yaleb{suffix}", _py("real_yaleb", "--data", _YALE, "--out", "{work}", *flags),
-            (f"real_yaleb{suffix}.json",), minutes=30, inputs=(_YALE,), **_FIT)
+            (f"real_yaleb{suffix}.json",), minutes=30, inputs=(_YALE,),
+            **(_REFINE if "--refine-shape" in flags else _FIT))
       for suffix, flags in (("", ()), ("_train4", ("--train", "4")), ("_refine", ("--refine",)),
                             ("_normals", ("--normals",)), ("_interreflection", ("--interreflection",)),
                             ("_texel_albedo", ("--texel-albedo",)), ("_refine_shape", ("--refine-shape",)),

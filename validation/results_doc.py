@@ -9,8 +9,8 @@ or real, a table of the key numbers, and the picture
 ``validation/results/<name>.png`` where one exists. A file of a layout this
 script does not know gets one line listing its top-level keys; a key missing
 from a known layout shows as "—". The tables are drawn by one function per layout in
-``results_tables_pipeline.py`` and ``results_tables_fits.py``, with the number formats of
-``results_format.py``; this file maps result files to them and writes the page.
+``results_tables_pipeline.py``, ``results_tables_fits.py`` and ``results_tables_design.py``, with the
+number formats of ``results_format.py``; this file maps result files to them and writes the page.
 
 Run:  python validation/results_doc.py [--results DIR] [--out FILE] [--check]
 
@@ -37,6 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import doc_figures  # noqa: E402  (the figures of the hand-written docs, checked with --check)
 from results_format import DASH, get  # noqa: E402  (the formatting helpers)
+from results_tables_design import sec_design_metrics  # noqa: E402  (the redesign issue's measuring stick)
 from results_tables_fits import (  # noqa: E402  (one function per result layout)
     sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_depth_cameras, sec_floor_depth,
     sec_joint_outline, sec_light_balance_measure, sec_light_calibration_bias, sec_refine, sec_refine_gradient,
@@ -171,7 +172,7 @@ LAYOUTS = {
     "brdf_recovery": ("BRDF recovery", "SIMULATED", sec_brdf_recovery),
     "export": ("Export: glTF's material against each fitted BRDF", "SIMULATED", sec_export),
     "model_span": ("The built-in model's span", "model samples (Surrey Face Model faces)", sec_model_span),
-    "mutations": ("Mutations of the BRDF formulas", "no data: a check of the test suite", sec_mutations),
+    "mutations": ("Mutations: whether the tests catch the bugs they name", "no data: a check of the test suite", sec_mutations),
     "normals_faces": ("Per-texel normals on faces", "SIMULATED", sec_normals_faces),
     "pareto": ("Error against run time of the whole pipeline", "SIMULATED", sec_pareto),
     "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
@@ -185,6 +186,8 @@ LAYOUTS = {
     "refine_shape_default": ("Shape refinement on the default capture", "SIMULATED", sec_refine_shape_default),
     "shape_depth": ("Where the fitted faces lie in depth", "SIMULATED", sec_shape_depth),
     "floor_depth": ("How much of the shape floor is each photograph's depth", "SIMULATED", sec_floor_depth),
+    "design_metrics": ("The redesign's measuring stick (issue 49)", "no data: a count over the source",
+                       sec_design_metrics),
     "depth_cameras": ("What the clicks pin of a face's depth, with one camera or two", "SIMULATED", sec_depth_cameras),
     "silhouette_depth": ("Whether the head's outline could pin each photograph's depth", "SIMULATED",
                          sec_silhouette_depth),
