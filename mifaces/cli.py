@@ -30,8 +30,7 @@ from .image_files import MAX_IMAGE_PIXELS
 from .paths import check_writable
 from .result_set import check_result_target
 from .gallery import render_gallery
-from .importers.diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
-from .importers.yaleb import SPLIT, import_subject
+from .importers.cli import export_calibration_command, import_
 from .capture.detector import NoFaceError, detect_landmarks
 from .cli_options import default, fit_flag, refine_shape_options, renamed, width_x_height
 from .model import load_model
@@ -423,43 +422,8 @@ def landmarks(images: tuple[str, ...], out_path: str, box) -> None:
         raise SystemExit(1)
 
 
-@main.group("import")
-def import_() -> None:
-    """Convert public data sets into captures."""
-
-
-@import_.command("yaleb")
-@click.argument("subject_dir", type=click.Path(exists=True, file_okay=False))
-@click.argument("out", type=click.Path(file_okay=False))
-@click.option("--train", "count", default=None, type=click.IntRange(1),
-              help="Number of training lights, spread over the directions (default 8).")
-@click.option("--train-lights", default=None, help="Training lights instead: stems or tags, e.g. A+000E+00,A+035E-20.")
-@click.option("--force", is_flag=True, help="Write over an existing capture at OUT.")
-@click.option("--unknown-lights", is_flag=True,
-              help="Hide the light directions: same light names, marked unknown, estimated with the face.")
-def yaleb(subject_dir: str, out: str, count: int | None, train_lights: str | None, force: bool,
-          unknown_lights: bool) -> None:
-    """Write the Extended Yale B subject in SUBJECT_DIR as a capture at OUT: the training photographs with
-    their directional lights, the held-out ones named in OUT/split.json."""
-    if count is not None and train_lights is not None:
-        raise click.UsageError("give --train or --train-lights, not both")
-    train = [s.strip() for s in train_lights.split(",") if s.strip()] if train_lights is not None else count or 8
-    try:
-        path = import_subject(subject_dir, out, train, force=force, unknown_lights=unknown_lights)
-    except (FileExistsError, FileNotFoundError, ValueError) as error:
-        raise click.ClickException(str(error)) from None
-    click.echo(f"wrote the capture {path} and {path / SPLIT}")
-
-
-@import_.command("diligent")
-@click.argument("object_dir", type=click.Path(exists=True, file_okay=False))
-@click.argument("out", type=click.Path(file_okay=False))
-@click.option("--force", is_flag=True, help="Write over an existing import at OUT.")
-def diligent(object_dir: str, out: str, force: bool) -> None:
-    """Write the DiLiGenT object in OBJECT_DIR as OUT/diligent.npz (images per unit light intensity, lights, mask;
-    x right, y up, z towards the camera) and OUT/split.json (the fixed training and held-out halves of the lights)."""
-    path = import_diligent(object_dir, out, force=force)
-    click.echo(f"wrote {path / DILIGENT_ARCHIVE} and {path / DILIGENT_SPLIT}")
+main.add_command(import_)
+main.add_command(export_calibration_command)
 
 
 @main.command()

@@ -66,6 +66,12 @@ def test_compare_tolerances_and_ignored_keys(reproduce):
     assert reproduce.compare(dict(old, seconds=9.0, provenance={}), old, exact) == []
     assert reproduce.compare(dict(old, b=[1]), old, loose) == ["/b: 1 items rerun against 2 committed"]
     assert reproduce.compare(dict(old, s="no"), old, loose) == ["/s: 'no' rerun, 'ok' committed"]
+    # a looser tolerance for part of a file only
+    part = reproduce.Entry("z", ("python", "validation/z.py"), ("z.json",), tolerances=(("/fit", 0.05, 0.0),))
+    nested = {"fit": {"d": 1.0}, "exact": 1.0}
+    assert reproduce.compare({"fit": {"d": 1.04}, "exact": 1.0}, nested, part) == []
+    assert reproduce.compare({"fit": {"d": 1.06}, "exact": 1.0}, nested, part) == ["/fit/d: 1.06 rerun, 1.0 committed"]
+    assert reproduce.compare({"fit": {"d": 1.0}, "exact": 1.001}, nested, part) == ["/exact: 1.001 rerun, 1.0 committed"]
     assert reproduce.compare({k: v for k, v in old.items() if k != "a"}, old, loose) == [
         "/a: only in the committed file"]
 

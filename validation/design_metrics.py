@@ -142,8 +142,9 @@ def modules(root: Path, under: str = PACKAGE) -> list[tuple[str, Path]]:
     base = root / under
     if base.is_file():
         return [(under, base)]
+    # (``mifaces/plugins``: where the installed package and reproduce.py's scratch copy put ``plugins/``)
     return [(p.relative_to(root).as_posix(), p) for p in sorted(base.rglob("*.py"))
-            if "__pycache__" not in p.parts]
+            if "__pycache__" not in p.parts and not p.relative_to(root).as_posix().startswith("mifaces/plugins/")]
 
 
 def _excluded(rel: str) -> bool:

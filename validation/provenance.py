@@ -11,7 +11,9 @@ with a ``provenance`` entry beside the script's own keys:
 - ``inputs``: the SHA-256 of every data file it read from outside the code (model data, ``../shared``);
 - ``code``: one SHA-256 over every repository file the script depends on: itself and the modules of
   ``mifaces``, the plugins and ``validation/`` it imports, directly or not, with the data files of their
-  packages (``dependencies``, ``code_hash``; ``import mifaces`` alone loads most of the library).
+  packages (``dependencies``, ``code_hash``; ``import mifaces`` alone loads most of the library);
+- ``packages``: the versions of Python and of the numerical packages (``PACKAGES``): a rerun in a fresh
+  environment may install newer ones, which can move the last digits of a fit.
   ``reproduce.py`` calls a result *stale* when this hash no longer matches the tree's.
 
 A script adds its inputs by path; ``SHARED`` and ``MODEL_DATA`` name the usual ones.
@@ -151,7 +153,24 @@ def provenance(script: str | Path, *, seeds=None, subjects=None, inputs=(), argv
         "subjects": None if subjects is None else [str(s) for s in subjects],
         "inputs": {_display(Path(p)): file_hash(Path(p)) for p in inputs},
         "code": code_hash(script),
+        "packages": packages(),
     }
+
+
+#: The packages whose version can move a result's last digits (a fresh ``pip install`` picks the newest).
+PACKAGES = ("numpy", "scipy", "drjit", "mitsuba", "trimesh", "scikit-image")
+
+
+def packages() -> dict:
+    """The installed versions of :data:`PACKAGES` and Python's (None for one not installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    def get(name):
+        try:
+            return version(name)
+        except PackageNotFoundError:
+            return None
+    return {"python": ".".join(map(str, sys.version_info[:3])), **{name: get(name) for name in PACKAGES}}
 
 
 def _display(path: Path) -> str:

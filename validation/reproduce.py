@@ -76,6 +76,12 @@ class Entry:
     ignore: tuple[str, ...] = ()
     minutes: float = 0.0  # what a rerun takes on 2 cores, roughly (0: under a minute)
     inputs: tuple[str, ...] = ()  # data it reads from outside the code, repository-relative (../shared/…)
+    #: (path prefix, rtol, atol): looser tolerances for part of a file (``/surface``), the first match wins
+    tolerances: tuple[tuple[str, float, float], ...] = ()
+
+    def tolerance(self, path: str) -> tuple[float, float]:
+        """(rtol, atol) at ``path`` (``/a/b[0]/c``) of a result file."""
+        return next(((r, a) for prefix, r, a in self.tolerances if path.startswith(prefix)), (self.rtol, self.atol))
 
     @property
     def script(self) -> Path:
@@ -100,7 +106,11 @@ _REFINE = dict(rtol=2e-2, atol=1e-3, ignore=("reason",))
 REGISTRY: tuple[Entry, ...] = (
     # quick: rerun by CI
     Entry("model_span", _py("model_span", "--out", "validation/results/model_span.json"), ("model_span.json",),
-          quick=True, kind="deterministic", rtol=1e-6, atol=1e-12, inputs=(_SFM,)),
+          quick=True, kind="deterministic", rtol=1e-6, atol=1e-12, inputs=(_SFM,),
+          # the surface-to-surface fit is ICP: which triangle is closest flips with the last digits of the
+          # numerical packages, and a fresh install moved one face's mean distance by 3.7 % (0.551 -> 0.530 mm,
+          # 2026-12-05, numpy 2.4.6); the landmark fits, closed-form, matched to the last digit
+          tolerances=(("/surface", 0.06, 0.005),)),
     Entry("brdf_energy", _py("brdf_energy"), ("brdf_energy.json",), quick=True, kind="deterministic", **_F32),
     Entry("design_metrics", _py("design_metrics"), ("design_metrics.json",), quick=True, kind="deterministic",
           ignore=("line", "lines")),
@@ -267,7 +277,8 @@ def compare(new, old, entry: Entry, path: str = "") -> list[str]:
             and not isinstance(new, bool)):
         if math.isnan(old) and math.isnan(new):
             return []
-        if new == old or abs(new - old) <= entry.atol + entry.rtol * max(abs(new), abs(old)):
+        rtol, atol = entry.tolerance(path)
+        if new == old or abs(new - old) <= atol + rtol * max(abs(new), abs(old)):
             return []
         return [f"{path}: {new!r} rerun, {old!r} committed"]
     return [] if new == old else [f"{path}: {str(new)[:60]!r} rerun, {str(old)[:60]!r} committed"]
@@ -306,9 +317,21 @@ def rerun(entry: Entry, main: Path, log) -> tuple[int, float]:
     return done.returncode, time.perf_counter() - start
 
 
-def stamp(data, entry: Entry):
+def code_state(entry: Entry, repo: Path = REPO) -> dict | None:
+    """The commit, code hash and dirtiness of what a rerun of ``entry`` runs, taken when the tree is
+    copied (None for an entry that runs no script of ours)."""
+    if entry.argv[0] != "python":
+        return None
+    script = repo / entry.argv[1]
+    return {"commit": provenance._git("rev-parse", "HEAD"), "code": provenance.code_hash(script),
+            "dirty": provenance.dirty(provenance.dependencies(script))}
+
+
+def stamp(data, entry: Entry, code: dict | None = None):
     """``data`` with the ``provenance`` of a rerun of ``entry`` (validation/provenance.py) where the
-    script wrote none; a result that is a list, not an object, is returned as it is."""
+    script wrote none; a result that is a list, not an object, is returned as it is. ``code``: the
+    ``commit``, ``dirty`` and ``code`` of the tree the rerun was copied from (taken before it ran: the
+    tree may change during a long run)."""
     if not isinstance(data, dict) or entry.argv[0] != "python":
         return data
     seeds = data.get("seeds") if isinstance(data.get("seeds"), list) else None
@@ -318,7 +341,7 @@ def stamp(data, entry: Entry):
                                    else None, subjects=subjects, inputs=[REPO / i for i in entry.inputs],
                                    argv=[entry.argv[1].replace("validation/", str(REPO / "validation") + "/", 1),
                                          *[a.replace("{work}", "WORK") for a in entry.argv[2:]]])
-    return {**data, "provenance": data.get("provenance") or record}
+    return {**data, "provenance": data.get("provenance") or {**record, **(code or {})}}
 
 
 def reproduce(entries, *, repo: Path = REPO, keep: Path | None = None, plant=None, update: bool = False,
@@ -332,20 +355,20 @@ def reproduce(entries, *, repo: Path = REPO, keep: Path | None = None, plant=Non
     records = []
     with tempfile.TemporaryDirectory(prefix="mifaces-reproduce-", dir=keep) as tmp:
         main = scratch_copy(Path(tmp), repo)
+        copied = {entry.name: code_state(entry, repo) for entry in entries}  # what runs: the tree as copied
         if plant is not None:
             plant(main)
         for entry in entries:
             for name in entry.outputs:
                 (main / "validation" / "results" / name).unlink(missing_ok=True)
             log_path = Path(tmp) / f"{entry.name}.log"
+            ran = copied[entry.name]
             echo(f"{entry.name}: {' '.join(entry.argv)}" + (f" (about {entry.minutes:g} min)" if entry.minutes else ""))
             with open(log_path, "w") as log:
                 code, seconds = rerun(entry, main, log)
             for name in entry.outputs:
-                script = repo / entry.argv[1] if entry.argv[0] == "python" else None
                 record = {"file": name, "entry": entry.name, "seconds": round(seconds, 1),
-                          "code": None if script is None else provenance.code_hash(script),
-                          "dirty": None if script is None else provenance.dirty(provenance.dependencies(script))}
+                          "code": ran and ran["code"], "dirty": ran and ran["dirty"], "commit": ran and ran["commit"]}
                 made = main / "validation" / "results" / name
                 if code != 0 or not made.exists():
                     tail = log_path.read_text()[-2000:]
@@ -357,7 +380,7 @@ def reproduce(entries, *, repo: Path = REPO, keep: Path | None = None, plant=Non
                     record.update(status="differs" if differences else "matches", differences=differences[:20],
                                   n_differences=len(differences))
                     if update:  # the rerun's values where they differ; its provenance either way
-                        new = stamp(json.loads((made if differences else committed).read_text()), entry)
+                        new = stamp(json.loads((made if differences else committed).read_text()), entry, ran)
                         provenance.write_json(committed, new)
                         picture = made.with_suffix(".png")
                         if differences and picture.exists():
@@ -404,9 +427,10 @@ def stale(reproduced: dict, results: Path = RESULTS) -> dict[str, str]:
 def record(records: list[dict], results: Path = RESULTS) -> None:
     """Merge ``records`` into ``reproduced.json`` and rewrite ``stale.json`` from it."""
     reproduced = _load(results / "reproduced.json", {}).get("files", {})
-    commit = provenance._git("rev-parse", "HEAD")
+    head = provenance._git("rev-parse", "HEAD")
     date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d")
     for r in records:
+        commit = r.get("commit") or head  # the commit the rerun was copied at
         reproduced[r["file"]] = {"date": date, "commit": commit, "dirty": r.get("dirty"), "status": r["status"],
                                  "code": r["code"], "seconds": r["seconds"]}
     provenance.write_json(results / "reproduced.json", {
