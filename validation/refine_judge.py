@@ -6,10 +6,14 @@ fit (:func:`mifaces.refine.shape.refine_shape`). Two judges are on offer
 (:attr:`mifaces.refine.shape.ShapeRefineSchedule.judged`): ``0``, pixels of the training photographs
 held out in blocks (the default), and ``1``, the last photograph held out of the fit as well. For every
 seed this simulates the default capture at ``--resolution``, fits the shapes once with the defaults,
-refines them under each judge, and asks whether the judge's verdict was right: a refinement **helped**
-when the faces' mean error after a rigid alignment (what the refinement can change; their depth it
-cannot see) fell, over the photographs it was fitted on. A judge is right when it keeps a refinement
-that helped or rejects one that did not.
+refines them under each judge, and asks whether the judge's verdict was right. A refinement **helped**
+by one of two measures, each over every photograph's face (one displacement moves them all):
+
+- ``distance``: the faces' mean error after a rigid alignment fell (what the refinement can change;
+  their depth it cannot see);
+- ``normals``: their mean normal error fell (what the reflectance samples see).
+
+A judge is right by a measure when it keeps a refinement that helped by it or rejects one that did not.
 
 It chooses the default judge, so it reads development seeds only (:data:`roles.SIMULATED`)::
 
@@ -71,8 +75,9 @@ def judge_run(capture, fits, face, truth, judged: int) -> dict:
            "aligned_before_mm": aligned_mean(before), "aligned_refined_mm": aligned_mean(moved),
            "normal_before_deg": before["summary"]["mean_normal_deg"],
            "normal_refined_deg": moved["summary"]["mean_normal_deg"]}
-    run["helped"] = run["aligned_refined_mm"] < run["aligned_before_mm"]
-    run["right"] = run["accepted"] == run["helped"]
+    run["helped"] = {"distance": run["aligned_refined_mm"] < run["aligned_before_mm"],
+                     "normals": run["normal_refined_deg"] < run["normal_before_deg"]}
+    run["right"] = {measure: run["accepted"] == helped for measure, helped in run["helped"].items()}
     return run
 
 
@@ -87,23 +92,32 @@ def seed_run(seed: int, resolution: int, work: Path) -> dict:
     for judged in JUDGES:
         run = out["judges"][str(judged)] = judge_run(capture, fits, face, truth, judged)
         print(f"seed {seed}, judged {judged}: {'kept' if run['accepted'] else 'rejected'}; aligned "
-              f"{run['aligned_before_mm']:.3f} -> {run['aligned_refined_mm']:.3f} mm "
-              f"({'helped' if run['helped'] else 'did not help'}: {'right' if run['right'] else 'wrong'}); "
-              f"{run['reason']}", flush=True)
+              f"{run['aligned_before_mm']:.3f} -> {run['aligned_refined_mm']:.3f} mm, normals "
+              f"{run['normal_before_deg']:.2f} -> {run['normal_refined_deg']:.2f} deg (right by distance: "
+              f"{run['right']['distance']}, by normals: {run['right']['normals']}); {run['reason']}", flush=True)
     return out
 
 
+MEASURES = ("distance", "normals")
+
+
 def summary(runs: list) -> dict:
+    """Per judge: how often it kept, and by each measure how often the refinement helped and the judge
+    was right (kept a refinement that helped, rejected one that did not)."""
     out = {}
     for judged in map(str, JUDGES):
         rows = [r["judges"][judged] for r in runs]
-        out[judged] = {"runs": len(rows), "kept": sum(r["accepted"] for r in rows),
-                       "helped": sum(r["helped"] for r in rows), "right": sum(r["right"] for r in rows),
-                       "kept_but_worse": sum(r["accepted"] and not r["helped"] for r in rows),
-                       "rejected_but_better": sum(not r["accepted"] and r["helped"] for r in rows),
+        kept = [r for r in rows if r["accepted"]]
+        out[judged] = {"runs": len(rows), "kept": len(kept),
                        "mean_aligned_change_when_kept_mm": float(np.mean(
-                           [r["aligned_refined_mm"] - r["aligned_before_mm"] for r in rows if r["accepted"]]))
-                       if any(r["accepted"] for r in rows) else None}
+                           [r["aligned_refined_mm"] - r["aligned_before_mm"] for r in kept])) if kept else None,
+                       "mean_normal_change_when_kept_deg": float(np.mean(
+                           [r["normal_refined_deg"] - r["normal_before_deg"] for r in kept])) if kept else None}
+        for measure in MEASURES:
+            out[judged][measure] = {
+                "helped": sum(r["helped"][measure] for r in rows), "right": sum(r["right"][measure] for r in rows),
+                "kept_but_worse": sum(r["accepted"] and not r["helped"][measure] for r in rows),
+                "rejected_but_better": sum(not r["accepted"] and r["helped"][measure] for r in rows)}
     return out
 
 
@@ -123,8 +137,9 @@ def main(argv=None) -> int:
                           "seeds": args.seeds, "resolution": args.resolution, "lit_by": FIT_SHAPE_BRDF,
                           "default_judged": ShapeRefineSchedule.judged, "summary": result, "runs": runs})
     for judged, row in result.items():
-        print(f"judged {judged}: kept {row['kept']} of {row['runs']}, helped {row['helped']}, right {row['right']} "
-              f"(kept but worse {row['kept_but_worse']}, rejected but better {row['rejected_but_better']})")
+        print(f"judged {judged}: kept {row['kept']} of {row['runs']}; " + "; ".join(
+            f"by {m}: helped {row[m]['helped']}, right {row[m]['right']} (kept but worse {row[m]['kept_but_worse']}, "
+            f"rejected but better {row[m]['rejected_but_better']})" for m in MEASURES))
     return 0
 
 
