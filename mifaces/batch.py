@@ -16,6 +16,11 @@ oversubscribe the cores, each worker process takes one task at a time and
 :class:`WorkerSetup` gives its Dr.Jit pool ``cores // task slots on the
 host`` threads (:func:`drjit.set_thread_count`).
 
+Every capture is measured with the same :class:`~mifaces.options.measure.MeasureOptions`, sent
+whole to the workers and recorded whole in ``batch.json`` and each ``report.json``; ``resume``
+skips a capture only if its report records these options, and measures one fitted with other
+options again.
+
 A capture that fails (a corrupt manifest, a fit that diverges, a worker
 that dies) is recorded with its error in ``OUT/batch.json``; the others go
 on. Once all have finished, :func:`mifaces.population.write_population`
@@ -26,9 +31,7 @@ complete capture of the batch. See ``docs/scaling.md``.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import importlib.util
-import inspect
 import json
 import os
 import shutil
@@ -47,11 +50,11 @@ from distributed import Client, KilledWorker, LocalCluster, WorkerPlugin, as_com
 from distributed.comm import get_address_host
 from tqdm import tqdm
 
-from .reflectance import FitOptions
 from .capture.types import MANIFEST
 from .atomic import write_json
 from .importers.yaleb import import_subject
-from .pipeline import GEOMETRIES, MODELS, measure
+from .options.measure import MeasureOptions
+from .pipeline import measure
 from .population import write_population
 from .progress import progress as progress_bar
 
@@ -64,8 +67,6 @@ RECORD = "batch.json"
 IMPORTED = "captures"
 #: A capture's status in the record.
 DONE, SKIPPED, FAILED, PENDING = "done", "skipped", "failed", "pending"
-#: Defaults of :func:`mifaces.pipeline.measure`, which :func:`measure_batch` shares.
-_MEASURE = inspect.signature(measure).parameters
 #: Times Dask reruns a capture whose worker died before calling it failed.
 RETRIES = 1
 
@@ -130,18 +131,19 @@ def _unique_names(folders: list[Path]) -> list[str]:
         depth += 1
 
 
-def is_complete(folder: Path, capture: Path, models, geometry: str, resolution: int) -> bool:
-    """Whether ``folder`` holds a finished measurement of ``capture`` with these options:
-    ``report.json`` readable and naming the same capture, models, geometry and
-    resolution, and the report's other files and every model's ``brdf.json`` present."""
+def is_complete(folder: Path, capture: Path, options: MeasureOptions) -> bool:
+    """Whether ``folder`` holds a finished measurement of ``capture`` with ``options``:
+    ``report.json`` readable, naming the same capture and recording these options (its
+    ``options.requested``, read by :meth:`MeasureOptions.from_record
+    <mifaces.options.measure.MeasureOptions.from_record>`: all of them, not only the models),
+    and the report's other files and every model's ``brdf.json`` present."""
     try:
         report = json.loads((folder / "report.json").read_text())
         same = (Path(report["capture"]).resolve() == Path(capture).resolve()
-                and sorted(report["models"]) == sorted(models)
-                and report["geometry"] == geometry and report["resolution"] == resolution)
-    except (OSError, ValueError, KeyError, TypeError):
+                and MeasureOptions.from_record(report["options"]["requested"]) == options)
+    except (OSError, ValueError, KeyError, TypeError):  # a report of other options, or of none
         return False
-    files = [folder / "report.md", folder / "report.png"] + [folder / "brdf" / m / "brdf.json" for m in models]
+    files = [folder / "report.md", folder / "report.png"] + [folder / "brdf" / m / "brdf.json" for m in options.models]
     return same and all(f.is_file() for f in files)
 
 
@@ -157,7 +159,7 @@ def _replace_folder(source: Path, target: Path) -> None:
         os.replace(source, target)
 
 
-def measure_one(name: str, source, out, importer: str | None = None, options: dict | None = None) -> dict:
+def measure_one(name: str, source, out, importer: str | None = None, options: MeasureOptions | None = None) -> dict:
     """The task of one capture: import it if asked, :func:`mifaces.pipeline.measure`
     it into ``out/.<name>.partial``, and rename that to ``out/<name>``.
 
@@ -179,10 +181,7 @@ def measure_one(name: str, source, out, importer: str | None = None, options: di
             capture = IMPORTERS[importer](source, out / IMPORTED / name, force=True)
         entry["capture"] = str(capture)
         shutil.rmtree(partial, ignore_errors=True)
-        kwargs = dict(options or {})
-        fields = {f.name for f in dataclasses.fields(FitOptions)}  # the record's plain values, one FitOptions
-        kwargs["options"] = FitOptions(**{k: kwargs.pop(k) for k in list(kwargs) if k in fields})
-        report = measure(partial, capture, progress=False, **kwargs)
+        report = measure(partial, capture, options, progress=False)
         _replace_folder(partial, final)
         entry.update(status=DONE, measure_seconds=report["seconds"]["total"])
     except Exception as error:  # recorded, and the batch goes on
@@ -261,12 +260,9 @@ def dashboard(client: Client) -> str:
     return f"Dask dashboard: {client.dashboard_link}"
 
 
-def measure_batch(inputs, out, workers: int | None = None, scheduler: str | None = None, models=MODELS,
-                  resume: bool = False, importer: str | None = None, variant: str | None = None,
-                  geometry: str = _MEASURE["geometry"].default,
-                  resolution: int = FitOptions.resolution,
-                  progress: bool = True, echo=None,
-                  **options) -> dict:
+def measure_batch(inputs, out, options: MeasureOptions | None = None, *, workers: int | None = None,
+                  scheduler: str | None = None, resume: bool = False, importer: str | None = None,
+                  variant: str | None = None, progress: bool = True, echo=None, **keywords) -> dict:
     """Measure many captures on Dask, each as :func:`mifaces.pipeline.measure` would.
 
     Parameters
@@ -276,21 +272,24 @@ def measure_batch(inputs, out, workers: int | None = None, scheduler: str | None
     out : path
         Batch folder: ``<name>/`` per capture, ``batch.json``, ``population.{md,json,png}``
         (and ``captures/<name>/`` with an importer).
+    options : MeasureOptions, optional
+        How every capture is measured (:func:`mifaces.pipeline.measure`), sent whole to the workers.
     workers : int, optional
         Worker processes of the local cluster (default: one per core, at most one per capture).
     scheduler : str, optional
         Address (``tcp://host:port``) or scheduler file of a running Dask
         scheduler to use instead of a local cluster.
-    models : sequence of str
-        BRDF models to fit.
     resume : bool
-        Skip captures whose results in ``out`` are complete (:func:`is_complete`).
+        Skip captures whose results in ``out`` are complete and record ``options``
+        (:func:`is_complete`); measure those fitted with other options again.
     importer : {None, 'yaleb'}
         Import raw data first (:data:`IMPORTERS`).
     variant : str, optional
         Mitsuba variant of the workers (default: the current one).
-    geometry, resolution, **options
-        Passed to :func:`mifaces.pipeline.measure` (``spp``, ``shape_iterations``, ``face_model``).
+    **keywords
+        Options as keywords, applied over ``options`` as :func:`mifaces.pipeline.measure` takes them
+        (``models=``, ``geometry=``, ``spp=``, ...; :meth:`MeasureOptions.of
+        <mifaces.options.measure.MeasureOptions.of>`).
     progress : bool
         A bar over the captures.
     echo : callable, optional
@@ -299,25 +298,22 @@ def measure_batch(inputs, out, workers: int | None = None, scheduler: str | None
     Returns
     -------
     dict
-        The record, also written as ``out/batch.json``: ``options``,
+        The record, also written as ``out/batch.json``: ``options`` (:meth:`MeasureOptions.to_record
+        <mifaces.options.measure.MeasureOptions.to_record>`),
         ``captures`` (``{name: entry}``, see :func:`measure_one`),
         ``failed`` (names), ``seconds``, ``throughput_per_hour``, ``population``.
     """
     t0 = time.perf_counter()
     echo = echo or (lambda line: None)
     out = Path(out).resolve()
-    unknown = [m for m in models if m not in MODELS]
-    if unknown or not models or geometry not in GEOMETRIES:  # before any worker starts
-        raise ValueError(f"models must be among {list(MODELS)} (got {list(models)}), geometry one of "
-                         f"{GEOMETRIES} (got {geometry!r})")
+    options = MeasureOptions.of(options, keywords, "measure_batch")  # validated before any worker starts
     captures = find_captures(inputs, importer)
-    options = {"models": list(models), "geometry": geometry, "resolution": resolution, **options}
-    record = {"out": str(out), "importer": importer, "options": options,
+    record = {"out": str(out), "importer": importer, "options": options.to_record(),
               "captures": {name: {"source": str(source), "status": PENDING} for name, source in captures.items()}}
     todo = {}
     for name, source in captures.items():
         capture = out / IMPORTED / name if importer else source
-        if resume and is_complete(out / name, capture, models, geometry, resolution):
+        if resume and is_complete(out / name, capture, options):
             record["captures"][name].update(status=SKIPPED, capture=str(capture))
         else:
             todo[name] = source
@@ -337,7 +333,7 @@ def measure_batch(inputs, out, workers: int | None = None, scheduler: str | None
     return record
 
 
-def _run(todo: dict, out: Path, importer, options: dict, variant: str, workers, scheduler, record: dict,
+def _run(todo: dict, out: Path, importer, options: MeasureOptions, variant: str, workers, scheduler, record: dict,
          progress: bool, echo) -> None:
     """Submit ``todo`` to the cluster; record each capture as it finishes."""
     with cluster_client(workers, scheduler, len(todo)) as client:

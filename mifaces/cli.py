@@ -2,17 +2,19 @@
 
 Each command is one API call that a script could make. An option means the
 same in every command: ``--face-model`` names the face model (``simulate``,
-``fit-shape``, ``fit-brdf``, ``export``) and ``--brdf`` the BRDF model
+``fit-shape``, ``fit-brdf``, ``measure``, ``batch``, ``export``) and ``--brdf`` the BRDF model
 (``simulate``'s ground truth, the model ``fit-brdf`` fits, the models
 ``measure`` and ``batch`` fit). ``--model``, which named the one or the
 other, still works for one release with a deprecation message
-(:func:`mifaces.cli_options.renamed`).
+(:func:`mifaces.cli_options.renamed`). The flags of an options value are made from
+its fields, declared once (:func:`mifaces.cli_options.option_flags`): ``fit-brdf``,
+``measure`` and ``batch`` take the fit's (:class:`~mifaces.reflectance.FitOptions`),
+``measure`` and ``batch`` the main job's (:class:`~mifaces.options.measure.MeasureOptions`).
 """
 
 from __future__ import annotations
 
 import json
-import math
 import warnings
 from pathlib import Path
 
@@ -20,27 +22,25 @@ import click
 
 import mifaces
 
-from .brdf import BUILTIN_NAMES, MAX_LOBES, NAMES as BRDF_MODELS
+from .brdf import BUILTIN_NAMES, NAMES as BRDF_MODELS
 from .capture import load_capture
 from .capture.ground_truth import ground_truth_folder
 from .environment import SKY_SUN_ANGLES, TURBIDITY, sky_emitter
 from .export import export_face
 from .atomic import write_json
-from .image_files import MAX_IMAGE_PIXELS
 from .paths import check_writable
 from .result_set import check_result_target
 from .gallery import render_gallery
 from .importers.cli import export_calibration_command, import_
 from .capture.detector import NoFaceError, detect_landmarks
-from .cli_options import default, fit_flag, refine_shape_options, renamed, width_x_height
+from .cli_options import default, option_flags, renamed, width_x_height
 from .model import load_model
-from .pipeline import GEOMETRIES, MODELS, measure as measure_capture
+from .options.measure import MeasureOptions
+from .pipeline import measure as measure_capture
 from .shape.io import load_geometry
 from .reflectance import FitOptions, fit_brdf as fit_brdf_model, render_fitted
-from .reflectance.fit.uncertainty import METHODS as UNCERTAINTY_METHODS
 from .reflectance.io import KIND as BRDF_KIND, write_fitted
 from .refine import refine_estimate
-from .refine.shape import ShapeRefineSchedule
 from .refine.shape_lit import refine_fits
 from .report import RANKED, format_value, ranking_sentence
 from .shape import fit_shape as fit_shapes
@@ -49,9 +49,6 @@ from .status import CONVERGED
 from .studio.environment_light import ENVIRONMENTS
 from .studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
 
-#: Largest texture resolution R the commands take (R x R texels).
-MAX_TEXTURE = math.isqrt(MAX_IMAGE_PIXELS)
-TEXEL_ALBEDO_HELP = "An albedo per texel in the glossy fit; --no-: one per region, as the paper (docs/uncertainty.md)."
 
 
 class Commands(click.Group):
@@ -167,10 +164,9 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
 @click.option("--no-diffuse", is_flag=True, help="Ignore the companion diffuse-light pictures.")
 @click.option("--fixed-focal", is_flag=True, help="Keep the calibrated focal length.")
 @click.option("--force", is_flag=True, help="Write over the fits in --out (those not fitted again are kept).")
-@refine_shape_options(False)
+@option_flags(MeasureOptions, "refinement", only=("refine_shape",))
 def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[str, ...], iterations: float | None,
-              no_diffuse: bool, fixed_focal: bool, force: bool, refine_shape: bool, refine_shape_judged: int,
-              refine_shape_early_stop: bool) -> None:
+              no_diffuse: bool, fixed_focal: bool, force: bool, refinement: MeasureOptions) -> None:
     """Fit the face model to every photograph of CAPTURE (paper sec. 4.2)."""
     check_writable(out_dir)
     if (Path(out_dir) / SHAPES_INDEX).exists() and not force:
@@ -178,9 +174,9 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
                                    "write over them")
     fits = fit_shapes(capture, face_model, measurements=list(measurements) or None, out=out_dir, iterations=iterations,
                progress=True, use_diffuse=not no_diffuse, fit_focal=not fixed_focal)
-    if refine_shape:
+    schedule = refinement.refine_shape
+    if schedule is not None:
         loaded, model = load_capture(capture), load_model(face_model).truncated(load_model(face_model).fit_shape_modes)
-        schedule = ShapeRefineSchedule(judged=refine_shape_judged, early_stop=refine_shape_early_stop)
         fits, refinement = refine_fits(loaded, fits, model, schedule=schedule)
         click.echo(f"shape refinement: {'kept' if refinement.accepted else 'not kept'}: {refinement.reason}")
         if refinement.accepted:
@@ -205,30 +201,15 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
               help="Folder for brdf.json, albedo.exr and scene.xml.")
 @click.option("--geometry", default=default(fit_brdf_model, "geometry"), show_default=True,
               help="'ground-truth' (a simulated capture's) or the folder mifaces fit-shape wrote.")
-@click.option("--resolution", default=default(FitOptions, "resolution"), show_default=True,
-              type=click.IntRange(8, MAX_TEXTURE), help="Texture-space resolution R (R x R texels).")
-@click.option("--lobes", default=default(FitOptions, "lobes"), show_default=True, type=click.IntRange(1, MAX_LOBES),
-              help="Lafortune lobes.")
 @click.option("--face-model", default=None, help="Face model of the geometry (default: the one it names).")
 @click.option("--force", is_flag=True, help="Replace the fitted BRDF in --out.")
-@click.option("--refine/--no-refine", default=default(measure_capture, "refine"), show_default=True,
-              help="Refine the fit by differentiable rendering against the photographs.")
-@click.option("--normals/--no-normals", default=default(FitOptions, "normals"), show_default=True,
-              help="Estimate a normal per texel alternating with the fit (writes normals.exr, used by scene.xml).")
-@click.option("--specular-maps/--no-specular-maps", default=default(FitOptions, "specular_maps"),
-              show_default=True, help="Estimate the specular reflectance per texel (writes specular.exr).")
-@click.option("--uncertainty", default=default(FitOptions, "uncertainty"), show_default=True,
-              type=click.Choice(UNCERTAINTY_METHODS + ("none",)),
-              help="How the parameters' 95 % intervals are estimated (docs/uncertainty.md); 'none' leaves them out.")
-@fit_flag("texel_albedo", TEXEL_ALBEDO_HELP)
-def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolution: int, lobes: int,
-             face_model: str | None, force: bool, refine: bool, normals: bool, specular_maps: bool,
-             uncertainty: str, texel_albedo: bool) -> None:
+@option_flags(FitOptions)
+@option_flags(MeasureOptions, "refinement", only=("refine",))
+def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, face_model: str | None, force: bool,
+             options: FitOptions, refinement: MeasureOptions) -> None:
     """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
     check_result_target(out_dir, BRDF_KIND, force)
-    options = FitOptions(resolution=resolution, lobes=lobes, normals=normals, specular_maps=specular_maps,
-                         uncertainty=None if uncertainty == "none" else uncertainty, texel_albedo=texel_albedo)
-    if not refine:
+    if not refinement.refine:
         estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, out=out_dir, force=force,
                                   options=options)
     else:  # the refinement, the next stage, before the result is written
@@ -253,38 +234,11 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, resolut
 @click.argument("capture", required=False, type=click.Path(exists=True))
 @click.option("--out", "out_dir", default="out/measure", show_default=True, type=click.Path(file_okay=False),
               help="Output folder (capture/, shapes/, brdf/<model>/, report.md/json/png).")
-@click.option("--brdf", "models", multiple=True, type=click.Choice(BRDF_MODELS),
-              help="BRDF model(s) to fit, repeatable (default: all four).")
-@click.option("--geometry", default=default(measure_capture, "geometry"), show_default=True,
-              type=click.Choice(GEOMETRIES),
-              help="Fit the face model to each photograph, or use a simulated capture's true shapes.")
-@click.option("--resolution", default=default(FitOptions, "resolution"), show_default=True,
-              type=click.IntRange(8, MAX_TEXTURE), help="Texture resolution R.")
-@click.option("--refine/--no-refine", default=default(measure_capture, "refine"), show_default=True,
-              help="Refine each fit by differentiable rendering against the photographs.")
-@click.option("--normals/--no-normals", default=default(FitOptions, "normals"), show_default=True,
-              help="Estimate a normal per texel alternating with each fit.")
-@click.option("--specular-maps/--no-specular-maps", default=default(FitOptions, "specular_maps"),
-              show_default=True, help="Estimate the specular reflectance per texel (specular.exr; renders read it).")
-@refine_shape_options(default(measure_capture, "refine_shape"))
-@click.option("--balance-lights/--no-balance-lights", default=default(FitOptions, "balance_lights"),
-              show_default=True, help="Correct the given lights' relative intensities by the face's one albedo before "
-                                      "the BRDF fits (a lamp a percent off biases the glossy fit).")
-@click.option("--interreflection/--no-interreflection", default=default(FitOptions, "interreflection"),
-              show_default=True, help="Take the light bounced between parts of the face out of the samples "
-                                      "(a second fit; bounced light biases skin's lobe low).")
-@fit_flag("texel_albedo", TEXEL_ALBEDO_HELP)
-def measure(capture: str | None, out_dir: str, models: tuple[str, ...], geometry: str, resolution: int,
-            refine: bool, normals: bool, specular_maps: bool, refine_shape: bool, refine_shape_judged: int,
-            refine_shape_early_stop: bool, balance_lights: bool, interreflection: bool, texel_albedo: bool) -> None:
+@option_flags(MeasureOptions)
+def measure(capture: str | None, out_dir: str, options: MeasureOptions) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
     check_writable(out_dir)
-    report = measure_capture(out_dir, capture, models=models or MODELS, geometry=geometry, refine=refine,
-                             refine_shape=refine_shape and ShapeRefineSchedule(judged=refine_shape_judged,
-                                                                           early_stop=refine_shape_early_stop),
-                             options=FitOptions(resolution=resolution, normals=normals, specular_maps=specular_maps,
-                                                balance_lights=balance_lights, interreflection=interreflection,
-                                                texel_albedo=texel_albedo))
+    report = measure_capture(out_dir, capture, options=options)
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")
@@ -435,27 +389,19 @@ main.add_command(export_calibration_command)
               help="Worker processes of the local Dask cluster (default: one per core, at most one per capture).")
 @click.option("--scheduler", default=None,
               help="Address (tcp://host:port) or scheduler file of a running Dask scheduler, instead of a local cluster.")
-@click.option("--brdf", "models", multiple=True, type=click.Choice(BRDF_MODELS),
-              help="BRDF model(s) to fit, repeatable (default: all four).")
-@click.option("--resume", is_flag=True, help="Skip captures whose results in --out are complete.")
+@click.option("--resume", is_flag=True, help="Skip captures whose results in --out are complete and fitted with "
+                                              "these options (the others are measured again).")
 @click.option("--import", "importer", default=None,
               help="'yaleb': INPUTS are raw data (Yale subject folders, or folders of them), imported into OUT/captures "
                    "first (mifaces.batch.IMPORTERS).")
-@click.option("--geometry", default=default(measure_capture, "geometry"), show_default=True,
-              type=click.Choice(GEOMETRIES),
-              help="Fit the face model to each photograph, or use a simulated capture's true shapes.")
-@click.option("--resolution", default=default(FitOptions, "resolution"), show_default=True, type=click.IntRange(8),
-              help="Texture resolution R.")
-@click.option("--spp", default=default(measure_capture, "spp"), show_default=True, type=click.IntRange(1),
-              help="Samples per pixel of the reports' renders.")
-def batch(inputs: tuple[str, ...], out_dir: str, workers: int | None, scheduler: str | None, models: tuple[str, ...],
-          resume: bool, importer: str | None, geometry: str, resolution: int, spp: int) -> None:
+@option_flags(MeasureOptions)
+def batch(inputs: tuple[str, ...], out_dir: str, workers: int | None, scheduler: str | None, resume: bool,
+          importer: str | None, options: MeasureOptions) -> None:
     """Measure many captures (INPUTS: capture folders or folders of them) on Dask, and write a population report."""
     from .batch import measure_batch  # Dask's import is slow: only for this command
 
-    record = measure_batch(inputs, out_dir, workers=workers, scheduler=scheduler, models=models or MODELS,
-                           resume=resume, importer=importer, geometry=geometry, resolution=resolution, spp=spp,
-                           echo=click.echo)
+    record = measure_batch(inputs, out_dir, options, workers=workers, scheduler=scheduler, resume=resume,
+                           importer=importer, echo=click.echo)
     counts = {s: sum(e["status"] == s for e in record["captures"].values()) for s in ("done", "skipped", "failed")}
     click.echo(f"{counts['done']} measured, {counts['skipped']} skipped (complete), {counts['failed']} failed in "
                f"{record['seconds']:.0f} s; population report: {out_dir}/population.md")

@@ -1,16 +1,19 @@
-"""The options of the ``mifaces`` command line (:mod:`mifaces.cli`): their
-defaults taken from the API, their parsing callbacks, and the spellings of
-renamed options kept for one release."""
+"""The options of the ``mifaces`` command line (:mod:`mifaces.cli`): the flags of an options
+value made from its fields (:func:`option_flags`), the other defaults taken from the API, their
+parsing callbacks, and the spellings of renamed options kept for one release."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import inspect
 
 import click
 
-from .reflectance.options import FitOptions
-from .refine.shape import ShapeRefineSchedule
+from .options.fields import default_of, several
+
+#: How the command line spells None among an option's choices.
+NONE = "none"
 
 
 def default(function, name: str):
@@ -18,30 +21,81 @@ def default(function, name: str):
     return inspect.signature(function).parameters[name].default
 
 
-def fit_flag(name: str, help: str):
-    """The ``--NAME/--no-NAME`` option of the :class:`~mifaces.reflectance.FitOptions` field ``name``
-    (``texel_albedo``: ``--texel-albedo``), its default the field's."""
-    flag = name.replace("_", "-")
-    return click.option(f"--{flag}/--no-{flag}", default=default(FitOptions, name), show_default=True, help=help)
+def option_flags(cls, name: str = "options", only: tuple[str, ...] | None = None):
+    """A decorator of a command: a flag per user option of the options class ``cls`` (a field
+    with ``help``, :func:`mifaces.options.fields.option`; nested options flattened, see there),
+    its default, range or choices and help the field's; the command is called with the value
+    built from them as keyword ``name`` (a ``ValueError`` of its validation ends the command with
+    its message). ``only``: these fields of ``cls`` (the others at their defaults)."""
+    flags = list(_flags(cls, only))
+
+    def decorate(command):
+        @functools.wraps(command)
+        def wrapper(*args, **kwargs):
+            kwargs[name] = _value(cls, kwargs, only)
+            return command(*args, **kwargs)
+
+        for declarations, attrs in reversed(flags):  # click lists options in the order they decorate
+            wrapper = click.option(*declarations, **attrs)(wrapper)
+        return wrapper
+
+    return decorate
 
 
-def refine_shape_options(default_on: bool):
-    """``--refine-shape/--no-refine-shape``, ``--refine-shape-judged N`` and
-    ``--refine-shape-early-stop/--no-refine-shape-early-stop`` of ``measure`` and ``fit-shape`` (their
-    defaults :class:`~mifaces.refine.shape.ShapeRefineSchedule`'s)."""
-    def apply(command):
-        command = click.option("--refine-shape-early-stop/--no-refine-shape-early-stop",
-                               default=ShapeRefineSchedule.early_stop, show_default=True,
-                               help="Let half of --refine-shape's held-out pixels choose its iteration, the other "
-                                    "half judge it (docs/refine_shape.md).")(command)
-        command = click.option("--refine-shape-judged", default=ShapeRefineSchedule.judged, show_default=True,
-                               type=click.IntRange(0), help="Photographs held out of --refine-shape to judge it by "
-                               "(the last ones; 0: held-out pixels only; docs/refine_shape.md).")(command)
-        return click.option("--refine-shape/--no-refine-shape", default=default_on, show_default=True,
-                            help="Refine the fitted faces beyond the model by differentiable rendering, lit by a "
-                                 "quick Phong fit (minutes; kept only if it lowers the loss on pixels it did not "
-                                 "fit: docs/refine_shape.md).")(command)
-    return apply
+def _user_fields(cls, only):
+    return [f for f in dataclasses.fields(cls) if "help" in f.metadata and (only is None or f.name in only)]
+
+
+def _flags(cls, only=None, prefix: str = ""):
+    """(declarations, attributes) of ``click.option`` for each user option of ``cls``."""
+    for field in _user_fields(cls, only):
+        meta, parameter, value = field.metadata, prefix + field.name, default_of(field)
+        flag = "--" + (prefix + meta.get("flag", field.name)).replace("_", "-")
+        nested = meta.get("nested")
+        if nested is not None and meta.get("switch"):
+            yield (f"{flag}/--no-{flag[2:]}", parameter), dict(default=False, show_default=True, help=meta["help"])
+            yield from _flags(nested, None, parameter + "_")
+        elif nested is not None:
+            yield from _flags(nested, None, prefix)
+        elif several(field):
+            yield (flag, parameter), dict(multiple=True, type=click.Choice(meta["choices"]), help=meta["help"])
+        elif isinstance(value, bool):
+            yield (f"{flag}/--no-{flag[2:]}", parameter), dict(default=value, show_default=True, help=meta["help"])
+        elif "choices" in meta:
+            choices = tuple(NONE if c is None else c for c in meta["choices"])
+            yield (flag, parameter), dict(default=NONE if value is None else value, show_default=True,
+                                          type=click.Choice(choices), help=meta["help"])
+        else:
+            yield (flag, parameter), dict(default=value, show_default=value is not None, type=_type(meta),
+                                          help=meta["help"])
+
+
+def _type(meta: dict):
+    """The click type of an option with ``bounds`` (an int or float range), else None (click's guess)."""
+    if "bounds" not in meta:
+        return None
+    low, high = meta["bounds"]
+    integer = all(isinstance(b, int) for b in (low, high) if b is not None)
+    return click.IntRange(low, high) if integer else click.FloatRange(low, high)
+
+
+def _value(cls, kwargs: dict, only=None, prefix: str = ""):
+    """The ``cls`` value of the command's flags (taken out of ``kwargs``)."""
+    values = {}
+    for field in _user_fields(cls, only):
+        parameter, nested = prefix + field.name, field.metadata.get("nested")
+        if nested is not None and field.metadata.get("switch"):
+            on = kwargs.pop(parameter)
+            schedule = _value(nested, kwargs, None, parameter + "_")
+            values[field.name] = schedule if on else None
+        elif nested is not None:
+            values[field.name] = _value(nested, kwargs, None, prefix)
+        else:
+            given = kwargs.pop(parameter)
+            if several(field) and not given:  # none given: the default
+                continue
+            values[field.name] = None if given == NONE and "choices" in field.metadata else given
+    return cls(**values)
 
 
 def width_x_height(ctx, param, value: str) -> tuple[int, int]:
@@ -79,4 +133,4 @@ def renamed(old: str, new: str, name: str, **attrs):
     return decorate
 
 
-__all__ = ["default", "fit_flag", "width_x_height", "renamed"]
+__all__ = ["default", "option_flags", "width_x_height", "renamed"]

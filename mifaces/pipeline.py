@@ -41,9 +41,9 @@ from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, as_given, balance_intensit
                        estimate_environments, estimate_lights, lights_document, refit_lights, write_lights,
                        write_lights_picture)
 from .model import load_model
+from .options.measure import GEOMETRIES, MeasureOptions
 from .reflectance import BRDFEstimate, FitOptions, capture_samples, fit_brdf, write_estimate
 from .reflectance.light_balance import balance_given_lights
-from .reflectance.options import fit_options
 from .refine import refine_estimate
 from .refine.shape import ShapeRefineSchedule
 from .refine.shape_lit import refine_lit, refined_fits
@@ -64,8 +64,6 @@ from .validation.validator import Validator, relative_rmse
 MODELS = NAMES
 #: The fitted face the report shows in 3D (the best model's, or the first's, as glTF).
 FACE_GLB = "face.glb"
-#: Where the face geometry comes from.
-GEOMETRIES = ("fitted", "ground-truth")
 #: Folders of the result: the fitted faces, and those refined by ``refine_shape`` (same layout).
 SHAPES, REFINED_SHAPES = "shapes", "shapes_refined"
 
@@ -106,10 +104,8 @@ class FittedModel:
     estimate: BRDFEstimate
 
 
-def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, options: FitOptions | None = None,
-            refine: bool = False, refine_shape: bool | ShapeRefineSchedule = False,
-            shape_iterations: float | None = None, spp: int = 64, face_model="builtin", progress: bool = True,
-            **deprecated) -> dict:
+def measure(out, capture=None, options: MeasureOptions | FitOptions | None = None, *, progress: bool = True,
+            **keywords) -> dict:
     """Measure the reflectance of the face in ``capture``, writing everything to ``out``.
 
     The stages hand their results to each other in memory: the face model is
@@ -132,41 +128,24 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
         A capture folder; without one, the default capture of
         :func:`mifaces.studio.simulate` (built-in face, Cook-Torrance
         ground truth) is simulated first into ``out/capture``.
-    models : sequence of str
-        BRDF models to fit.
-    geometry : {'fitted', 'ground-truth'}
-        Fit the face model to every photograph (``mifaces fit-shape``), or use
-        a simulated capture's true shapes.
-    options : FitOptions, optional
-        How every BRDF model is fitted (:class:`mifaces.reflectance.FitOptions`): the texture
-        resolution R of the reflectance samples, per-texel ``normals`` and ``specular_maps``
-        (the renders show them), ``balance_lights`` (the given lights' relative intensities
-        corrected by the face's one albedo before any BRDF is fitted, the factors in the
-        report's ``light_balance``), ...
-    shape_iterations : float, optional
-        Scale of the shape fitter's iteration schedule.
-    spp : int
-        Samples per pixel of the report's renders.
-    face_model : str, path or MorphableModel
-        The face model fitted to the photographs (``geometry='fitted'``).
-    refine : bool
-        Refine each fit by differentiable rendering against the photographs
-        (:func:`mifaces.refine.refine_estimate`).
-    refine_shape : bool or ShapeRefineSchedule
-        Refine the fitted faces beyond the model's span by differentiable
-        rendering (:func:`mifaces.refine.shape.refine_shape`, with this
-        schedule where one is given): a first fit of the first model in
-        ``models`` on the model-fitted shapes lights the faces, one displacement
-        along the normals is fitted against the photographs, and it is kept only
-        if it lowers the loss on pixels it did not fit (and, with
-        :attr:`~mifaces.refine.shape.ShapeRefineSchedule.judged`, on photographs
-        it left out); the samples are then taken on the kept faces. Off by
-        default: it costs minutes, and on the default capture the faces it
-        keeps relight worse (``docs/refine_shape.md``).
-    **deprecated
-        ``resolution=``, ``normals=``, ``specular_maps=``, ``balance_lights=`` as separate
-        keywords, as before :class:`~mifaces.reflectance.FitOptions`: still accepted, with a
-        :class:`DeprecationWarning`.
+    options : MeasureOptions or FitOptions, optional
+        How to measure (:class:`mifaces.options.measure.MeasureOptions`: the BRDF models, the
+        geometry, the face model, the fit's :class:`~mifaces.reflectance.FitOptions`, the
+        refinements, the renders' spp); a :class:`~mifaces.reflectance.FitOptions` is the fit's,
+        the rest as default. Recorded whole in ``report.json``'s ``options``: ``requested``, and
+        ``effective`` as the fits' plan resolved them (:meth:`MeasureOptions.resolved
+        <mifaces.options.measure.MeasureOptions.resolved>`; each model's in its entry's
+        ``fit_options``).
+    progress : bool
+        Progress bars and lines.
+    **keywords
+        Fields of :class:`~mifaces.options.measure.MeasureOptions` as keywords, applied over
+        ``options`` (``models=("phong",)``, ``geometry=``, ``refine=``, ``refine_shape=True`` or a
+        :class:`~mifaces.refine.shape.ShapeRefineSchedule`, ``shape_iterations=``, ``spp=``,
+        ``face_model=``), as this function took them before the options value; and, deprecated
+        with a :class:`DeprecationWarning`, :class:`~mifaces.reflectance.FitOptions`' fields
+        (``resolution=``, ``normals=``, ...). :meth:`MeasureOptions.of
+        <mifaces.options.measure.MeasureOptions.of>` makes the one value.
 
     Returns
     -------
@@ -197,35 +176,34 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
     The main job on a small capture (``capture_folder``, one :func:`mifaces.simulate` wrote here),
     one BRDF model on the simulator's true shapes, into ``out / "measure"``:
 
-    >>> from mifaces import measure
+    >>> from mifaces import MeasureOptions, measure
     >>> from mifaces.reflectance import FitOptions
-    >>> report = measure(out / "measure", capture_folder, models=("phong",), geometry="ground-truth", spp=2,
-    ...                  options=FitOptions(resolution=32), progress=False)
+    >>> options = MeasureOptions(models=("phong",), geometry="ground-truth", spp=2, fit=FitOptions(resolution=32))
+    >>> report = measure(out / "measure", capture_folder, options, progress=False)
     >>> list(report["models"]), sorted(p.name for p in (out / "measure").glob("report.*"))
     (['phong'], ['report.html', 'report.json', 'report.md', 'report.png'])
     >>> sorted(report["models"]["phong"]["validation"])[:3]  # a simulated capture is judged against its truth
     ['albedo_rmse', 'brdf_rmse', 'environment_rmse']
+    >>> MeasureOptions.from_record(report["options"]["requested"]) == options  # recorded whole
+    True
     """
     t0 = time.perf_counter()
     out = Path(out)
-    options = fit_options(options, deprecated, "measure")
-    resolution = options.resolution
-    if geometry not in GEOMETRIES:
-        raise ValueError(f"geometry must be one of {GEOMETRIES}, got {geometry!r}")
-    unknown = [m for m in models if m not in MODELS]
-    if unknown or not models:
-        raise ValueError(f"unknown BRDF model(s) {unknown}; choose from {list(MODELS)}")
+    options = MeasureOptions.of(options, keywords)
+    resolution, geometry, models = options.fit.resolution, options.geometry, options.models
     timings = {}
     capture = _capture(out, capture, timings, progress)
     report = {"capture": str(capture.path), "measurements": len(capture.measurements), "geometry": geometry,
-              "resolution": resolution, "models": {}}
+              "resolution": resolution,
+              "options": {"requested": options.to_record(), "effective": options.resolved().to_record()},
+              "models": {}}
     unknown = bool(capture.unknown_lights)
     if unknown:
         check_estimable(capture)
         if geometry != "fitted":
             raise ValueError(f"lights {[l.name for l in capture.unknown_lights]} are unknown: they are estimated with "
                              "the fitted faces, so geometry must be 'fitted'")
-    face, shapes, fits = _geometry(out, capture, geometry, face_model, shape_iterations, report, timings, progress)
+    face, shapes, fits = _geometry(out, capture, options, options.face_model, report, timings, progress)
     if unknown:  # every later stage reads the estimated lights as given ones
         t = time.perf_counter()
         estimated = estimate_lights(capture, fits)
@@ -233,8 +211,7 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
             # one round of alternation: each pose's face fitted to all its photographs under the first
             # estimates, then each light fitted again on that face
             first = timings["fit_shape"]
-            face, shapes, fits = _geometry(out, as_given(estimated), geometry, face, shape_iterations, report,
-                                           timings, progress)
+            face, shapes, fits = _geometry(out, as_given(estimated), options, face, report, timings, progress)
             timings["fit_shape"], timings["fit_shape_alternation"] = first, timings["fit_shape"]
             estimated = estimate_lights(capture, refit_lights(capture, fits, face))
         capture = estimate_environments(estimated, shapes, face, progress=progress)
@@ -246,21 +223,20 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
         if balanced is not capture:
             capture = balanced
             samples = capture_samples(capture, shapes, face, resolution, progress=progress)
-    if options.balance_lights:
+    if options.fit.balance_lights:
         capture, samples = balance_given_lights(capture, samples)
         report["light_balance"] = capture.metadata.get("light_balance")
     timings["reflectance_samples"] = time.perf_counter() - t
-    if not refine and any(light.environment for light in capture.lights):
+    if not options.refine and any(light.environment for light in capture.lights):
         report["environment_note"] = MAP_WITHOUT_REFINE
         warnings.warn(MAP_WITHOUT_REFINE, stacklevel=2)
     if unknown:
         report["lights"] = {"file": write_lights(out, capture).name, "picture": LIGHTS_PICTURE, "note": RELATIVE_NOTE,
                             "estimates": [e for e in lights_document(capture)["lights"] if e["estimated"]]}
         write_lights_picture(out / LIGHTS_PICTURE, capture)
-    if refine_shape:
-        schedule = refine_shape if isinstance(refine_shape, ShapeRefineSchedule) else None
+    if options.refine_shape is not None:
         shapes, samples = _refine_shapes(out, capture, face, shapes, fits, samples, models[0], resolution, report,
-                                         timings, progress, schedule)
+                                         timings, progress, options.refine_shape)
     first = next(m for m in capture.measurements if m.name in shapes)
     novel = novel_light(capture, np.asarray(shapes[first.name]).mean(axis=0))
     scene = FaceScene(face, shapes[first.name])  # the first photograph's face, built once for every model
@@ -272,8 +248,8 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
         report["validation"] = validator.summary
     fitted, validation_images = [], {}
     for model in models:
-        entry, result = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, spp, timings,
-                                   progress, options, refine)
+        entry, result = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, timings,
+                                   progress, options)
         if validator is not None:
             t = time.perf_counter()
             entry["validation"], validation_images[model] = validator.validate(result.estimate)
@@ -293,8 +269,9 @@ def measure(out, capture=None, models=MODELS, geometry: str = "fitted", *, optio
     write_uncertainty_picture(out / "report_uncertainty.png", report)
     write_markdown(out / "report.md", report, first.name)
     best = report.get("ranking", {}).get("heldout_rmse", list(models))[0]
-    glb = export_face(out / "brdf" / best, out / FACE_GLB, measurement=first.name if geometry == "fitted" else None,
-                      face_model=face)[-1]
+    estimate = next(f.estimate for f in fitted if f.model == best)  # exported from memory, not read back
+    glb = export_face(estimate, out / FACE_GLB, measurement=first.name if geometry == "fitted" else None,
+                      shapes=fits, face_model=face, source=str(out / "brdf" / best))[-1]
     write_html(out / "report.html", report, glb, best)
     return report
 
@@ -308,15 +285,15 @@ def _capture(out: Path, capture, timings: dict, progress: bool) -> Capture:
     return load_capture(capture)
 
 
-def _geometry(out: Path, capture: Capture, geometry: str, face_model, shape_iterations, report: dict,
-              timings: dict, progress: bool):
+def _geometry(out: Path, capture: Capture, options: MeasureOptions, face_model, report: dict, timings: dict,
+              progress: bool):
     """The face model, per-measurement world vertices and the shape fits: fitted (and written to
     ``out/shapes`` for the user) or the simulator's ground truth (no fits: None)."""
-    if geometry == "ground-truth":
+    if options.geometry == "ground-truth":
         return (*load_geometry(capture, "ground-truth"), None)
     face = load_model(face_model)  # a loaded model is taken as it is
     t = time.perf_counter()
-    fits = fit_shape(capture, face, out=out / SHAPES, iterations=shape_iterations, progress=progress)
+    fits = fit_shape(capture, face, out=out / SHAPES, iterations=options.shape_iterations, progress=progress)
     timings["fit_shape"] = time.perf_counter() - t
     report["shapes"] = {f.measurement: {"status": f.status, "seconds": f.seconds,
                                         "feature_rms_px": f.loss.get("feature_rms_px"),
@@ -379,8 +356,7 @@ def _refine_shapes(out: Path, capture: Capture, face, shapes: dict, fits, sample
 
 
 def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, scene: FaceScene, first,
-               novel, spp: int, timings: dict, progress: bool, options: FitOptions,
-               refine: bool) -> tuple[dict, FittedModel]:
+               novel, timings: dict, progress: bool, options: MeasureOptions) -> tuple[dict, FittedModel]:
     """Fit one BRDF model, write it, render it in the first photograph's place
     and under the novel light; the report's entry, and the fitted model."""
     t = time.perf_counter()
@@ -388,9 +364,10 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
         warnings.simplefilter("always")
         # balanced once above, for every model
         estimate = fit_brdf(capture, model, shapes, face_model=face, samples=samples, progress=progress,
-                            options=replace(options, balance_lights=False))
-        if refine:
-            estimate = refine_estimate(estimate, capture, shapes, face, seed=options.seed, progress=progress)
+                            options=replace(options.fit, balance_lights=False))
+        estimate = replace(estimate, fit_options=options.fit)  # as asked: the balance is measure's, above
+        if options.refine:
+            estimate = refine_estimate(estimate, capture, shapes, face, seed=options.fit.seed, progress=progress)
     if any(light.estimated for light in capture.lights):
         estimate = replace(estimate, lighting={"lights": "estimated", "reflectance": "relative", "note": RELATIVE_NOTE})
     light = capture.light(first.light)
@@ -402,8 +379,8 @@ def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samp
     entry["ground_truth"] = ground_truth_errors(estimate, capture)
     brdf, albedo = estimate.to_json(), estimate.albedo.albedo
     maps = {"normals": estimate.normal_texture(), "specular": estimate.specular_texture()}
-    rendered = scene.render(brdf, albedo, capture.camera, lamp, spp=spp, **maps)
-    relit = scene.render(brdf, albedo, capture.camera, novel, spp=spp, **maps)
+    rendered = scene.render(brdf, albedo, capture.camera, lamp, spp=options.spp, **maps)
+    relit = scene.render(brdf, albedo, capture.camera, novel, spp=options.spp, **maps)
     photo = first.image.pixels
     on_face = face_pixels(scene, capture.camera)  # the fitted face's pixels, whatever the background shows
     entry["training_rmse"] = relative_rmse(rendered, photo, on_face)

@@ -8,6 +8,7 @@ scheduler started separately on the loopback interface.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -22,6 +23,8 @@ from click.testing import CliRunner
 
 from mifaces.batch import find_captures, is_complete
 from mifaces.cli import main
+from mifaces.options.measure import MeasureOptions
+from mifaces.reflectance import FitOptions
 from mifaces.population import robust_summary
 from mifaces.status import NOT_FITTED
 
@@ -29,6 +32,8 @@ pytestmark = pytest.mark.slow
 
 #: Options of every batch here: the cheapest measurement that runs every stage.
 OPTIONS = ["--brdf", "phong", "--geometry", "ground-truth", "--resolution", "32", "--spp", "2"]
+#: The options value those flags make.
+RAN = MeasureOptions(models=("phong",), geometry="ground-truth", spp=2, fit=FitOptions(resolution=32))
 GOOD = ["s0", "s1", "s2", "s3"]
 #: Seconds any one wait for a subprocess may take.
 TIMEOUT = 240
@@ -48,8 +53,8 @@ def captures(small_capture, tmp_path_factory):
     return root
 
 
-def _batch(*args) -> tuple[int, str]:
-    result = CliRunner().invoke(main, ["batch", *map(str, args), *OPTIONS])
+def _batch(*args, options=OPTIONS) -> tuple[int, str]:
+    result = CliRunner().invoke(main, ["batch", *map(str, args), *options])
     return result.exit_code, result.output
 
 
@@ -91,9 +96,14 @@ def test_batch_failure_does_not_stop_the_others(captures, tmp_path):
     for name in GOOD:
         assert f"{name}: done" in output
         assert record["captures"][name]["status"] == "done"
-        assert is_complete(out / name, captures / "good" / name, ["phong"], "ground-truth", 32)
+        assert is_complete(out / name, captures / "good" / name, RAN)
     assert not list(out.glob(".*.partial"))
     assert len({record["captures"][name]["worker"] for name in GOOD}) <= 2  # worker processes are reused
+    # the options sent whole to the workers, recorded whole in the batch's record and every report
+    assert MeasureOptions.from_record(record["options"]) == RAN
+    for name in GOOD:
+        report = json.loads((out / name / "report.json").read_text())
+        assert MeasureOptions.from_record(report["options"]["requested"]) == RAN
     population = json.loads((out / "population.json").read_text())
     assert population["subjects"] == sorted(GOOD)
     phong = population["models"]["phong"]
@@ -128,11 +138,18 @@ def test_resume_after_a_killed_run(captures, tmp_path):
     for name in GOOD:
         expected = "skipped" if name in finished else "done"
         assert record["captures"][name]["status"] == expected
-        assert is_complete(out / name, captures / "good" / name, ["phong"], "ground-truth", 32)
+        assert is_complete(out / name, captures / "good" / name, RAN)
     assert {p.parent.name: p.stat().st_mtime_ns for p in out.glob("s*/report.json") if p.parent.name in finished} \
         == finished
     assert not list(out.glob(".*.partial"))
     assert json.loads((out / "population.json").read_text())["subjects"] == GOOD
+    # a capture fitted with other options is no result of these: --resume measures it again
+    other = dataclasses.replace(RAN, spp=3)
+    assert not is_complete(out / "s0", captures / "good" / "s0", other)
+    code, output = _batch(captures / "good" / "s0", "--out", out, "--resume", options=[*OPTIONS, "--spp", "3"])
+    assert code == 0, output
+    assert _record(out)["captures"]["s0"]["status"] == "done" and is_complete(out / "s0", captures / "good" / "s0",
+                                                                             other)
 
 
 def _dask(*args, cwd: Path) -> subprocess.Popen:
@@ -169,7 +186,7 @@ def test_batch_on_a_separate_scheduler(captures, tmp_path):
         record = _record(out)
         workers = {record["captures"][name]["worker"] for name in ("s0", "s1")}
         assert len(workers) == 1 and not workers.pop().endswith(f":{os.getpid()}")  # the one outside worker
-        assert all(is_complete(out / n, captures / "good" / n, ["phong"], "ground-truth", 32) for n in ("s0", "s1"))
+        assert all(is_complete(out / n, captures / "good" / n, RAN) for n in ("s0", "s1"))
     finally:
         for process in reversed(processes):
             process.terminate()

@@ -11,6 +11,7 @@ from click.testing import CliRunner
 
 import mifaces.batch
 import mifaces.cli as cli
+from mifaces.options.measure import MeasureOptions
 
 #: Command -> (the API function it calls, as an attribute of mifaces.cli or mifaces.batch).
 CALLS = {"simulate": (cli, "simulate_capture"), "fit-shape": (cli, "fit_shapes"), "fit-brdf": (cli, "fit_brdf_model"),
@@ -56,8 +57,10 @@ def _face_model(call):
 
 
 def _brdf(call):
+    """The BRDF model(s) of the call: fit-brdf's second argument, the models of measure's and batch's options."""
     args, kwargs = call
-    return kwargs["models"] if "models" in kwargs else args[1]
+    options = [a for a in args if isinstance(a, MeasureOptions)]
+    return options[0].models if options else args[1]
 
 
 @pytest.mark.parametrize("command", ["simulate", "fit-shape"])
@@ -108,8 +111,8 @@ def test_help_names_the_new_options_only(command):
     (["--refine-shape"], 0, False),
     (["--refine-shape", "--refine-shape-judged", "1", "--refine-shape-early-stop"], 1, True)])
 def test_measure_passes_the_shape_refinement_schedule(run, tmp_path, flags, judged, early_stop):
-    result, (_, kwargs) = run("measure", *_arguments("measure", tmp_path), *flags)
-    schedule = kwargs["refine_shape"]
+    result, (args, _) = run("measure", *_arguments("measure", tmp_path), *flags)
+    schedule = args[2].refine_shape
     assert (schedule.judged, schedule.early_stop) == (judged, early_stop)
-    result, (_, kwargs) = run("measure", *_arguments("measure", tmp_path))
-    assert kwargs["refine_shape"] is False  # off unless asked
+    result, (args, _) = run("measure", *_arguments("measure", tmp_path))
+    assert args[2].refine_shape is None  # off unless asked

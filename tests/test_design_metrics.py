@@ -143,6 +143,7 @@ def run(capture, f, out):
     json.load(f)
     load_geometry(capture, "ground-truth")  # READ geometry
     export_face(out / "brdf" / "phong", out / "face.glb")  # READ export
+    export_face(f, out / "face.glb", source=str(out))  # WRITE export
     return rio.load_estimate(capture)  # READ estimate
 '''
 
@@ -250,6 +251,7 @@ def test_export_name_checks_sys_path_and_pipeline_reads(metrics, tree):
     assert [(r["line"], r["function"], r["reads_its_output"]) for r in reads] == [
         (_line(PIPELINE, "# READ geometry"), "mifaces.shape.io.load_geometry", False),
         (_line(PIPELINE, "# READ export"), "mifaces.export.export_face", True),
+        (_line(PIPELINE, "# WRITE export"), "mifaces.export.export_face", False),
         (_line(PIPELINE, "# READ estimate"), "mifaces.reflectance.io.load_estimate", False)]
 
 
@@ -260,7 +262,7 @@ def test_measure_writes_targets_and_is_deterministic(metrics, tree):
     assert m["light_branches"]["count"] == 8 and m["light_branches"]["met"] is False
     assert m["loose_modules"]["count"] == 4 and m["loose_modules"]["target"] == 2 and m["loose_modules"]["met"] is False
     assert m["fit_brdf_lines"]["count"] == 5 and m["fit_brdf_calls_itself"]["count"] is True
-    assert m["pipeline_reads"]["count"] == 1 and len(m["pipeline_reads"]["pipeline_calls"]) == 3
+    assert m["pipeline_reads"]["count"] == 1 and len(m["pipeline_reads"]["pipeline_calls"]) == 4
     assert len(metrics.summary_rows(data)) == len(m)
 
 

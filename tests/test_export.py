@@ -48,7 +48,8 @@ def _validate(*files: Path) -> list[dict]:
 def test_gltf_brdf_matches_mitsubas_principled_lobe():
     """glTF's specular layer (GGX, F0 from the index, f90 = 1) against Mitsuba's principled
     BSDF with the same roughness and index and no diffuse: an independent evaluation."""
-    from mifaces.export.material import GltfLobe, gltf_brdf, hemisphere_pairs
+    from mifaces.brdf.gltf_lobe import GltfLobe, gltf_brdf
+    from mifaces.brdf.hemisphere import hemisphere_pairs
     from mifaces.validation.brdf_error import eval_bsdf
 
     mifaces.set_variant("llvm_ad_rgb")
@@ -66,32 +67,37 @@ def test_gltf_brdf_matches_mitsubas_principled_lobe():
 
 
 def test_each_model_maps_onto_a_ggx_lobe():
+    from mifaces.brdf import model
     from mifaces.brdf.builtin import fresnel_normal
     from mifaces.brdf.cosine_lobe import exponent_of_slope
-    from mifaces.export.material import gltf_lobe
+    from mifaces.brdf.materials import REFRACTIVE_INDEX
 
-    ct = gltf_lobe("cooktorrance", {"specular_reflectance": [0.5, 0.4, 0.5], "roughness": 0.3, "eta": 1.4})
+    ct = model("cooktorrance").gltf_lobe({"specular_reflectance": [0.5, 0.4, 0.5], "roughness": 0.3, "eta": 1.4})
     assert ct.alpha == 0.3 and ct.f90 == 0.5
     np.testing.assert_allclose(ct.f0, np.array([0.5, 0.4, 0.5]) * fresnel_normal(1.4))
-    phong = gltf_lobe("phong", {"specular_reflectance": 0.1, "exponent": 50.0})
+    # a region without its own η takes its published one (the value a fit holds there)
+    lips = model("cooktorrance").region_values({"specular_reflectance": 0.5, "roughness": 0.3}, "lips")
+    assert lips["eta"] == REFRACTIVE_INDEX["lips"]
+    phong = model("phong").gltf_lobe({"specular_reflectance": 0.1, "exponent": 50.0})
     assert exponent_of_slope(phong.alpha) == pytest.approx(50.0)  # the inverse of the slope -> exponent map
     np.testing.assert_allclose(phong.f0, 0.1)
     assert phong.f90 == pytest.approx(0.1)
-    ward = gltf_lobe("ward", {"specular_reflectance": [0.05, 0.05, 0.05], "alpha": 0.2})
+    ward = model("ward").gltf_lobe({"specular_reflectance": [0.05, 0.05, 0.05], "alpha": 0.2})
     assert ward.alpha == 0.2 and ward.f90 == pytest.approx(0.05)
-    with pytest.raises(ValueError, match="no glTF mapping"):
-        gltf_lobe("blinn", {})
 
 
 def test_lafortune_lobe_is_the_least_squares_fit():
     """The fitted α has a smaller residual than its neighbours, and the fit is close to the lobe."""
-    from mifaces.export.material import ALPHA_GRID, GltfLobe, fit_lafortune, gltf_brdf, hemisphere_pairs, specular_lobe
+    from mifaces.brdf import model
+    from mifaces.brdf.gltf_lobe import ALPHA_GRID, FIT_GRID, GltfLobe, glossy_values, gltf_brdf
+    from mifaces.brdf.hemisphere import hemisphere_pairs
 
     mifaces.set_variant("llvm_ad_rgb")
     params = {"cxy": -0.9, "cz": 0.9, "exponent": 20.0}
-    lobe = fit_lafortune(params, {})
-    wi, wo = hemisphere_pairs()
-    target = specular_lobe("lafortune", params, {}, wi, wo) * wo[:, 2:3]
+    lafortune = model("lafortune")
+    lobe = lafortune.gltf_lobe(params)  # the default: the nearest GGX lobe
+    wi, wo = hemisphere_pairs(FIT_GRID)
+    target = glossy_values(lafortune, params, wi, wo) * wo[:, 2:3]
 
     def residual(alpha):
         basis = gltf_brdf(wi, wo, np.zeros(3), GltfLobe(alpha, np.ones(3), 1.0)) * wo[:, 2:3]
@@ -398,6 +404,77 @@ def test_exported_tangents_are_the_frame_the_normal_map_is_written_in(measured):
     np.testing.assert_allclose(face.normals, normal, atol=1e-6)
     np.testing.assert_allclose(np.cross(face.normals, face.tangents[:, :3]) * face.tangents[:, 3:], bitangent,
                                atol=1e-5)
+
+
+# --------------------------------------------------------------------------------------------
+# One result type: the estimate in memory and the folder it was written to
+# --------------------------------------------------------------------------------------------
+def test_a_result_folder_reads_back_as_the_estimate_written(small_capture, tmp_path):
+    """read_estimate(folder) of a fit is the estimate fit_brdf returned: its model, the region
+    parameters and records, the albedo and specular maps (as written, float32); and the face
+    exported from either is the same file."""
+    from mifaces import brdf
+    from mifaces.export import export_face
+    from mifaces.reflectance import fit_brdf
+    from mifaces.reflectance.io import read_estimate
+
+    capture = small_capture("read_back", measurements=4, resolution=(192, 192), spp=4, albedo_resolution=64, seed=2)
+    fitted = fit_brdf(capture, "cooktorrance", out=tmp_path / "ct", progress=False,
+                      options=FitOptions(resolution=16, specular_maps=True))
+    read = read_estimate(tmp_path / "ct")
+    assert (read.model, read.options, read.measurements) == (fitted.model, fitted.options, fitted.measurements)
+    model = brdf.model(fitted.model, **fitted.options)  # values as brdf.json keeps them (RGB as three)
+    assert read.regions() == model.validate_regions(fitted.regions())
+    assert any(max(p["specular_reflectance"]) > 0 for p in read.regions().values())  # a lobe was measured
+    for name, fit in fitted.fits.items():
+        np.testing.assert_equal((read.fits[name].params, read.fits[name].status, read.fits[name].loss),
+                                (model.validate(fit.params), fit.status, fit.loss))  # (a prior's loss: NaN)
+    np.testing.assert_array_equal(read.albedo.albedo, fitted.albedo.albedo.astype(np.float32))
+    np.testing.assert_array_equal(read.specular_texture(), fitted.specular_texture().astype(np.float32))
+    assert read.normal_texture() is None and fitted.normal_texture() is None
+    (memory,) = export_face(fitted, tmp_path / "memory.glb", source=str(tmp_path / "ct"))
+    (folder,) = export_face(tmp_path / "ct", tmp_path / "folder.glb")
+    assert memory.read_bytes() == folder.read_bytes()
+
+
+def test_a_new_brdf_model_is_exported_without_export_knowing_it(monkeypatch, tmp_path):
+    """A model class defined here (a Blinn lobe), registered for the test only: exported through
+    the base class's mapping (the nearest GGX lobe), export/ never told its name."""
+    import drjit as dr
+    import mitsuba as mi
+    import pygltflib
+
+    from mifaces import brdf
+    from mifaces.brdf.model import BRDFModel, Parameter, power
+    from mifaces.export import export_face
+    from mifaces.reflectance.fit.region_fit import RegionFit
+    from mifaces.reflectance.maps.diffuse import DiffuseMap
+    from mifaces.reflectance.result import BRDFEstimate
+
+    class Blinn(BRDFModel):
+        name, title = "blinn_test", "Blinn (test)"
+
+        def specular_parameters(self):
+            return (Parameter("specular_reflectance", "rgb", 0.1, 0.0, 1.0, "scale"),
+                    Parameter("exponent", "float", 40.0, 1.0, 1e4, "Blinn exponent"))
+
+        def specular(self, wi, wo, params):
+            h = dr.normalize(wi + wo)
+            n = params["exponent"]
+            return mi.Color3f(params["specular_reflectance"]) * (n + 8.0) / (8.0 * dr.pi) * power(h.z, n)
+
+    mifaces.set_variant("llvm_ad_rgb")
+    monkeypatch.setitem(brdf.MODELS, Blinn.name, Blinn)
+    params = {"specular_reflectance": [0.2, 0.15, 0.1], "exponent": 60.0}
+    fit = RegionFit(Blinn.name, {}, dict(params, diffuse_reflectance=[0.5, 0.4, 0.3]), 0.0, 1, 0.0, "converged", "",
+                    1)
+    albedo = np.full((16, 16, 3), 0.4, np.float32)
+    estimate = BRDFEstimate(Blinn.name, {}, {"skin": fit}, DiffuseMap(albedo, None, None), None, 1, ("m",))
+    (glb,) = export_face(estimate, tmp_path / "face.glb")
+    lobe = Blinn().gltf_lobe(params)
+    assert 0.02 < lobe.alpha < 0.5 and np.all(np.diff(lobe.f0) < 0) and 0 < lobe.f90 <= 1
+    document = pygltflib.GLTF2().load(str(glb))
+    assert document.extras["mifaces"]["model"] == Blinn.name
 
 
 # --------------------------------------------------------------------------------------------

@@ -39,7 +39,7 @@ def test_unknown_keywords_are_named(flags, message):
 def test_bad_options_are_named():
     with pytest.raises(ValueError, match="uncertainty must be one of"):
         FitOptions(uncertainty="guess")
-    with pytest.raises(ValueError, match="resolution must be a positive"):
+    with pytest.raises(ValueError, match=r"resolution must be an integer in \[8, "):
         FitOptions(resolution=0)
 
 

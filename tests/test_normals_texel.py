@@ -300,7 +300,8 @@ def test_cli_normals_flags_reach_the_api(monkeypatch, tmp_path):
     calls = {}
 
     def fake(*args, **kwargs):
-        calls.update(vars(kwargs["options"]))  # the flags travel in one FitOptions
+        options = kwargs["options"]  # fit-brdf: one FitOptions; measure: one MeasureOptions holding it
+        calls.update(vars(getattr(options, "fit", options)))
         raise SystemExit(0)
 
     monkeypatch.setattr(cli, "fit_brdf_model", fake)

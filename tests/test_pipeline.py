@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 import skimage.io
+from mifaces.options.measure import MeasureOptions
 from mifaces.reflectance import FitOptions
 
 
@@ -30,6 +31,14 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
     saved = json.loads((tmp_path / "m" / "report.json").read_text())
     assert saved == json.loads(json.dumps(report))  # the file is the report returned
     assert set(saved["models"]) == {"cooktorrance", "phong"}
+    # the options recorded whole, as they ran (the keywords made them) and as the fits' plan resolved them
+    ran = MeasureOptions(models=("cooktorrance", "phong"), geometry="ground-truth", spp=4,
+                         fit=FitOptions(resolution=128))
+    assert MeasureOptions.from_record(saved["options"]["requested"]) == ran
+    assert MeasureOptions.from_record(saved["options"]["effective"]) == ran.resolved()
+    brdf = json.loads((tmp_path / "m" / "brdf" / "phong" / "brdf.json").read_text())
+    assert FitOptions.from_record(brdf["fit_options"]["requested"]) == ran.fit
+    assert saved["models"]["phong"]["fit_options"] == brdf["fit_options"]
     for model, entry in saved["models"].items():
         assert set(entry["regions"]) == set(entry["fit"])
         assert {fit["status"] for fit in entry["fit"].values()} <= set(BRDF_STATUSES)
@@ -83,7 +92,7 @@ def test_measure_writes_a_report(capture_dir, tmp_path):
     assert picture.shape[0] / picture.shape[1] == pytest.approx(2 / 4, rel=0.1)  # a row of four panels per model
     picture = skimage.io.imread(tmp_path / "m" / "report.png")  # truth and two fits, four conditions
     assert picture.shape[0] / picture.shape[1] == pytest.approx(4 * 2.5 / (3 * 2.6), rel=0.1)
-    with pytest.raises(ValueError, match="unknown BRDF model"):
+    with pytest.raises(ValueError, match="models must be one or more of"):
         measure(tmp_path / "x", capture_dir, models=("blinn",))
     with pytest.raises(ValueError, match="geometry must be"):
         measure(tmp_path / "x", capture_dir, geometry="guess")
@@ -110,7 +119,11 @@ def test_two_photographs_too_few_for_the_texel_fit_keep_the_region_fit(capture_d
     np.testing.assert_allclose(skin.params["specular_reflectance"], region.fits["skin"].params["specular_reflectance"],
                                rtol=1e-3, atol=1e-4)  # refitted from it
     assert np.max(skin.params["specular_reflectance"]) > 0 and "alpha" in skin.uncertainty
-    assert json.loads((tmp_path / "w" / "brdf.json").read_text())["texel_albedo"] is False
+    written = json.loads((tmp_path / "w" / "brdf.json").read_text())
+    assert written["texel_albedo"] is False
+    # asked for, and left out: brdf.json records both
+    assert FitOptions.from_record(written["fit_options"]["requested"]) == FitOptions(resolution=64)
+    assert FitOptions.from_record(written["fit_options"]["effective"]) == FitOptions(resolution=64, texel_albedo=False)
 
 
 def test_cli_measure_prints_skin_and_errors(capture_dir, tmp_path):
@@ -127,6 +140,9 @@ def test_cli_measure_prints_skin_and_errors(capture_dir, tmp_path):
     assert "skin:" in line and "alpha=" in line and "specular_reflectance=[" in line
     assert "vs ground truth" not in line  # the truth is Cook-Torrance: no parameter errors for Ward
     assert f"report: {out}/report.md" in result.output
+    recorded = json.loads((out / "report.json").read_text())["options"]["requested"]
+    assert MeasureOptions.from_record(recorded) == MeasureOptions(models=("ward",), geometry="ground-truth",
+                                                                  fit=FitOptions(resolution=64))
     assert ("ranked by held-out lights (novel pose, relative image RMSE; ≈: within the renders' noise): ward "
             in result.output)
     assert json.loads((out / "report.json").read_text())["models"].keys() == {"ward"}

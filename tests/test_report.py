@@ -14,7 +14,8 @@ import pytest
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.shape.io import load_geometry
 from mifaces.reflectance import FitOptions, fit_brdf
-from mifaces.validation.brdf_error import brdf_rmse, hemisphere_grid
+from mifaces.brdf.hemisphere import hemisphere_grid
+from mifaces.validation.brdf_error import brdf_rmse
 from mifaces.validation.held_out import held_out_lights, novel_rotation
 from mifaces.validation.validator import Validator, relative_rmse
 

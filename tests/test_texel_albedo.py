@@ -139,7 +139,8 @@ def test_cli_texel_albedo_flag_reaches_the_fit(monkeypatch, tmp_path):
     calls = {}
 
     def fake(*args, **kwargs):
-        calls.update(vars(kwargs["options"]))
+        options = kwargs["options"]  # fit-brdf: one FitOptions; measure: one MeasureOptions holding it
+        calls.update(vars(getattr(options, "fit", options)))
         raise SystemExit(0)
 
     monkeypatch.setattr(cli, "fit_brdf_model", fake)

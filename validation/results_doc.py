@@ -38,6 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import doc_figures  # noqa: E402  (the figures of the hand-written docs, checked with --check)
 from results_format import DASH, get  # noqa: E402  (the formatting helpers)
 from results_tables_design import sec_design_metrics  # noqa: E402  (the redesign issue's measuring stick)
+from results_tables_studies import sec_refine_judge  # noqa: E402
 from results_tables_fits import (  # noqa: E402  (one function per result layout)
     sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_depth_cameras, sec_floor_depth,
     sec_joint_outline, sec_light_balance_measure, sec_light_calibration_bias, sec_refine, sec_refine_gradient,
@@ -178,6 +179,7 @@ LAYOUTS = {
     "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
     "real_yaleb": ("Held-out relighting on the Yale face database", "real photographs", sec_real_yaleb),
     "refine": ("Refinement by differentiable rendering", "SIMULATED", sec_refine),
+    "refine_judge": ("The shape refinement's judges on development seeds", "SIMULATED", sec_refine_judge),
     "light_calibration_bias": ("The texture-space fit with calibrated and true lights", "SIMULATED",
                                sec_light_calibration_bias),
     "light_balance_measure": ("The main job with the given lights balanced", "SIMULATED", sec_light_balance_measure),

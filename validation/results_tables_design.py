@@ -11,7 +11,7 @@ def _target(metric: dict) -> str:
     if target is None:
         return DASH
     shown = text(target) if isinstance(target, bool) or target == 0 else f"≤ {text(target)}"
-    return shown if metric.get("target_from") == "issue 49" else f"{shown} (proposed)"
+    return f"{shown} (proposed)" if str(metric.get("target_from")).startswith("proposed") else shown
 
 
 def sec_design_metrics(d):

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import Parameter, ParameterError, rgb
+from .parameter import Parameter, ParameterError, rgb
 
 
 @dataclass(frozen=True)

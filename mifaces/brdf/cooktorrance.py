@@ -26,6 +26,8 @@ import mitsuba as mi
 import numpy as np
 
 from . import microfacet
+from .builtin import fresnel_normal
+from .gltf_lobe import GltfLobe
 from .materials import REFRACTIVE_INDEX, SKIN_REFRACTIVE_INDEX
 from .model import SLOPE_GRID, BRDFModel, COS_EPSILON, Parameter, dot, mean
 
@@ -63,6 +65,14 @@ class CookTorrance(BRDFModel):
     def from_cook_torrance(self, region):
         """The region's values themselves."""
         return {k: (list(v) if isinstance(v, list) else v) for k, v in region.items()}
+
+    def gltf_lobe(self, params):
+        """α = m (Beckmann's RMS slope; GGX with α = m has the Beckmann lobe's core width, as
+        :mod:`mifaces.brdf.builtin` maps it for ``principled``), f0 = ρ_s F0(η), f90 = ρ_s
+        (the dielectric Fresnel term scaled by ρ_s, in Schlick's form)."""
+        rho = np.broadcast_to(np.asarray(params["specular_reflectance"], np.float64), 3)
+        eta = float(params.get(ETA.name, ETA.default))
+        return GltfLobe.clipped(params["roughness"], rho * fresnel_normal(eta), float(np.max(rho)))
 
     def fresnel_term(self, cos_theta, eta):
         """F at incidence cosine ``cos_theta`` for this model's ``fresnel`` option."""

@@ -60,7 +60,8 @@ def energy_bound(exponent, log, exp):
 
 
 class Lafortune(BRDFModel):
-    """Lafortune with the lobes numbered in ``lobes`` (1-based), default one."""
+    """Lafortune with the lobes numbered in ``lobes`` (1-based), default one. Its lobes have no
+    microfacet parameters: it is exported as the nearest GGX lobe (:meth:`BRDFModel.gltf_lobe`)."""
 
     name = "lafortune"
     title = "Lafortune"

@@ -20,90 +20,22 @@ Conventions, held by every model
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Callable, ClassVar, Iterable, Mapping, Sequence
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .gltf_lobe import GltfLobe, nearest_lobe
+from .parameter import Parameter, ParameterError, rgb
+
 #: Cosines below this are treated as this in divisions (θ > 89.99994°).
 COS_EPSILON = 1e-6
 #: Most glossy lobes a model may have (Lafortune): each lobe costs a power
 #: per sample, and beyond a few the fits are not determined by photographs.
 MAX_LOBES = 8
-#: Relative slack at a range's ends, so that a float32 round trip of a value
-#: at its bound (a fit's optimum at the bound) stays valid.
-_RANGE_SLACK = 1e-6
 
-
-class ParameterError(ValueError):
-    """A BRDF parameter that is not a finite number (or colour) within its
-    :class:`Parameter`'s physical range, or that the model does not have."""
-
-
-@dataclass(frozen=True)
-class Parameter:
-    """One parameter of a BRDF model.
-
-    Attributes
-    ----------
-    name : str
-        The name used by the plugin (XML, ``mi.traverse``) and in ``brdf.json``.
-    kind : str
-        ``'rgb'`` (three channels) or ``'float'``.
-    default : float
-        Value used when a scene does not give one.
-    lower, upper : float
-        The physically valid range, for fitting and validation.
-    doc : str
-        One line for the docs.
-    start : float, optional
-        Value a fit starts from when it knows nothing better: a weak lobe of
-        medium width, far from any sharp minimum (default: ``default``).
-    """
-
-    name: str
-    kind: str
-    default: float
-    lower: float
-    upper: float
-    doc: str
-    start: float | None = None
-
-    def check(self, value, where: str = ""):
-        """``value`` as plain floats (three for an RGB parameter), or a
-        :class:`ParameterError` naming ``where``, the parameter and the value.
-
-        A value must be a finite number (an RGB parameter also a triple of
-        them; no booleans, strings or objects) within [:attr:`lower`,
-        :attr:`upper`]. Dr.Jit values (``mi.Float``, ``mi.Color3f``) are read
-        back, so check them where they are set, not in a kernel."""
-        prefix = f"{where}: " if where else ""
-        shape = "a colour (one number or three)" if self.kind == "rgb" else "a number"
-        try:
-            if isinstance(value, (bool, str, bytes, dict)) or (
-                    isinstance(value, (list, tuple)) and any(isinstance(v, (bool, str)) for v in value)):
-                raise TypeError
-            values = np.array(dr.detach(value) if dr.is_array_v(value) else value, dtype=np.float64).ravel()
-        except (TypeError, ValueError):
-            raise ParameterError(f"{prefix}{self.name} = {value!r} is not {shape}"[:300]) from None
-        if values.size not in ((1, 3) if self.kind == "rgb" else (1,)):
-            raise ParameterError(f"{prefix}{self.name} = {value!r} is not {shape}"[:300])
-        slack = _RANGE_SLACK * max(1.0, abs(self.lower), abs(self.upper))
-        if not np.all(np.isfinite(values)) or np.any(values < self.lower - slack) \
-                or np.any(values > self.upper + slack):
-            shown = values.tolist() if values.size > 1 else float(values[0])
-            raise ParameterError(f"{prefix}{self.name} = {shown} is outside [{self.lower}, {self.upper}] "
-                                 "or not finite")
-        return [float(v) for v in np.broadcast_to(values, 3)] if self.kind == "rgb" else float(values[0])
-
-    def start_value(self):
-        """:attr:`start` (or :attr:`default`): a float, or three for an RGB parameter."""
-        value = float(self.default if self.start is None else self.start)
-        return [value] * 3 if self.kind == "rgb" else value
-
-
+#: The Lambertian term's albedo, every model's first parameter.
 DIFFUSE = Parameter("diffuse_reflectance", "rgb", 0.5, 0.0, 1.0,
                     "albedo of the Lambertian term ρ_d/π")
 
@@ -136,12 +68,6 @@ def check_numbers(name: str, value, length: int | None = None, minimum: float | 
         shown = value.tolist() if isinstance(value, np.ndarray) else value
         raise ValueError(f"{name} must be {what}{bound}, got {shown!r}"[:300])
     return float(values) if length is None else values
-
-
-def rgb(value) -> dict:
-    """A Mitsuba ``rgb`` spectrum dict from a number or an RGB triple."""
-    v = np.broadcast_to(np.asarray(value, np.float64), 3)
-    return {"type": "rgb", "value": [float(x) for x in v]}
 
 
 def _numeric(value) -> bool:
@@ -212,8 +138,8 @@ class BRDFModel:
     how it is derived from a generic glossy lobe (:meth:`from_lobe`,
     :meth:`from_cook_torrance`) and how a ``brdf.json`` document of it is
     checked and becomes a region's plugin (:meth:`validate_document`,
-    :meth:`region_plugin`, :meth:`merge_overrides`, :meth:`check_complete`),
-    as a Mitsuba built-in ground truth
+    :meth:`region_plugin`, :meth:`merge_overrides`, :meth:`check_complete`)
+    and how it is exported (:meth:`gltf_lobe`), as a Mitsuba built-in ground truth
     (:class:`~mifaces.brdf.builtin.BuiltinBSDF`) does.
     The defaults here fit a model with one lobe scaled by
     ``specular_reflectance``.
@@ -429,6 +355,19 @@ class BRDFModel:
         simulator's ground truth. The other models derive theirs by
         :func:`mifaces.brdf.cooktorrance.from_cook_torrance_lobe`."""
         raise NotImplementedError(f"{self.name} is not derived from Cook–Torrance values")
+
+    # -- export (glTF 2.0: mifaces.brdf.gltf_lobe) --------------------------
+    def region_values(self, params: Mapping, region: str) -> dict:
+        """Face region ``region``'s glossy ``params`` completed by what a fit holds there
+        (:meth:`fixed_defaults`, :meth:`fixed_in_region`, e.g. Cook–Torrance's η): all that
+        the region's lobe depends on, so regions of equal values have one lobe."""
+        return {**self.fixed_defaults(), **self.fixed_in_region(region), **params}
+
+    def gltf_lobe(self, params: Mapping) -> GltfLobe:
+        """The glTF specular layer of the glossy part with ``params`` (:meth:`region_values`):
+        the nearest GGX lobe by least squares (:func:`~mifaces.brdf.gltf_lobe.nearest_lobe`),
+        unless the model maps its parameters in closed form."""
+        return nearest_lobe(self, params)
 
     # -- the formulas ----------------------------------------------------
     def specular(self, wi, wo, params):

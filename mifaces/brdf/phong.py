@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from . import cosine_lobe
 from .cooktorrance import from_cook_torrance_lobe
+from .gltf_lobe import GltfLobe
 from .model import EXPONENT_GRID, BRDFModel, Parameter, mean, power
 
 
@@ -43,6 +45,12 @@ class Phong(BRDFModel):
         """ρ_s = the albedo (the lobe reflects exactly ρ_s at normal
         incidence), n from :func:`~mifaces.brdf.cosine_lobe.exponent_of_slope`."""
         return {"specular_reflectance": list(albedo), "exponent": cosine_lobe.exponent_of_slope(roughness)}
+
+    def gltf_lobe(self, params):
+        """α = 1/√(2n), the inverse of :func:`~mifaces.brdf.cosine_lobe.exponent_of_slope`;
+        f0 = f90 = ρ_s (the lobe reflects ρ_s at normal incidence and has no Fresnel rise)."""
+        rho = np.broadcast_to(np.asarray(params["specular_reflectance"], np.float64), 3)
+        return GltfLobe.clipped(1.0 / np.sqrt(2.0 * float(params["exponent"])), rho, float(np.max(rho)))
 
     def specular(self, wi, wo, params):
         n = params["exponent"]

@@ -19,9 +19,11 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from . import microfacet
 from .cooktorrance import from_cook_torrance_lobe
+from .gltf_lobe import GltfLobe
 from .model import SLOPE_GRID, BRDFModel, COS_EPSILON, Parameter, dot, exp_flushed, mean
 
 
@@ -45,6 +47,11 @@ class Ward(BRDFModel):
     def from_lobe(self, albedo, roughness):
         """ρ_s = the albedo, α = the RMS slope (the Ward lobe is Beckmann's slope distribution)."""
         return {"specular_reflectance": list(albedo), "alpha": roughness}
+
+    def gltf_lobe(self, params):
+        """α = the Ward α (Ward's lobe is Beckmann's slope distribution), f0 = f90 = ρ_s."""
+        rho = np.broadcast_to(np.asarray(params["specular_reflectance"], np.float64), 3)
+        return GltfLobe.clipped(params["alpha"], rho, float(np.max(rho)))
 
     def specular(self, wi, wo, params):
         alpha = dr.maximum(params["alpha"], microfacet.MIN_ROUGHNESS)

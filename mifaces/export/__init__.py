@@ -1,10 +1,11 @@
 """Take the measured face anywhere: glTF 2.0, OBJ and USD with PBR textures.
 
-:func:`export_face` reads a ``fit-brdf`` or ``measure`` model folder and
+:func:`export_face` takes a fitted BRDF (the estimate in memory, or a
+``fit-brdf`` or ``measure`` model folder) and
 writes the face in the format of the output's suffix (:data:`FORMATS`):
 geometry in metres, +y up, with normals, tangents and texture coordinates,
 and the fitted reflectance mapped onto glTF's metallic-roughness model
-(:mod:`mifaces.export.material`) as textures through the region map
+(each model by its own mapping, :mod:`mifaces.brdf.gltf_lobe`) as textures through the region map
 (:mod:`mifaces.export.face`). The mapping and its error: ``docs/export.md``.
 
 Examples
@@ -37,18 +38,20 @@ def writer(out):
     return FORMATS[suffix]
 
 
-def export_face(result, out, measurement: str | None = None, shapes=None, face_model=None) -> list[Path]:
-    """Write the face measured in model folder ``result`` to file ``out``.
+def export_face(result, out, measurement: str | None = None, shapes=None, face_model=None,
+                source: str | None = None) -> list[Path]:
+    """Write the face of fitted BRDF ``result`` to file ``out``.
 
     Parameters
     ----------
-    result : path
-        A ``fit-brdf`` or ``measure`` model folder (``out/measure/brdf/cooktorrance``).
+    result : BRDFEstimate or path
+        The estimate in memory (:func:`mifaces.reflectance.fit_brdf`), or a ``fit-brdf`` or
+        ``measure`` model folder (``out/measure/brdf/cooktorrance``) read into one.
     out : path
         The output file; its suffix picks the format (:data:`FORMATS`). OBJ and USD
         write their textures (and OBJ its ``.mtl``) beside it.
-    measurement, shapes, face_model
-        The shape: see :func:`mifaces.export.face.exported_face` (default: the model's mean shape).
+    measurement, shapes, face_model, source
+        The shape and an estimate's provenance: see :func:`mifaces.export.face.exported_face` (default: the model's mean shape).
 
     Returns
     -------
@@ -67,7 +70,7 @@ def export_face(result, out, measurement: str | None = None, shapes=None, face_m
     if out.is_dir():
         raise IsADirectoryError(f"{out} is a folder; give the file to write (e.g. {out / 'face.glb'})")
     check_writable(out.parent)
-    face = exported_face(result, measurement, shapes, face_model)  # everything is checked before a file is written
+    face = exported_face(result, measurement, shapes, face_model, source)  # everything is checked before a file is written
     return write(face, out)
 
 

@@ -1,10 +1,13 @@
 """The measured face as a file format needs it: geometry in metres and
-glTF-style PBR textures, built from a ``fit-brdf`` or ``measure`` model folder.
+glTF-style PBR textures, built from a fitted BRDF: the
+:class:`~mifaces.reflectance.BRDFEstimate` in memory, or a ``fit-brdf`` or
+``measure`` model folder read into one.
 
-:func:`exported_face` reads the folder (a complete, unmixed result set:
-:func:`mifaces.result_set.verify_set`), takes the face's shape (the model's mean,
+:func:`exported_face` takes the estimate (a folder must be a complete, unmixed
+result set: :func:`mifaces.result_set.verify_set`), the face's shape (the model's mean,
 or the shape fitted to one photograph), and maps every region's BRDF onto
-glTF's model (:mod:`mifaces.export.material`), spread over texture space by
+glTF's model, each model by its own mapping
+(:meth:`mifaces.brdf.model.BRDFModel.gltf_lobe`), spread over texture space by
 the region map. The writers (:mod:`mifaces.export.gltf`, ``obj``, ``usd``)
 only lay the :class:`ExportedFace` out in their format.
 
@@ -28,16 +31,18 @@ from pathlib import Path
 
 import numpy as np
 
+from ..brdf import model as brdf_model
+from ..brdf.gltf_lobe import GltfLobe
 from ..brdf.materials import SKIN_REFRACTIVE_INDEX
+from ..brdf.model import BRDFModel
 from ..result_set import ResultSetError, verify_set
 from ..model import MorphableModel, load_model
 from ..model.regions import REGION_NAMES, REGIONS, texel_regions_of_mesh
-from ..reflectance.io import KIND, load_estimate
-from ..reflectance.result import FILES
+from ..reflectance.io import KIND, read_estimate
+from ..reflectance.result import FILES, BRDFEstimate
 from ..reflectance.maps.normals import decode, encode, mitsuba_frames
 from ..shape.io import INDEX as SHAPES_INDEX, file_stem
 from ..status import CONVERGED
-from .material import GltfLobe, gltf_lobe
 
 #: Millimetres (the model's unit) per metre (glTF's and the exports' unit).
 MM_PER_METRE = 1000.0
@@ -70,7 +75,7 @@ class ExportedFace:
         ``specularColorFactor`` (the specular colour may exceed 1; the texture holds it divided by this).
     ior : float
     lobes : dict
-        Region name -> :class:`~mifaces.export.material.GltfLobe`.
+        Region name -> :class:`~mifaces.brdf.gltf_lobe.GltfLobe`.
     info : dict
         Provenance: the result folder, the BRDF model, the shape's source.
     """
@@ -111,7 +116,13 @@ def check_result(folder) -> Path:
 
 def fitted_shape(face_model: MorphableModel, shapes, measurement: str) -> np.ndarray:
     """The model-frame vertices (N, 3, mm) fitted to ``measurement``, from a
-    ``fit-shape`` folder ``shapes`` (its coefficients and expression; the pose is dropped)."""
+    ``fit-shape`` folder ``shapes`` or the fits in memory (:class:`~mifaces.shape.ShapeFit`
+    sequence): their coefficients and expression; the pose is dropped."""
+    if not isinstance(shapes, (str, Path)):
+        fit = next((f for f in shapes if f.measurement == measurement), None)
+        if fit is None or not fit.converged:
+            raise ValueError(f"measurement {measurement!r} has no converged shape fit")
+        return face_model.shape(fit.coefficients, fit.expression if face_model.has_expressions else None)
     shapes = Path(shapes)
     if not (shapes / SHAPES_INDEX).is_file():
         raise FileNotFoundError(f"no fitted shapes at {shapes} (no {SHAPES_INDEX}): give the fit-shape folder "
@@ -143,25 +154,27 @@ def gltf_normals(texture: np.ndarray, face_model: MorphableModel, vertices: np.n
     return encode(out.reshape(texture.shape))
 
 
-def _region_table(document: dict, labels: np.ndarray) -> dict[int, GltfLobe]:
+def _region_table(brdf: BRDFModel, regions: dict, labels: np.ndarray) -> dict[int, GltfLobe]:
     """Label -> glTF lobe for every label in ``labels`` (background and unfitted regions: skin's)."""
-    regions, options = document["regions"], document.get("options", {})
     lobes, known = {}, {}
     for label in np.unique(labels):
         name = REGION_NAMES[label] if REGION_NAMES[label] in regions else "skin"
-        key = json.dumps([name if document["model"] == "cooktorrance" else "", regions[name]], sort_keys=True)
-        if key not in known:  # regions that fell back to another's parameters share its lobe
-            known[key] = gltf_lobe(document["model"], regions[name], name, options)
+        values = brdf.region_values(regions[name], name)
+        key = json.dumps({k: np.asarray(v, np.float64).tolist() for k, v in values.items()}, sort_keys=True)
+        if key not in known:  # regions of equal values (fallen back to another's) share its lobe
+            known[key] = brdf.gltf_lobe(values)
         lobes[int(label)] = known[key]
     return lobes
 
 
 def material_textures(document: dict, albedo: np.ndarray, labels: np.ndarray, specular=None,
                       ior: float = MATERIAL_IOR) -> tuple[dict, float, dict]:
-    """The PBR textures of :class:`ExportedFace` from a BRDF document, its albedo
-    map (R, R, 3), the texel labels (R, R) and an optional per-texel specular map.
-    Returns ``(textures, specular_color_scale, lobes by region name)``."""
-    lobes = _region_table(document, labels)
+    """The PBR textures of :class:`ExportedFace` from a BRDF (``{"model", "options", "regions"}``,
+    as ``brdf.json`` and :meth:`BRDFEstimate.to_json <mifaces.reflectance.BRDFEstimate.to_json>`
+    give it), its albedo map (R, R, 3), the texel labels (R, R) and an optional per-texel
+    specular map. Returns ``(textures, specular_color_scale, lobes by region name)``."""
+    brdf = brdf_model(document["model"], **document.get("options", {}))
+    lobes = _region_table(brdf, document["regions"], labels)
     r = labels.shape[0]
     base, rough = np.zeros((r, r, 3)), np.zeros((r, r, 3))
     color, factor = np.zeros((r, r, 3)), np.zeros((r, r))
@@ -181,46 +194,60 @@ def material_textures(document: dict, albedo: np.ndarray, labels: np.ndarray, sp
     return textures, color_scale, {REGION_NAMES[k]: v for k, v in lobes.items()}
 
 
-def exported_face(result, measurement: str | None = None, shapes=None, face_model=None) -> ExportedFace:
-    """Read a model folder and build the face to export (module docstring).
+def exported_face(result, measurement: str | None = None, shapes=None, face_model=None,
+                  source: str | None = None) -> ExportedFace:
+    """Build the face to export from a fitted BRDF (module docstring).
 
     Parameters
     ----------
-    result : path
-        A ``fit-brdf`` or ``measure`` model folder (``brdf.json``, ``albedo.exr``, ...).
+    result : BRDFEstimate or path
+        The estimate (:func:`mifaces.reflectance.fit_brdf`), or a ``fit-brdf`` or ``measure``
+        model folder (``brdf.json``, ``albedo.exr``, ...) read into one
+        (:func:`mifaces.reflectance.io.read_estimate`).
     measurement : str, optional
         Export the shape fitted to this photograph; default: the model's mean shape.
-    shapes : path, optional
-        The ``fit-shape`` folder holding that fit; default: ``shapes/`` of the
-        ``measure`` run the folder belongs to (``RESULT/../../shapes``).
+    shapes : path or sequence of ShapeFit, optional
+        The ``fit-shape`` folder holding that fit, or the fits in memory; default (a folder
+        ``result``): ``shapes/`` of the ``measure`` run the folder belongs to (``RESULT/../../shapes``).
     face_model : str, path or MorphableModel, optional
         The face model; default: the one the fitted shapes name, else ``'builtin'``.
+    source : str, optional
+        Where an estimate in memory was written, recorded as its provenance (``info['result']``);
+        a folder ``result`` is its own.
 
     Raises
     ------
     mifaces.result_set.ResultSetError
         An incomplete or mixed result set (:func:`check_result`).
     """
-    folder = check_result(result)
-    data = load_estimate(folder)
-    if data["albedo"] is None:
-        raise ResultSetError(f"{folder}: {FILES['albedo']} is missing")
-    shapes = folder.parent.parent / "shapes" if shapes is None else Path(shapes)
-    if face_model is None:
-        index = shapes / SHAPES_INDEX
+    if not isinstance(result, BRDFEstimate):
+        folder = check_result(result)
+        result, source = read_estimate(folder), str(folder)
+        if result.albedo.albedo is None:
+            raise ResultSetError(f"{folder}: {FILES['albedo']} is missing")
+        shapes = folder.parent.parent / "shapes" if shapes is None else shapes
+    if isinstance(shapes, (str, Path)) and face_model is None:
+        index = Path(shapes) / SHAPES_INDEX
         face_model = json.loads(index.read_text()).get("model_source", "builtin") if index.is_file() else "builtin"
-    face_model = load_model(face_model)
+    face_model = load_model("builtin" if face_model is None else face_model)
+    if measurement is not None and shapes is None:
+        raise ValueError(f"the shape fitted to {measurement!r}: give its fits (shapes=)")
     vertices = face_model.shape_mean if measurement is None else fitted_shape(face_model, shapes, measurement)
-    resolution = data["albedo"].shape[0]
+    albedo = np.asarray(result.albedo.albedo, np.float32)  # as the result's files keep it
+    resolution = albedo.shape[0]
     labels = texel_regions_of_mesh(face_model.region_map, face_model.uv, face_model.triangles, resolution)
-    textures, color_scale, lobes = material_textures(data, data["albedo"], labels, data.get("specular"))
-    if data.get("normals") is not None:
-        if data["normals"].shape[:2] != (resolution, resolution):
-            raise ResultSetError(f"{folder}: the normal map is {data['normals'].shape[1]}x{data['normals'].shape[0]}"
+    specular = result.specular_texture()
+    brdf = {"model": result.model, "options": result.options, "regions": result.regions()}
+    textures, color_scale, lobes = material_textures(brdf, albedo, labels,
+                                                     None if specular is None else np.asarray(specular, np.float32))
+    normals = result.normal_texture()
+    if normals is not None:
+        if normals.shape[:2] != (resolution, resolution):
+            raise ResultSetError(f"{source}: the normal map is {normals.shape[1]}x{normals.shape[0]}"
                                  f" but the albedo map {resolution}x{resolution}: files of different runs")
-        textures["normal"] = gltf_normals(data["normals"], face_model, vertices)
+        textures["normal"] = gltf_normals(normals, face_model, vertices)
     tangent, _, normal = face_model.tangent_frames(vertices)
-    info = {"result": str(folder), "model": data["model"], "face_model": face_model.name,
+    info = {"result": str(source), "model": result.model, "face_model": face_model.name,
             "shape": "mean" if measurement is None else f"fitted to {measurement}",
             "regions": sorted(REGIONS[name] for name in lobes)}
     return ExportedFace(positions=(np.asarray(vertices, np.float64) / MM_PER_METRE).astype(np.float32),

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..options.fields import check, option
 from .schedule import HOLDOUT, HOLDOUT_BLOCK
 
 
@@ -97,18 +98,21 @@ class ShapeRefineSchedule:
     evaluation_spp: int = 32
     holdout: float = HOLDOUT
     holdout_block: int = HOLDOUT_BLOCK
-    early_stop: bool = False
-    judged: int = 0
+    early_stop: bool = option(False, help="Let half of --refine-shape's held-out pixels choose its iteration, the "
+                                          "other half judge it (docs/refine_shape.md).")
+    judged: int = option(0, bounds=(0, None), help="Photographs held out of --refine-shape to judge it by (the last "
+                                                   "ones; 0: held-out pixels only; docs/refine_shape.md).")
     carry_over: float = 0.5
 
     def __post_init__(self):
+        check(self)
         counts = ["iterations", "spp", "evaluation_spp", "holdout_block"]
         if self.downsample is not None:  # None: chosen per camera (factor)
             counts.append("downsample")
         for name in counts:
             if isinstance(getattr(self, name), bool) or int(getattr(self, name)) < 1:
                 raise ValueError(f"ShapeRefineSchedule.{name} must be an integer >= 1, got {getattr(self, name)!r}")
-        for name in ("spp_silhouette", "spp_shadow", "judged"):
+        for name in ("spp_silhouette", "spp_shadow"):
             if isinstance(getattr(self, name), bool) or int(getattr(self, name)) < 0:
                 raise ValueError(f"ShapeRefineSchedule.{name} must be >= 0, got {getattr(self, name)!r}")
         for name in ("learning_rate", "smoothing", "epsilon"):

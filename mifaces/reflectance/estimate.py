@@ -105,7 +105,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     t0 = time.perf_counter()
     options = fit_options(options, deprecated, "fit_brdf")
     resolution, fixed, schedule, seed = options.resolution, options.fixed, options.schedule, options.seed
-    normals, uncertainty = options.normals, options.uncertainty
+    normals = options.normals
     capture = load_capture(capture)
     brdf = brdf_models.model(model, **options.brdf_options())
     face, shapes = load_geometry(capture, geometry, face_model)
@@ -138,12 +138,12 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     # parameters with a published value per region (Cook-Torrance's η) are fixed at it unless given
     per_region = {name: {k: v for k, v in brdf.fixed_in_region(name).items() if fixed is None or k not in fixed}
                   for name in names.values()}
-    rounds = 0 if normals else int(options.albedo_rounds)
+    plan = options.resolved()  # which of the albedo's fits, and whether intervals, with normals
+    rounds, texel_albedo, uncertainty = int(plan.albedo_rounds), plan.texel_albedo, plan.uncertainty
     region_fit = dict(progress=progress, fixed=fixed, fixed_by_region=per_region, schedule=schedule, seed=seed,
                       cluster=tile_clusters(on_face.texel, resolution, label=on_face.label))
-    texel_albedo = options.texel_albedo and not normals and not rounds
     fits = fit_regions(brdf, on_face, names, **region_fit,
-                       uncertainty=None if normals or rounds or texel_albedo else uncertainty)
+                       uncertainty=None if rounds or texel_albedo else uncertainty)
     if texel_albedo:  # the glossy parts with an albedo per texel, and their intervals over larger tiles
         region_fit["cluster"] = tile_clusters(on_face.texel, resolution, label=on_face.label,
                                               tile=max(1, round(TEXEL_TILE_AT_128 * resolution / 128)))
@@ -199,7 +199,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
                             measurements=tuple(samples.measurement_names),
                             seconds={"samples": t_samples - t0, "fit": t_fit - t_samples, "refine": t_end - t_fit,
                                      "total": t_end - t0}, light_balance=light_balance,
-                            interreflection=interreflection, texel_albedo=texel_albedo)
+                            interreflection=interreflection, texel_albedo=texel_albedo, fit_options=options)
     if texel_normals is not None:
         first = next(name for name in estimate.measurements if name in shapes)
         estimate.normals = mitsuba_tangent_normals(texel_normals.normals, face, shapes[first]).astype(np.float32)

@@ -25,13 +25,19 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 from .. import brdf as brdf_models
 from ..atomic import atomic_write, write_json
 from ..image_files import read_exr, write_exr, write_png
 from ..result_set import ResultSetError, result_set, verify_set
 from ..environment import environment_emitter
 from ..render import FaceScene, scene_xml
-from .result import FILES, BRDFEstimate
+from ..model.regions import REGIONS
+from .fit.region_fit import RegionFit
+from .maps.diffuse import DiffuseMap
+from .maps.specular import SpecularMap
+from .result import FILES, FIT_KEYS, BRDFEstimate
 
 #: Samples per pixel of ``scene.xml`` (``mi.load_file(path, spp=N)`` overrides it).
 SCENE_SPP = 64
@@ -159,4 +165,30 @@ def load_estimate(path) -> dict:
     return data
 
 
-__all__ = ["KIND", "write_estimate", "write_fitted", "load_estimate"]
+def read_estimate(path) -> BRDFEstimate:
+    """A result folder (or its ``brdf.json``) as the :class:`BRDFEstimate` that :func:`fit_brdf
+    <mifaces.reflectance.estimate.fit_brdf>` returned and :func:`write_estimate` wrote, read by
+    :func:`load_estimate` (and refused as it refuses). What the files keep comes back as it was
+    (the region fits and their records, the albedo map, the normal and specular maps as written,
+    float32); what they do not keep is None: the region map (the face model's, which a reader
+    has), the albedo's sample counts and weights, the specular map's scales and information,
+    the fits' histories."""
+    data = load_estimate(path)
+    records = data.get("fit") or {}
+    fits = {name: RegionFit(data["model"], data["options"], dict(params, **{
+        k: v for k, v in records.get(name, {}).items() if k == "diffuse_reflectance"}),
+        **{k: records.get(name, {}).get(k) for k in FIT_KEYS if k != "diffuse_reflectance"},
+        uncertainty=(data.get("uncertainty") or {}).get(name) or {}) for name, params in data["regions"].items()}
+    specular = None if data["specular"] is None else SpecularMap(
+        None, data["specular"], None, {REGIONS[k]: v for k, v in (data.get("specular_shrinkage") or {}).items()})
+    return BRDFEstimate(
+        model=data["model"], options=data["options"], fits=fits, albedo=DiffuseMap(data["albedo"], None, None),
+        region_map=None, samples=data.get("samples", 0), measurements=tuple(data.get("measurements", ())),
+        seconds=data.get("seconds") or {}, refinement=data.get("refinement"),
+        normals=None if data["normals"] is None else 2.0 * np.asarray(data["normals"], np.float64) - 1.0,
+        normal_refinement=data.get("normal_refinement"), specular=specular, lighting=data.get("lighting"),
+        light_balance=data.get("light_balance"), interreflection=data.get("interreflection"),
+        texel_albedo=bool(data.get("texel_albedo", False)))
+
+
+__all__ = ["KIND", "write_estimate", "write_fitted", "load_estimate", "read_estimate"]

@@ -1,14 +1,22 @@
 """How :func:`mifaces.reflectance.fit_brdf` fits: one value that travels from the CLI and
-:func:`mifaces.measure` to the fit, instead of a dozen forwarded flags."""
+:func:`mifaces.measure` to the fit, instead of a dozen forwarded flags. Each option is declared
+once (:func:`mifaces.options.fields.option`): its default, range, help and flag."""
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
+from ..brdf import MAX_LOBES
+from ..image_files import MAX_IMAGE_PIXELS
+from ..options.fields import check, from_record, option, record
 from .fit.region_fit import SubsetSchedule
 from .fit.uncertainty import METHODS
+
+#: Largest texture resolution R (R x R texels): an image's pixel limit.
+MAX_TEXTURE = math.isqrt(MAX_IMAGE_PIXELS)
 
 
 @dataclass(frozen=True)
@@ -86,26 +94,50 @@ class FitOptions:
         photograph.
     """
 
-    resolution: int = 512
-    lobes: int = 1
-    model_options: dict = field(default_factory=dict)
+    resolution: int = option(512, bounds=(8, MAX_TEXTURE), help="Texture resolution R (R x R texels).")
+    lobes: int = option(1, bounds=(1, MAX_LOBES), help="Lafortune lobes.")
+    model_options: dict = option(factory=dict)
     fixed: dict | None = None
-    schedule: SubsetSchedule | None = None
-    seed: int = 0
-    normals: bool = False
+    schedule: SubsetSchedule | None = option(None, nested=SubsetSchedule)
+    seed: int = option(0, bounds=(0, None))
+    normals: bool = option(False, help="Estimate a normal per texel alternating with each fit (normals.exr, which "
+                                       "scene.xml and the renders read).")
     normal_options: dict | None = None
-    specular_maps: bool = False
-    uncertainty: str | None = METHODS[0]
-    albedo_rounds: int = 0
-    texel_albedo: bool = True
-    balance_lights: bool = False
-    interreflection: bool = False
+    specular_maps: bool = option(False, help="Estimate the specular reflectance per texel (specular.exr; renders "
+                                             "read it).")
+    uncertainty: str | None = option(METHODS[0], choices=METHODS + (None,),
+                                     help="How the parameters' 95 % intervals are estimated (docs/uncertainty.md); "
+                                          "'none' leaves them out.")
+    albedo_rounds: int = option(0, bounds=(0, None))
+    texel_albedo: bool = option(True, help="An albedo per texel in the glossy fit; --no-: one per region, as the "
+                                           "paper (docs/uncertainty.md).")
+    balance_lights: bool = option(False, help="Correct the given lights' relative intensities by the face's one "
+                                              "albedo before the BRDF fits (a lamp a percent off biases the glossy "
+                                              "fit).")
+    interreflection: bool = option(False, help="Take the light bounced between parts of the face out of the "
+                                               "samples (a second fit; bounced light biases skin's lobe low).")
 
     def __post_init__(self):
-        if self.uncertainty is not None and self.uncertainty not in METHODS:
-            raise ValueError(f"uncertainty must be one of {METHODS} or None, got {self.uncertainty!r}")
-        if int(self.resolution) < 1:
-            raise ValueError(f"resolution must be a positive number of texels, got {self.resolution!r}")
+        check(self)
+
+    def to_record(self) -> dict:
+        """Every option, as a JSON object (:meth:`from_record` reads it back, equal)."""
+        return record(self)
+
+    @classmethod
+    def from_record(cls, data: dict) -> FitOptions:
+        """The options :meth:`to_record` wrote."""
+        return from_record(cls, data)
+
+    def resolved(self) -> FitOptions:
+        """These options as :func:`~mifaces.reflectance.fit_brdf` plans to run them: ``normals``
+        (whose rounds refit the albedo) turns off ``albedo_rounds``, ``texel_albedo`` and the
+        uncertainty; ``albedo_rounds`` turns off ``texel_albedo``. (What the fit then left out,
+        where the data did not allow it: :meth:`BRDFEstimate.effective_options
+        <mifaces.reflectance.result.BRDFEstimate.effective_options>`.)"""
+        if self.normals:
+            return dataclasses.replace(self, albedo_rounds=0, texel_albedo=False, uncertainty=None)
+        return dataclasses.replace(self, texel_albedo=self.texel_albedo and not self.albedo_rounds)
 
     def brdf_options(self) -> dict:
         """The BRDF model's options, with ``lobes`` where it is not 1."""
@@ -141,7 +173,9 @@ def fit_options(options, flags: dict, caller: str) -> FitOptions:
         shown = ", ".join(f"{key}=..." for key in flags)
         warnings.warn(f"{caller}({shown}) is deprecated and goes in the next release: pass "
                       f"options=FitOptions({shown})", DeprecationWarning, stacklevel=3)
+    if isinstance(options, FitOptions) and not flags:
+        return options  # a value already: normalised where it was made
     return dataclasses.replace(options or FitOptions(), **flags)
 
 
-__all__ = ["FitOptions", "fit_options"]
+__all__ = ["MAX_TEXTURE", "FitOptions", "fit_options"]

@@ -13,6 +13,7 @@ from .fit.region_fit import RegionFit
 from .maps.diffuse import DiffuseMap
 from .maps.normals import encode
 from .maps.specular import SpecularMap
+from .options import FitOptions
 
 def fitted_light(light, refinement: dict | None):
     """``light`` (:class:`~mifaces.capture.Light`) as a fit was fitted under it: an estimated
@@ -83,6 +84,9 @@ class BRDFEstimate:
     texel_albedo : bool
         Whether the glossy parts were fitted with an albedo per texel
         (``FitOptions(texel_albedo=True)``, the default); ``brdf.json`` says which (``"texel_albedo"``).
+    fit_options : FitOptions or None
+        The options the fit was asked to run with; ``brdf.json``'s ``"fit_options"`` records them
+        whole, ``requested`` and ``effective`` (:meth:`effective_options`).
     """
 
     model: str
@@ -101,6 +105,17 @@ class BRDFEstimate:
     light_balance: dict | None = None
     interreflection: dict | None = None
     texel_albedo: bool = False
+    fit_options: FitOptions | None = None
+
+    def effective_options(self) -> FitOptions | None:
+        """The options as the fit ran: :attr:`fit_options` as its plan resolved them
+        (:meth:`FitOptions.resolved <mifaces.reflectance.options.FitOptions.resolved>`), less what
+        the data did not allow: the per-texel albedo where it measured no lobe on skin, normals
+        where no texel had the samples, specular maps for a model without a specular reflectance."""
+        if self.fit_options is None:
+            return None
+        return dataclasses.replace(self.fit_options.resolved(), texel_albedo=bool(self.texel_albedo),
+                                   normals=self.normals is not None, specular_maps=self.specular is not None)
 
     def fitted_light(self, light):
         """``light`` as this estimate was fitted under it (:func:`fitted_light`)."""
@@ -138,6 +153,8 @@ class BRDFEstimate:
                 **({} if self.light_balance is None else {"light_balance": self.light_balance}),
                 **({} if self.interreflection is None else {"interreflection": self.interreflection}),
                 "texel_albedo": bool(self.texel_albedo),
+                **({} if self.fit_options is None else {"fit_options": {
+                    "requested": self.fit_options.to_record(), "effective": self.effective_options().to_record()}}),
                 **({} if self.normals is None else {"normals": FILES["normals"],
                                                     "normal_refinement": self.normal_refinement}),
                 **({} if self.specular is None else {"specular": FILES["specular"], "specular_shrinkage": {

@@ -5,7 +5,7 @@ The BRDF error over the hemisphere, for any truth that
 :func:`mifaces.render.region_bsdf` builds (the four plugins, Mitsuba's
 built-ins, spatially varying maps). Truth and fit are loaded as Mitsuba
 BSDFs and evaluated by their ``eval``, which returns F = f(ωi, ωo) cos θo,
-on every pair of a fixed set of directions (:func:`hemisphere_grid`:
+on every pair of a fixed set of directions (:func:`mifaces.brdf.hemisphere.hemisphere_grid`:
 :data:`GRID` ² directions, stratified and cosine-weighted, so that a
 sample mean is a cosine-weighted hemispherical mean) at
 :data:`UV_SAMPLES` texels of the region (where the truth varies over
@@ -26,24 +26,14 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..brdf.model import rgb
+from ..brdf.hemisphere import hemisphere_grid
+from ..brdf.parameter import rgb
 from ..render import region_bsdf
 
 #: Directions per axis of the hemisphere grid: GRID² directions, GRID⁴ (ωi, ωo) pairs.
 GRID = 12
 #: Texels per region at which the BRDFs are compared.
 UV_SAMPLES = 8
-
-
-def hemisphere_grid(n: int = GRID) -> np.ndarray:
-    """n² unit directions (local frame, z the normal), one per cell of an n x n
-    grid of the unit square mapped by Mitsuba's cosine-weighted hemisphere
-    warp (Shirley–Chiu concentric map): stratified, each with the same
-    share of the projected solid angle."""
-    u = (np.arange(n) + 0.5) / n
-    x, y = np.meshgrid(u, u)
-    d = mi.warp.square_to_cosine_hemisphere(mi.Point2f(x.ravel(), y.ravel()))
-    return np.stack([np.asarray(d[i], np.float64) for i in range(3)], axis=1)
 
 
 def eval_bsdf(bsdf: dict, uv: np.ndarray, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
@@ -97,4 +87,4 @@ def brdf_rmse(truth: dict, fit: dict, region: str, true_albedo, fit_albedo, uv: 
     return float(np.sqrt(np.sum((f_fit - f_true) ** 2) / energy))
 
 
-__all__ = ["GRID", "UV_SAMPLES", "hemisphere_grid", "eval_bsdf", "region_texels", "brdf_rmse"]
+__all__ = ["GRID", "UV_SAMPLES", "eval_bsdf", "region_texels", "brdf_rmse"]
