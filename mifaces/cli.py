@@ -238,7 +238,7 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, face_mo
 def measure(capture: str | None, out_dir: str, options: MeasureOptions) -> None:
     """The main job: from CAPTURE (default: a simulated capture of the built-in face) to fitted BRDFs and a report."""
     check_writable(out_dir)
-    report = measure_capture(out_dir, capture, options=options)
+    report = measure_capture(out_dir, capture, options)
     for model, entry in report["models"].items():
         skin = entry["regions"].get("skin", {})
         truth = (entry.get("ground_truth") or {}).get("regions", {}).get("skin")

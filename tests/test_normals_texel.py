@@ -300,7 +300,8 @@ def test_cli_normals_flags_reach_the_api(monkeypatch, tmp_path):
     calls = {}
 
     def fake(*args, **kwargs):
-        options = kwargs["options"]  # fit-brdf: one FitOptions; measure: one MeasureOptions holding it
+        # fit-brdf: one FitOptions by keyword; measure: one MeasureOptions holding it, the third argument
+        options = kwargs["options"] if "options" in kwargs else args[2]
         calls.update(vars(getattr(options, "fit", options)))
         raise SystemExit(0)
 
