@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ..capture.camera import Camera
 from .colmap_records import NO_POINT, CameraRecord, ImageRecord, PointRecord, read_records, write_records
@@ -67,30 +68,14 @@ class ColmapModel:
 
 def rotation_from_quaternion(q) -> np.ndarray:
     """The rotation matrix of a quaternion ``(w, x, y, z)`` (normalised first), as COLMAP's ``qvec2rotmat``."""
-    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    w, x, y, z = np.asarray(q, np.float64)
+    return Rotation.from_quat([x, y, z, w]).as_matrix()
 
 
 def quaternion_from_rotation(rotation) -> np.ndarray:
-    """The unit quaternion ``(w, x, y, z)`` with ``w >= 0`` of a rotation matrix (Shepperd's method:
-    from the largest of the trace and the diagonal, for precision)."""
-    m = np.asarray(rotation, np.float64)
-    trace = np.trace(m)
-    if trace > max(m[0, 0], m[1, 1], m[2, 2]):
-        s = 2 * np.sqrt(1 + trace)
-        q = [s / 4, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-    elif m[0, 0] >= m[1, 1] and m[0, 0] >= m[2, 2]:
-        s = 2 * np.sqrt(1 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = [(m[2, 1] - m[1, 2]) / s, s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-    elif m[1, 1] >= m[2, 2]:
-        s = 2 * np.sqrt(1 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s]
-    else:
-        s = 2 * np.sqrt(1 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4]
-    q = np.array(q) / np.linalg.norm(q)
+    """The unit quaternion ``(w, x, y, z)`` with ``w >= 0`` of a rotation matrix."""
+    x, y, z, w = Rotation.from_matrix(np.asarray(rotation, np.float64)).as_quat()
+    q = np.array([w, x, y, z])
     return -q if q[0] < 0 else q
 
 
