@@ -12,7 +12,7 @@ import numpy as np
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.shape.io import load_geometry
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
-from mifaces.reflectance import estimate as estimate_module
+from mifaces.reflectance import fitting as fitting_module
 from mifaces.reflectance.fit import uncertainty as unc
 from mifaces.reflectance.fit.regions import fit_regions
 from mifaces.reflectance.maps.diffuse import albedo_offsets
@@ -42,7 +42,7 @@ def test_the_texel_albedo_takes_the_skin_lobe_nearer_the_truth(small_capture, tm
         clusters.append((samples, kwargs.get("cluster")))
         return fit_regions(brdf, samples, *args, **kwargs)
 
-    monkeypatch.setattr(estimate_module, "fit_regions", spy)
+    monkeypatch.setattr(fitting_module, "fit_regions", spy)
     mifaces.set_variant("llvm_ad_rgb")
     capture = load_capture(small_capture("rounds", measurements=4, resolution=(192, 192), spp=8,
                                          albedo_resolution=256, seed=3))

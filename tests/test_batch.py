@@ -1,4 +1,4 @@
-"""Tests of mifaces.batch (``mifaces batch`` on Dask) and mifaces.population.
+"""Tests of mifaces.pipeline.batch (``mifaces batch`` on Dask) and mifaces.report.population.
 
 Four tiny simulated captures (different seeds, 2 photographs at 128²,
 ground-truth geometry, one model at texture 32²) and a fifth with a corrupt
@@ -21,12 +21,12 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from mifaces.batch import find_captures, is_complete
-from mifaces.cli import main
+from mifaces.pipeline.batch import find_captures, is_complete
+from mifaces.cli.commands import main
 from mifaces.options.measure import MeasureOptions
 from mifaces.reflectance import FitOptions
-from mifaces.population import robust_summary
-from mifaces.status import NOT_FITTED
+from mifaces.report.population import robust_summary
+from mifaces.runtime.status import NOT_FITTED
 
 pytestmark = pytest.mark.slow
 
@@ -63,7 +63,7 @@ def _record(out: Path) -> dict:
 
 
 def _command() -> list[str]:
-    return [sys.executable, "-c", "import sys; from mifaces.cli import main; sys.exit(main())"]
+    return [sys.executable, "-c", "import sys; from mifaces.cli.commands import main; sys.exit(main())"]
 
 
 def test_robust_summary_flags_beyond_three_mads():

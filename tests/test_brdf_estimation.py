@@ -17,8 +17,8 @@ from skimage.transform import resize
 
 from mifaces.capture import load_capture
 from mifaces.capture.ground_truth import ground_truth_folder
-from mifaces.cli import main
-from mifaces.image_files import read_exr
+from mifaces.cli.commands import main
+from mifaces.io.image_files import read_exr
 from mifaces.shape.io import load_geometry
 from mifaces.model.regions import REGIONS, texel_regions_of_mesh
 from mifaces.reflectance import FitOptions, fit_brdf, load_estimate, render_estimate, render_fitted

@@ -16,7 +16,7 @@ from mifaces.reflectance.fit.region_fit import FULL_DATA, SubsetSchedule, fit_re
 from mifaces.reflectance.fit.regions import fit_regions
 from mifaces.reflectance.samples import ReflectanceSamples
 from mifaces.reflectance.fit.levenberg_marquardt import CONVERGED, levenberg_marquardt
-from mifaces.status import AT_BOUND, AT_START, DEFAULTS, PRIOR
+from mifaces.runtime.status import AT_BOUND, AT_START, DEFAULTS, PRIOR
 
 TRUTH = {
     "phong": ({}, {"diffuse_reflectance": [0.5, 0.35, 0.3], "specular_reflectance": [0.12, 0.1, 0.09],

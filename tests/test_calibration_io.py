@@ -12,8 +12,8 @@ import pytest
 from click.testing import CliRunner
 
 from mifaces.capture import MANIFEST, Camera, load_capture
-from mifaces.cli import main
-from mifaces.image_files import write_png
+from mifaces.cli.commands import main
+from mifaces.io.image_files import write_png
 from mifaces.importers.calibration_io import (POSE, export_calibration, import_calibration, import_colmap,
                                               import_transforms, photographs, single_camera)
 from mifaces.importers.colmap import read_colmap

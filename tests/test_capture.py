@@ -14,7 +14,7 @@ import pytest
 
 from mifaces.capture import (FEATURE_POINT_RANGE, MANIFEST, Camera, Capture, CaptureError, WhiteTarget, decode,
                              load_capture, read_image)
-from mifaces.image_files import read_exr, write_exr, write_png
+from mifaces.io.image_files import read_exr, write_exr, write_png
 from test_simulate import STUDIO, copy_capture, studio  # noqa: F401  (studio: the shared session fixture)
 
 WIDTH, HEIGHT = STUDIO["resolution"]

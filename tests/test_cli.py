@@ -1,4 +1,4 @@
-"""Tests of mifaces.cli's option names: ``--face-model`` is the face model and
+"""Tests of mifaces.cli.commands's option names: ``--face-model`` is the face model and
 ``--brdf`` the BRDF model in every command; ``--model``, which named either,
 still works for one release with a deprecation message on stderr.
 
@@ -9,13 +9,13 @@ parse the command lines without simulating or fitting anything."""
 import pytest
 from click.testing import CliRunner
 
-import mifaces.batch
-import mifaces.cli as cli
+import mifaces.pipeline.batch
+import mifaces.cli.commands as cli
 from mifaces.options.measure import MeasureOptions
 
-#: Command -> (the API function it calls, as an attribute of mifaces.cli or mifaces.batch).
+#: Command -> (the API function it calls, as an attribute of mifaces.cli.commands or mifaces.pipeline.batch).
 CALLS = {"simulate": (cli, "simulate_capture"), "fit-shape": (cli, "fit_shapes"), "fit-brdf": (cli, "fit_brdf_model"),
-         "measure": (cli, "measure_capture"), "batch": (mifaces.batch, "measure_batch")}
+         "measure": (cli, "measure_capture"), "batch": (mifaces.pipeline.batch, "measure_batch")}
 
 
 class Called(ValueError):

@@ -12,8 +12,8 @@ import pytest
 from click.testing import CliRunner
 
 from mifaces import photometric_stereo as ps
-from mifaces.image_files import read_codes
-from mifaces.cli import main
+from mifaces.io.image_files import read_codes
+from mifaces.cli.commands import main
 from mifaces.importers import diligent
 from mifaces.photometric_stereo import nonlambertian as nm
 

@@ -13,7 +13,7 @@ import pytest
 
 #: The public API whose docstrings carry an Examples section.
 PUBLIC = ("mifaces.capture.load_capture", "mifaces.studio.simulate", "mifaces.shape.fit_shape",
-          "mifaces.reflectance.fit_brdf", "mifaces.pipeline.measure", "mifaces.render.FaceScene.render")
+          "mifaces.reflectance.fit_brdf", "mifaces.pipeline.measure.measure", "mifaces.render.FaceScene.render")
 
 
 def public_object(path: str):

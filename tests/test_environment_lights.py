@@ -1,4 +1,4 @@
-"""Environment lights in the texture-space stages (mifaces.reflectance.environment, mifaces.lighting):
+"""Environment lights in the texture-space stages (mifaces.reflectance.environment, mifaces.light_estimation.unknown):
 given maps in the capture format, the light a map sends to a surface, a map estimated from
 photographs, and the files an estimate writes."""
 
@@ -14,10 +14,10 @@ import pytest
 
 from mifaces.capture import Camera, CaptureError, load_capture, read_ground_truth
 from mifaces.capture.types import RELATIVE_IRRADIANCE
-from mifaces.environment import (LUMINANCE, dominant_direction, environment_emitter, irradiance, peak_irradiance,
-                                 studio_environment, texel_directions, to_world)
-from mifaces.image_files import read_exr, write_exr
-from mifaces.lighting import LIGHTS_FILE, LIGHTS_FOLDER, write_lights, write_lights_picture
+from mifaces.lights.environment import (LUMINANCE, dominant_direction, environment_emitter, irradiance, peak_irradiance,
+                                        studio_environment, texel_directions, to_world)
+from mifaces.io.image_files import read_exr, write_exr
+from mifaces.light_estimation.unknown import LIGHTS_FILE, LIGHTS_FOLDER, write_lights, write_lights_picture
 from mifaces.reflectance.environment import equivalent_lights, estimate_map, reduced_map
 from mifaces.refine.environment import ENVMAP_FLOOR, padded_envmap
 from mifaces.render import mitsuba_sensor
@@ -185,7 +185,7 @@ def test_measure_estimates_a_hidden_map_with_the_face(studio_capture, tmp_path):
     import shutil
 
     from mifaces.capture import MANIFEST
-    from mifaces.pipeline import measure
+    from mifaces.pipeline.measure import measure
 
     hidden = tmp_path / "hidden"
     shutil.copytree(studio_capture, hidden)
@@ -279,7 +279,7 @@ def test_held_out_lights_avoid_the_maps_light(studio_capture):
 def test_a_map_without_the_refinement_is_flagged(studio_capture, tmp_path):
     """A capture lit by a map, measured without --refine: the report and a warning say that the
     glossy parameters need the refinement."""
-    from mifaces.pipeline import MAP_WITHOUT_REFINE, measure
+    from mifaces.pipeline.measure import MAP_WITHOUT_REFINE, measure
 
     with pytest.warns(UserWarning, match="read as lit from one direction per texel"):
         report = measure(tmp_path / "m", studio_capture, models=("phong",), geometry="ground-truth", spp=2,

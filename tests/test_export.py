@@ -21,7 +21,7 @@ WEB = Path(__file__).resolve().parents[1] / "tools" / "web"
 @pytest.fixture(scope="module")
 def measured(small_capture, tmp_path_factory):
     """A small default measure run (all four models, true shapes, 64² textures): its output folder."""
-    from mifaces.pipeline import measure
+    from mifaces.pipeline.measure import measure
 
     capture = small_capture("export", measurements=2, resolution=(256, 256), spp=8, albedo_resolution=128, seed=4)
     out = tmp_path_factory.mktemp("export") / "m"
@@ -299,7 +299,7 @@ def test_each_format_writes_its_texture_conventions(tmp_path):
 def test_cli_exports_the_fitted_shape_of_a_measurement(measured, tmp_path):
     from click.testing import CliRunner
 
-    from mifaces.cli import main
+    from mifaces.cli.commands import main
     from mifaces.model import load_model
 
     model = load_model("builtin")
@@ -483,7 +483,7 @@ def test_a_new_brdf_model_is_exported_without_export_knowing_it(monkeypatch, tmp
 @pytest.mark.parametrize("damage", ["changed", "missing", "no manifest"])
 def test_incomplete_or_mixed_result_is_refused(measured, tmp_path, damage):
     from mifaces.export import export_face
-    from mifaces.result_set import SET_MANIFEST, ResultSetError
+    from mifaces.io.result_set import SET_MANIFEST, ResultSetError
 
     result = tmp_path / "cooktorrance"
     shutil.copytree(measured / "brdf" / "cooktorrance", result)

@@ -1,4 +1,4 @@
-"""The pixels a face covers (mifaces.face_pixels): the pixel centres' rays with their region
+"""The pixels a face covers (mifaces.render.face_pixels): the pixel centres' rays with their region
 labels, the filtered footprint of a render, and the front of the face."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 import numpy as np
 import pytest
 
-from mifaces.face_pixels import face_pixels, front_of_face_pixels
+from mifaces.render.face_pixels import face_pixels, front_of_face_pixels
 from mifaces.model import load_model
 from mifaces.model.regions import REGIONS
 from mifaces.render import FaceScene

@@ -32,11 +32,11 @@ from mifaces import brdf
 from mifaces.brdf import MAX_LOBES, ParameterError, validate_brdf
 from mifaces.capture import CaptureError, load_capture
 from mifaces.capture.calibration import CalibrationError, calibrate_light
-from mifaces.cli import main
-from mifaces.atomic import write_json
-from mifaces.image_files import read_exr, write_exr
+from mifaces.cli.commands import main
+from mifaces.io.atomic import write_json
+from mifaces.io.image_files import read_exr, write_exr
 from mifaces.render import check_render_size
-from mifaces.result_set import SET_MANIFEST, TEST_PAUSE_ENV, ResultSetError, check_result_target, result_set, verify_set
+from mifaces.io.result_set import SET_MANIFEST, TEST_PAUSE_ENV, ResultSetError, check_result_target, result_set, verify_set
 from mifaces.reflectance.io import KIND, load_estimate
 from mifaces.reflectance.result import FILES
 from mifaces.shape.io import write_fit
@@ -185,7 +185,7 @@ def test_3_fit_brdf_killed_at_a_random_moment(capture, tmp_path):
 
 
 def _kill_in_write_window(command: list[str], flag: Path, points: list[str], timeout: float = 240.0) -> None:
-    """Run ``command`` with :data:`~mifaces.result_set.TEST_PAUSE_ENV` set to ``flag``: let it go on at each of
+    """Run ``command`` with :data:`~mifaces.io.result_set.TEST_PAUSE_ENV` set to ``flag``: let it go on at each of
     ``points`` but the last, where it is killed, inside the write window and nowhere else."""
     log = flag.with_suffix(".log")
     with open(log, "wb") as output:
@@ -378,7 +378,7 @@ def test_8_unwritable_out_fails_before_the_work(capture, tmp_path, monkeypatch, 
         raise AssertionError("the work started")
 
     for name in ("fit_brdf_model", "fit_shapes", "render_fitted", "load_capture"):
-        monkeypatch.setattr(f"mifaces.cli.{name}", work)
+        monkeypatch.setattr(f"mifaces.cli.commands.{name}", work)
     args = {"fit-brdf": ["fit-brdf", str(capture), "--out", out], "fit-shape": ["fit-shape", str(capture), "--out", out],
             "simulate": ["simulate", out], "render": ["render", str(tmp_path), str(capture), "--out", out + "/img"]}
     result = _run(*args[command])
@@ -473,7 +473,7 @@ def test_10_fit_shape_into_an_existing_empty_folder(capture, tmp_path):
     """`mifaces fit-shape CAPTURE --out DIR` with DIR an empty folder writes the fit and the index there:
     the index lists the fit with the status the fit's file and the exit code give, and the SHA-256 of
     the files written."""
-    from mifaces.result_set import file_sha256
+    from mifaces.io.result_set import file_sha256
 
     out = _empty(tmp_path, "shapes")
     result = _run("fit-shape", str(capture), "--out", str(out), "--measurements", "m00", "--iterations", "0.01")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mifaces.atomic import atomic_write, write_json
-from mifaces.image_files import read_exr, write_exr, write_png
+from mifaces.io.atomic import atomic_write, write_json
+from mifaces.io.image_files import read_exr, write_exr, write_png
 
 
 def test_atomic_write_keeps_the_old_file_on_failure(tmp_path):

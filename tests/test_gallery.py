@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from click.testing import CliRunner
 
-from mifaces.cli import main
-from mifaces.image_files import read_exr
+from mifaces.cli.commands import main
+from mifaces.io.image_files import read_exr
 
 
 def test_gallery_cli_writes_exr_and_png_with_four_lit_spheres(tmp_path):

@@ -1,4 +1,4 @@
-"""Integer photographs read at their true bit depth (mifaces.image_files, mifaces.capture.images)."""
+"""Integer photographs read at their true bit depth (mifaces.io.image_files, mifaces.capture.images)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mifaces.capture.images import read_image
-from mifaces.image_files import read_codes
+from mifaces.io.image_files import read_codes
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 

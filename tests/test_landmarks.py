@@ -92,7 +92,7 @@ def test_cli_writes_the_faces_found_and_names_the_others(frontal, tmp_path):
     import PIL.Image
     from click.testing import CliRunner
 
-    from mifaces.cli import main
+    from mifaces.cli.commands import main
 
     blank = tmp_path / "blank.png"
     PIL.Image.fromarray(np.full((192, 168), 128, np.uint8)).save(blank)

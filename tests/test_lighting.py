@@ -1,4 +1,4 @@
-"""Lights nobody measured (mifaces.lighting): from fitted lights to the capture's, and their files.
+"""Lights nobody measured (mifaces.light_estimation.unknown): from fitted lights to the capture's, and their files.
 The fitted lights here are written by hand (their fit is tested in tests/test_shape.py)."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import pytest
 
 from mifaces.capture import load_capture
 from mifaces.capture.types import RELATIVE_IRRADIANCE
-from mifaces.lighting import (LIGHTS_FILE, UnknownLightError, estimate_lights, sphere_shading, write_lights,
-                              write_lights_picture)
+from mifaces.light_estimation.unknown import (LIGHTS_FILE, UnknownLightError, estimate_lights, sphere_shading,
+                                              write_lights, write_lights_picture)
 from mifaces.model.geometry import rotation_matrix
 from mifaces.shape.targets import light_direction
 from test_real_capture import write_directional
@@ -92,7 +92,7 @@ def test_sphere_shading_is_brightest_towards_the_light():
 def test_balance_intensities_gives_one_albedo(tmp_path):
     """Samples of one face under two estimated lights whose intensities are off by known factors
     (with highlights and grazing samples as outliers): the factors are found and undone."""
-    from mifaces.lighting import balance_intensities
+    from mifaces.light_estimation.unknown import balance_intensities
     from mifaces.reflectance.samples import ReflectanceSamples
 
     capture = estimate_lights(_capture(tmp_path), [fitted("m0", (0, 0, -1)), fitted("m1", (0.5, 0, -0.8)),
@@ -157,7 +157,7 @@ def test_given_lights_anchor_the_estimated_intensities(tmp_path):
     """A capture mixing a given light with an unknown one: the given light keeps its intensity and the
     estimated one is expressed in its units; a capture whose lights are all estimated has no use for
     the white target (its units tie to no estimated light)."""
-    from mifaces.lighting import balance_intensities
+    from mifaces.light_estimation.unknown import balance_intensities
 
     capture = estimate_lights(_capture(tmp_path, [{"name": "top", "unknown": True},
                                                   {"name": "side", "direction": [3, 0, -4], "intensity": 2.0}]),
@@ -194,8 +194,8 @@ def test_samples_under_an_unknown_light_are_refused(tmp_path):
 
 
 def test_report_page_shows_the_lights_picture_when_there_is_one(tmp_path):
-    from mifaces.lighting import LIGHTS_PICTURE
-    from mifaces.report_html import write_html
+    from mifaces.light_estimation.unknown import LIGHTS_PICTURE
+    from mifaces.report.html import write_html
 
     report = {"capture": "c", "measurements": 1, "geometry": "fitted", "resolution": 8, "models": {},
               "seconds": {"total": 1.0}}

@@ -11,7 +11,7 @@ import mitsuba as mi
 import pytest
 
 import mifaces
-from mifaces import llvm
+from mifaces.runtime import llvm
 
 
 @pytest.mark.parametrize("path,version", [
@@ -45,7 +45,7 @@ def test_import_loads_a_working_libllvm():
     code = ("import mifaces, drjit as dr, mitsuba as mi\n"
             "x = dr.arange(mi.Float, 8)\n"
             "print(int(dr.sum(x)[0]) if dr.is_array_v(dr.sum(x)) else int(dr.sum(x)))\n"
-            "from mifaces import llvm; print(llvm.loaded_libllvm())")
+            "from mifaces.runtime import llvm; print(llvm.loaded_libllvm())")
     env = {k: v for k, v in os.environ.items() if k != llvm.ENV_VAR}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
     assert out.returncode == 0, out.stderr

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 
 from mifaces import brdf
 from mifaces.capture import Light
-from mifaces.cli import main
+from mifaces.cli.commands import main
 from mifaces.model.geometry import vertex_normals
 from mifaces.model.mesh import mitsuba_mesh
 from mifaces.model.texture_space import rasterize
@@ -295,7 +295,7 @@ def test_fit_brdf_with_normals_writes_the_normal_map(capture_dir, tmp_path):
 
 
 def test_cli_normals_flags_reach_the_api(monkeypatch, tmp_path):
-    import mifaces.cli as cli
+    import mifaces.cli.commands as cli
 
     calls = {}
 

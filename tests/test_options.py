@@ -11,7 +11,7 @@ import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 import pytest
 from click.testing import CliRunner
 
-import mifaces.cli as cli
+import mifaces.cli.commands as cli
 from mifaces.options.measure import MeasureOptions
 from mifaces.reflectance import FitOptions
 from mifaces.reflectance.fit.region_fit import SubsetSchedule
@@ -96,7 +96,7 @@ def test_resolved_is_the_fits_plan():
 @pytest.fixture
 def called(monkeypatch):
     """Run a command line with its API call stubbed: the arguments it was called with."""
-    import mifaces.batch
+    import mifaces.pipeline.batch
 
     calls = []
 
@@ -104,7 +104,7 @@ def called(monkeypatch):
         calls.append((args, kwargs))
         raise ValueError("stubbed")
 
-    for module, name in ((cli, "fit_brdf_model"), (cli, "measure_capture"), (mifaces.batch, "measure_batch")):
+    for module, name in ((cli, "fit_brdf_model"), (cli, "measure_capture"), (mifaces.pipeline.batch, "measure_batch")):
         monkeypatch.setattr(module, name, stub)
 
     def invoke(*args):

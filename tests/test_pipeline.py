@@ -19,8 +19,8 @@ def capture_dir(small_capture):
 
 def test_measure_writes_a_report(capture_dir, tmp_path):
     import mifaces
-    from mifaces.pipeline import measure
-    from mifaces.status import BRDF_STATUSES
+    from mifaces.pipeline.measure import measure
+    from mifaces.runtime.status import BRDF_STATUSES
 
     mifaces.set_variant("llvm_ad_rgb")
     report = measure(tmp_path / "m", capture_dir, models=("cooktorrance", "phong"), geometry="ground-truth", spp=4,
@@ -130,7 +130,7 @@ def test_cli_measure_prints_skin_and_errors(capture_dir, tmp_path):
     """The main job's command line: each model's skin parameters with their ground-truth error, and the report."""
     from click.testing import CliRunner
 
-    from mifaces.cli import main
+    from mifaces.cli.commands import main
 
     out = tmp_path / "cli"
     result = CliRunner().invoke(main, ["--variant", "llvm_ad_rgb", "measure", str(capture_dir), "--out", str(out),
@@ -169,7 +169,7 @@ def test_novel_direction_for_directional_lights(capture_dir):
     import dataclasses
 
     from mifaces.capture import load_capture
-    from mifaces.emitters import light_record
+    from mifaces.lights.emitters import light_record
     from mifaces.validation.held_out import novel_light
 
     capture = load_capture(capture_dir)
@@ -188,7 +188,7 @@ def test_cli_fit_shape_then_fit_brdf_on_the_fitted_shape(capture_dir, tmp_path):
     """fit-shape writes a shape that fit-brdf samples reflectance on."""
     from click.testing import CliRunner
 
-    from mifaces.cli import main
+    from mifaces.cli.commands import main
 
     runner = CliRunner()
     shapes = tmp_path / "shapes"
@@ -211,7 +211,7 @@ def test_cli_fit_shape_then_fit_brdf_on_the_fitted_shape(capture_dir, tmp_path):
 def test_measure_names_the_failed_shape_fits(capture_dir, tmp_path, monkeypatch):
     """Without one usable shape fit, measure stops with a message naming each fit's status and reason,
     before any reflectance stage runs."""
-    import mifaces.pipeline as pipeline
+    import mifaces.pipeline.measure as pipeline
     from mifaces.shape import ShapeFit
 
     def failing(capture, model, **options):
@@ -235,7 +235,7 @@ def test_measure_refines_the_shapes_when_asked(capture_dir, tmp_path, monkeypatc
     """measure(refine_shape=True): a first fit lights the faces, the refinement runs against the
     photographs and the report says whether it was kept and why (a short schedule here)."""
     import mifaces
-    import mifaces.pipeline as pipeline
+    import mifaces.pipeline.measure as pipeline
     from mifaces.refine.shape import ShapeRefineSchedule
     from mifaces.refine.shape_lit import refine_lit
 
@@ -265,7 +265,7 @@ def test_measure_writes_the_refined_shapes_it_fits_on(capture_dir, tmp_path, mon
     RES/shapes_refined (the layout of RES/shapes, loadable as --geometry), the model fit stays in
     RES/shapes; a refinement not accepted writes none."""
     import mifaces
-    import mifaces.pipeline as pipeline
+    import mifaces.pipeline.measure as pipeline
     from mifaces.capture import load_capture
     from mifaces.shape.io import load_geometry
     from mifaces.refine.shape import ShapeRefinement
@@ -303,9 +303,9 @@ def test_measure_with_unknown_lights_checks_before_fitting(capture_dir, tmp_path
     light it cannot estimate (an environment map seen in one pose), naming the lights, before any fit runs."""
     import shutil
 
-    import mifaces.pipeline as pipeline
+    import mifaces.pipeline.measure as pipeline
     from mifaces.capture import MANIFEST
-    from mifaces.lighting import UnknownLightError
+    from mifaces.light_estimation.unknown import UnknownLightError
 
     def never(*args, **kwargs):
         raise AssertionError("fitted before the lights were checked")

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from mifaces.progress import EVERY_ITEM, LineProgress, progress
+from mifaces.runtime.progress import EVERY_ITEM, LineProgress, progress
 
 
 def _lines(monkeypatch, **kwargs) -> list[str]:

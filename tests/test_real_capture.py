@@ -90,7 +90,7 @@ def test_uncalibrated_camera_with_explicit_intrinsics(tmp_path):
 
 
 def test_read_image_channels(tmp_path):
-    from mifaces.image_files import write_png
+    from mifaces.io.image_files import write_png
 
     write_pgm(tmp_path / "grey.pgm", np.full((4, 5), 128))
     write_png(tmp_path / "colour.png", np.full((4, 5, 3), 0.5))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mifaces.capture import Camera, Light
-from mifaces.image_files import write_exr
+from mifaces.io.image_files import write_exr
 from mifaces.model import load_model
 from mifaces.brdf.model import rgb
 from mifaces.render import ALBEDO, ALBEDO_REF, FaceScene, region_meshes, scene_xml

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mifaces.environment import STUDIO_PANELS, environment_emitter, sky_emitter, studio_environment
-from mifaces.face_pixels import face_pixels
+from mifaces.lights.environment import STUDIO_PANELS, environment_emitter, sky_emitter, studio_environment
+from mifaces.render.face_pixels import face_pixels
 from mifaces.model import load_model
 from mifaces.render import FaceScene
 
@@ -115,7 +115,7 @@ def test_an_emitter_dict_carries_its_own_scale(scene):
     (["--sky", "--place", "45", "0", "0"], "--place needs --sky-time"),
 ])
 def test_cli_render_sky_refuses_bad_options(tmp_path, arguments, message):
-    from mifaces.cli import main
+    from mifaces.cli.commands import main
 
     env = tmp_path / "env.exr"
     env.write_bytes(b"")
@@ -127,8 +127,8 @@ def test_cli_render_sky_refuses_bad_options(tmp_path, arguments, message):
 
 def test_cli_render_sky(small_capture, tmp_path):
     """``mifaces render --sky``: the ground truth's BRDF (a brdf.json folder) under the sun and sky."""
-    from mifaces.cli import main
-    from mifaces.image_files import read_exr
+    from mifaces.cli.commands import main
+    from mifaces.io.image_files import read_exr
 
     # (seed 3: at 64 px the steel spheres locate some lights too poorly to load, 2 of 8 seeds)
     capture = small_capture("sky", measurements=1, resolution=(64, 64), spp=2, albedo_resolution=32, seed=3)

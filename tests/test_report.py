@@ -165,7 +165,7 @@ def test_a_fitted_shape_is_told_apart_from_the_reflectance(capture, estimate):
 def test_report_names_every_fit_that_did_not_simply_converge(tmp_path):
     """report.md lists each region whose fit ended at a bound, at its start values, borrowed or at the
     defaults, with the reason; a converged region is not listed (issue 27)."""
-    from mifaces.report import write_markdown
+    from mifaces.report.measurement import write_markdown
 
     statuses = {"skin": ("converged", "relative loss decrease below ftol"),
                 "nostrils": ("at_start", "converged; the glossy parameters stayed at their start values"),
@@ -188,7 +188,7 @@ def test_report_names_every_fit_that_did_not_simply_converge(tmp_path):
 def test_report_gives_each_fitted_shape_its_errors_and_the_modes_used():
     """report.md's shape section: the identity modes of the fit and of the simulated truth, and per
     photograph the status, both convergence measures and the errors in the world frame."""
-    from mifaces.report import shapes_markdown
+    from mifaces.report.measurement import shapes_markdown
 
     report = {"face_model": {"name": "builtin", "model_shape_modes": 100, "fit_shape_modes": 50,
                              "truth_shape_modes": 100, "truth_detail": True},
@@ -208,7 +208,7 @@ def _validated(heldout: float, again: float) -> dict:
 
 
 def test_ranking_calls_a_tie_within_the_renders_noise():
-    from mifaces.report import ranking, ranking_sentence, ties
+    from mifaces.report.measurement import ranking, ranking_sentence, ties
 
     # a and b: 0.2 points apart, but the second draw of random numbers orders them the other way: a tie;
     # b and c: 3 points apart in both draws: c is worse

@@ -108,5 +108,5 @@ def test_provenance_records_where_a_result_came_from(monkeypatch, tmp_path):
     assert p["inputs"] == {str(data_file): "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"}
     assert p["code"] == provenance.code_hash(VALIDATION / "model_span.py")
     deps = [str(d) for d in provenance.dependencies(VALIDATION / "model_span.py")]
-    assert "validation/model_span.py" in deps and "mifaces/shape_errors.py" in deps
+    assert "validation/model_span.py" in deps and "mifaces/validation/shape_errors.py" in deps
     assert "validation/provenance.py" in deps  # model_span.py imports it

@@ -28,7 +28,7 @@ from mifaces.model.geometry import rotation_matrix
 from mifaces.shape import (ShapeFitError, ShapeOptions, ShapeSchedule, Weights, feature_targets, fit_measurement,
                            fit_shape, light_direction, load_fitted_shapes, rotation_centre, shapes_in_world)
 from mifaces.shape.fitter import Fitter, sample_normals
-from mifaces.status import CONVERGED, DIVERGED, NOT_CONVERGED
+from mifaces.runtime.status import CONVERGED, DIVERGED, NOT_CONVERGED
 
 SIZE = 128
 #: A short coarse-to-fine schedule: these tests check recovery, not the last digit.
@@ -612,7 +612,7 @@ def test_unknown_lights_estimated_on_the_shared_face(model, camera, posed, tmp_p
     light's from its stated guess, and the capture's lights become those estimates."""
     from dataclasses import replace
 
-    from mifaces.lighting import estimate_lights
+    from mifaces.light_estimation.unknown import estimate_lights
 
     ypr, t, v, m = posed
     towards = [(0.1, -0.1, -1.0), (0.7, -0.2, -0.7), (-0.5, -0.45, -0.75)]
@@ -648,7 +648,7 @@ def test_alternation_refits_the_lights_on_the_face_of_all_photographs(model, cam
     """One round of the alternation (measure's, for unknown directional lights): the pose's face
     fitted to all photographs under the first estimates read as given, then each unknown light
     fitted again on that face; the estimates stay right and a given light's fit is kept."""
-    from mifaces.lighting import as_given, estimate_lights, refit_lights
+    from mifaces.light_estimation.unknown import as_given, estimate_lights, refit_lights
 
     ypr, t, v, m = posed
     towards = [(0.1, -0.1, -1.0), (0.7, -0.2, -0.7), (-0.5, -0.45, -0.75)]
@@ -681,7 +681,7 @@ def test_a_capture_without_ambient_light_holds_the_ambient_term_at_zero(model, c
     intensities come out closer than with a fitted ambient, which trades against a frontal light."""
     from dataclasses import replace
 
-    from mifaces.lighting import estimate_lights, refit_lights
+    from mifaces.light_estimation.unknown import estimate_lights, refit_lights
 
     ypr, t, v, m = posed
     towards = [(0.1, -0.1, -1.0), (0.7, -0.2, -0.7), (-0.5, -0.45, -0.75)]

@@ -1,4 +1,4 @@
-"""mifaces.shape_errors: the world-frame errors of a fitted face, on faces moved by hand."""
+"""mifaces.validation.shape_errors: the world-frame errors of a fitted face, on faces moved by hand."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 import mifaces
 from mifaces.model.geometry import rotation_matrix
-from mifaces.shape_errors import shape_errors
+from mifaces.validation.shape_errors import shape_errors
 
 #: A camera 1200 mm in front of the face, looking along -z of the world (its +z row is world -z).
 CAMERA = SimpleNamespace(position=np.array([0.0, 0.0, 1200.0]), rotation=np.diag([1.0, -1.0, -1.0]))

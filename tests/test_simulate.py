@@ -21,8 +21,8 @@ import mifaces  # noqa: F401  # isort: skip
 from conftest import JIT_VARIANTS
 from mifaces.capture import (GROUND_TRUTH, IMAGE_SUFFIXES, MANIFEST, GroundTruth, load_capture, read_ground_truth,
                              read_image, write_ground_truth)
-from mifaces.image_files import read_exr
-from mifaces.result_set import SET_MANIFEST
+from mifaces.io.image_files import read_exr
+from mifaces.io.result_set import SET_MANIFEST
 from mifaces.studio.truth import COOK_TORRANCE_REGIONS, brdf_with_overrides, default_brdf
 from mifaces.studio.scene import LIGHT_DISTANCE, studio_camera
 from mifaces.studio.simulate import simulate
@@ -50,7 +50,7 @@ def studio(tmp_path_factory) -> Path:
 
 def copy_capture(source: Path, target: Path) -> Path:
     """A copy of a capture whose files are hard links (cheap); replace a file rather than
-    writing into it (the writers in :mod:`mifaces.atomic` do) so the source stays intact."""
+    writing into it (the writers in :mod:`mifaces.io.atomic` do) so the source stays intact."""
     shutil.copytree(source, target, copy_function=_link)
     return target
 
@@ -356,7 +356,7 @@ def test_simulate_rejects_bad_arguments_before_rendering(tmp_path, kwargs, messa
 def test_cli_simulate_writes_a_capture(tmp_path):
     from click.testing import CliRunner
 
-    from mifaces.cli import main
+    from mifaces.cli.commands import main
 
     params = tmp_path / "params.json"
     params.write_text(json.dumps({"model": "ward", "regions": {"lips": {"alpha": 0.2}}}))
@@ -385,7 +385,7 @@ def test_cli_simulate_writes_a_capture(tmp_path):
 def test_cli_simulate_names_bad_options(tmp_path, args, message):
     from click.testing import CliRunner
 
-    from mifaces.cli import main
+    from mifaces.cli.commands import main
 
     (tmp_path / "bad.json").write_text("{ not json")
     (tmp_path / "unknown.json").write_text(json.dumps({"regions": {"chin": {"roughness": 0.3}}}))

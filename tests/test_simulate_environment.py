@@ -16,9 +16,9 @@ from click.testing import CliRunner
 
 from conftest import JIT_VARIANTS
 from mifaces.capture import MANIFEST, load_capture, read_ground_truth
-from mifaces.cli import main
-from mifaces.environment import bake_environment, environment_emitter, irradiance, map_directions, sky_emitter
-from mifaces.image_files import read_exr
+from mifaces.cli.commands import main
+from mifaces.lights.environment import bake_environment, environment_emitter, irradiance, map_directions, sky_emitter
+from mifaces.io.image_files import read_exr
 from mifaces.studio import photograph
 from mifaces.studio.environment_light import ENVIRONMENT_HEIGHT, ENVIRONMENTS
 from mifaces.studio.scene import studio_camera

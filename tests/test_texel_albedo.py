@@ -134,7 +134,7 @@ def test_the_texel_fits_intervals_match_refitting_with_each_cluster_left_out(jit
 def test_cli_texel_albedo_flag_reaches_the_fit(monkeypatch, tmp_path):
     from click.testing import CliRunner
 
-    import mifaces.cli as cli
+    import mifaces.cli.commands as cli
 
     calls = {}
 

@@ -194,7 +194,7 @@ def test_detailed_face_lies_outside_the_model_span(captures):
 def test_measure_runs_on_a_truth_outside_the_fit(tmp_path):
     """The main job on a roughplastic, detailed face fitted with the default model:
     it runs, and reports the albedo error against the truth's map."""
-    from mifaces.pipeline import measure
+    from mifaces.pipeline.measure import measure
 
     mifaces.set_variant("llvm_ad_rgb")
     capture = tmp_path / "capture"
@@ -250,7 +250,7 @@ def test_subsurface_truth_renders_translucent_skin(tmp_path):
 def test_cli_simulate_offers_the_truths_and_names_bad_combinations(tmp_path):
     from click.testing import CliRunner
 
-    from mifaces.cli import main
+    from mifaces.cli.commands import main
 
     help_text = CliRunner().invoke(main, ["simulate", "--help"]).output
     for option in ("roughplastic", "principled", "--varying", "--detail", "--subsurface"):

@@ -165,7 +165,7 @@ def test_import_subject_refuses_to_overwrite(imported, tmp_path):
     # --force and --train-lights through the command line; the companion is the training light nearest the axis
     from click.testing import CliRunner
 
-    from mifaces.cli import main
+    from mifaces.cli.commands import main
 
     copy = tmp_path / "capture"
     args = ["import", "yaleb", str(folder), str(copy), "--train-lights", "A+035E-20,A+010E+00"]
@@ -185,7 +185,7 @@ def test_import_subject_with_unknown_lights(imported, tmp_path):
     from click.testing import CliRunner
 
     from mifaces.capture import load_capture
-    from mifaces.cli import main
+    from mifaces.cli.commands import main
 
     out, folder = imported
     hidden = tmp_path / "hidden"

@@ -41,7 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import uncertainty as U  # noqa: E402  (the captures and checks of validation/uncertainty.py)
 from roles import SIMULATED, refuse_report_data  # noqa: E402
 
-from mifaces.atomic import write_json  # noqa: E402
+from mifaces.io.atomic import write_json  # noqa: E402
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf  # noqa: E402
 from mifaces.reflectance.fit import region_fit as fitting  # noqa: E402
 from mifaces.reflectance.fit.intervals import _value_jacobian  # noqa: E402

@@ -43,7 +43,7 @@ from mifaces import brdf
 from mifaces.reflectance.fit.parameters import ParameterSpace, linear_start
 from mifaces.reflectance.fit.problem import Problem
 from mifaces.reflectance.fit.region_fit import FULL_DATA, SubsetSchedule, fit_region
-from mifaces.atomic import save_figure, write_json
+from mifaces.io.atomic import save_figure, write_json
 
 OUT = Path(__file__).resolve().parent / "results"
 

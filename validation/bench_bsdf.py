@@ -27,8 +27,8 @@ import mitsuba as mi
 import numpy as np
 
 from mifaces import brdf
-from mifaces.atomic import write_json
-from mifaces.scenes import scene_path
+from mifaces.io.atomic import write_json
+from mifaces.render.scenes import scene_path
 
 OUT = Path(__file__).resolve().parent / "results"
 

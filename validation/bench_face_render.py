@@ -38,7 +38,7 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 import mitsuba as mi
 import numpy as np
 
-from mifaces.atomic import write_json
+from mifaces.io.atomic import write_json
 from mifaces.model import load_model
 from mifaces.render import region_bsdf, region_meshes
 from mifaces.studio.photograph import albedo_texture

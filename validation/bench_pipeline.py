@@ -30,7 +30,7 @@ from pathlib import Path
 
 import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 
-from mifaces.atomic import save_figure, write_json
+from mifaces.io.atomic import save_figure, write_json
 
 RESULTS = Path(__file__).resolve().parent / "results"
 MIFACES = Path(sys.executable).parent / "mifaces"

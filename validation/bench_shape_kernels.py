@@ -51,7 +51,7 @@ import drjit as dr
 import numpy as np
 
 from mifaces.capture import load_capture
-from mifaces.atomic import write_json
+from mifaces.io.atomic import write_json
 from mifaces.shape import ShapeSchedule, fit_measurement
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -39,8 +39,8 @@ import mitsuba as mi
 import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.atomic import atomic_path, write_json
-from mifaces.image_files import read_exr
+from mifaces.io.atomic import atomic_path, write_json
+from mifaces.io.image_files import read_exr
 from mifaces.studio.simulate import PRESETS, simulate
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -19,7 +19,7 @@ import numpy as np
 
 from mifaces import brdf
 from mifaces.brdf.albedo import glossy_albedo
-from mifaces.atomic import save_figure, write_json
+from mifaces.io.atomic import save_figure, write_json
 
 OUT = Path(__file__).resolve().parent / "results"
 ANGLES = np.linspace(0.0, 89.9, 46)

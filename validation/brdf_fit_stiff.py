@@ -31,7 +31,7 @@ import numpy as np
 from mifaces import brdf
 from mifaces.reflectance.fit.region_fit import fit_region
 from mifaces.reflectance.fit.regions import fit_regions
-from mifaces.atomic import write_json
+from mifaces.io.atomic import write_json
 from mifaces.reflectance.samples import ReflectanceSamples, unsaturated
 
 OUT = Path(__file__).resolve().parent / "results"

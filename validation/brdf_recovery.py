@@ -38,7 +38,7 @@ from mifaces.shape.io import load_geometry
 from mifaces.reflectance import FitOptions, fit_brdf, render_estimate
 from mifaces.validation.truth_errors import ground_truth_errors
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.atomic import write_json
+from mifaces.io.atomic import write_json
 from mifaces.model.regions import REGIONS
 from mifaces.render import face_meshes, mitsuba_sensor
 from mifaces.studio.simulate import simulate
@@ -209,7 +209,7 @@ def plot(same: list[dict], cross: list[dict], path: Path) -> None:
     h2, l2 = ax2.get_legend_handles_labels()
     ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.22), ncol=3)
     fig.tight_layout()
-    from mifaces.atomic import save_figure
+    from mifaces.io.atomic import save_figure
 
     save_figure(fig, path, dpi=110)
 

@@ -38,7 +38,7 @@ import trimesh
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from mifaces.atomic import write_json
+from mifaces.io.atomic import write_json
 from mifaces.model import load_model
 from mifaces.model.landmarks import FEATURE_POINTS
 from mifaces.studio.scene import CAMERA_DISTANCE, FIELD_HEIGHT, head_turns

@@ -57,7 +57,7 @@ What is counted, and how (each function takes the repository's root; ``mifaces/`
    ``model_name``, ``brdf``, ``brdf_model`` or ``brdf_name``.
 8. **``sys.path.insert`` in validation/** (``sys_path_inserts``): the scripts ``validation/*.py`` that call
    ``sys.path.insert``.
-9. **Reads back in the pipeline** (``pipeline_reads``): in ``mifaces/pipeline.py`` and
+9. **Reads back in the pipeline** (``pipeline_reads``): in ``mifaces/pipeline.py`` or
    ``mifaces/pipeline/``, the calls of a function of ``mifaces`` (imported from it, or defined in the
    module) that reads a folder, whose name, a leading ``_`` aside, starts with ``load_`` or ``read_`` or is
    one of :data:`FOLDER_READERS` (``export_face`` reads a BRDF result folder), **with an argument built

@@ -5,7 +5,7 @@ map, the photographs rendered with exactly the map the capture states) and each 
 capture is measured twice with ``mifaces measure`` (Cook-Torrance, the truth's family, fitted
 faces, ``--refine``): once with the map given, once with the light hidden
 (``{"name", "unknown": true, "kind": "environment"}``: the map is estimated with the face,
-``mifaces.lighting.estimate_environments``, and refined with the BRDF). Reported per run:
+``mifaces.light_estimation.unknown.estimate_environments``, and refined with the BRDF). Reported per run:
 
 * skin's BRDF error against the truth (the validation's relative BRDF RMSE) and its fitted
   parameters' errors;
@@ -42,12 +42,12 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 import numpy as np
 
 from mifaces.capture import MANIFEST, load_capture, read_ground_truth
-from mifaces.environment import LUMINANCE, irradiance, texel_directions
-from mifaces.atomic import save_figure, write_json
-from mifaces.image_files import read_exr
+from mifaces.lights.environment import LUMINANCE, irradiance, texel_directions
+from mifaces.io.atomic import save_figure, write_json
+from mifaces.io.image_files import read_exr
 from mifaces.shape.io import load_geometry
-from mifaces.lighting import LIGHTS_FOLDER
-from mifaces.pipeline import measure
+from mifaces.light_estimation.unknown import LIGHTS_FOLDER
+from mifaces.pipeline.measure import measure
 from mifaces.studio import simulate
 from mifaces.studio.environment_light import ENVIRONMENTS
 from mifaces.reflectance import FitOptions, fit_brdf

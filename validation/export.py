@@ -27,10 +27,10 @@ import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 
 from mifaces.export import export_face
 from mifaces.export.material import FIT_GRID, mapping_rmse
-from mifaces.atomic import write_json
+from mifaces.io.atomic import write_json
 from mifaces.model import load_model
 from mifaces.model.regions import REGIONS, texel_regions_of_mesh
-from mifaces.pipeline import measure
+from mifaces.pipeline.measure import measure
 from mifaces.reflectance.io import load_estimate
 from mifaces.studio.simulate import simulate
 from mifaces.reflectance import FitOptions

@@ -10,7 +10,7 @@ renders the floor of
 
 - ``fitted``: the fitted face, as the report does (the report validates the first photograph);
 - ``depth_removed``: the fitted face moved along the camera's axis by its mean depth offset over
-  the front of the face (:func:`mifaces.shape_errors.shape_errors`' ``depth_mm``);
+  the front of the face (:func:`mifaces.validation.shape_errors.shape_errors`' ``depth_mm``);
 - ``aligned``: the fitted face after the best rigid motion onto the truth (its shape's own error);
 - ``truth_at_fitted_depth``: the true face moved by the fitted face's depth offset (the depth's
   own share);
@@ -35,8 +35,8 @@ import mifaces  # first: libLLVM  # isort: skip
 
 import numpy as np
 
-from mifaces.atomic import write_json
-from mifaces.shape_errors import front_of_face, rigid_alignment, shape_errors
+from mifaces.io.atomic import write_json
+from mifaces.validation.shape_errors import front_of_face, rigid_alignment, shape_errors
 from mifaces.validation.validator import Validator
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -41,7 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import uncertainty as U  # noqa: E402  (the captures and checks of validation/uncertainty.py)
 
 import mifaces.studio.scene as studio_scene  # noqa: E402
-from mifaces.atomic import write_json  # noqa: E402
+from mifaces.io.atomic import write_json  # noqa: E402
 from mifaces.capture import with_true_lights  # noqa: E402
 from mifaces.reflectance import capture_samples  # noqa: E402
 

@@ -46,14 +46,14 @@ import scipy.ndimage as ndi
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from mifaces.atomic import write_json
+from mifaces.io.atomic import write_json
 from mifaces.capture.ground_truth import read_ground_truth
-from mifaces.face_pixels import face_pixels
+from mifaces.render.face_pixels import face_pixels
 from mifaces.model.geometry import vertex_normals
 from mifaces.render import FaceScene
 from mifaces.shape.result import FEATURE_NOISE
 from mifaces.shape.targets import feature_targets, metric_distances
-from mifaces.shape_errors import capture_shape_errors
+from mifaces.validation.shape_errors import capture_shape_errors
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from shape_depth import fitted_shapes, simulated_default  # noqa: E402  (the captures of validation/shape_depth.py)

@@ -3,7 +3,7 @@ and without ``--balance-lights`` on the same captures.
 
 Each seed simulates the default capture (:func:`mifaces.studio.simulate`: the built-in face, 6
 photographs under 2 lights, Cook–Torrance truth, 512²; the simulator places the lights as its steel
-spheres calibrate them, with their errors) and runs :func:`mifaces.pipeline.measure` on it twice, with
+spheres calibrate them, with their errors) and runs :func:`mifaces.pipeline.measure.measure` on it twice, with
 ``FitOptions(balance_lights=False)`` (the default) and ``True``. Per run and model, from the report: skin's
 BRDF error over the hemisphere (``validation.brdf_rmse.skin``), the albedo error, the held-out-light and
 environment errors on the fitted faces and with the fitted reflectance on the true shape; and the factors
@@ -32,8 +32,8 @@ import mifaces  # first: libLLVM  # isort: skip
 
 import numpy as np
 
-from mifaces.atomic import write_json
-from mifaces.pipeline import measure
+from mifaces.io.atomic import write_json
+from mifaces.pipeline.measure import measure
 from mifaces.reflectance import FitOptions
 from mifaces.studio import simulate
 from roles import SIMULATED, refuse_report_data

@@ -34,7 +34,7 @@ import uncertainty as U  # noqa: E402  (the captures and checks of validation/un
 from roles import SIMULATED, refuse_report_data  # noqa: E402
 
 from mifaces.capture import with_true_lights  # noqa: E402
-from mifaces.atomic import write_json  # noqa: E402
+from mifaces.io.atomic import write_json  # noqa: E402
 from mifaces.reflectance import FitOptions, fit_brdf  # noqa: E402
 from mifaces.reflectance.light_balance import GIVEN_MAX_HALF_COSINE, log_light_errors  # noqa: E402
 from mifaces.reflectance.samples import capture_samples  # noqa: E402

@@ -28,7 +28,7 @@ import mifaces  # first: libLLVM and the variant  # isort: skip
 import mitsuba as mi
 import numpy as np
 
-from mifaces.image_files import write_png
+from mifaces.io.image_files import write_png
 from mifaces.model import load_model
 from mifaces.model.regions import REGION_NAMES
 
@@ -141,7 +141,7 @@ def main(argv=None) -> int:
     import matplotlib.pyplot as plt
     from matplotlib.patches import Patch
 
-    from mifaces.atomic import save_figure
+    from mifaces.io.atomic import save_figure
 
     maps = [("built-in (ICT head, atlas)", builtin.region_map)]
     if sfm is not None:

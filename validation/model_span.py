@@ -73,7 +73,7 @@ from mifaces.model import load_model
 from mifaces.model.builtin import FIT_SHAPE_MODES
 from mifaces.model.ict_convert import MODEL_FILE
 from mifaces.model.regions import REGIONS
-from mifaces.shape_errors import rigid_alignment
+from mifaces.validation.shape_errors import rigid_alignment
 from provenance import write_result
 from roles import SURREY_FACES, require_development
 

@@ -149,6 +149,15 @@ MUTATIONS = [
      "plugin eval without cos θo"),
     ("plugin-mixture", "plugins", "plugins/analytic.py", "pdf = pdf + (1.0 - p_spec) * mi.warp",
      "pdf = pdf + mi.warp", "diffuse density not weighted by its share"),
+    ("plugin-remap", "plugins", "plugins/analytic.py", "u = dr.select(chose_specular, sample1 / dr.maximum(p_spec, 1e-30),",
+     "u = dr.select(chose_specular, sample1,", "the chosen lobe's sample not rescaled to [0, 1)"),
+    ("plugin-weight", "plugins", "plugins/analytic.py", "weight = f / dr.maximum(pdf, 1e-30)", "weight = f",
+     "sample weight f instead of f/pdf"),
+    ("plugin-horizon", "plugins", "plugins/analytic.py", "valid = (wi.z > 0) & (wo.z > 0)", "valid = wo.z > 0",
+     "plugin eval: no horizon for wi"),
+    ("plugin-diffuse-sample", "plugins", "plugins/analytic.py", "                           mi.warp.square_to_cosine_hemisphere(sample2))",
+     "                           mi.warp.square_to_uniform_hemisphere(sample2))",
+     "diffuse lobe sampled uniformly, its density still cosine"),
     # ---- the shape fit's energy ----------------------------------------------------------------
     ("shape-feature-units", "shape", "mifaces/shape/energy.py", "/ (self.scale_px ** 2)", "/ self.scale_px",
      "E_F: the 512-px scale not squared"),
@@ -482,7 +491,7 @@ def main(argv=None) -> None:
     print(f"{len(chosen)} mutation(s) in {seconds:.0f} s", flush=True)
 
     import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
-    from mifaces.atomic import write_json
+    from mifaces.io.atomic import write_json
 
     write_json(OUT, {"areas": area_summary(results), "mutations": results,
                      "missed": [r["id"] for r in results if not r["caught"]],

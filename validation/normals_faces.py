@@ -39,7 +39,7 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.atomic import save_figure, write_json
+from mifaces.io.atomic import save_figure, write_json
 from mifaces.shape.io import load_geometry
 from mifaces.model.regions import REGIONS
 from mifaces.model.texture_space import rasterize

@@ -5,7 +5,7 @@ photographs' resolution and their samples per pixel (the simulated
 photographs' Monte Carlo noise, standing in for a camera's noise), this
 simulates a capture of the built-in face (Cook–Torrance truth,
 :func:`mifaces.studio.simulate`) and runs the main job on it
-(:func:`mifaces.pipeline.measure`: fit the face model to each photograph,
+(:func:`mifaces.pipeline.measure.measure`: fit the face model to each photograph,
 sample reflectance, fit the BRDF models), then reads from its report
 (:mod:`mifaces.validation.validator`):
 
@@ -49,8 +49,8 @@ import mifaces  # first: libLLVM  # isort: skip
 import mitsuba as mi
 import numpy as np
 
-from mifaces.atomic import save_figure, write_json
-from mifaces.pipeline import measure
+from mifaces.io.atomic import save_figure, write_json
+from mifaces.pipeline.measure import measure
 from mifaces.studio import simulate
 from mifaces.reflectance import FitOptions
 

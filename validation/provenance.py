@@ -182,9 +182,9 @@ def _display(path: Path) -> str:
 
 
 def write_json(path: str | Path, data) -> None:
-    """Write ``data`` as JSON to ``path`` atomically (``mifaces.atomic``)."""
+    """Write ``data`` as JSON to ``path`` atomically (``mifaces.io.atomic``)."""
     import mifaces  # noqa: F401  (first: it points Dr.Jit at a working libLLVM)  # isort: skip
-    from mifaces.atomic import write_json as atomic_json
+    from mifaces.io.atomic import write_json as atomic_json
 
     atomic_json(path, data)
 

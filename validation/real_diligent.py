@@ -39,7 +39,7 @@ import numpy as np
 
 from mifaces import photometric_stereo as ps
 from mifaces.brdf import NAMES
-from mifaces.atomic import atomic_write, write_json
+from mifaces.io.atomic import atomic_write, write_json
 from mifaces.importers import diligent
 from mifaces.photometric_stereo import nonlambertian as nm
 

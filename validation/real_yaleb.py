@@ -66,11 +66,11 @@ import numpy as np
 from mifaces import photometric_stereo
 from mifaces.brdf import NAMES
 from mifaces.capture import Light, load_capture
-from mifaces.atomic import save_figure, write_json
-from mifaces.image_files import write_exr, write_png
+from mifaces.io.atomic import save_figure, write_json
+from mifaces.io.image_files import write_exr, write_png
 from mifaces.shape.io import load_geometry
 from mifaces.importers.yaleb import default_split, import_subject, read_subject
-from mifaces.pipeline import SHAPES, NoUsableShapeError, measure
+from mifaces.pipeline.measure import SHAPES, NoUsableShapeError, measure
 from mifaces.reflectance import FitOptions, fit_brdf, load_estimate
 from mifaces.refine.shape import ShapeRefineSchedule
 from mifaces.render import FaceScene
@@ -253,7 +253,7 @@ def figure(results: list[dict], out: Path, data_dir: Path, run_dir: Path, best: 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from mifaces.image_files import read_exr
+    from mifaces.io.image_files import read_exr
 
     r = results[0]
     lights = sorted(r["per_light"], key=lambda s: r["per_light"][s]["azimuth"])

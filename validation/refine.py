@@ -39,7 +39,7 @@ import mitsuba as mi
 import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.atomic import write_json
+from mifaces.io.atomic import write_json
 from mifaces.shape.io import load_geometry
 from mifaces.validation.held_out import novel_light
 from mifaces.reflectance import FitOptions, fit_brdf
@@ -67,7 +67,7 @@ def region_errors(estimate, capture) -> dict:
 
 def novel_light_errors(estimates: dict, capture, face, shapes, spp: int) -> tuple[dict, dict]:
     """Relative RMSE, on the pixels the light lights (the truth's render brighter than 2 % of its
-    brightest pixel: not :func:`mifaces.face_pixels.face_pixels`, whose mask takes in the face's
+    brightest pixel: not :func:`mifaces.render.face_pixels.face_pixels`, whose mask takes in the face's
     shadowed pixels too), of each estimate's render under a light no photograph used against the
     ground truth's render (same scene, same samples); the images."""
     truth = read_ground_truth(capture)

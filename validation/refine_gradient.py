@@ -40,7 +40,7 @@ import mitsuba as mi
 import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth, with_true_lights
-from mifaces.atomic import write_json
+from mifaces.io.atomic import write_json
 from mifaces.shape.io import load_geometry
 from mifaces.reflectance import FitOptions, fit_brdf
 from mifaces.refine import RefineSchedule

@@ -35,12 +35,12 @@ import mifaces  # first: libLLVM  # isort: skip
 
 import numpy as np
 
-from mifaces.atomic import write_json
+from mifaces.io.atomic import write_json
 from mifaces.capture import load_capture
 from mifaces.refine.shape import ShapeRefineSchedule, displaced
 from mifaces.refine.shape_lit import FIT_SHAPE_BRDF, refine_fits
 from mifaces.shape import fit_shape, shapes_in_world
-from mifaces.shape_errors import capture_shape_errors
+from mifaces.validation.shape_errors import capture_shape_errors
 from mifaces.shape.io import load_geometry
 from mifaces.studio import simulate
 from refine_shape_default import errors

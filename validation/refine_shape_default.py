@@ -5,7 +5,7 @@ after, as ``mifaces fit-shape --refine-shape`` runs it.
 Simulates the default capture (seed 0, 6 photographs) at ``--resolution`` (256² by default: the
 refinement's cost grows with the pixels), fits the shapes with the defaults
 (:func:`mifaces.shape.fit_shape`), refines them (:func:`mifaces.refine.shape_lit.refine_fits`,
-lit by a quick per-region fit) and scores both by :func:`mifaces.shape_errors.capture_shape_errors`:
+lit by a quick per-region fit) and scores both by :func:`mifaces.validation.shape_errors.capture_shape_errors`:
 the faces it returns (``refined``: the model fit where the refinement was not kept) and the faces
 displaced by its displacement whether kept or not (``displaced``).
 
@@ -21,7 +21,7 @@ tuning seed 11 at 512², rendered at full resolution and at the default::
         --out validation/results/refine_shape_default_512_tuning.json
 
 Writes ``validation/results/refine_shape_default{,_judged}{,_early_stop}.json`` (or ``--out``): per set of faces
-the errors of :func:`~mifaces.shape_errors.capture_shape_errors`, the normals' among them.
+the errors of :func:`~mifaces.validation.shape_errors.capture_shape_errors`, the normals' among them.
 """
 
 from __future__ import annotations
@@ -35,13 +35,13 @@ from pathlib import Path
 import mifaces  # first: libLLVM  # isort: skip
 
 from mifaces.capture import load_capture
-from mifaces.atomic import write_json
+from mifaces.io.atomic import write_json
 from mifaces.shape.io import load_geometry
 from mifaces.refine.shape import ShapeRefineSchedule, displaced
 from mifaces.brdf import NAMES as BRDF_MODELS
 from mifaces.refine.shape_lit import FIT_SHAPE_BRDF, refine_fits
 from mifaces.shape import fit_shape, shapes_in_world
-from mifaces.shape_errors import capture_shape_errors
+from mifaces.validation.shape_errors import capture_shape_errors
 from mifaces.studio import simulate
 from roles import SIMULATED, refuse_report_data
 

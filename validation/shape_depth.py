@@ -3,7 +3,7 @@
 Simulates the default capture (``mifaces simulate``: 512², six photographs, two lamps) for each
 seed, fits its faces with the defaults (:func:`mifaces.shape.fit_shape`: one identity, each
 photograph its pose) and scores them against the truth by
-:func:`mifaces.shape_errors.capture_shape_errors`: the world-frame error without alignment,
+:func:`mifaces.validation.shape_errors.capture_shape_errors`: the world-frame error without alignment,
 after a rigid alignment, the depth offset, the fitted face's size against the true one's and the
 error left after the true face is scaled by that ratio about the camera's centre; then the same
 with the calibrated focal length held (``fit_focal=False``; ``focal_held``). A pinhole camera sees
@@ -40,10 +40,10 @@ import numpy as np
 
 from mifaces.capture import load_capture
 from mifaces.capture.ground_truth import read_ground_truth
-from mifaces.atomic import write_json
+from mifaces.io.atomic import write_json
 from mifaces.shape.io import load_geometry
 from mifaces.shape import ShapeOptions, fit_measurement, fit_shape, shapes_in_world
-from mifaces.shape_errors import capture_shape_errors
+from mifaces.validation.shape_errors import capture_shape_errors
 from mifaces.studio import simulate
 from roles import SIMULATED, refuse_report_data
 

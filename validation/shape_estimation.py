@@ -56,7 +56,7 @@ from scipy.spatial import cKDTree
 
 from mifaces import shape as se
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.atomic import save_figure, write_json
+from mifaces.io.atomic import save_figure, write_json
 from mifaces.model.landmarks import FEATURE_POINTS
 from mifaces.reflectance import FitOptions
 

@@ -31,10 +31,10 @@ import mifaces  # first: libLLVM  # isort: skip
 
 import numpy as np
 
-from mifaces.atomic import save_figure, write_json
-from mifaces.face_pixels import face_pixels
+from mifaces.io.atomic import save_figure, write_json
+from mifaces.render.face_pixels import face_pixels
 from mifaces.render import FaceScene
-from mifaces.shape_errors import capture_shape_errors
+from mifaces.validation.shape_errors import capture_shape_errors
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from shape_depth import fitted_shapes, simulated_default  # noqa: E402  (the captures of validation/shape_depth.py)
@@ -52,7 +52,7 @@ ROWS_PERCENTILE = 60
 
 def coverage(face, vertices, camera) -> np.ndarray:
     """Fraction of each pixel of ``camera`` that the face ``vertices`` cover: the share of its
-    SUPERSAMPLE² sub-pixel centres whose rays hit the face (:func:`mifaces.face_pixels.face_pixels`
+    SUPERSAMPLE² sub-pixel centres whose rays hit the face (:func:`mifaces.render.face_pixels.face_pixels`
     on a camera SUPERSAMPLE times finer)."""
     s = SUPERSAMPLE
     hit = face_pixels(FaceScene(face, np.asarray(vertices, np.float32)), camera.scaled(s), spp=None)

@@ -58,11 +58,11 @@ from skimage.transform import resize
 
 from mifaces.brdf.materials import REFRACTIVE_INDEX
 from mifaces.capture import read_ground_truth
-from mifaces.atomic import save_figure, write_json
-from mifaces.image_files import read_exr
+from mifaces.io.atomic import save_figure, write_json
+from mifaces.io.image_files import read_exr
 from mifaces.model import load_model
 from mifaces.model.regions import REGIONS
-from mifaces.pipeline import measure
+from mifaces.pipeline.measure import measure
 from mifaces.studio.simulate import simulate
 from mifaces.studio.varying import texel_regions
 

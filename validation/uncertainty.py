@@ -48,12 +48,12 @@ import mifaces  # first: libLLVM  # isort: skip
 import numpy as np
 
 from mifaces.capture import load_capture, read_ground_truth
-from mifaces.atomic import atomic_write, save_figure, write_json
+from mifaces.io.atomic import atomic_write, save_figure, write_json
 from mifaces.shape.io import load_geometry
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
 from mifaces.reflectance.fit import intervals
 from mifaces.reflectance.fit import uncertainty as unc
-from mifaces.status import DEFAULTS, PRIOR
+from mifaces.runtime.status import DEFAULTS, PRIOR
 from mifaces.studio import photograph, simulate
 from roles import SIMULATED, refuse_report_data
 

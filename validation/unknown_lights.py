@@ -5,7 +5,7 @@ photographs by ``default_split``) is measured twice with that script's
 :func:`subject_run`: once with the calibrated import (the light directions
 from the file names), once imported with ``--unknown-lights`` (the same light
 names, no directions), so that ``mifaces measure`` estimates every light with
-the face (:mod:`mifaces.lighting`). Reported:
+the face (:mod:`mifaces.light_estimation.unknown`). Reported:
 
 * the angle between each estimated direction (``measure/lights.json``) and the
   calibrated import's direction of the same light: median and max over all
@@ -44,9 +44,9 @@ import numpy as np
 
 from mifaces.brdf import NAMES
 from mifaces.capture.types import AMBIENT_KINDS
-from mifaces.atomic import save_figure, write_json
+from mifaces.io.atomic import save_figure, write_json
 from mifaces.importers.yaleb import default_split, read_subject
-from mifaces.lighting import LIGHTS_FILE
+from mifaces.light_estimation.unknown import LIGHTS_FILE
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_yaleb import RESULTS, SHADOW_ANGLE, subject_run, summary  # noqa: E402
@@ -71,13 +71,13 @@ def simulated_run(out: Path, ambient: str | None = None) -> dict:
     """The default simulated capture at ``out/capture``, its lights hidden in a second manifest
     beside the first (``capture_unknown.json``: the same images; with ``ambient``, saying so:
     ``"none"``, what the simulator's photographs hold, no lamp but the one), fitted (:func:`mifaces.shape.fit_shape`)
-    and its lights estimated (:func:`mifaces.lighting.estimate_lights`, with ``measure``'s round of
-    alternation: :func:`~mifaces.lighting.as_given`, :func:`~mifaces.lighting.refit_lights`); per light
+    and its lights estimated (:func:`mifaces.light_estimation.unknown.estimate_lights`, with ``measure``'s round of
+    alternation: :func:`~mifaces.light_estimation.unknown.as_given`, :func:`~mifaces.light_estimation.unknown.refit_lights`); per light
     the angle (degrees)
     between the estimate and the direction from the fitted head's centre to the calibrated lamp, and
     the spread of its photographs' estimates."""
     from mifaces.capture import MANIFEST, load_capture
-    from mifaces.lighting import as_given, estimate_lights, refit_lights
+    from mifaces.light_estimation.unknown import as_given, estimate_lights, refit_lights
     from mifaces.shape import fit_shape, shapes_in_world
     from mifaces.studio import simulate
 

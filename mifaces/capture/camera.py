@@ -7,6 +7,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..model.geometry import camera_frame_direction
+
 
 @dataclass(frozen=True, eq=False)
 class Camera:
@@ -149,9 +151,3 @@ class Camera:
                 "translation": [float(t) for t in self.translation],
                 **({} if self.calibrated else {"calibrated": False})}
 
-
-def camera_frame_direction(azimuth: float, elevation: float) -> np.ndarray:
-    """:meth:`Camera.direction` in the camera frame (OpenCV: x right, y down,
-    z forward, so towards the camera is -z)."""
-    az, el = np.radians(azimuth), np.radians(elevation)
-    return np.array([-np.cos(el) * np.sin(az), -np.sin(el), -np.cos(el) * np.cos(az)])

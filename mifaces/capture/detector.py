@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..image_files import read_codes, read_exr
+from ..io.image_files import read_codes, read_exr
 
 #: Number of landmarks (iBUG 300-W).
 COUNT = 68
@@ -109,7 +109,7 @@ def detect_landmarks(image, box=None, name: str | None = None) -> Landmarks:
     Parameters
     ----------
     image : path or array
-        A photograph (any format :func:`mifaces.image_files.read_codes` or
+        A photograph (any format :func:`mifaces.io.image_files.read_codes` or
         EXR reads), or an array (H, W) or (H, W, C), integer codes or floats in [0, 1].
     box : (x0, y0, x1, y1), optional
         The face box, skipping the detector: needed for tight crops, whose

@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write, write_json
-from ..image_files import read_exr, write_exr
+from ..io.atomic import atomic_write, write_json
+from ..io.image_files import read_exr, write_exr
 from .camera import Camera
 from .types import GROUND_TRUTH, Capture
 
@@ -243,8 +243,7 @@ def with_true_lights(capture: Capture) -> Capture:
     if unplaced:
         raise ValueError(f"capture {capture.path}: the simulator placed no point light for light(s) {unplaced} "
                          "(an environment or directional light has no true position)")
-    return replace(capture, lights=tuple(replace(light, position=np.asarray(positions[light.name], np.float64))
-                                         for light in capture.lights))
+    return replace(capture, lights=tuple(light.moved_to(positions[light.name]) for light in capture.lights))
 
 
 def _scene_json(truth: GroundTruth) -> dict:

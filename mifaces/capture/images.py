@@ -1,6 +1,6 @@
 """Reading photographs: integer or float files to linear RGB per unit exposure.
 
-The files themselves are read by :mod:`mifaces.image_files`; here their codes become linear
+The files themselves are read by :mod:`mifaces.io.image_files`; here their codes become linear
 values (transfer curve, exposure) and their saturated pixels are marked.
 """
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..image_files import read_codes, read_exr
+from ..io.image_files import read_codes, read_exr
 from .hdr import decode_srgb
 from .types import TRANSFERS, Image
 
@@ -47,7 +47,7 @@ def read_image(path: str | os.PathLike, transfer: str = "linear", gamma: float =
     """Read a photograph as an :class:`Image` (linear RGB per unit exposure).
 
     EXR files must be linear. Integer images (PNG, TIFF, PGM/PPM, JPEG; 8 or
-    16 bit, read at their true depth by :func:`mifaces.image_files.read_codes`)
+    16 bit, read at their true depth by :func:`mifaces.io.image_files.read_codes`)
     are decoded with ``transfer``; their saturated pixels are those at the
     largest code. ``saturation`` (linear value, before dividing by the
     exposure) marks saturated pixels of float images. A greyscale file (one

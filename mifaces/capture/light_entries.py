@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..image_files import read_exr
-from ..paths import resolve_inside
+from ..io.image_files import read_exr
+from ..io.paths import resolve_inside
 from .camera import Camera
 from .measurement_entries import read_image_entry
 from .problems import Problems
@@ -68,7 +68,7 @@ _GIVEN = ("direction", "position_mm", "spheres", "intensity", "map")
 def _environment_light(e: dict, name, where: str, relative, root: Path, problems: Problems) -> Light | None:
     """A given environment map: ``map``, a latitude-longitude OpenEXR file (width twice the height,
     linear RGB radiance in pixel value, times the optional ``scale``) in the frame of
-    :func:`mifaces.environment.environment_emitter`."""
+    :func:`mifaces.lights.environment.environment_emitter`."""
     n = len(problems)
     if e.get("kind", "environment") != "environment":
         problems.append(f"{where}: light {name!r} has a 'map' but kind {e['kind']!r}: a map is an environment light")

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..image_files import check_image_size
+from ..io.image_files import check_image_size
 from .detector import NoFaceError
 from ..model.landmarks import FEATURE_POINTS
 from .calibration import CalibrationError, calibrate_light
@@ -223,14 +223,10 @@ def _calibrate(lights: list[Light], camera: Camera, problems: Problems) -> list[
     """The lights with the positions their steel-sphere pictures give (paper sec. 3)."""
     calibrated = []
     for light in lights:
-        if light.position is None and light.spheres is not None:
-            try:
-                cal = calibrate_light(light.spheres, camera)
-            except CalibrationError as e:
-                problems.append(f"light {light.name!r}: steel-sphere calibration failed: {e}")
-                calibrated.append(light)
-                continue
-            light = replace(light, position=cal.position, calibration=cal)
+        try:
+            light = light.calibrated(lambda spheres: calibrate_light(spheres, camera))
+        except CalibrationError as e:
+            problems.append(f"light {light.name!r}: steel-sphere calibration failed: {e}")
         calibrated.append(light)
     return calibrated
 

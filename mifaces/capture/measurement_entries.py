@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..model.landmarks import FEATURE_POINTS
-from ..paths import check_name, resolve_inside
+from ..io.paths import check_name, resolve_inside
 from .camera import Camera
 from .images import read_image
 from .problems import Problems
@@ -17,7 +17,7 @@ from .types import FEATURE_POINT_RANGE, IMAGE_SUFFIXES, TRANSFERS, Image, Measur
 
 def read_image_entry(entry, where: str, root: Path, camera: Camera | None, problems: Problems) -> Image | None:
     """Read and check one image entry ``{"path", "transfer", "gamma", "exposure", "saturation"}``:
-    a path inside the capture folder (:func:`mifaces.paths.resolve_inside`), finite, non-negative pixels."""
+    a path inside the capture folder (:func:`mifaces.io.paths.resolve_inside`), finite, non-negative pixels."""
     if isinstance(entry, str):
         entry = {"path": entry}
     if not isinstance(entry, dict):

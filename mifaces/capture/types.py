@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..lights.light import Light, any_relative, unknown_lights
 from .camera import Camera
 
 #: File name of the manifest inside a capture folder.
@@ -93,93 +94,6 @@ class SpherePictures:
     radius: float
     highlight: Image
     outline: Image
-
-
-@dataclass(frozen=True, eq=False)
-class Light:
-    """One light condition.
-
-    Attributes
-    ----------
-    name : str
-    position : (3,) float64 or None
-        World position in mm of a point light, as given or as calibrated from
-        ``spheres``; None for a directional light.
-    intensity : (3,) float64
-        Per RGB channel: a point light's radiant intensity, in the units of
-        the white target's calibration (pixel value x mm²); a directional
-        light's irradiance at normal incidence (pixel value), 1 where its
-        absolute value is unknown (``relative``).
-    spheres : SpherePictures or None
-    calibration : object or None
-        The :class:`mifaces.capture.calibration.LightCalibration` the position came from.
-    direction : (3,) float64 or None
-        A directional (distant) light: unit vector in the world frame from
-        the subject towards the light. None for a point light.
-    relative : bool
-        The intensity is known only up to a factor common to all lights.
-    unknown : bool
-        Nobody measured this light: neither position nor direction is given, and
-        :func:`mifaces.lighting.estimate_lights` estimates it with the face (the
-        photographs sharing it share its estimate).
-    kind : str
-        What an unknown light is estimated as, one of :data:`LIGHT_KINDS`.
-    guess : (3,) float64 or None
-        An unknown directional light's stated guess of its direction (unit, world
-        frame, towards the light), where to start; None: frontal (towards the camera).
-    envmap_size : (int, int) or None
-        An unknown environment light's map size (width, height) in texels.
-    envmap : (H, 2H, 3) float32 or None
-        An environment light's map (``kind`` ``'environment'``, given or estimated):
-        latitude-longitude radiance in pixel value, in the camera-placed frame of
-        :func:`mifaces.environment.environment_emitter` (local +y the camera's up,
-        +z towards the camera, the centre column behind the camera).
-    estimated : bool
-        The direction and intensity were estimated from the photographs (relative
-        intensity), not given by the capture.
-    """
-
-    name: str
-    position: np.ndarray | None
-    intensity: np.ndarray
-    spheres: SpherePictures | None = None
-    calibration: object | None = None
-    direction: np.ndarray | None = None
-    relative: bool = False
-    unknown: bool = False
-    kind: str = "directional"
-    guess: np.ndarray | None = None
-    envmap_size: tuple[int, int] | None = None
-    estimated: bool = False
-    envmap: np.ndarray | None = None
-
-    @property
-    def environment(self) -> bool:
-        """Light from everywhere, an environment map (given, estimated, or to estimate)."""
-        return self.kind == "environment"
-
-    @property
-    def directional(self) -> bool:
-        """A distant light: the same direction and irradiance everywhere, no falloff."""
-        return self.direction is not None
-
-    def towards(self, points) -> tuple[np.ndarray, np.ndarray]:
-        """Unit directions (N, 3) from world ``points`` (N, 3) towards the light,
-        and the distances (N,) to it (infinite for a directional light)."""
-        points = np.atleast_2d(np.asarray(points, np.float64))
-        if self.directional:
-            d = np.broadcast_to(np.asarray(self.direction, np.float64), points.shape).copy()
-            return d, np.full(len(points), np.inf)
-        if self.unknown:
-            raise ValueError(f"light {self.name!r} is unknown: estimate it first (mifaces.lighting.estimate_lights)")
-        if self.environment:
-            raise ValueError(f"light {self.name!r} is an environment map: it has no one direction "
-                             "(mifaces.reflectance.environment.equivalent_lights)")
-        if self.position is None:
-            raise ValueError(f"light {self.name!r} has no position (load the capture with calibrate=True)")
-        offset = np.asarray(self.position, np.float64) - points
-        distance = np.linalg.norm(offset, axis=1)
-        return offset / np.maximum(distance, 1e-30)[:, None], distance
 
 
 @dataclass(frozen=True, eq=False)
@@ -280,13 +194,13 @@ class Capture:
     @property
     def unknown_lights(self) -> tuple[Light, ...]:
         """The lights nobody measured, to estimate with the face (:attr:`Light.unknown`)."""
-        return tuple(light for light in self.lights if light.unknown)
+        return unknown_lights(self.lights)
 
     @property
     def relative_reflectance(self) -> bool:
         """Reflectance is known only up to a factor: no white target, or
         lights of unknown absolute intensity."""
-        return self.white_target is None or any(light.relative for light in self.lights)
+        return self.white_target is None or any_relative(self.lights)
 
     def reflectance_scale(self) -> np.ndarray:
         """The scale s of eq. 4 the reflectance samples take (RGB): the white target's

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..paths import check_writable
+from ..io.paths import check_writable
 from .face import ExportedFace, exported_face
 from .gltf import write_gltf
 from .obj import write_obj
@@ -62,7 +62,7 @@ def export_face(result, out, measurement: str | None = None, shapes=None, face_m
     ------
     ValueError
         An unknown suffix; a measurement without a converged shape fit.
-    mifaces.result_set.ResultSetError
+    mifaces.io.result_set.ResultSetError
         An incomplete or mixed result set. Nothing is written.
     """
     write = writer(out)

@@ -4,7 +4,7 @@ glTF-style PBR textures, built from a fitted BRDF: the
 ``measure`` model folder read into one.
 
 :func:`exported_face` takes the estimate (a folder must be a complete, unmixed
-result set: :func:`mifaces.result_set.verify_set`), the face's shape (the model's mean,
+result set: :func:`mifaces.io.result_set.verify_set`), the face's shape (the model's mean,
 or the shape fitted to one photograph), and maps every region's BRDF onto
 glTF's model, each model by its own mapping
 (:meth:`mifaces.brdf.model.BRDFModel.gltf_lobe`), spread over texture space by
@@ -35,14 +35,14 @@ from ..brdf import model as brdf_model
 from ..brdf.gltf_lobe import GltfLobe
 from ..brdf.materials import SKIN_REFRACTIVE_INDEX
 from ..brdf.model import BRDFModel
-from ..result_set import ResultSetError, verify_set
+from ..io.result_set import ResultSetError, verify_set
 from ..model import MorphableModel, load_model
 from ..model.regions import REGION_NAMES, REGIONS, texel_regions_of_mesh
 from ..reflectance.io import KIND, read_estimate
 from ..reflectance.result import FILES, BRDFEstimate
 from ..reflectance.maps.normals import decode, encode, mitsuba_frames
 from ..shape.io import INDEX as SHAPES_INDEX, file_stem
-from ..status import CONVERGED
+from ..runtime.status import CONVERGED
 
 #: Millimetres (the model's unit) per metre (glTF's and the exports' unit).
 MM_PER_METRE = 1000.0
@@ -100,7 +100,7 @@ def check_result(folder) -> Path:
     ------
     FileNotFoundError
         No ``brdf.json`` there.
-    mifaces.result_set.ResultSetError
+    mifaces.io.result_set.ResultSetError
         No set manifest (not written as a set, or cut short), files missing,
         changed or from another run.
     """
@@ -217,7 +217,7 @@ def exported_face(result, measurement: str | None = None, shapes=None, face_mode
 
     Raises
     ------
-    mifaces.result_set.ResultSetError
+    mifaces.io.result_set.ResultSetError
         An incomplete or mixed result set (:func:`check_result`).
     """
     if not isinstance(result, BRDFEstimate):

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pygltflib as g
 
-from ..atomic import atomic_path
-from ..image_files import encode_png
+from ..io.atomic import atomic_path
+from ..io.image_files import encode_png
 from .face import ExportedFace
 
 #: glTF constants (the specification's enums).

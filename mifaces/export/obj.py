@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from ..atomic import atomic_write
-from ..image_files import encode_png
+from ..io.atomic import atomic_write
+from ..io.image_files import encode_png
 from .face import ExportedFace
 
 

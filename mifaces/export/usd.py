@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_path, atomic_write
-from ..image_files import encode_png
+from ..io.atomic import atomic_path, atomic_write
+from ..io.image_files import encode_png
 from .face import ExportedFace
 
 #: The textures written beside the layer, and whether they are sRGB-encoded.

@@ -19,12 +19,12 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from ..atomic import atomic_write, write_json
+from ..io.atomic import atomic_write, write_json
 from ..capture.camera import Camera
 from ..capture.images import read_image
 from ..capture.loader import load_capture
 from ..capture.types import FORMAT, IMAGE_SUFFIXES, MANIFEST, TRANSFERS, VERSION, Capture
-from ..paths import check_name, resolve_inside
+from ..io.paths import check_name, resolve_inside
 from .colmap import read_colmap, write_colmap
 from .transforms import read_transforms, write_transforms
 
@@ -177,8 +177,7 @@ def photographs(capture: Capture) -> list[str]:
     for m in capture.measurements:
         images += [m.image, *([m.diffuse] if m.diffuse is not None else []), *m.exposures]
     for light in capture.lights:
-        if light.spheres is not None:
-            images += [light.spheres.highlight, light.spheres.outline]
+        images += light.pictures
     relative = (Path(os.path.relpath(image.path, capture.path)).as_posix() for image in images)
     return list(dict.fromkeys(relative))
 

@@ -1,4 +1,4 @@
-"""The command line of the importers (:mod:`mifaces.cli` adds them): ``mifaces import yaleb |
+"""The command line of the importers (:mod:`mifaces.cli.commands` adds them): ``mifaces import yaleb |
 diligent | colmap | transforms`` and ``mifaces export-calibration``, each one API call."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import click
 
 from ..capture.types import TRANSFERS
-from ..cli_options import default
+from ..cli.options import default
 from .calibration_io import SPARSE, TRANSFORMS, export_calibration, import_calibration, import_colmap, import_transforms
 from .diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
 from .yaleb import SPLIT, import_subject

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write
+from ..io.atomic import atomic_write
 
 #: COLMAP's camera models: name -> (model id, number of parameters) (``src/colmap/sensor/models.h``).
 MODELS = {"SIMPLE_PINHOLE": (0, 3), "PINHOLE": (1, 4), "SIMPLE_RADIAL": (2, 4), "RADIAL": (3, 5),

@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..image_files import read_codes
-from ..atomic import atomic_write, write_json
+from ..io.image_files import read_codes
+from ..io.atomic import atomic_write, write_json
 
 #: The viewer's direction, at every pixel (orthographic camera).
 VIEW = (0.0, 0.0, 1.0)

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import write_json
+from ..io.atomic import write_json
 from ..capture.camera import Camera
 from .colmap import PIXEL_CENTRE
 

@@ -31,10 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..capture.camera import camera_frame_direction
-from ..image_files import read_codes
+from ..model.geometry import camera_frame_direction
+from ..io.image_files import read_codes
 from ..capture.types import FORMAT, MANIFEST, VERSION
-from ..atomic import atomic_write, write_json
+from ..io.atomic import atomic_write, write_json
 
 #: ``yaleBxx_P00A+035E-20``: azimuth and elevation in degrees.
 _LIGHT = re.compile(r"_P00A([+-]\d+)E([+-]\d+)$")

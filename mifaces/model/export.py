@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_path
+from ..io.atomic import atomic_path
 
 
 def export_mesh(path: str | os.PathLike, vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray,

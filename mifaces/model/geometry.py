@@ -152,3 +152,10 @@ def grid_triangles(rows: int, cols: int) -> np.ndarray:
     a = (i * cols + j).ravel()
     b, c, d = a + 1, a + cols, a + cols + 1  # right, below, below-right
     return np.concatenate([np.stack([a, c, b], 1), np.stack([b, c, d], 1)]).astype(np.int32)
+
+
+def camera_frame_direction(azimuth: float, elevation: float) -> np.ndarray:
+    """:meth:`mifaces.capture.Camera.direction` in the camera frame (OpenCV: x right, y down,
+    z forward, so towards the camera is -z)."""
+    az, el = np.radians(azimuth), np.radians(elevation)
+    return np.array([-np.cos(el) * np.sin(az), -np.sin(el), -np.cos(el) * np.cos(az)])

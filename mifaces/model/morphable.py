@@ -35,7 +35,7 @@ from pathlib import Path
 import drjit as dr
 import numpy as np
 
-from ..atomic import atomic_write
+from ..io.atomic import atomic_write
 from . import geometry
 from .export import export_mesh
 from .mesh import mitsuba_mesh

@@ -4,7 +4,7 @@
 valid range or choices, its command-line flag), validates a value by those descriptions and
 writes it as a JSON record; every options value uses it: :class:`mifaces.reflectance.FitOptions`,
 :class:`mifaces.refine.ShapeRefineSchedule` and :class:`mifaces.options.measure.MeasureOptions`
-(the main job's, which holds the other two). :func:`mifaces.cli_options.option_flags` turns the
+(the main job's, which holds the other two). :func:`mifaces.cli.options.option_flags` turns the
 same descriptions into the commands' flags.
 
 Nothing is imported here: :mod:`mifaces.options.fields` sits below every stage, and

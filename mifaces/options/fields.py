@@ -2,7 +2,7 @@
 option means (``help``), which values it takes (``bounds`` or ``choices``) and how the command
 line spells it (``flag``). From it, :func:`check` validates a value on construction (called in
 ``__post_init__``; the error names the field), :func:`record` writes the value as a JSON object
-and :func:`from_record` reads it back, equal; :func:`mifaces.cli_options.option_flags` makes the
+and :func:`from_record` reads it back, equal; :func:`mifaces.cli.options.option_flags` makes the
 commands' flags.
 
 A field with ``help`` is a user option (it gets a flag); one with only ``bounds`` or ``choices``

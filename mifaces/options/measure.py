@@ -1,5 +1,5 @@
 """How :func:`mifaces.measure` runs: :class:`MeasureOptions`, one value from the command line (or
-a script) to the pipeline and to :mod:`mifaces.batch`'s workers, recorded whole in
+a script) to the pipeline and to :mod:`mifaces.pipeline.batch`'s workers, recorded whole in
 ``report.json``."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ GEOMETRIES = ("fitted", "ground-truth")
 
 @dataclass(frozen=True)
 class MeasureOptions:
-    """Options of :func:`mifaces.measure` (and of every capture of :func:`mifaces.batch.measure_batch`).
+    """Options of :func:`mifaces.measure` (and of every capture of :func:`mifaces.pipeline.batch.measure_batch`).
 
     Validated on construction: an unknown model or geometry, a number out of its range, or
     settings that contradict each other raise a ``ValueError`` naming the field.

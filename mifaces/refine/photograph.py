@@ -13,7 +13,7 @@ import mitsuba as mi
 import numpy as np
 from scipy.ndimage import binary_erosion
 
-from ..face_pixels import face_pixels
+from ..render.face_pixels import face_pixels
 from ..render import FaceScene, mitsuba_sensor
 
 #: Key of a capture's ``metadata`` that gives the lamp's radius (mm).
@@ -53,11 +53,7 @@ def _light(capture, measurement, lamp_radius: float | None) -> tuple:
     """The measurement's :class:`~mifaces.capture.Light`, and the sphere lamp that replaces its point
     light (or None)."""
     light = capture.light(measurement.light)
-    if light.environment or light.directional or light.position is None or not lamp_radius:
-        return light, None
-    radiance = np.asarray(light.intensity, np.float64) / (np.pi * lamp_radius ** 2)  # same intensity, I = L π r²
-    return light, {"type": "sphere", "center": [float(x) for x in light.position], "radius": float(lamp_radius),
-                   "emitter": {"type": "area", "radiance": {"type": "rgb", "value": radiance.tolist()}}}
+    return light, light.sphere_lamp(lamp_radius)
 
 
 @dataclass(eq=False)
@@ -77,7 +73,7 @@ class PhotographView:
         Pixels whose every photograph pixel the face covers (eroded by one
         pixel at silhouettes), none saturated.
     labels : (H, W) int
-        Region label at each pixel (:func:`mifaces.face_pixels.face_pixels` of the pixel centres,
+        Region label at each pixel (:func:`mifaces.render.face_pixels.face_pixels` of the pixel centres,
         sampled at the render resolution).
     scale : float
         1/μ_k: multiplies a render to compare it with ``target``.
@@ -139,8 +135,7 @@ def photograph_view(capture, m, face: FaceScene, brdf: dict, albedo: np.ndarray,
     k = downsample
     camera = capture.camera
     light, lamp = _light(capture, m, lamp_radius)
-    kind = ("sphere" if lamp is not None else "environment" if light.environment
-            else "directional" if light.directional else "point")
+    kind = "sphere" if lamp is not None else light.emitter_kind
     description = face.scene(brdf, albedo, camera, light, normals=normals, specular=specular)
     labels = face_pixels(face, camera, spp=None, region_map=region_map)
     covered = binary_erosion(labels > 0, iterations=1) & ~m.image.saturated

@@ -103,7 +103,7 @@ class RefineProblem:
         self.lights = sorted({p.light for p in self.photographs})
         #: the glossy parameters start at the model's start values, not the texture-space fit's
         self.restarted = (schedule.restart_under_maps and
-                          any(capture.light(name).environment for name in self.lights))
+                          any(capture.light(name).radiance_map is not None for name in self.lights))
         for photo in self.photographs:
             photo.light_index = self.lights.index(photo.light)
         #: each region variable's value in the texture-space fit (where it starts unless restarted)
@@ -134,9 +134,9 @@ class RefineProblem:
         self.environments = {}
         if schedule.environment_learning_rate is not None:
             for name in self.lights:
-                light = capture.light(name)
-                if light.environment and light.estimated and light.envmap is not None:
-                    log = EnvironmentVariable.start(light.envmap)
+                envmap = capture.light(name).estimated_map
+                if envmap is not None:
+                    log = EnvironmentVariable.start(envmap)
                     self.environments[name] = EnvironmentVariable.of(log)
                     self.variables[environment_variable(name)] = log
 

@@ -68,7 +68,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..progress import progress as progress_bar
+from ..runtime.progress import progress as progress_bar
 from ..reflectance.result import BRDFEstimate
 from .kernels import kernel_counts, kernel_history
 from .photograph import LAMP_RADIUS_KEY

@@ -63,7 +63,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..progress import progress as progress_bar
+from ..runtime.progress import progress as progress_bar
 from ..render import FaceScene
 from ..model.geometry import welded_normals
 from .kernels import kernel_counts, kernel_history

@@ -2,7 +2,7 @@
 a map estimated from the photographs (issue 26, ``docs/unknown_lights.md``).
 
 A map is a latitude-longitude RGB image in the camera-placed frame of
-:func:`mifaces.environment.environment_emitter`, read as Mitsuba's ``envmap``
+:func:`mifaces.lights.environment.environment_emitter`, read as Mitsuba's ``envmap``
 reads it: texel (row j, column i) of an H x W map lies in the direction of
 u = (i + 1/2) / W, v = j / (H - 1) (Mitsuba interpolates bilinearly, the first
 and last rows at the poles), with u = atan2(x, -z) / 2π, v = acos(y) / π in
@@ -40,8 +40,8 @@ import mitsuba as mi
 import numpy as np
 
 from ..capture.types import RELATIVE_IRRADIANCE
-from ..environment import LUMINANCE, peak_irradiance, texel_directions, to_world
-from ..population import MAD_SCALE
+from ..lights.environment import LUMINANCE, peak_irradiance, texel_directions, to_world
+from ..report.population import MAD_SCALE
 
 #: (width, height) of the map a given one is reduced to for the texture-space stages.
 TRANSPORT_SIZE = (32, 16)
@@ -198,7 +198,7 @@ def estimate_map(radiance: list[np.ndarray], transports: list[np.ndarray], texel
     Returns
     -------
     envmap : (H, W, 3) float32, scaled so that its
-        :func:`~mifaces.environment.peak_irradiance` has luminance :data:`RELATIVE_IRRADIANCE`
+        :func:`~mifaces.lights.environment.peak_irradiance` has luminance :data:`RELATIVE_IRRADIANCE`
     info : dict
         ``rounds``, ``residual`` (relative RMS of the last round), ``samples``.
     """

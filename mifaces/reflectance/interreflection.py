@@ -27,7 +27,7 @@ import mitsuba as mi
 import numpy as np
 import scipy.ndimage
 
-from ..progress import progress as progress_bar
+from ..runtime.progress import progress as progress_bar
 from ..render.scene import FaceScene
 
 #: The path tracer's depth of the render the bounced light is taken from (2 is direct light only):

@@ -14,7 +14,7 @@ region's BSDF in; ``albedo_std.exr``, the albedo's posterior standard
 deviation per texel (:attr:`mifaces.reflectance.maps.diffuse.DiffuseMap.std`),
 when known. ``brdf.json``'s ``"uncertainty"`` holds each region's parameter
 intervals (:mod:`mifaces.reflectance.fit.uncertainty`). The files are one result set
-(:func:`mifaces.result_set.result_set`): written together into a sibling folder
+(:func:`mifaces.io.result_set.result_set`): written together into a sibling folder
 and swapped in, so a killed run leaves the earlier set whole.
 :func:`load_estimate` reads ``brdf.json`` and the albedo map back and refuses
 a mixed set.
@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 
 from .. import brdf as brdf_models
-from ..atomic import atomic_write, write_json
-from ..image_files import read_exr, write_exr, write_png
-from ..result_set import ResultSetError, result_set, verify_set
-from ..environment import environment_emitter
+from ..io.atomic import atomic_write, write_json
+from ..io.image_files import read_exr, write_exr, write_png
+from ..io.result_set import ResultSetError, result_set, verify_set
+from ..lights.environment import environment_emitter
 from ..render import FaceScene, scene_xml
 from ..model.regions import REGIONS
 from .fit.region_fit import RegionFit
@@ -51,7 +51,7 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light, 
                    force: bool = False) -> dict[str, Path]:
     """Write ``brdf.json``, ``albedo.exr`` (+ ``albedo.png``), ``meshes/*.ply``
     and ``scene.xml`` into folder ``out`` as one result set
-    (:func:`mifaces.result_set.result_set`): all of them or none.
+    (:func:`mifaces.io.result_set.result_set`): all of them or none.
 
     Parameters
     ----------
@@ -61,7 +61,7 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light, 
         The geometry the scene shows (world frame, mm).
     camera : mifaces.capture.Camera
     light : mifaces.capture.Light
-        The scene's light (:func:`mifaces.emitters.light_emitters`), as the
+        The scene's light (:func:`mifaces.lights.emitters.light_emitters`), as the
         estimate was fitted under it (:meth:`BRDFEstimate.fitted_light`: a map
         the refinement refined is the refined one). An environment map is
         written beside the scene as ``environment.exr``.
@@ -72,7 +72,7 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light, 
     document = estimate.to_json()
     normals, specular = estimate.normal_texture(), estimate.specular_texture()
     lamp = estimate.fitted_light(light)
-    envmap = lamp.envmap if lamp.environment else None
+    envmap = lamp.radiance_map
     environment = None if envmap is None else environment_emitter(FILES["environment"], camera)  # named by file
     scene = face.description(document, camera, lamp if envmap is None else None, envmap=environment,
                              spp=SCENE_SPP, albedo=FILES["albedo"],
@@ -121,7 +121,7 @@ def load_estimate(path) -> dict:
 
     Raises
     ------
-    mifaces.result_set.ResultSetError
+    mifaces.io.result_set.ResultSetError
         Files that were not written together (a ``brdf.json`` and an albedo
         map of different runs: changed checksums, or, in a folder without a
         set manifest, an albedo map of another resolution).

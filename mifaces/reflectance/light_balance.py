@@ -3,7 +3,7 @@
 A texel's reflectance ``r = pixel / (E cos)`` is the same under every light where each light's
 irradiance ``E`` is right, and ``1 / s`` of it where ``E`` is ``s`` times too large. The reflectance
 samples of a capture's photographs therefore measure each light's intensity error relative to the
-others (:func:`log_light_errors`). :func:`mifaces.lighting.balance_intensities` uses that to set
+others (:func:`log_light_errors`). :func:`mifaces.light_estimation.unknown.balance_intensities` uses that to set
 estimated lights' intensities; :func:`balance_given_lights` corrects calibrated ones (a lamp the
 steel spheres place a percent too far gives 2 % too little light, which skin's ρs absorbs many
 times over: ``docs/refine.md``).
@@ -85,8 +85,7 @@ def balance_given_lights(capture, samples):
         The lights' intensities divided by their ``s``, each sample's reflectance times its light's
         ``s``, and ``capture.metadata['light_balance']`` the factors ``s``.
     """
-    names = [light.name for light in capture.lights
-             if not light.unknown and not light.estimated and not light.environment]
+    names = [light.name for light in capture.lights if light.intensity_given]
     log_s = log_light_errors(capture, samples, names, max_half_cosine=GIVEN_MAX_HALF_COSINE) if len(names) >= 2 else None
     if not log_s:
         return capture, samples
@@ -95,7 +94,7 @@ def balance_given_lights(capture, samples):
     per_measurement = np.array([factor.get(light_of[name], 1.0) for name in samples.measurement_names])
     balanced = replace(samples, reflectance=(samples.reflectance * per_measurement[samples.measurement][:, None])
                        .astype(samples.reflectance.dtype))
-    lights = tuple(replace(light, intensity=np.asarray(light.intensity, np.float64) / factor[light.name])
+    lights = tuple(light.with_intensity(np.asarray(light.intensity, np.float64) / factor[light.name])
                    if light.name in factor else light for light in capture.lights)
     return replace(capture, lights=lights, metadata=dict(capture.metadata, light_balance=factor)), balanced
 

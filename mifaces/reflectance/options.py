@@ -10,7 +10,7 @@ import warnings
 from dataclasses import dataclass
 
 from ..brdf import MAX_LOBES
-from ..image_files import MAX_IMAGE_PIXELS
+from ..io.image_files import MAX_IMAGE_PIXELS
 from ..options.fields import check, from_record, option, record
 from .fit.region_fit import SubsetSchedule
 from .fit.uncertainty import METHODS

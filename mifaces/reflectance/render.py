@@ -7,7 +7,6 @@ with Mitsuba's path tracer as the simulator renders photographs
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,10 +14,10 @@ import numpy as np
 from ..brdf.model import check_numbers
 from ..capture import Light, load_capture
 from ..shape.io import load_geometry
-from ..image_files import save_image
+from ..io.image_files import save_image
 from ..model import MorphableModel
 from ..model.geometry import rotation_about, turned
-from ..paths import check_writable
+from ..io.paths import check_writable
 from ..render import FaceScene
 from .io import load_estimate
 from .result import BRDFEstimate, fitted_light
@@ -30,7 +29,7 @@ def render_estimate(estimate: BRDFEstimate, face_model: MorphableModel, vertices
     """Render the fitted face (linear RGB, (H, W, 3)) on geometry ``vertices``
     (world frame) seen by ``camera``, under a :class:`~mifaces.capture.Light` (point,
     directional or environment map) and/or an environment ``envmap``
-    (:func:`mifaces.emitters.light_emitters`): for novel poses, novel lights and comparisons with
+    (:func:`mifaces.lights.emitters.light_emitters`): for novel poses, novel lights and comparisons with
     held-out photographs. To render one face several times, build its
     :class:`~mifaces.render.FaceScene` once and call its ``render``."""
     return FaceScene(face_model, vertices).render(estimate.to_json(), estimate.albedo.albedo, camera, light,
@@ -54,7 +53,7 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
     mm), ``light_direction`` (a directional light, world frame, towards the
     light; :meth:`mifaces.capture.Camera.direction` turns an azimuth and
     elevation into one) or an ``envmap`` is given (an equirectangular map,
-    or an emitter dict such as :func:`mifaces.environment.sky_emitter`'s); its intensity is the
+    or an emitter dict such as :func:`mifaces.lights.environment.sky_emitter`'s); its intensity is the
     measurement light's unless ``intensity`` is given (the :class:`~mifaces.capture.Light` rendered:
     the measurement's, or one made of these). Rendered in the
     capture's camera and units, the image compares pixel for pixel with a
@@ -80,7 +79,7 @@ def render_fitted(brdf_dir, capture, out, measurement: str | None = None, geomet
                         data.get("refinement"))  # a map the refinement refined, as scene.xml has it
     intensity = lamp.intensity if intensity is None else intensity
     if light_position is None and light_direction is None and envmap is None:  # the measurement's light
-        light = lamp if lamp.environment else replace(lamp, intensity=intensity)
+        light = lamp.with_intensity(intensity)
     elif light_position is None and light_direction is None:
         light = None  # the environment alone
     else:

@@ -21,9 +21,7 @@ def fitted_light(light, refinement: dict | None):
     ``brdf.json`` record, kept only where the refinement was) is that refined map; any other light
     is itself."""
     maps = (refinement or {}).get("environment_maps") or {}
-    if light.environment and light.estimated and light.name in maps:
-        return dataclasses.replace(light, envmap=np.asarray(maps[light.name], np.float32))
-    return light
+    return light.with_estimated_map(maps.get(light.name))
 
 
 #: The fitted BRDF's files in an output folder.
@@ -71,7 +69,7 @@ class BRDFEstimate:
         (:func:`mifaces.reflectance.maps.specular.refine_specular`), if estimated.
     lighting : dict or None
         How the lights were known where they were estimated from the photographs
-        (:mod:`mifaces.lighting`): ``{"lights": "estimated", "reflectance": "relative", "note"}``,
+        (:mod:`mifaces.light_estimation.unknown`): ``{"lights": "estimated", "reflectance": "relative", "note"}``,
         written to ``brdf.json``; None for a capture whose lights are given.
     light_balance : dict or None
         Light name -> the factor its given intensity was off by, as the face's one albedo

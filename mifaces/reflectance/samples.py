@@ -29,10 +29,10 @@ import numpy as np
 import scipy.ndimage
 import skimage.morphology
 
-from ..atomic import atomic_path
+from ..io.atomic import atomic_path
 from ..model.geometry import tangent_frames
 from ..model.mesh import mitsuba_mesh
-from ..progress import progress as progress_bar
+from ..runtime.progress import progress as progress_bar
 from .environment import LUMINANCE, equivalent_lights
 from ..model.regions import texel_regions_of_mesh
 from ..model.texture_space import rasterize
@@ -483,12 +483,7 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     chosen = [m for m in capture.measurements if m.name in wanted]
     for m in progress_bar(chosen, desc="reflectance samples", unit="photo", enabled=progress):
         light = capture.light(m.light)
-        if light.unknown:
-            raise ValueError(f"measurement {m.name!r}: light {light.name!r} is unknown: estimate it with the face "
-                             "first (mifaces measure, or mifaces.lighting.estimate_lights on the shape fits)")
-        if light.position is None and not light.directional and light.envmap is None:
-            raise ValueError(f"measurement {m.name!r}: light {light.name!r} has no position "
-                             "(load the capture with calibrate=True)")
+        light.require_incidence(f"measurement {m.name!r}")
         parts.append(measurement_samples(capture.camera, light, m.image.pixels, geometry[m.name],
                                          face_model.triangles, face_model.uv, raster, saturated=m.image.saturated,
                                          scale=scale, erosion=erosion, min_cosine=min_cosine, name=m.name,

@@ -9,8 +9,8 @@ import mitsuba as mi
 import numpy as np
 
 from .. import brdf as brdf_models
-from ..atomic import atomic_path
-from ..emitters import light_emitters
+from ..io.atomic import atomic_path
+from ..lights.emitters import light_emitters
 from .materials import ALBEDO, ALBEDO_REF, NORMALS, SPECULAR, region_bsdf, with_textures
 from .meshes import MESH_FOLDER, region_meshes
 from .sensor import check_render_size, mitsuba_sensor
@@ -64,7 +64,7 @@ class FaceScene:
         camera : mifaces.capture.Camera
         light, envmap, envmap_scale : optional
             A :class:`~mifaces.capture.Light` and an environment instead of it or besides it
-            (:func:`mifaces.emitters.light_emitters`): a scene holds only the emitters it is given.
+            (:func:`mifaces.lights.emitters.light_emitters`): a scene holds only the emitters it is given.
         spp, max_depth : int
             Samples per pixel and the path tracer's depth (shadows and
             interreflection).

@@ -7,8 +7,8 @@ import math
 import mitsuba as mi
 import numpy as np
 
-from ..image_files import check_image_size
-from ..progress import progress
+from ..io.image_files import check_image_size
+from ..runtime.progress import progress
 
 
 #: Largest number of samples one render pass traces (Mitsuba's wavefront:

@@ -17,7 +17,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..arrays import device_array
+from ..runtime.arrays import device_array
 
 #: Packed values per step (see :meth:`Energy.energy`).
 PACKED = 8

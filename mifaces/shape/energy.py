@@ -27,7 +27,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..arrays import device_array
+from ..runtime.arrays import device_array
 from .layout import Layout
 from .layout import adjacency as triangle_adjacency
 from .result import Weights

@@ -13,10 +13,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..capture import load_capture
-from ..environment import dominant_direction
 from ..model import load_model
-from ..progress import progress as progress_bar
-from ..status import CONVERGED, DIVERGED, NOT_CONVERGED
+from ..runtime.progress import progress as progress_bar
+from ..runtime.status import CONVERGED, DIVERGED, NOT_CONVERGED
 from .energy import DIFFUSE, POINT, directed, lit_key
 from .fitter import Fitter
 from .io import model_source, write_fit, write_index
@@ -24,7 +23,7 @@ from .poses import companions, one_face, own_lights, pose_groups, shared_fit
 from .result import (FEATURE_NOISE, MAX_FEATURE_ERROR, MAX_IMAGE_RMS, ShapeFit, ShapeFitError, ShapeOptions,
                      ShapeSchedule, Weights)
 from .targets import (eye_distance_px, feature_targets, light_angles, normalised, reference_measurement,
-                      rotation_centre, start_light_angles)
+                      rotation_centre)
 
 #: Parameter blocks of a fit's geometry and texture: held where only a photograph's lighting is fitted
 #: on a pose's shared face (:func:`fit_light`).
@@ -127,16 +126,11 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
     for key, source in lights.items():
         if source is None:
             continue
-        if source.unknown or source.environment:  # a free directed light: from its guess, else frontal
-            if source.guess is not None:
-                initial.setdefault(f"{key}.light_angles", light_angles(camera.rotation @ source.guess))
-            elif source.envmap is not None:  # a given map: from where most of its light comes
-                initial.setdefault(f"{key}.light_angles",
-                                   light_angles(camera.rotation @ dominant_direction(source.envmap, camera)))
-        elif source.directional:
-            initial.setdefault(f"{key}.light_angles", start_light_angles(source, camera, camera.position))
-        else:
-            positions[key] = source.position
+        start = source.start_direction(camera)  # None: frontal, or a point light's held position
+        if start is not None:
+            initial.setdefault(f"{key}.light_angles", light_angles(camera.rotation @ start))
+        elif source.held_position is not None:
+            positions[key] = source.held_position
     if not options.ambient:  # no light but the photographs' own: each directed light's ambient held at zero
         held = [f"{key}.ambient" for key in images if directed(key)]
         initial.update(dict.fromkeys(held, 0.0))
@@ -242,7 +236,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     iterations : float or ShapeSchedule, optional
         A :class:`ShapeSchedule`, or a factor on the default schedule's iteration counts.
     progress : bool
-        Show progress (:func:`mifaces.progress.progress`).
+        Show progress (:func:`mifaces.runtime.progress.progress`).
     weights : Weights, optional
     use_diffuse : bool
         Use the companion diffuse-light image where present.
@@ -359,7 +353,7 @@ def _member_fit(fit: ShapeFit, measurement, capture, model, schedule: ShapeSched
     capture does not know it (:func:`fit_light`); else :func:`~mifaces.shape.poses.shared_fit`.
     ``shared``: :func:`fit_measurement`'s ``weights``, ``distances``, ``progress`` and ``options``."""
     light = capture.light(measurement.light) if measurement.light else None
-    if key is not None or light is None or not light.unknown or light.environment or not fit.converged:
+    if key is not None or light is None or not light.fitted_on_face or not fit.converged:
         return shared_fit(fit, measurement, capture, key)
     return fit_light(fit, measurement, capture.camera, model, light, schedule, **shared)
 

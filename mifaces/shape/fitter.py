@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from ..model.geometry import rotation_matrix
 from ..model.mesh import mitsuba_mesh
-from ..status import DIVERGED, NOT_CONVERGED
+from ..runtime.status import DIVERGED, NOT_CONVERGED
 from .adam import COLUMNS, DeviceAdam
 from .energy import POINT, Energy, directed
 from .layout import Layout, adjacency

@@ -7,7 +7,7 @@ The index is written last and holds each file's SHA-256: a reader
 (:func:`load_fitted_shapes`) refuses a file that is not the one the index
 was written with (a run killed between a measurement's files and the index),
 so fits of two runs are never mixed. Measurement names become file names
-only if they are safe (:func:`mifaces.paths.check_name`)."""
+only if they are safe (:func:`mifaces.io.paths.check_name`)."""
 
 from __future__ import annotations
 
@@ -19,11 +19,11 @@ import numpy as np
 
 from ..capture import GROUND_TRUTH, Camera, load_capture, read_ground_truth
 from ..capture.ground_truth import SCENE
-from ..atomic import atomic_write, write_json
+from ..io.atomic import atomic_write, write_json
 from ..model import MorphableModel, load_model
-from ..paths import check_name
-from ..result_set import ResultSetError, file_sha256
-from ..status import CONVERGED
+from ..io.paths import check_name
+from ..io.result_set import ResultSetError, file_sha256
+from ..runtime.status import CONVERGED
 from .result import ShapeFit
 
 #: Name of the index file :func:`~mifaces.shape.fit.fit_shape` writes beside the per-measurement files.
@@ -34,7 +34,7 @@ ALBEDO_SUFFIX = "_albedo"
 
 def file_stem(measurement: str) -> str:
     """The file name stem of ``measurement``'s fit: its name, if safe
-    (:func:`mifaces.paths.check_name`), not the index's and not one that
+    (:func:`mifaces.io.paths.check_name`), not the index's and not one that
     another measurement's albedo file takes (``<name>_albedo``)."""
     check_name(measurement, "measurement name", reserved=(Path(INDEX).stem,))
     if measurement.lower().endswith(ALBEDO_SUFFIX):

@@ -69,7 +69,7 @@ def companions(capture, others) -> list:
     :data:`JOINT_PHOTOGRAPHS` at most with the leader, in the capture's order, each with its light."""
     given = [(m, capture.light(m.light) if m.light else None) for m in others]
     return [(m, light) for m, light in given
-            if light is None or not (light.unknown or light.environment)][:JOINT_PHOTOGRAPHS - 1]
+            if light is None or not light.direction_fitted][:JOINT_PHOTOGRAPHS - 1]
 
 
 def own_lights(fit: ShapeFit) -> ShapeFit:

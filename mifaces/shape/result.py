@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..status import CONVERGED
+from ..runtime.status import CONVERGED
 
 #: Default convergence limit of the feature points: RMS distance from their targets as a fraction of
 #: the face's eye distance (outer corners) in the image, on top of :data:`FEATURE_NOISE`; with it,

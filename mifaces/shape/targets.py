@@ -43,10 +43,8 @@ def start_light_angles(light, camera, head_world) -> tuple[float, float] | None:
     """Start angles (:func:`light_angles`) of a capture's :class:`~mifaces.capture.Light` seen
     from the world point ``head_world`` (mm): a directional light's direction, a point light's
     direction from there, turned into the camera frame; None for a light with neither."""
-    if light is None or light.environment or (not light.directional and light.position is None):
-        return None
-    towards, _ = light.towards(np.asarray(head_world, np.float64)[None])
-    return light_angles(camera.rotation @ towards[0])
+    towards = None if light is None else light.direction_from(np.asarray(head_world, np.float64)[None])
+    return None if towards is None else light_angles(camera.rotation @ towards[0])
 
 
 def rotation_centre(model) -> np.ndarray:

@@ -4,16 +4,16 @@ capture (``simulate(environment=...)``), instead of the point lights.
 The capture states it as one given environment light (``docs/capture.md``): a
 latitude-longitude OpenEXR map in pixel value (radiance times the
 photographs' exposure, so the photographs' exposure is 1) in the frame of
-:func:`mifaces.environment.environment_emitter` (local +y the camera's up,
+:func:`mifaces.lights.environment.environment_emitter` (local +y the camera's up,
 +z towards the camera). The photographs are rendered with exactly that map:
-the generated studio (:func:`mifaces.environment.studio_environment`) as it
-is, Mitsuba's sun and sky (:func:`mifaces.environment.sky_emitter`, the sun
-at :data:`mifaces.environment.SKY_SUN_ANGLES` about the camera) baked into a
-map first (:func:`mifaces.environment.bake_environment`).
+the generated studio (:func:`mifaces.lights.environment.studio_environment`) as it
+is, Mitsuba's sun and sky (:func:`mifaces.lights.environment.sky_emitter`, the sun
+at :data:`mifaces.lights.environment.SKY_SUN_ANGLES` about the camera) baked into a
+map first (:func:`mifaces.lights.environment.bake_environment`).
 
 Exposure follows from the map, once per environment, not from a render: a
 white Lambertian surface facing the map's brightest direction (the largest
-irradiance E; it reads E / π, :func:`mifaces.environment.irradiance`) reads
+irradiance E; it reads E / π, :func:`mifaces.lights.environment.irradiance`) reads
 :data:`ENVIRONMENT_LEVEL` of full scale. The simulated subjects' skin
 (brightest channel 0.3 to 0.73, pale to dark over seeds) then reads at most
 about 0.65 (the 99th percentile of the face: 0.25 to 0.65), with headroom
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..environment import SKY_SUN_ANGLES, bake_environment, peak_irradiance, sky_emitter, studio_environment
+from ..lights.environment import SKY_SUN_ANGLES, bake_environment, peak_irradiance, sky_emitter, studio_environment
 
 #: The environments a simulated capture can be lit by.
 ENVIRONMENTS = ("studio", "sky")
@@ -49,7 +49,7 @@ class EnvironmentLight:
         One of :data:`ENVIRONMENTS`; the capture's light name.
     map : (H, 2H, 3) float32
         Latitude-longitude radiance in pixel value, in the frame of
-        :func:`mifaces.environment.environment_emitter`: what the capture states
+        :func:`mifaces.lights.environment.environment_emitter`: what the capture states
         and what the photographs are rendered with.
     description : dict
         What the environment was, for the ground truth's description: with ``exposure``, the
@@ -93,7 +93,7 @@ def environment_radiance(name: str, camera) -> tuple[np.ndarray, dict]:
 
 def environment_exposure(radiance: np.ndarray) -> float:
     """The exposure at which a white Lambertian surface facing the brightest direction of the map
-    ``radiance`` (:func:`mifaces.environment.peak_irradiance`; E its largest channel) reads
+    ``radiance`` (:func:`mifaces.lights.environment.peak_irradiance`; E its largest channel) reads
     :data:`ENVIRONMENT_LEVEL`: level π / E."""
     peak = float(peak_irradiance(radiance).max())
     if peak <= 0:

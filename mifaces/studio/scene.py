@@ -19,7 +19,7 @@ import numpy as np
 
 from ..brdf.model import rgb
 from ..capture import Camera, Light
-from ..emitters import light_emitters
+from ..lights.emitters import light_emitters
 from ..render import mitsuba_sensor
 from .environment_light import EnvironmentLight, environment_light
 
@@ -208,5 +208,5 @@ def face_light(studio: Studio, light: int) -> dict:
 
 
 def point_light(studio: Studio, light: int) -> dict:
-    """The point light of condition ``light`` (:func:`mifaces.emitters.light_emitters`)."""
+    """The point light of condition ``light`` (:func:`mifaces.lights.emitters.light_emitters`)."""
     return light_emitters(Light(f"light_{light}", studio.light_positions[light], studio.intensity), studio.camera)

@@ -70,11 +70,11 @@ import numpy as np
 
 from ..brdf.cooktorrance import DIGITS
 from ..capture import write_ground_truth
-from ..image_files import MAX_IMAGE_SIDE, check_image_size
+from ..io.image_files import MAX_IMAGE_SIDE, check_image_size
 from ..render import check_render_size
-from ..result_set import check_result_target, result_set
+from ..io.result_set import check_result_target, result_set
 from ..model import load_model
-from ..progress import progress as progress_bar
+from ..runtime.progress import progress as progress_bar
 from ..render import face_meshes, region_bsdf, region_meshes
 from .photograph import albedo_texture, annotate, photograph_face, photograph_spheres, visible_feature_points
 from . import subsurface as translucent
@@ -122,7 +122,7 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     ----------
     out : path
         Capture folder to write, as one result set
-        (:func:`mifaces.result_set.result_set`): the photographs, the manifest and
+        (:func:`mifaces.io.result_set.result_set`): the photographs, the manifest and
         the ground truth appear together, or not at all.
     model : str, path or MorphableModel
         ``'builtin'``, a model file for :func:`mifaces.load_model`, or a model.
@@ -170,11 +170,11 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     environment : {'studio', 'sky'}, optional
         Light every photograph by an environment instead of the point lights
         (:data:`mifaces.studio.environment_light.ENVIRONMENTS`): the generated studio
-        (:func:`mifaces.environment.studio_environment`) or Mitsuba's sun and sky with the
-        sun at :data:`mifaces.environment.SKY_SUN_ANGLES` about the camera, baked into a map
-        (:func:`mifaces.environment.bake_environment`). The capture states that map as its one
+        (:func:`mifaces.lights.environment.studio_environment`) or Mitsuba's sun and sky with the
+        sun at :data:`mifaces.lights.environment.SKY_SUN_ANGLES` about the camera, baked into a map
+        (:func:`mifaces.lights.environment.bake_environment`). The capture states that map as its one
         given environment light (``lights/<name>.exr``, pixel value, the frame of
-        :func:`mifaces.environment.environment_emitter`), the photographs are rendered with
+        :func:`mifaces.lights.environment.environment_emitter`), the photographs are rendered with
         exactly it; no steel spheres, no point lights, no white target; each measurement
         its own head turn (:func:`mifaces.studio.scene.head_turns`).
 
@@ -199,7 +199,7 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     ------
     FileExistsError
         ``out`` holds a simulated capture and ``force`` is False.
-    mifaces.result_set.ResultSetError
+    mifaces.io.result_set.ResultSetError
         ``out`` holds files mifaces did not write (a real capture).
     """
     t_start = time.perf_counter()

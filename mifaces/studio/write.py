@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from ..capture import FORMAT, MANIFEST, VERSION, GroundTruth, TrueLight, TrueMeasurement
-from ..atomic import write_json
-from ..image_files import write_exr, write_png
+from ..io.atomic import write_json
+from ..io.image_files import write_exr, write_png
 from ..model.landmarks import FEATURE_POINTS
 from .photograph import FULL_WELL, READ_NOISE, Photographs, SpherePhotographs
 from .environment_light import EnvironmentLight

@@ -16,8 +16,8 @@ from scipy.spatial.transform import Rotation
 
 from ..capture.types import RELATIVE_IRRADIANCE
 from ..capture import Light
-from ..environment import dominant_direction
-from ..image_files import read_exr
+from ..lights.environment import dominant_direction
+from ..io.image_files import read_exr
 
 #: The novel pose: yaw about the camera's up axis, then pitch about its right
 #: axis (degrees, through the true face's centroid; positive yaw turns the face
@@ -108,7 +108,7 @@ def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -
 
 
 def novel_light(capture, centre: np.ndarray) -> Light:
-    """The light none of the measurements used that :func:`mifaces.pipeline.measure`
+    """The light none of the measurements used that :func:`mifaces.pipeline.measure.measure`
     renders each fit under beside its photograph: the first of :func:`held_out_lights`
     (of ``capture``'s lights, seen from ``centre``), named ``'novel'``."""
     light, _ = held_out_lights(capture, centre, 1)[0]

@@ -7,7 +7,7 @@ from skimage.transform import resize
 
 from ..capture import read_ground_truth
 from ..model.regions import REGIONS
-from ..status import NOT_FITTED
+from ..runtime.status import NOT_FITTED
 
 
 def ground_truth_errors(estimate, capture, ground_truth=None, albedo_scale: float = 1.0) -> dict | None:

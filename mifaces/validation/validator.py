@@ -29,7 +29,7 @@ Four numbers per fitted model (:meth:`Validator.validate`):
     and over the lights the root mean square of the e's.
 ``environment_rmse``
     The same under the generated studio and a sunsky
-    (:mod:`mifaces.environment`).
+    (:mod:`mifaces.lights.environment`).
 
 Renders are Monte Carlo estimates. The truth and every fit are rendered
 with the same seed (common random numbers: the same camera rays and light
@@ -55,9 +55,9 @@ from scipy.spatial.transform import Rotation
 from skimage.transform import resize
 
 from ..capture import Camera, read_ground_truth
-from ..emitters import light_record
-from ..environment import LUMINANCE, SKY_SUN_ANGLES, sky_emitter, studio_environment
-from ..face_pixels import front_of_face_pixels
+from ..lights.emitters import light_record
+from ..lights.environment import LUMINANCE, SKY_SUN_ANGLES, sky_emitter, studio_environment
+from ..render.face_pixels import front_of_face_pixels
 from ..shape.io import load_geometry
 from ..model.geometry import turned
 from ..model.regions import REGIONS
@@ -149,7 +149,7 @@ class Validator:
         Name -> the true face's image (H, W, 3).
     mask, truth_mask : (H, W) bool
         The pixels compared: where the front of either face is seen; where the true face's is
-        (:func:`mifaces.face_pixels.front_of_face_pixels`).
+        (:func:`mifaces.render.face_pixels.front_of_face_pixels`).
     summary : dict
         What was compared, for the report (pose, lights, environments, shape floor, sizes, seconds).
     """
@@ -279,7 +279,7 @@ class Validator:
             rendered on the *true* shape (the reflectance alone; equal to
             the others where the fit used the true shape). ``replicate``: the same pooled image
             errors with every render's random numbers drawn again (:data:`NOISE_SEED`), so that
-            two models' difference can be told from Monte Carlo noise (:func:`mifaces.report.ties`).
+            two models' difference can be told from Monte Carlo noise (:func:`mifaces.report.measurement.ties`).
         images : dict
             Condition name -> the fitted face's image (H, W, 3).
         """

@@ -21,7 +21,7 @@ from typing import Callable
 
 import numpy as np
 
-from ...status import CONVERGED, MAX_ITERATIONS, STALLED
+from ...runtime.status import CONVERGED, MAX_ITERATIONS, STALLED
 
 
 @dataclass

@@ -15,7 +15,7 @@ import mitsuba as mi
 import numpy as np
 
 from ...brdf.model import DIFFUSE, BRDFModel, Parameter
-from ...arrays import device_array
+from ...runtime.arrays import device_array
 
 
 @dataclass(frozen=True)

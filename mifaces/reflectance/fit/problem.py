@@ -14,7 +14,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ...arrays import device_array
+from ...runtime.arrays import device_array
 from .parameters import ParameterSpace
 
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from ... import brdf as brdf_models
 from ...brdf.model import DIFFUSE as DIFFUSE_PARAMETER, BRDFModel
-from ...status import AT_BOUND, AT_START, CONVERGED
+from ...runtime.status import AT_BOUND, AT_START, CONVERGED
 from ..maps.diffuse import AlbedoOffsets
 from .levenberg_marquardt import levenberg_marquardt
 from .lobes import SPIKE, prune_lobes

@@ -12,8 +12,8 @@ import numpy as np
 
 from ... import brdf as brdf_models
 from ...brdf.model import BRDFModel
-from ...progress import progress as progress_bar
-from ...status import AT_BOUND, AT_START, CONVERGED, DEFAULTS, PRIOR
+from ...runtime.progress import progress as progress_bar
+from ...runtime.status import AT_BOUND, AT_START, CONVERGED, DEFAULTS, PRIOR
 from ..maps.diffuse import AlbedoOffsets
 from ..samples import ReflectanceSamples
 from .intervals import prior_intervals

@@ -12,7 +12,8 @@ import os
 import drjit as dr
 import mitsuba as mi
 
-from . import llvm, plugins
+from .. import plugins
+from . import llvm
 
 _registered: set[str] = set()
 

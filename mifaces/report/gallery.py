@@ -8,10 +8,10 @@ from pathlib import Path
 
 import mitsuba as mi
 
-from .brdf import NAMES
-from .image_files import save_image
-from .render import render_passes
-from .scenes import scene_path
+from ..brdf import NAMES
+from ..io.image_files import save_image
+from ..render import render_passes
+from ..render.scenes import scene_path
 
 #: Plugins in the gallery, left to right.
 ORDER = NAMES

@@ -28,8 +28,8 @@ import datetime as _dt
 import mitsuba as mi
 import numpy as np
 
-from .brdf.model import check_numbers
-from .capture.camera import camera_frame_direction
+from ..brdf.model import check_numbers
+from ..model.geometry import camera_frame_direction
 
 #: The studio's soft boxes about the camera: name, azimuth and elevation
 #: (degrees, as :meth:`mifaces.capture.Camera.direction`: 0 0 from the camera,

@@ -1,4 +1,4 @@
-"""The options of the ``mifaces`` command line (:mod:`mifaces.cli`): the flags of an options
+"""The options of the ``mifaces`` command line (:mod:`mifaces.cli.commands`): the flags of an options
 value made from its fields (:func:`option_flags`), the other defaults taken from the API, their
 parsing callbacks, and the spellings of renamed options kept for one release."""
 
@@ -10,7 +10,7 @@ import inspect
 
 import click
 
-from .options.fields import default_of, several
+from ..options.fields import default_of, several
 
 #: How the command line spells None among an option's choices.
 NONE = "none"

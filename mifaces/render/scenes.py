@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 #: Folder of the shipped scene files.
-SCENES = Path(__file__).resolve().parent.parent / "scenes"
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
 
 
 def scene_path(name: str) -> Path:

@@ -1,7 +1,7 @@
 """Many captures at once: :func:`measure_batch` (``mifaces batch``) on Dask.
 
 Each capture is one task, :func:`measure_one`, that runs
-:func:`mifaces.pipeline.measure` into ``OUT/.<name>.partial`` and renames
+:func:`mifaces.pipeline.measure.measure` into ``OUT/.<name>.partial`` and renames
 the folder to ``OUT/<name>`` once it is complete, so ``OUT/<name>`` holds
 exactly what ``mifaces measure`` writes, or nothing. The tasks run on a
 ``dask.distributed`` cluster: a :class:`~distributed.LocalCluster` of
@@ -23,7 +23,7 @@ options again.
 
 A capture that fails (a corrupt manifest, a fit that diverges, a worker
 that dies) is recorded with its error in ``OUT/batch.json``; the others go
-on. Once all have finished, :func:`mifaces.population.write_population`
+on. Once all have finished, :func:`mifaces.report.population.write_population`
 writes the population report ``OUT/population.{md,json,png}`` over every
 complete capture of the batch. See ``docs/scaling.md``.
 """
@@ -50,13 +50,13 @@ from distributed import Client, KilledWorker, LocalCluster, WorkerPlugin, as_com
 from distributed.comm import get_address_host
 from tqdm import tqdm
 
-from .capture.types import MANIFEST
-from .atomic import write_json
-from .importers.yaleb import import_subject
-from .options.measure import MeasureOptions
-from .pipeline import measure
-from .population import write_population
-from .progress import progress as progress_bar
+from ..capture.types import MANIFEST
+from ..io.atomic import write_json
+from ..importers.yaleb import import_subject
+from ..options.measure import MeasureOptions
+from .measure import measure
+from ..report.population import write_population
+from ..runtime.progress import progress as progress_bar
 
 #: Readers of raw data sets, by the name ``mifaces batch --import`` takes:
 #: ``(source folder, capture folder to write, force=True) -> capture folder``.
@@ -160,7 +160,7 @@ def _replace_folder(source: Path, target: Path) -> None:
 
 
 def measure_one(name: str, source, out, importer: str | None = None, options: MeasureOptions | None = None) -> dict:
-    """The task of one capture: import it if asked, :func:`mifaces.pipeline.measure`
+    """The task of one capture: import it if asked, :func:`mifaces.pipeline.measure.measure`
     it into ``out/.<name>.partial``, and rename that to ``out/<name>``.
 
     Returns
@@ -263,7 +263,7 @@ def dashboard(client: Client) -> str:
 def measure_batch(inputs, out, options: MeasureOptions | None = None, *, workers: int | None = None,
                   scheduler: str | None = None, resume: bool = False, importer: str | None = None,
                   variant: str | None = None, progress: bool = True, echo=None, **keywords) -> dict:
-    """Measure many captures on Dask, each as :func:`mifaces.pipeline.measure` would.
+    """Measure many captures on Dask, each as :func:`mifaces.pipeline.measure.measure` would.
 
     Parameters
     ----------
@@ -273,7 +273,7 @@ def measure_batch(inputs, out, options: MeasureOptions | None = None, *, workers
         Batch folder: ``<name>/`` per capture, ``batch.json``, ``population.{md,json,png}``
         (and ``captures/<name>/`` with an importer).
     options : MeasureOptions, optional
-        How every capture is measured (:func:`mifaces.pipeline.measure`), sent whole to the workers.
+        How every capture is measured (:func:`mifaces.pipeline.measure.measure`), sent whole to the workers.
     workers : int, optional
         Worker processes of the local cluster (default: one per core, at most one per capture).
     scheduler : str, optional
@@ -287,7 +287,7 @@ def measure_batch(inputs, out, options: MeasureOptions | None = None, *, workers
     variant : str, optional
         Mitsuba variant of the workers (default: the current one).
     **keywords
-        Options as keywords, applied over ``options`` as :func:`mifaces.pipeline.measure` takes them
+        Options as keywords, applied over ``options`` as :func:`mifaces.pipeline.measure.measure` takes them
         (``models=``, ``geometry=``, ``spp=``, ...; :meth:`MeasureOptions.of
         <mifaces.options.measure.MeasureOptions.of>`).
     progress : bool

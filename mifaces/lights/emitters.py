@@ -2,7 +2,7 @@
 :class:`~mifaces.capture.Light` (a point light, a directional light or an
 environment map), or an environment given as a map or an emitter; and a
 light's record in a report. World frame, mm; maps placed in the camera's
-frame (:mod:`mifaces.environment`)."""
+frame (:mod:`mifaces.lights.environment`)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .brdf.model import check_numbers, rgb
+from ..brdf.model import check_numbers, rgb
 from .environment import environment_emitter
 
 
@@ -24,8 +24,8 @@ def light_emitters(light, camera, envmap=None, envmap_scale: float = 1.0) -> dic
     intensity/π) or an environment map (``envmap``); a light that is not a capture's is a ``Light``
     made for it, e.g. ``Light("held-out", position, intensity)``. ``envmap``: an equirectangular
     map (path or (H, W, 3) array, linear RGB) scaled by ``envmap_scale``, or an emitter dict such
-    as :func:`mifaces.environment.sky_emitter`'s, instead of or besides a point or directional
-    light. Maps are placed in ``camera``'s frame (:func:`mifaces.environment.environment_emitter`).
+    as :func:`mifaces.lights.environment.sky_emitter`'s, instead of or besides a point or directional
+    light. Maps are placed in ``camera``'s frame (:func:`mifaces.lights.environment.environment_emitter`).
     """
     if light is not None and light.environment:
         if light.envmap is None:
@@ -40,7 +40,7 @@ def light_emitters(light, camera, envmap=None, envmap_scale: float = 1.0) -> dic
     emitters = {}
     if light is not None:
         emitters["light"] = _light_emitter(light)
-    if isinstance(envmap, dict):  # an emitter, e.g. mifaces.environment.sky_emitter's
+    if isinstance(envmap, dict):  # an emitter, e.g. mifaces.lights.environment.sky_emitter's
         if envmap_scale != 1.0:
             raise ValueError("an environment given as an emitter carries its own scale: leave envmap_scale at 1")
         emitters["environment"] = envmap

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_write, save_figure
-from .status import CONVERGED
-from .validation.validator import TRUE_SHAPE
+from ..io.atomic import atomic_write, save_figure
+from ..runtime.status import CONVERGED
+from ..validation.validator import TRUE_SHAPE
 
 
 #: The validation's image errors the report ranks the models by, and their labels: the fitted faces, and
@@ -93,7 +93,7 @@ def write_validation_picture(path: Path, truth: dict, images: dict, report: dict
 def write_fit_picture(path: Path, fitted, photo_name: str) -> None:
     """The fits against the photograph (``report.png``, or ``report_training.png``
     beside a validation): per fitted model (``fitted``, each a
-    :class:`mifaces.pipeline.FittedModel`) a row of the photograph
+    :class:`mifaces.pipeline.measure.FittedModel`) a row of the photograph
     ``photo_name``, the fitted face under its light, their difference and the
     fitted face under the novel light."""
     import matplotlib
@@ -152,7 +152,7 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
 
 
 def lights_markdown(report: dict) -> list[str]:
-    """The report's lines on lights estimated from the photographs (:mod:`mifaces.lighting`): each
+    """The report's lines on lights estimated from the photographs (:mod:`mifaces.light_estimation.unknown`): each
     light's direction (world frame, towards the light), relative intensity and the spread of its
     photographs' estimates, the picture, and what stays ambiguous; none for given lights."""
     if "lights" not in report:
@@ -177,7 +177,7 @@ def lights_markdown(report: dict) -> list[str]:
 def shapes_markdown(report: dict) -> list[str]:
     """The report's lines on the fitted shapes: the identity modes the fit (and a simulated
     truth) used, and per photograph the fit's status, feature-point error and, against a
-    simulated truth, its error in the world frame (``mifaces.shape_errors``)."""
+    simulated truth, its error in the world frame (``mifaces.validation.shape_errors``)."""
     face = report.get("face_model")
     if not face or "shapes" not in report:
         return []

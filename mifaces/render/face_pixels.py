@@ -1,6 +1,6 @@
 """The pixels of a camera's image that a face covers: the one test, for the refinement's masks
 and region labels (:func:`mifaces.refine.photograph.photograph_view`), the training error of
-``mifaces measure`` (:mod:`mifaces.pipeline`), and the validation's masks
+``mifaces measure`` (:mod:`mifaces.pipeline.measure`), and the validation's masks
 (:mod:`mifaces.validation.validator`: :func:`front_of_face_pixels`, the front of the face only).
 
 Two footprints of a pixel, for two uses:
@@ -19,9 +19,9 @@ from __future__ import annotations
 import mitsuba as mi
 import numpy as np
 
-from .model.mesh import mitsuba_mesh
-from .render import FaceScene, mitsuba_sensor
-from .shape_errors import front_of_face
+from ..model.mesh import mitsuba_mesh
+from . import FaceScene, mitsuba_sensor
+from ..validation.shape_errors import front_of_face
 
 #: Samples per pixel of the filtered footprint (:func:`face_pixels`).
 FOOTPRINT_SPP = 4
@@ -81,7 +81,7 @@ def face_pixels(scene: FaceScene, camera, spp: int | None = FOOTPRINT_SPP, regio
 
 
 def front_of_face_pixels(face_model, vertices: np.ndarray, camera, spp: int = FOOTPRINT_SPP) -> np.ndarray:
-    """Pixels of ``camera``'s image where the front of the face (:func:`mifaces.shape_errors.front_of_face`
+    """Pixels of ``camera``'s image where the front of the face (:func:`mifaces.validation.shape_errors.front_of_face`
     on the model's mean shape: the vertices that look forward, from the chin up, outside the hair)
     is the surface seen: (H, W) bool. The back of the head, the ears, the neck and the scalp are left
     out: no photograph of a capture sees them well, so their albedo is not measured, and an error

@@ -1,11 +1,11 @@
 """The population report of a batch: how the fitted reflectance varies across subjects.
 
 :func:`population` reads the ``report.json`` of every measured capture
-(:func:`mifaces.pipeline.measure`) and gives, per BRDF model and region,
+(:func:`mifaces.pipeline.measure.measure`) and gives, per BRDF model and region,
 the distribution of each fitted parameter across subjects (median, spread
 as the scaled median absolute deviation, range) with the subjects beyond
 :data:`OUTLIER_MADS` deviations flagged; the same for each region's diffuse
-albedo; how the fits ended (:mod:`mifaces.status`); the time per capture;
+albedo; how the fits ended (:mod:`mifaces.runtime.status`); the time per capture;
 and, for simulated captures, the error against the ground truth across
 subjects. Only regions fitted on their own samples enter the parameter
 statistics (a ``prior`` region copies another's BRDF); all enter the status
@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_write, save_figure, write_json
-from .status import NOT_FITTED
+from ..io.atomic import atomic_write, save_figure, write_json
+from ..runtime.status import NOT_FITTED
 
 #: Scale that makes the median absolute deviation estimate a normal distribution's σ.
 MAD_SCALE = 1.4826
@@ -132,7 +132,7 @@ def population(reports: dict[str, dict], record: dict | None = None) -> dict:
         summary}}, "albedo": {region: {channel: summary}}, "ground_truth":
         {"parameters": ..., "albedo": {error: summary}}, "status": {status:
         count}}}`` (summaries from :func:`robust_summary`); ``shape_status``;
-        ``seconds`` (``measure``: :func:`mifaces.pipeline.measure`'s total;
+        ``seconds`` (``measure``: :func:`mifaces.pipeline.measure.measure`'s total;
         ``task``: the batch task's wall time); ``outliers``, every flagged value
         (``where``: ``model / section / region / parameter`` or ``seconds / kind``).
     """

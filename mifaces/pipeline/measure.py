@@ -31,34 +31,37 @@ from pathlib import Path
 
 import numpy as np
 
-from .brdf import NAMES
-from .capture import Capture, load_capture, read_ground_truth
-from .export import export_face
-from .atomic import write_json
-from .face_pixels import face_pixels
-from .shape.io import load_geometry
-from .lighting import (LIGHTS_PICTURE, RELATIVE_NOTE, as_given, balance_intensities, check_estimable,
-                       estimate_environments, estimate_lights, lights_document, refit_lights, write_lights,
-                       write_lights_picture)
-from .model import load_model
-from .options.measure import GEOMETRIES, MeasureOptions
-from .reflectance import BRDFEstimate, FitOptions, capture_samples, fit_brdf, write_estimate
-from .reflectance.light_balance import balance_given_lights
-from .refine import refine_estimate
-from .refine.shape import ShapeRefineSchedule
-from .refine.shape_lit import refine_lit, refined_fits
-from .emitters import light_record
-from .render import FaceScene
-from .report import (ranking, ties, write_fit_picture, write_markdown, write_uncertainty_picture,
-                     write_validation_picture)
-from .report_html import write_html
-from .shape import fit_shape, shapes_in_world
-from .shape.io import model_source, write_fit, write_index
-from .shape_errors import capture_shape_errors
-from .studio import simulate
-from .validation.truth_errors import ground_truth_errors
-from .validation.held_out import novel_light
-from .validation.validator import Validator, relative_rmse
+from ..brdf import NAMES
+from ..capture import Capture, load_capture, read_ground_truth
+from ..export import export_face
+from ..io.atomic import write_json
+from ..render.face_pixels import face_pixels
+from ..shape.io import load_geometry
+from ..light_estimation.unknown import (LIGHTS_PICTURE, RELATIVE_NOTE, as_given, balance_intensities, check_estimable,
+                                        estimate_environments, estimate_lights, lights_document, refit_lights,
+                                        write_lights, write_lights_picture)
+from ..model import load_model
+from ..options.measure import GEOMETRIES, MeasureOptions
+from .. import brdf as brdf_models
+from ..reflectance import BRDFEstimate, FitOptions, capture_samples, write_estimate
+from ..reflectance.fitting import fit_samples
+from ..reflectance.sample_stage import SampleSet, take_samples, without_bounced_light
+from ..refine import refine_estimate
+from ..refine.shape import ShapeRefineSchedule
+from ..refine.shape_lit import refine_lit, refined_fits
+from ..lights.emitters import light_record
+from ..lights.light import estimated_lights
+from ..render import FaceScene
+from ..report.measurement import (ranking, ties, write_fit_picture, write_markdown, write_uncertainty_picture,
+                                  write_validation_picture)
+from ..report.html import write_html
+from ..shape import fit_shape, shapes_in_world
+from ..shape.io import model_source, write_fit, write_index
+from ..validation.shape_errors import capture_shape_errors
+from ..studio import simulate
+from ..validation.truth_errors import ground_truth_errors
+from ..validation.held_out import novel_light
+from ..validation.validator import Validator, relative_rmse
 
 #: Models ``measure`` fits unless told otherwise.
 MODELS = NAMES
@@ -81,7 +84,7 @@ class NoUsableShapeError(ValueError):
 @dataclass(frozen=True)
 class FittedModel:
     """One BRDF model fitted by :func:`measure`: its estimate and its row of
-    the report's picture (:func:`mifaces.report.write_fit_picture`).
+    the report's picture (:func:`mifaces.report.measurement.write_fit_picture`).
 
     Attributes
     ----------
@@ -119,11 +122,11 @@ def measure(out, capture=None, options: MeasureOptions | FitOptions | None = Non
         Output folder: ``capture/`` (when simulated), ``shapes/``,
         ``brdf/<model>/``, ``report.{md,json,png}`` (and
         ``report_training.png`` for a capture with ground truth),
-        ``report.html`` (:mod:`mifaces.report_html`) with ``face.glb``: the
+        ``report.html`` (:mod:`mifaces.report.html`) with ``face.glb``: the
         face of the model best under the held-out lights (else the first model),
         in the shape fitted to the first photograph (the mean shape with
         ``geometry='ground-truth'``). For a capture with unknown lights, also
-        ``lights.json`` and ``report_lights.png`` (:mod:`mifaces.lighting`).
+        ``lights.json`` and ``report_lights.png`` (:mod:`mifaces.light_estimation.unknown`).
     capture : path or Capture, optional
         A capture folder; without one, the default capture of
         :func:`mifaces.studio.simulate` (built-in face, Cook-Torrance
@@ -156,8 +159,8 @@ def measure(out, capture=None, options: MeasureOptions | FitOptions | None = Non
     -----
     Lights the capture does not know (``"unknown": true``) are estimated with the faces: the shape
     fit fits each photograph's light (:func:`mifaces.shape.fit.fit_light`),
-    :func:`mifaces.lighting.estimate_lights` makes them the capture's directional lights and
-    :func:`~mifaces.lighting.balance_intensities` sets their intensities from the reflectance
+    :func:`mifaces.light_estimation.unknown.estimate_lights` makes them the capture's directional lights and
+    :func:`~mifaces.light_estimation.unknown.balance_intensities` sets their intensities from the reflectance
     samples; every later stage reads them as given (``docs/unknown_lights.md``). Reflectance is
     then relative (``brdf.json``'s ``lighting``).
 
@@ -207,7 +210,7 @@ def measure(out, capture=None, options: MeasureOptions | FitOptions | None = Non
     if unknown:  # every later stage reads the estimated lights as given ones
         t = time.perf_counter()
         estimated = estimate_lights(capture, fits)
-        if any(light.unknown and not light.environment for light in capture.lights):
+        if any(light.fitted_on_face for light in capture.lights):
             # one round of alternation: each pose's face fitted to all its photographs under the first
             # estimates, then each light fitted again on that face
             first = timings["fit_shape"]
@@ -217,17 +220,18 @@ def measure(out, capture=None, options: MeasureOptions | FitOptions | None = Non
         capture = estimate_environments(estimated, shapes, face, progress=progress)
         timings["estimate_lights"] = time.perf_counter() - t
     t = time.perf_counter()
-    samples = capture_samples(capture, shapes, face, resolution, progress=progress)
+    samples = None
     if unknown:  # the intensities that give the face one albedo under every estimated light
+        samples = capture_samples(capture, shapes, face, resolution, progress=progress)
         balanced = balance_intensities(capture, samples)
         if balanced is not capture:
-            capture = balanced
-            samples = capture_samples(capture, shapes, face, resolution, progress=progress)
+            capture, samples = balanced, None
+    taken = take_samples(capture, shapes, face, options.fit, samples=samples, progress=progress)
+    capture = taken.capture  # its given lights balanced, with balance_lights
     if options.fit.balance_lights:
-        capture, samples = balance_given_lights(capture, samples)
-        report["light_balance"] = capture.metadata.get("light_balance")
+        report["light_balance"] = taken.light_balance
     timings["reflectance_samples"] = time.perf_counter() - t
-    if not options.refine and any(light.environment for light in capture.lights):
+    if not options.refine and any(light.radiance_map is not None for light in capture.lights):
         report["environment_note"] = MAP_WITHOUT_REFINE
         warnings.warn(MAP_WITHOUT_REFINE, stacklevel=2)
     if unknown:
@@ -235,8 +239,8 @@ def measure(out, capture=None, options: MeasureOptions | FitOptions | None = Non
                             "estimates": [e for e in lights_document(capture)["lights"] if e["estimated"]]}
         write_lights_picture(out / LIGHTS_PICTURE, capture)
     if options.refine_shape is not None:
-        shapes, samples = _refine_shapes(out, capture, face, shapes, fits, samples, models[0], resolution, report,
-                                         timings, progress, options.refine_shape)
+        taken = _refine_shapes(out, taken, fits, models[0], report, timings, progress, options.refine_shape)
+        shapes = taken.shapes
     first = next(m for m in capture.measurements if m.name in shapes)
     novel = novel_light(capture, np.asarray(shapes[first.name]).mean(axis=0))
     scene = FaceScene(face, shapes[first.name])  # the first photograph's face, built once for every model
@@ -248,8 +252,7 @@ def measure(out, capture=None, options: MeasureOptions | FitOptions | None = Non
         report["validation"] = validator.summary
     fitted, validation_images = [], {}
     for model in models:
-        entry, result = _fit_model(out, capture, model, face, shapes, samples, scene, first, novel, timings,
-                                   progress, options)
+        entry, result = _fit_model(out, taken, model, scene, first, novel, timings, progress, options)
         if validator is not None:
             t = time.perf_counter()
             entry["validation"], validation_images[model] = validator.validate(result.estimate)
@@ -324,21 +327,23 @@ def _geometry(out: Path, capture: Capture, options: MeasureOptions, face_model, 
     return face, shapes, fits
 
 
-def _refine_shapes(out: Path, capture: Capture, face, shapes: dict, fits, samples, model: str, resolution: int,
-                   report: dict, timings: dict, progress: bool, schedule: ShapeRefineSchedule | None = None):
-    """The faces refined by differentiable rendering (kept only where the held-out losses fall) and
-    their samples; ``report['shape_refinement']`` says what happened, and on a simulated capture
+def _refine_shapes(out: Path, taken: SampleSet, fits, model: str, report: dict, timings: dict, progress: bool,
+                   schedule: ShapeRefineSchedule | None = None) -> SampleSet:
+    """The samples ``taken`` on the faces refined by differentiable rendering (kept only where the held-out
+    losses fall); ``report['shape_refinement']`` says what happened, and on a simulated capture
     ``report['shape_errors_refined']`` how far the refined faces lie from the truth. Refined fitted
     faces are written to ``out/shapes_refined`` (:data:`REFINED_SHAPES`, the layout of
     ``out/shapes``), the geometry the BRDFs are then fitted on."""
     t = time.perf_counter()
-    result = refine_lit(capture, shapes, face, samples, model, resolution, schedule=schedule, progress=progress)
+    capture, face = taken.capture, taken.face
+    result = refine_lit(capture, taken.shapes, face, taken.samples, model, taken.resolution, schedule=schedule,
+                        progress=progress)
     report["shape_refinement"] = {"accepted": result.accepted, "reason": result.reason, "model": model,
                                   "seconds": time.perf_counter() - t,
                                   **{k: v for k, v in result.record.items() if k not in ("loss_per_iteration",)}}
     timings["refine_shape"] = time.perf_counter() - t
     if not result.accepted:
-        return shapes, samples
+        return taken
     if read_ground_truth(capture) is not None:
         _, true_shapes = load_geometry(capture, "ground-truth")
         report["shape_errors_refined"] = capture_shape_errors(face, result.shapes, true_shapes,
@@ -349,26 +354,25 @@ def _refine_shapes(out: Path, capture: Capture, face, shapes: dict, fits, sample
             write_fit(out / REFINED_SHAPES, fit, face)
         write_index(out / REFINED_SHAPES, capture, face, refined, model_source=model_source(face))
         report["shape_refinement"]["shapes"] = REFINED_SHAPES
-    t = time.perf_counter()
-    samples = capture_samples(capture, result.shapes, face, resolution, progress=progress)
-    timings["reflectance_samples"] += time.perf_counter() - t
-    return result.shapes, samples
+    taken = taken.on_shapes(result.shapes, progress=progress)
+    timings["reflectance_samples"] += taken.seconds
+    return taken
 
 
-def _fit_model(out: Path, capture: Capture, model: str, face, shapes: dict, samples, scene: FaceScene, first,
-               novel, timings: dict, progress: bool, options: MeasureOptions) -> tuple[dict, FittedModel]:
+def _fit_model(out: Path, taken: SampleSet, model: str, scene: FaceScene, first, novel, timings: dict, progress: bool,
+               options: MeasureOptions) -> tuple[dict, FittedModel]:
     """Fit one BRDF model, write it, render it in the first photograph's place
     and under the novel light; the report's entry, and the fitted model."""
     t = time.perf_counter()
+    capture, shapes, face = taken.capture, taken.shapes, taken.face
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        # balanced once above, for every model
-        estimate = fit_brdf(capture, model, shapes, face_model=face, samples=samples, progress=progress,
-                            options=replace(options.fit, balance_lights=False))
-        estimate = replace(estimate, fit_options=options.fit)  # as asked: the balance is measure's, above
+        brdf = brdf_models.model(model, **options.fit.brdf_options())
+        estimate = fit_samples(without_bounced_light(taken, brdf, options.fit, progress=progress), brdf, options.fit,
+                               progress=progress)
         if options.refine:
             estimate = refine_estimate(estimate, capture, shapes, face, seed=options.fit.seed, progress=progress)
-    if any(light.estimated for light in capture.lights):
+    if estimated_lights(capture.lights):
         estimate = replace(estimate, lighting={"lights": "estimated", "reflectance": "relative", "note": RELATIVE_NOTE})
     light = capture.light(first.light)
     write_estimate(estimate, out / "brdf" / model, scene, capture.camera, light, force=True)  # measure's own folder

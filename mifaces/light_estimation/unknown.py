@@ -36,19 +36,19 @@ import numpy as np
 
 import mitsuba as mi
 
-from .capture.types import RELATIVE_IRRADIANCE, Capture
-from .environment import texel_directions, to_world
-from .atomic import save_figure, write_json
-from .image_files import write_exr
-from .model.mesh import mitsuba_mesh
-from .model.texture_space import rasterize
-from .progress import progress as progress_bar
-from .reflectance.environment import estimate_map, transport
-from .reflectance.light_balance import log_light_errors
-from .reflectance.samples import _unoccluded, read_photograph, texel_geometry
-from .shape.fit import fit_light
-from .shape.result import ShapeOptions
-from .shape.targets import light_angles
+from ..capture.types import RELATIVE_IRRADIANCE, Capture
+from ..lights.environment import texel_directions, to_world
+from ..io.atomic import save_figure, write_json
+from ..io.image_files import write_exr
+from ..model.mesh import mitsuba_mesh
+from ..model.texture_space import rasterize
+from ..runtime.progress import progress as progress_bar
+from ..reflectance.environment import estimate_map, transport
+from ..reflectance.light_balance import log_light_errors
+from ..reflectance.samples import _unoccluded, read_photograph, texel_geometry
+from ..shape.fit import fit_light
+from ..shape.result import ShapeOptions
+from ..shape.targets import light_angles
 
 #: File of a result folder holding the capture's lights, estimated and given.
 LIGHTS_FILE = "lights.json"
@@ -348,7 +348,7 @@ def lights_document(capture: Capture) -> dict:
                 "ambient": capture.ambient}
     if any(light.environment for light in capture.lights):
         document["map"] = (f"environment maps: latitude-longitude OpenEXR, linear RGB radiance in pixel value, in "
-                           "the frame of mifaces.environment.environment_emitter (+y the camera's up, +z towards the "
+                           "the frame of mifaces.lights.environment.environment_emitter (+y the camera's up, +z towards the "
                            "camera); an estimated map is relative: its largest unoccluded irradiance is "
                            f"{RELATIVE_IRRADIANCE:.6g}")
     return document

@@ -4,7 +4,7 @@ Every file mifaces writes goes through :func:`atomic_path` or :func:`atomic_writ
 a temporary file beside the target and is renamed over it only once complete,
 so an interrupted run never leaves a half-written output and never destroys
 one written earlier. Several files that belong together are written as one
-result set (:mod:`mifaces.result_set`).
+result set (:mod:`mifaces.io.result_set`).
 """
 
 from __future__ import annotations

@@ -34,8 +34,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model.geometry import vertex_normals
-from .model.regions import REGIONS
+from ..model.geometry import vertex_normals
+from ..model.regions import REGIONS
 
 
 def front_of_face(model, vertices=None) -> np.ndarray:

@@ -21,8 +21,8 @@ import shutil
 from importlib import resources
 from pathlib import Path
 
-from .atomic import atomic_write
-from .lighting import LIGHTS_PICTURE
+from ..io.atomic import atomic_write
+from ..light_estimation.unknown import LIGHTS_PICTURE
 
 #: The vendored viewer and its licences (``mifaces/web``), copied beside the page.
 VIEWER = "model-viewer-umd.min.js"

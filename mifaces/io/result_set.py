@@ -25,7 +25,7 @@ from pathlib import Path
 
 from .atomic import write_json
 from .paths import check_writable
-from .version import VERSION
+from ..version import VERSION
 
 #: The file a result set's folder holds, written last (:func:`result_set`).
 SET_MANIFEST = ".mifaces-set.json"

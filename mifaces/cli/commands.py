@@ -6,8 +6,8 @@ same in every command: ``--face-model`` names the face model (``simulate``,
 (``simulate``'s ground truth, the model ``fit-brdf`` fits, the models
 ``measure`` and ``batch`` fit). ``--model``, which named the one or the
 other, still works for one release with a deprecation message
-(:func:`mifaces.cli_options.renamed`). The flags of an options value are made from
-its fields, declared once (:func:`mifaces.cli_options.option_flags`): ``fit-brdf``,
+(:func:`mifaces.cli.options.renamed`). The flags of an options value are made from
+its fields, declared once (:func:`mifaces.cli.options.option_flags`): ``fit-brdf``,
 ``measure`` and ``batch`` take the fit's (:class:`~mifaces.reflectance.FitOptions`),
 ``measure`` and ``batch`` the main job's (:class:`~mifaces.options.measure.MeasureOptions`).
 """
@@ -22,32 +22,32 @@ import click
 
 import mifaces
 
-from .brdf import BUILTIN_NAMES, NAMES as BRDF_MODELS
-from .capture import load_capture
-from .capture.ground_truth import ground_truth_folder
-from .environment import SKY_SUN_ANGLES, TURBIDITY, sky_emitter
-from .export import export_face
-from .atomic import write_json
-from .paths import check_writable
-from .result_set import check_result_target
-from .gallery import render_gallery
-from .importers.cli import export_calibration_command, import_
-from .capture.detector import NoFaceError, detect_landmarks
-from .cli_options import default, option_flags, renamed, width_x_height
-from .model import load_model
-from .options.measure import MeasureOptions
-from .pipeline import measure as measure_capture
-from .shape.io import load_geometry
-from .reflectance import FitOptions, fit_brdf as fit_brdf_model, render_fitted
-from .reflectance.io import KIND as BRDF_KIND, write_fitted
-from .refine import refine_estimate
-from .refine.shape_lit import refine_fits
-from .report import RANKED, format_value, ranking_sentence
-from .shape import fit_shape as fit_shapes
-from .shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
-from .status import CONVERGED
-from .studio.environment_light import ENVIRONMENTS
-from .studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
+from ..brdf import BUILTIN_NAMES, NAMES as BRDF_MODELS
+from ..capture import load_capture
+from ..capture.ground_truth import ground_truth_folder
+from ..lights.environment import SKY_SUN_ANGLES, TURBIDITY, sky_emitter
+from ..export import export_face
+from ..io.atomic import write_json
+from ..io.paths import check_writable
+from ..io.result_set import check_result_target
+from ..report.gallery import render_gallery
+from ..importers.cli import export_calibration_command, import_
+from ..capture.detector import NoFaceError, detect_landmarks
+from .options import default, option_flags, renamed, width_x_height
+from ..model import load_model
+from ..options.measure import MeasureOptions
+from ..pipeline.measure import measure as measure_capture
+from ..shape.io import load_geometry
+from ..reflectance import FitOptions, fit_brdf as fit_brdf_model, render_fitted
+from ..reflectance.io import KIND as BRDF_KIND, write_fitted
+from ..refine import refine_estimate
+from ..refine.shape_lit import refine_fits
+from ..report.measurement import RANKED, format_value, ranking_sentence
+from ..shape import fit_shape as fit_shapes
+from ..shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
+from ..runtime.status import CONVERGED
+from ..studio.environment_light import ENVIRONMENTS
+from ..studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
 
 
 
@@ -393,12 +393,12 @@ main.add_command(export_calibration_command)
                                               "these options (the others are measured again).")
 @click.option("--import", "importer", default=None,
               help="'yaleb': INPUTS are raw data (Yale subject folders, or folders of them), imported into OUT/captures "
-                   "first (mifaces.batch.IMPORTERS).")
+                   "first (mifaces.pipeline.batch.IMPORTERS).")
 @option_flags(MeasureOptions)
 def batch(inputs: tuple[str, ...], out_dir: str, workers: int | None, scheduler: str | None, resume: bool,
           importer: str | None, options: MeasureOptions) -> None:
     """Measure many captures (INPUTS: capture folders or folders of them) on Dask, and write a population report."""
-    from .batch import measure_batch  # Dask's import is slow: only for this command
+    from ..pipeline.batch import measure_batch  # Dask's import is slow: only for this command
 
     record = measure_batch(inputs, out_dir, options, workers=workers, scheduler=scheduler, resume=resume,
                            importer=importer, echo=click.echo)

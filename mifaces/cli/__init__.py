@@ -1,0 +1,1 @@
+"""The ``mifaces`` command line (:mod:`.commands`) and its options (:mod:`.options`)."""

@@ -1,0 +1,1 @@
+"""Files in and out: images, atomic writes, checked paths and result sets."""

@@ -1,0 +1,1 @@
+"""Estimating the lights nobody measured, with the face."""

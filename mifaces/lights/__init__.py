@@ -1,0 +1,1 @@
+"""Lights as a rendered scene sees them: Mitsuba emitters and environments."""

@@ -1,0 +1,112 @@
+"""The samples stage: the one owner of the reflectance samples, which ``measure`` and ``fit_brdf`` call
+alike.
+
+:func:`take_samples` takes the photographs' samples on the faces (:func:`capture_samples`) and, with
+``balance_lights``, corrects the given lights' relative intensities by the face's one albedo
+(:func:`balance_given_lights`). :func:`without_bounced_light` then, with ``interreflection``, fits once,
+renders the light that fit bounces between parts of the face (:func:`bounced_light`) and samples the
+photographs again without it. Both return a :class:`SampleSet`: the samples with the capture whose
+lights they were taken under, and what the stage did, for the fit's record.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+from ..capture.types import Capture
+from .fitting import fit_samples
+from .interreflection import INDIRECT_DEPTH, INDIRECT_SPP, INDIRECT_WIDTH, bounced_light
+from .light_balance import balance_given_lights
+from .options import FitOptions
+from .samples import ReflectanceSamples, capture_samples
+
+
+@dataclass(frozen=True)
+class SampleSet:
+    """Reflectance samples and what they were taken from.
+
+    Attributes
+    ----------
+    capture : Capture
+        The capture, its lights as the samples were taken under them (balanced, with
+        ``balance_lights``).
+    shapes : dict
+        Per measurement, the face's (V, 3) world vertices.
+    face : MorphableModel
+    samples : ReflectanceSamples
+    light_balance : dict or None
+        What :func:`balance_given_lights` changed (its capture's ``metadata['light_balance']``).
+    interreflection : dict or None
+        Where the bounced light was taken out: its renders' ``depth``, ``width``, ``spp`` and
+        ``seconds``.
+    seconds : float
+        The stage's wall time.
+    """
+
+    capture: Capture
+    shapes: dict
+    face: object
+    samples: ReflectanceSamples
+    light_balance: dict | None = None
+    interreflection: dict | None = None
+    seconds: float = 0.0
+
+    @property
+    def resolution(self) -> int:
+        return self.samples.resolution
+
+    def on_shapes(self, shapes: dict, *, progress: bool = True) -> SampleSet:
+        """The samples taken again on other ``shapes`` (a refined face), under the same lights."""
+        t = time.perf_counter()
+        samples = capture_samples(self.capture, shapes, self.face, self.resolution,
+                                  measurements=self.samples.measurement_names, progress=progress)
+        return dataclasses.replace(self, shapes=shapes, samples=samples, seconds=time.perf_counter() - t)
+
+
+def take_samples(capture: Capture, shapes: dict, face, options: FitOptions, *,
+                 samples: ReflectanceSamples | None = None, measurements=None, progress: bool = True) -> SampleSet:
+    """The samples of ``capture``'s photographs on ``shapes`` at ``options.resolution``, or the ``samples``
+    given (taken before, at that resolution), with the given lights balanced where
+    ``options.balance_lights``.
+
+    Raises
+    ------
+    ValueError
+        Where ``samples`` are at another resolution, or no texel gave a sample.
+    """
+    t = time.perf_counter()
+    if samples is None:
+        samples = capture_samples(capture, shapes, face, options.resolution, measurements=measurements,
+                                  progress=progress)
+    elif samples.resolution != options.resolution:
+        raise ValueError(f"the samples are at resolution {samples.resolution}, not {options.resolution}")
+    if len(samples) == 0:
+        raise ValueError("no valid reflectance samples: every texel is hidden, shadowed, grazing or saturated")
+    light_balance = None
+    if options.balance_lights:
+        capture, samples = balance_given_lights(capture, samples)
+        light_balance = capture.metadata.get("light_balance")
+    return SampleSet(capture, shapes, face, samples, light_balance, seconds=time.perf_counter() - t)
+
+
+def without_bounced_light(taken: SampleSet, brdf, options: FitOptions, *, progress: bool = True) -> SampleSet:
+    """``taken``, and where ``options.interreflection``, its samples taken again without the light bounced
+    between parts of the face: a first fit of ``brdf`` (no intervals, normals or specular maps), its
+    bounced light rendered, the photographs sampled again less it."""
+    if not options.interreflection:
+        return taken
+    t = time.perf_counter()
+    first = fit_samples(taken, brdf, dataclasses.replace(options, interreflection=False, uncertainty=None,
+                                                         normals=False, specular_maps=False), progress=progress)
+    bounced = bounced_light(taken.capture, taken.shapes, taken.face, first, measurements=first.measurements,
+                            progress=progress)
+    samples = capture_samples(taken.capture, taken.shapes, taken.face, taken.resolution,
+                              measurements=first.measurements, progress=progress, indirect=bounced)
+    seconds = time.perf_counter() - t
+    record = {"depth": INDIRECT_DEPTH, "width": INDIRECT_WIDTH, "spp": INDIRECT_SPP, "seconds": seconds}
+    return dataclasses.replace(taken, samples=samples, interreflection=record, seconds=taken.seconds + seconds)
+
+
+__all__ = ["SampleSet", "take_samples", "without_bounced_light"]
