@@ -222,7 +222,7 @@ MUTATIONS = [
      "cx=self.cx * factor, cy=self.cy * factor", "scaled camera: principal point off by half a pixel"),
     ("camera-rays-fy", "camera", "mifaces/capture/camera.py", "(p[..., 0] - self.cx) / self.fx",
      "(p[..., 0] - self.cx) / self.fy", "pixel rays: x divided by fy"),
-    ("camera-azimuth-mirrored", "camera", "mifaces/capture/camera.py", "[-np.cos(el) * np.sin(az), -np.sin(el),",
+    ("camera-azimuth-mirrored", "camera", "mifaces/model/geometry.py", "[-np.cos(el) * np.sin(az), -np.sin(el),",
      "[np.cos(el) * np.sin(az), -np.sin(el),", "light azimuth mirrored (towards the image's right)"),
     ("energy-tangential", "camera", "mifaces/shape/energy.py",
      "x, y = (x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),",
