@@ -1,6 +1,6 @@
 """Captures' calibrations for other tools and back (mifaces.importers.calibration_io): a simulated
 capture's camera exported as a COLMAP model and a transforms.json, imported back as a capture with the
-same camera; several cameras refused; the command line."""
+same camera; a rig's cameras exported and imported as a capture of several cameras; the command line."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from mifaces.capture import MANIFEST, Camera, load_capture
 from mifaces.cli.commands import main
 from mifaces.io.image_files import write_png
 from mifaces.importers.calibration_io import (POSE, export_calibration, import_calibration, import_colmap,
-                                              import_transforms, photographs, single_camera)
+                                              camera_groups, import_transforms, photographs)
 from mifaces.importers.colmap import read_colmap
 from mifaces.importers.transforms import read_transforms
 
@@ -36,7 +36,7 @@ def assert_same_camera(a: Camera, b: Camera, atol: float = 1e-9):
 def test_export_and_import_a_simulated_capture(simulated, tmp_path):
     capture = load_capture(simulated, calibrate=False, detect=False)
     out = export_calibration(simulated, tmp_path / "calibration")
-    names = photographs(capture)
+    names = list(photographs(capture))
     # every picture the camera took: photographs, diffuse companions, steel-sphere pictures
     assert "images/m00_point.exr" in names and "images/m00_diffuse.png" in names
     assert "images/L00_spheres_point.exr" in names and len(set(names)) == len(names)
@@ -88,18 +88,41 @@ def test_import_chooses_the_diffuse_companion_and_refuses_to_overwrite(tmp_path)
         import_calibration({"a b.png": camera}, tmp_path / "in", out, "test", force=True)
 
 
-def test_several_cameras_need_the_multi_camera_format():
+def test_images_of_one_camera_are_grouped():
     camera = Camera(8, 6, 10.0, 10.0, 3.5, 2.5)
     moved = Camera(8, 6, 10.0, 10.0, 3.5, 2.5, translation=np.array([0.0, 0.0, 1.0]))
     zoomed = Camera(8, 6, 12.0, 12.0, 3.5, 2.5)
-    assert single_camera({"a.png": camera, "b.png": Camera(8, 6, 10.0, 10.0, 3.5, 2.5)}) is camera
-    with pytest.raises(ValueError, match=r"'a.png' and 'b.png' differ in their camera pose: .*multi-camera capture"):
-        single_camera({"a.png": camera, "b.png": moved})
-    with pytest.raises(ValueError, match=r"differ in their camera intrinsics and pose"):
-        single_camera({"a.png": camera, "c.png": camera, "b.png": Camera(8, 6, 12.0, 12.0, 3.5, 2.5,
-                                                                          translation=np.ones(3))})
-    with pytest.raises(ValueError, match=r"differ in their camera intrinsics:"):
-        single_camera({"a.png": camera, "b.png": zoomed})
+    groups = camera_groups({"a.png": camera, "b.png": moved, "c.png": Camera(8, 6, 10.0, 10.0, 3.5, 2.5),
+                            "d.png": zoomed})
+    assert [(g is camera, images) for g, images in groups][0] == (True, ["a.png", "c.png"])
+    assert [images for _, images in groups] == [["a.png", "c.png"], ["b.png"], ["d.png"]]
+    with pytest.raises(ValueError, match="no images"):
+        camera_groups({})
+
+
+def test_a_rig_goes_out_and_comes_back_with_its_cameras(small_capture, tmp_path):
+    rig = small_capture("calibration_rig", measurements=1, resolution=(64, 64), spp=1, albedo_resolution=64, seed=2,
+                        cameras=3)
+    capture = load_capture(rig, calibrate=False, detect=False)
+    taken = photographs(capture)
+    assert taken["images/m00_c2_point.exr"] is capture.cameras["c2"]
+    assert taken["images/L00_spheres_point.exr"] is capture.camera
+    out = export_calibration(rig, tmp_path / "calibration")
+    model = read_colmap(out / "sparse" / "0")
+    for name, camera in taken.items():
+        assert_same_camera(model.cameras[name], camera)
+    back = load_capture(import_colmap(out / "sparse" / "0", rig, tmp_path / "back"), calibrate=False, detect=False)
+    assert list(back.cameras) == ["cam0", "cam1", "cam2"]
+    for original, imported in zip(capture.cameras.values(), back.cameras.values()):
+        assert_same_camera(imported, original)
+    assert {m.pose for m in back.measurements} == {POSE}  # a calibration is of one rigid scene: one shot
+    for m in back.measurements:  # each photograph with its own camera, its companion of that camera
+        assert back.camera_of(m).width == m.image.pixels.shape[1]
+        assert back.camera_of(m) is back.camera_of(m.name)
+        assert m.name in back.metadata["images"]
+    c2 = next(m for m in back.measurements if m.name == "m00_c2_point")
+    assert c2.camera == "cam2" and c2.diffuse.path.parent == c2.image.path.parent
+    assert next(m for m in back.measurements if m.name == "m00_c2_diffuse").camera == "cam2"
 
 
 def test_command_line(simulated, tmp_path):

@@ -187,19 +187,30 @@ def test_report_names_every_fit_that_did_not_simply_converge(tmp_path):
 
 def test_report_gives_each_fitted_shape_its_errors_and_the_modes_used():
     """report.md's shape section: the identity modes of the fit and of the simulated truth, and per
-    photograph the status, both convergence measures and the errors in the world frame."""
+    photograph the status, both convergence measures, its reprojection in its own camera and the errors
+    in the world frame; per camera its reprojection error, and for one camera the depth it cannot fix."""
     from mifaces.report.measurement import shapes_markdown
 
     report = {"face_model": {"name": "builtin", "model_shape_modes": 100, "fit_shape_modes": 50,
                              "truth_shape_modes": 100, "truth_detail": True},
               "shapes": {"m00": {"status": "converged", "feature_rms_px": 0.81, "image_rms": 0.0312,
+                                 "reprojection_px": 0.456,
                                  "errors": {"world_mm": 2.5, "aligned_mm": 1.2, "depth_mm": -2.25,
-                                            "scale_pct": -0.19, "scaled_mm": 1.3}},
+                                            "scale_pct": -0.19, "scaled_mm": 1.3, "similarity_mm": 0.777}},
                          "m01": {"status": "not_converged", "feature_rms_px": 0.7, "image_rms": 0.2}}}
     text = "\n".join(shapes_markdown(report))
     assert "leading 50 of its 100 identity modes" in text and "drew on 100 plus fine detail" in text
-    assert "| m00 | converged | 0.81 | 0.031 | 2.50 | 1.20 | -2.25 | -0.19 | 1.30 |" in text
-    assert "| m01 | not_converged | 0.70 | 0.200 |  |  |  |  |  |" in text
+    assert "| m00 | converged | 0.81 | 0.46 | 0.031 | 2.50 | 1.20 | -2.25 | -0.19 | 1.30 | 0.78 |  |" in text
+    assert "| m01 | not_converged | 0.70 |  | 0.200 |  |  |  |  |  |  |  |" in text
+    assert "per camera" not in text and "One camera" not in text
+    rig = dict(report, cameras={"c0": {"reprojection_px": 0.35, "photographs": 6},
+                                "c1": {"reprojection_px": 0.41, "photographs": 6}})
+    assert "c0 0.35 px (6 photographs), c1 0.41 px (6 photographs)" in "\n".join(shapes_markdown(rig))
+    one = dict(report, depth={"depth_sd_mm": 12.34, "relative_size_sd": 0.0102, "size_from": "metric distances",
+                              "camera_distance_mm": 1210.0})
+    text = "\n".join(shapes_markdown(one))
+    assert "not observable from one camera" in text and "metric distances, known to 1.0 %" in text
+    assert "leaves 12.3 mm (1 sd) along the camera's axis at 1210 mm" in text
     assert shapes_markdown({"shapes": {}}) == []  # true shapes: nothing fitted, no section
 
 

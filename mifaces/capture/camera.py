@@ -151,3 +151,8 @@ class Camera:
                 "translation": [float(t) for t in self.translation],
                 **({} if self.calibrated else {"calibrated": False})}
 
+
+def relative_pose(source: Camera, target: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """``(A, b)`` of ``x_target = A x_source + b``: camera ``source``'s frame to camera ``target``'s."""
+    A = np.asarray(target.rotation, np.float64) @ np.asarray(source.rotation, np.float64).T
+    return A, np.asarray(target.translation, np.float64) - A @ np.asarray(source.translation, np.float64)

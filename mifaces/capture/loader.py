@@ -24,59 +24,94 @@ from .feature_points import detect_feature_points
 from .light_entries import read_lights
 from .measurement_entries import read_measurements
 from .problems import Problems
-from .types import (AMBIENT_KINDS, FEATURE_POINT_RANGE, FORMAT, MANIFEST, VERSION, Capture, CaptureError, Distance,
-                    Light, Measurement, WhiteTarget)
+from ..io.paths import check_name
+from .types import (AMBIENT_KINDS, DEFAULT_CAMERA, FEATURE_POINT_RANGE, FORMAT, MANIFEST, MIN_CAMERA_SEPARATION,
+                    VERSION, Capture, CaptureError, Distance, Light, Measurement, WhiteTarget)
 
 
-def _camera(entry, problems: Problems) -> Camera | None:
-    where = "camera"
+def _cameras(data: dict, problems: Problems) -> dict[str, Camera]:
+    """The manifest's cameras by id: its one ``camera`` (id :data:`DEFAULT_CAMERA`), or its
+    ``cameras`` list, each with an ``id``, calibrated (one head pose is shared by the cameras of a
+    shot, so their intrinsics and poses are not fitted), no two at one place."""
+    if "cameras" not in data:
+        camera = _camera(data.get("camera"), problems)
+        return {} if camera is None else {DEFAULT_CAMERA: camera}
+    if "camera" in data:
+        problems.append("camera, cameras: give one 'camera' or a list of 'cameras', not both")
+    cameras = {}
+    for i, entry, where in problems.objects(data, "cameras", " of cameras"):
+        ident = problems.need(entry, "id", where, str)
+        if ident is None:
+            continue
+        where = f"cameras[{i}] ({ident})"
+        try:
+            check_name(ident, f"{where}.id")
+        except ValueError as error:
+            problems.append(str(error))
+        camera = _camera(entry, problems, where)
+        if camera is not None and not camera.calibrated:
+            problems.append(f"{where}: a camera of several must be calibrated (a shot's cameras share one head pose, "
+                            "so their intrinsics are not fitted)")
+        if camera is not None and ident not in cameras:
+            cameras[ident] = camera
+    problems.unique("cameras", [e.get("id") for e in data.get("cameras") or [] if isinstance(e, dict)])
+    ids = list(cameras)
+    for a in range(len(ids)):
+        for b in range(a + 1, len(ids)):
+            gap = float(np.linalg.norm(cameras[ids[a]].position - cameras[ids[b]].position))
+            if gap < MIN_CAMERA_SEPARATION:
+                problems.append(f"cameras {ids[a]!r} and {ids[b]!r} are at one place ({gap:.3g} mm apart; "
+                                f"at least {MIN_CAMERA_SEPARATION:g} mm): one camera listed twice?")
+    return cameras
+
+
+def _camera(entry, problems: Problems, where: str = "camera") -> Camera | None:
     if not isinstance(entry, dict):
-        problems.append("camera: missing or not an object")
+        problems.append(f"{where}: missing or not an object")
         return None
     n = len(problems)
     width = problems.need(entry, "width", where, int)
     height = problems.need(entry, "height", where, int)
     for name, v in (("width", width), ("height", height)):
         if v is not None and v <= 0:
-            problems.append(f"camera.{name}: must be positive, got {v}")
+            problems.append(f"{where}.{name}: must be positive, got {v}")
     if width is not None and height is not None and width > 0 and height > 0:
         try:
-            check_image_size(width, height, "camera")
+            check_image_size(width, height, where)
         except ValueError as e:
             problems.append(str(e))
     calibrated = entry.get("calibrated", True)
     if not isinstance(calibrated, bool):
-        problems.append(f"camera.calibrated: must be true or false, got {calibrated!r}")
-    fx, fy, cx, cy = _intrinsics(entry, calibrated is not False, width, height, problems)
+        problems.append(f"{where}.calibrated: must be true or false, got {calibrated!r}")
+    fx, fy, cx, cy = _intrinsics(entry, calibrated is not False, width, height, problems, where)
     distortion = entry.get("distortion", [])
     try:
         distortion = np.asarray(distortion, np.float64).ravel()
         if len(distortion) not in (0, 4, 5, 8) or not np.all(np.isfinite(distortion)):
-            problems.append(f"camera.distortion: must be 0, 4, 5 or 8 finite OpenCV coefficients "
+            problems.append(f"{where}.distortion: must be 0, 4, 5 or 8 finite OpenCV coefficients "
                             f"(k1, k2, p1, p2[, k3[, k4, k5, k6]]), got {entry.get('distortion')!r}")
     except (TypeError, ValueError):
-        problems.append(f"camera.distortion: must be a list of numbers, got {entry.get('distortion')!r}")
+        problems.append(f"{where}.distortion: must be a list of numbers, got {entry.get('distortion')!r}")
     rotation = problems.vector(entry, "rotation", where, (3, 3), required=False, default=np.eye(3))
     if rotation is not None and not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-4):
-        problems.append("camera.rotation: must be a rotation matrix (orthonormal rows)")
+        problems.append(f"{where}.rotation: must be a rotation matrix (orthonormal rows)")
     elif rotation is not None and np.linalg.det(rotation) < 0:
-        problems.append("camera.rotation: has determinant -1 (a reflection, not a rotation)")
+        problems.append(f"{where}.rotation: has determinant -1 (a reflection, not a rotation)")
     translation = problems.vector(entry, "translation", where, 3, required=False, default=np.zeros(3))
     if len(problems) > n:
         return None
     return Camera(width, height, fx, fy, cx, cy, distortion, rotation, translation, calibrated)
 
 
-def _intrinsics(entry: dict, calibrated: bool, width, height, problems: Problems):
+def _intrinsics(entry: dict, calibrated: bool, width, height, problems: Problems, where: str = "camera"):
     """``fx, fy, cx, cy`` of a manifest's camera. An uncalibrated camera's are a guess: one
     ``focal_guess_px`` may stand for both focal lengths, and ``cx, cy`` default to the image centre."""
-    where = "camera"
     if "focal_guess_px" in entry:
         if calibrated:
-            problems.append("camera.focal_guess_px: only for an uncalibrated camera (\"calibrated\": false); "
+            problems.append(f"{where}.focal_guess_px: only for an uncalibrated camera (\"calibrated\": false); "
                             "a calibrated one gives fx and fy")
         if "fx" in entry or "fy" in entry:
-            problems.append("camera: give either focal_guess_px or fx and fy, not both")
+            problems.append(f"{where}: give either focal_guess_px or fx and fy, not both")
         fx = fy = problems.number(entry, "focal_guess_px", where, positive=True)
     else:
         fx = problems.number(entry, "fx", where, positive=True)
@@ -145,14 +180,15 @@ def load_capture(path: str | os.PathLike | Capture, calibrate: bool = True, dete
         problems.append(f"format: must be {FORMAT!r}, got {data.get('format')!r}")
     if data.get("version") != VERSION:
         problems.append(f"version: this mifaces reads version {VERSION}, got {data.get('version')!r}")
-    camera = _camera(data.get("camera"), problems)
+    cameras = _cameras(data, problems)
+    camera = next(iter(cameras.values()), None)
     white = _white_target(data.get("white_target"), problems)
     distances = _distances(data.get("distances"), problems)
     ambient = data.get("ambient", AMBIENT_KINDS[0])
     if ambient not in AMBIENT_KINDS:
         problems.append(f"ambient: must be one of {list(AMBIENT_KINDS)}, got {ambient!r}"[:300])
     lights = read_lights(data, root, camera, problems)
-    measurements = read_measurements(data, root, camera, [l.name for l in lights], problems)
+    measurements = read_measurements(data, root, cameras, [l.name for l in lights], problems)
     if problems:
         raise CaptureError(root, problems)
     if calibrate:
@@ -163,7 +199,7 @@ def load_capture(path: str | os.PathLike | Capture, calibrate: bool = True, dete
         raise CaptureError(root, problems)
     metadata = data.get("metadata", {})
     return Capture(root, camera, tuple(lights), tuple(measurements), tuple(distances), white,
-                   dict(metadata) if isinstance(metadata, dict) else {}, ambient)
+                   dict(metadata) if isinstance(metadata, dict) else {}, ambient, cameras)
 
 
 def _read_manifest(path: Path) -> tuple[Path, dict]:

@@ -12,7 +12,7 @@ from ..io.paths import check_name, resolve_inside
 from .camera import Camera
 from .images import read_image
 from .problems import Problems
-from .types import FEATURE_POINT_RANGE, IMAGE_SUFFIXES, TRANSFERS, Image, Measurement
+from .types import DEFAULT_CAMERA, FEATURE_POINT_RANGE, IMAGE_SUFFIXES, TRANSFERS, Image, Measurement
 
 
 def read_image_entry(entry, where: str, root: Path, camera: Camera | None, problems: Problems) -> Image | None:
@@ -107,9 +107,37 @@ def _face_box(obj: dict, where: str, problems: Problems) -> tuple[float, ...] | 
     return tuple(float(v) for v in box)
 
 
-def read_measurements(data: dict, root: Path, camera: Camera | None, lights: list[str],
+def _camera_id(e: dict, where: str, cameras: dict, problems: Problems) -> str | None:
+    """The id of the camera measurement entry ``e`` names: required where the capture has several
+    cameras, else that one's (where it names one, it must be that one)."""
+    ident = e.get("camera")
+    if ident is None and len(cameras) == 1:
+        return next(iter(cameras))
+    if ident is None:
+        if cameras:
+            problems.append(f"{where}.camera: missing; the capture has {len(cameras)} cameras: {list(cameras)}")
+        return None
+    if ident not in cameras:
+        if cameras:
+            problems.append(f"{where}.camera: no camera with id {ident!r} (cameras: {list(cameras)})"[:300])
+        return None
+    return ident
+
+
+def _pose_label(e: dict, where: str, problems: Problems) -> str | None:
+    """The pose label of measurement entry ``e``: its ``pose``, or its ``shot`` (the photographs
+    taken at one instant by several cameras: one head pose); both must agree where both are given."""
+    pose, shot = e.get("pose"), e.get("shot")
+    if pose is not None and shot is not None and str(pose) != str(shot):
+        problems.append(f"{where}: pose {pose!r} and shot {shot!r} differ; a shot is one head pose")
+    label = shot if shot is not None else pose
+    return None if label is None else str(label)
+
+
+def read_measurements(data: dict, root: Path, cameras: dict[str, Camera], lights: list[str],
                       problems: Problems) -> list[Measurement]:
-    """The manifest's ``measurements`` (each naming one of ``lights``); the problems found go to ``problems``."""
+    """The manifest's ``measurements`` (each naming one of ``lights`` and, where the capture has
+    several, one of ``cameras``: id -> Camera); the problems found go to ``problems``."""
     measurements = []
     capture_box = _face_box(data, "face_box", problems)
     for i, e, where in problems.objects(data, "measurements", ""):
@@ -123,7 +151,9 @@ def read_measurements(data: dict, root: Path, camera: Camera | None, lights: lis
         light = problems.need(e, "light", where, str)
         if light is not None and light not in lights:
             problems.append(f"{where}.light: no light condition named {light!r} (lights: {lights})")
-        pose = e.get("pose")
+        pose = _pose_label(e, where, problems)
+        ident = _camera_id(e, where, cameras, problems)
+        camera = cameras.get(ident)
         image = read_image_entry(e.get("image"), f"{where}.image", root, camera, problems) if "image" in e else \
             problems.need(e, "image", where)
         diffuse = (read_image_entry(e["diffuse"], f"{where}.diffuse", root, camera, problems) if "diffuse" in e
@@ -142,7 +172,12 @@ def read_measurements(data: dict, root: Path, camera: Camera | None, lights: lis
         points = _feature_points(e.get("feature_points") or {}, f"{where}.feature_points", camera, problems)
         box = _face_box(e, f"{where}.face_box", problems) if "face_box" in e else capture_box
         if isinstance(image, Image) and light is not None and None not in exposures:
-            measurements.append(Measurement(name, light, None if pose is None else str(pose), image, diffuse,
-                                            tuple(exposures), points, box))
+            measurements.append(Measurement(name, light, pose, image, diffuse, tuple(exposures), points, box,
+                                            ident if ident is not None else DEFAULT_CAMERA))
     problems.unique("measurements", [m.name for m in measurements])
+    photographed = {e.get("camera") for e in data.get("measurements") or [] if isinstance(e, dict)}
+    if len(cameras) > 1:
+        for ident in cameras:
+            if ident not in photographed:
+                problems.append(f"cameras: camera {ident!r} took no photograph (no measurement names it)")
     return measurements

@@ -38,6 +38,10 @@ ENVMAP_SIZE = (32, 16)
 ENVMAP_HEIGHTS = (4, 128)
 #: Heights (pixels) a given environment map may have (the width is twice the height).
 GIVEN_ENVMAP_HEIGHTS = (4, 4096)
+#: Id of the camera of a capture whose manifest gives one ``camera`` (not a ``cameras`` list).
+DEFAULT_CAMERA = "camera"
+#: Cameras of one capture whose centres are closer than this (mm) are one camera listed twice.
+MIN_CAMERA_SEPARATION = 1.0
 #: Transfer curves of integer images.
 TRANSFERS = ("linear", "srgb", "gamma")
 IMAGE_SUFFIXES = (".exr", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".pgm", ".ppm", ".pnm")
@@ -106,7 +110,8 @@ class Measurement:
     light : str
         Name of the :class:`Light` condition.
     pose : str or None
-        Label shared by the measurements taken at one pose of the subject.
+        Label shared by the measurements taken at one pose of the subject: the manifest's
+        ``pose``, or its ``shot`` (the photographs several cameras took of the unmoved head).
     image : Image
         The point-light photograph the BRDF is fitted to.
     diffuse : Image or None
@@ -121,6 +126,8 @@ class Measurement:
     face_box : (x0, y0, x1, y1) or None
         Where the face is in the photograph (pixels), for the landmark
         detector on tight crops; None: the detector finds it.
+    camera : str
+        Id of the camera that took the pictures (:attr:`Capture.cameras`).
     """
 
     name: str
@@ -131,6 +138,7 @@ class Measurement:
     exposures: tuple[Image, ...]
     feature_points: dict[str, np.ndarray]
     face_box: tuple[float, float, float, float] | None = None
+    camera: str = DEFAULT_CAMERA
 
 
 @dataclass(frozen=True)
@@ -168,7 +176,12 @@ class WhiteTarget:
 
 @dataclass(frozen=True, eq=False)
 class Capture:
-    """A loaded, validated capture (see the module docstring)."""
+    """A loaded, validated capture (see the module docstring).
+
+    ``camera`` is the capture's first camera, whose frame the lights' calibration uses;
+    ``cameras`` every camera by id (:data:`DEFAULT_CAMERA` alone for a one-camera manifest), each
+    measurement naming its own (:meth:`camera_of`).
+    """
 
     path: Path
     camera: Camera
@@ -178,6 +191,22 @@ class Capture:
     white_target: WhiteTarget | None
     metadata: dict = field(default_factory=dict)
     ambient: str = AMBIENT_KINDS[0]
+    cameras: dict = field(default_factory=dict)
+
+    def camera_of(self, measurement) -> Camera:
+        """The camera that took ``measurement`` (a :class:`Measurement` or its name)."""
+        if isinstance(measurement, str):
+            name, measurement = measurement, next((m for m in self.measurements if m.name == measurement), None)
+            if measurement is None:
+                raise KeyError(f"no measurement {name!r} in {self.path}")
+        if not self.cameras:
+            return self.camera
+        return self.cameras[measurement.camera]
+
+    @property
+    def several_cameras(self) -> bool:
+        """The photographs come from more than one camera."""
+        return len(self.cameras) > 1
 
     @property
     def ambient_light(self) -> bool:
@@ -217,7 +246,8 @@ class Capture:
         raise KeyError(f"no light {name!r} in {self.path}; lights: {[l.name for l in self.lights]}")
 
     def __repr__(self) -> str:
-        return (f"Capture({str(self.path)!r}: {self.camera.width}x{self.camera.height}, "
+        cameras = f"{len(self.cameras)} cameras, " if self.several_cameras else ""
+        return (f"Capture({str(self.path)!r}: {cameras}{self.camera.width}x{self.camera.height}, "
                 f"{len(self.lights)} lights, {len(self.measurements)} measurements)")
 
 

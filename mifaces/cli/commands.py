@@ -47,6 +47,7 @@ from ..shape import fit_shape as fit_shapes
 from ..shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
 from ..runtime.status import CONVERGED
 from ..studio.environment_light import ENVIRONMENTS
+from ..studio.scene import RIG_YAWS
 from ..studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
 
 
@@ -127,10 +128,14 @@ def gallery(out_dir: str, spp: int, size: tuple[int, int]) -> None:
 @click.option("--environment", type=click.Choice(ENVIRONMENTS), default=None,
               help="Light every photograph by the generated studio or the sun and sky instead of the point lights: "
                    "the capture states the map as its one environment light; each measurement a head turn.")
+@click.option("--cameras", default=default(simulate_capture, "cameras"), show_default=True,
+              type=click.IntRange(1, len(RIG_YAWS)),
+              help="Calibrated cameras photographing every shot (the studio camera, then others turned "
+                   f"{', '.join(f'{y:g}' for y in RIG_YAWS[1:])} degrees about the head).")
 @click.option("--force", is_flag=True, help="Replace a simulated capture at OUT (never a real one).")
 def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None, varying: bool, detail: bool,
              subsurface: bool, measurements: int, resolution: tuple[int, int], seed: int, preset: str | None, spp: int, companion: str,
-             environment: str | None, force: bool) -> None:
+             environment: str | None, cameras: int, force: bool) -> None:
     """Simulate a capture session with ground truth into folder OUT (paper sec. 3)."""
     overrides = None
     if brdf_params is not None:
@@ -142,7 +147,7 @@ def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None
     result = simulate_capture(out, model=face_model, brdf=brdf_model, brdf_params=overrides, measurements=measurements,
                               resolution=resolution, seed=seed, preset=preset, spp=spp, companion=companion,
                               force=force, varying=varying, detail=detail,
-                              subsurface=subsurface, environment=environment)
+                              subsurface=subsurface, environment=environment, cameras=cameras)
     lights = (f"the {environment} environment" if environment is not None
               else f"{result.lights} light{'s' * (result.lights != 1)}")
     click.echo(f"simulated {result.measurements} measurement{'s' * (result.measurements != 1)} under "

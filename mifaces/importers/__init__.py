@@ -10,7 +10,7 @@ edge to plain arrays and captures.
   :func:`~.transforms.read_transforms`, :func:`~.transforms.write_transforms`.
 - :mod:`mifaces.importers.calibration_io`: those calibrations as captures
   (:func:`~.calibration_io.import_colmap`, :func:`~.calibration_io.import_transforms`,
-  :func:`~.calibration_io.import_calibration`: one fixed camera) and a capture's camera for those
+  :func:`~.calibration_io.import_calibration`: one camera or several) and a capture's camera for those
   tools (:func:`~.calibration_io.export_calibration`).
 - :mod:`mifaces.importers.cli`: their commands, ``mifaces import ...`` and ``mifaces export-calibration``.
 """

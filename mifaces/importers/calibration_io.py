@@ -5,11 +5,11 @@ elsewhere and their photographs (:func:`import_colmap` for a COLMAP sparse model
 :func:`import_transforms` for a Nerfstudio / instant-ngp ``transforms.json``);
 :func:`export_calibration` writes a capture's camera in both formats for those tools.
 
-A capture holds **one** camera today, fixed, with every photograph taken by it (a measurement's
-``pose`` is the subject's, not the camera's). So a calibration becomes a capture only where all its
-images share one camera: the same intrinsics and the same pose (within :data:`POSE_TOLERANCE`), as a
-fixed camera photographing a subject under several lights is. Images from several cameras or camera
-positions are an error saying so: they need the multi-camera capture format.
+The images that share intrinsics and pose (within :data:`POSE_TOLERANCE`) are one camera
+(:func:`camera_groups`): a calibration whose images all share one becomes a one-camera capture (a
+fixed camera photographing a subject under several lights), one with several a capture with a
+``cameras`` list (docs/capture.md, "Several cameras"). A calibration is of a rigid scene, so every
+image is of one head pose: one ``shot``.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from ..io.atomic import atomic_write, write_json
 from ..capture.camera import Camera
 from ..capture.images import read_image
 from ..capture.loader import load_capture
-from ..capture.types import FORMAT, IMAGE_SUFFIXES, MANIFEST, TRANSFERS, VERSION, Capture
+from ..capture.types import DEFAULT_CAMERA, FORMAT, IMAGE_SUFFIXES, MANIFEST, TRANSFERS, VERSION, Capture
 from ..io.paths import check_name, resolve_inside
 from .colmap import read_colmap, write_colmap
 from .transforms import read_transforms, write_transforms
@@ -31,8 +31,9 @@ from .transforms import read_transforms, write_transforms
 #: Largest difference of two images' rotation entries, and of their translations relative to the
 #: larger's length (at least 1), for them to count as one camera pose.
 POSE_TOLERANCE = 1e-6
-#: Pose label of every measurement of an imported calibration: one fixed camera, one unmoved subject
-#: (``load_capture``'s pose grouping still fits apart a measurement whose feature points disagree).
+#: Pose (shot) label of every measurement of an imported calibration: one rigid scene, one unmoved subject
+#: (``load_capture``'s pose grouping still fits apart a measurement of one camera whose feature points
+#: disagree).
 POSE = "P0"
 #: Where :func:`export_calibration` writes the COLMAP model and the ``transforms.json`` in its folder.
 SPARSE = Path("sparse") / "0"
@@ -51,19 +52,20 @@ def _differences(a: Camera, b: Camera) -> list[str]:
     return [what for what, same in (("intrinsics", same_intrinsics), ("pose", same_pose)) if not same]
 
 
-def single_camera(cameras: dict[str, Camera]) -> Camera:
-    """The one camera that took every image of ``cameras`` (image name -> camera); a ``ValueError``
-    naming two images that differ where there are several."""
+def camera_groups(cameras: dict[str, Camera]) -> list[tuple[Camera, list[str]]]:
+    """The distinct cameras of ``cameras`` (image name -> camera), in the order of their first image,
+    each with the images it took (the same intrinsics and pose, :func:`_differences`)."""
     if not cameras:
         raise ValueError("the calibration has no images")
-    (first, camera), *others = cameras.items()
-    for name, other in others:
-        differ = _differences(camera, other)
-        if differ:
-            raise ValueError(f"images {first!r} and {name!r} differ in their camera {' and '.join(differ)}: a "
-                             "capture holds one fixed camera today, and photographs from several cameras or camera "
-                             "positions need the multi-camera capture format (not supported yet)")
-    return camera
+    groups: list[tuple[Camera, list[str]]] = []
+    for name, camera in cameras.items():
+        for first, images in groups:
+            if not _differences(first, camera):
+                images.append(name)
+                break
+        else:
+            groups.append((camera, [name]))
+    return groups
 
 
 def _destinations(images) -> dict[str, PurePosixPath]:
@@ -89,16 +91,18 @@ def import_calibration(cameras: dict[str, Camera], image_dir: str | os.PathLike,
                        scale: float = 1.0) -> Path:
     """Write the images of a calibration as a capture at ``out`` (``capture.json``, ``images/``).
 
-    * **Camera**: the one camera of every image (:func:`single_camera`), calibrated, its translation
-      multiplied by ``scale``: the world frame is the calibration's, in its units times ``scale``
-      (mm per unit).
+    * **Cameras**: the distinct cameras of the images (:func:`camera_groups`): one ``camera``, or a
+      ``cameras`` list with ids ``cam0``, ``cam1``, ... where there are several; calibrated, their
+      translations multiplied by ``scale``: the world frame is the calibration's, in its units times
+      ``scale`` (mm per unit).
     * **Lights**: one per image, named like its measurement, ``"unknown": true`` (no calibration
       tool knows the lights): estimated with the face by ``mifaces measure``.
-    * **Measurements**: one per image, all of pose :data:`POSE`, the file copied into ``images/``
+    * **Measurements**: one per image, all of pose (shot) :data:`POSE`, the file copied into ``images/``
       under its path (relative to ``image_dir``) less the folders all images' paths start with and
       any ``..``, and named by that path without suffix, folders joined by ``_``; decoded with
       ``transfer`` (an integer file; EXR files are linear); the ``diffuse`` companion of every one
-      is the image named ``diffuse`` (default: the first), for the landmark detector.
+      is the image named ``diffuse`` (default: the first) where its camera took it, else its
+      camera's first image, for the landmark detector.
     * ``metadata``: ``source`` and each measurement's image name.
 
     Raises
@@ -108,7 +112,7 @@ def import_calibration(cameras: dict[str, Camera], image_dir: str | os.PathLike,
     FileNotFoundError
         For a missing image.
     ValueError
-        For several cameras (:func:`single_camera`), an image name that cannot name a measurement,
+        For an image name that cannot name a measurement,
         an image of another size than the camera's or a format mifaces does not read, an unknown
         ``diffuse`` or ``transfer``, a ``scale`` that is not positive.
     """
@@ -119,7 +123,9 @@ def import_calibration(cameras: dict[str, Camera], image_dir: str | os.PathLike,
         raise ValueError(f"transfer: must be one of {TRANSFERS}, got {transfer!r}")
     if not (np.isfinite(scale) and scale > 0):
         raise ValueError(f"scale: must be a positive number of mm per unit, got {scale!r}")
-    camera = single_camera(cameras)
+    groups = camera_groups(cameras)
+    ids = {image: (f"cam{k}" if len(groups) > 1 else DEFAULT_CAMERA)
+           for k, (_, images) in enumerate(groups) for image in images}
     diffuse = next(iter(cameras)) if diffuse is None else diffuse
     if diffuse not in cameras:
         raise ValueError(f"diffuse: no image {diffuse!r} in the calibration (images: {list(cameras)[:10]})")
@@ -134,22 +140,33 @@ def import_calibration(cameras: dict[str, Camera], image_dir: str | os.PathLike,
         if not source_path.is_file():
             raise FileNotFoundError(f"image {image!r}: no file {source_path}")
         height, width = read_image(source_path, _transfer(image, transfer)).pixels.shape[:2]
+        camera = cameras[image]
         if (width, height) != (camera.width, camera.height):
             raise ValueError(f"image {image!r} is {width}x{height} pixels, its camera's images {camera.width}x"
                              f"{camera.height}")
         with atomic_write(resolve_inside(out / "images", str(destinations[image]))) as f:
             f.write(source_path.read_bytes())
-    entry = camera.to_json()
-    entry["translation"] = (np.asarray(camera.translation, np.float64) * scale).tolist()
+    entries = []
+    for camera, images in groups:
+        entry = camera.to_json()
+        entry["translation"] = (np.asarray(camera.translation, np.float64) * scale).tolist()
+        entries.append({"id": ids[images[0]], **entry})
+    companion = {image: diffuse if ids[diffuse] == ids[image] else next(i for i in cameras if ids[i] == ids[image])
+                 for image in cameras}
 
     def picture(image: str) -> dict:
         return {"path": f"images/{destinations[image]}", "transfer": _transfer(image, transfer)}
 
+    def measurement(image: str, name: str) -> dict:
+        entry = {"name": name, "light": name, "image": picture(image), "diffuse": picture(companion[image])}
+        return dict(entry, camera=ids[image], shot=POSE) if len(groups) > 1 else dict(entry, pose=POSE)
+
+    layout = ({"cameras": entries} if len(groups) > 1 else
+              {"camera": {k: v for k, v in entries[0].items() if k != "id"}})
     write_json(out / MANIFEST, {
-        "format": FORMAT, "version": VERSION, "camera": entry,
+        "format": FORMAT, "version": VERSION, **layout,
         "lights": [{"name": name, "unknown": True} for name in names.values()],
-        "measurements": [{"name": name, "light": name, "pose": POSE, "image": picture(image),
-                          "diffuse": picture(diffuse)} for image, name in names.items()],
+        "measurements": [measurement(image, name) for image, name in names.items()],
         "metadata": {"source": source, "scale_mm_per_unit": scale, "images": {n: i for i, n in names.items()}},
     })
     return out
@@ -170,23 +187,28 @@ def import_transforms(path: str | os.PathLike, out: str | os.PathLike, **options
     return import_calibration(cameras, Path(path).parent, out, f"transforms.json {Path(path).resolve()}", **options)
 
 
-def photographs(capture: Capture) -> list[str]:
-    """Every picture the capture's camera took (photographs, companions, steel-sphere pictures), once
-    each, as paths relative to the capture folder (``/``-separated)."""
+def photographs(capture: Capture) -> dict[str, Camera]:
+    """Every picture the capture's cameras took (photographs, companions, steel-sphere pictures), once
+    each, as paths relative to the capture folder (``/``-separated), with the camera that took it
+    (the steel spheres' is the first camera)."""
     images = []
     for m in capture.measurements:
-        images += [m.image, *([m.diffuse] if m.diffuse is not None else []), *m.exposures]
+        camera = capture.camera_of(m)
+        images += [(image, camera) for image in (m.image, *([m.diffuse] if m.diffuse is not None else []),
+                                                 *m.exposures)]
     for light in capture.lights:
-        images += light.pictures
-    relative = (Path(os.path.relpath(image.path, capture.path)).as_posix() for image in images)
-    return list(dict.fromkeys(relative))
+        images += [(image, capture.camera) for image in light.pictures]
+    out: dict[str, Camera] = {}
+    for image, camera in images:
+        out.setdefault(Path(os.path.relpath(image.path, capture.path)).as_posix(), camera)
+    return out
 
 
 def export_calibration(capture: Capture | str | os.PathLike, out_dir: str | os.PathLike) -> Path:
-    """Write a capture's camera for other tools: a COLMAP sparse model ``out_dir/sparse/0/``
+    """Write a capture's cameras for other tools: a COLMAP sparse model ``out_dir/sparse/0/``
     (``cameras.txt``, ``images.txt``, ``points3D.txt``, no points) whose image names are relative
     to the capture folder, and ``out_dir/transforms.json`` whose ``file_path`` s are relative to
-    ``out_dir``: the one camera for each of the capture's pictures (:func:`photographs`).
+    ``out_dir``: for each of the capture's pictures the camera that took it (:func:`photographs`).
 
     ``capture`` is a loaded capture or its folder (loaded without calibrating lights or detecting
     feature points). An uncalibrated camera (``Camera.calibrated`` False) is written with its guessed
@@ -194,9 +216,9 @@ def export_calibration(capture: Capture | str | os.PathLike, out_dir: str | os.P
     """
     capture = load_capture(capture, calibrate=False, detect=False)
     out_dir = Path(out_dir)
-    names = photographs(capture)
-    write_colmap({name: capture.camera for name in names}, out_dir / SPARSE)
+    taken = photographs(capture)
+    write_colmap(taken, out_dir / SPARSE)
     relative = [Path(os.path.relpath(os.path.abspath(capture.path / name), os.path.abspath(out_dir))).as_posix()
-                for name in names]
-    write_transforms([capture.camera] * len(names), out_dir / TRANSFORMS, relative)
+                for name in taken]
+    write_transforms(list(taken.values()), out_dir / TRANSFORMS, relative)
     return out_dir

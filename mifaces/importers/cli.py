@@ -76,7 +76,7 @@ def _calibration_options(command):
 def colmap(sparse_dir: str, image_dir: str, out: str, force: bool, diffuse: str | None, transfer: str,
            scale: float) -> None:
     """Write the images of the COLMAP sparse model SPARSE_DIR (text or binary), found in IMAGE_DIR, as a
-    capture at OUT: one fixed camera, one unknown light per image (docs/capture.md)."""
+    capture at OUT: its cameras, one unknown light per image (docs/capture.md)."""
     path = import_colmap(sparse_dir, image_dir, out, force=force, diffuse=diffuse, transfer=transfer, scale=scale)
     click.echo(f"wrote the capture {path}")
 
@@ -87,7 +87,7 @@ def colmap(sparse_dir: str, image_dir: str, out: str, force: bool, diffuse: str 
 @_calibration_options
 def transforms(transforms_json: str, out: str, force: bool, diffuse: str | None, transfer: str, scale: float) -> None:
     """Write the frames of a Nerfstudio / instant-ngp TRANSFORMS_JSON (images relative to its folder) as a
-    capture at OUT: one fixed camera, one unknown light per image (docs/capture.md)."""
+    capture at OUT: its cameras, one unknown light per image (docs/capture.md)."""
     path = import_transforms(transforms_json, out, force=force, diffuse=diffuse, transfer=transfer, scale=scale)
     click.echo(f"wrote the capture {path}")
 

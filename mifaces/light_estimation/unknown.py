@@ -139,7 +139,7 @@ def estimate_lights(capture: Capture, fits) -> Capture:
         if light.environment:  # estimate_environments' work
             continue
         used = [by_name[m.name] for m in capture.measurements if m.light == light.name and m.name in by_name]
-        directions = [(fit.measurement, fitted_direction(fit, capture.camera)) for fit in used]
+        directions = [(fit.measurement, fitted_direction(fit, capture.camera_of(fit.measurement))) for fit in used]
         directions = [(name, d) for name, d in directions if d is not None]
         if not directions:
             missing.append(light.name)
@@ -188,10 +188,11 @@ def refit_lights(capture: Capture, fits, face_model, **options) -> list:
         measurement = next(m for m in capture.measurements if m.name == fit.measurement)
         light = capture.light(measurement.light) if measurement.light else None
         leader = by_name.get(fit.shared_with, fit) if fit.shared_with else fit
-        if light is None or not light.unknown or light.environment or not leader.converged:
-            out.append(fit)
+        if (light is None or not light.unknown or light.environment or not leader.converged
+                or capture.camera_of(measurement) is not capture.camera_of(leader.measurement)):
+            out.append(fit)  # (another camera's photograph of the shot: its light was fitted with the leader's)
             continue
-        out.append(fit_light(leader, measurement, capture.camera, face_model, light, **options))
+        out.append(fit_light(leader, measurement, capture.camera_of(measurement), face_model, light, **options))
     return out
 
 
@@ -300,7 +301,7 @@ def estimate_environments(capture: Capture, shapes, face_model, resolution: int 
         if not used:
             raise UnknownLightError(f"unknown light {light.name!r}: no photograph under it has a fitted face "
                                     "to estimate the map on")
-        parts = [photograph_transport(capture.camera, m.image.pixels, m.image.saturated, shapes[m.name],
+        parts = [photograph_transport(capture.camera_of(m), m.image.pixels, m.image.saturated, shapes[m.name],
                                       face_model.triangles, face_model.uv, raster, light.envmap_size)
                  for m in used]
         envmap, fit = estimate_map(*zip(*parts), size=light.envmap_size)

@@ -57,6 +57,7 @@ from ..report.measurement import (ranking, ties, write_fit_picture, write_markdo
 from ..report.html import write_html
 from ..shape import fit_shape, shapes_in_world
 from ..shape.io import model_source, write_fit, write_index
+from ..shape.views import depth_uncertainty, reprojection_errors
 from ..validation.shape_errors import capture_shape_errors
 from ..studio import simulate
 from ..validation.truth_errors import ground_truth_errors
@@ -306,6 +307,11 @@ def _geometry(out: Path, capture: Capture, options: MeasureOptions, face_model, 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the failed fits are named below
         shapes = shapes_in_world(fits, capture)
+    views = reprojection_errors(capture, shapes, face)
+    for name, error in views["photographs"].items():
+        report["shapes"][name]["reprojection_px"] = error
+    report["cameras"] = views["cameras"]
+    report["depth"] = depth_uncertainty(capture, shapes, face)
     fitted_modes = max((len(f.coefficients) for f in fits), default=0)
     report["face_model"] = {"name": face.name, "model_shape_modes": face.shape_dim, "fit_shape_modes": fitted_modes}
     truth = read_ground_truth(capture)

@@ -64,12 +64,12 @@ def bounced_light(capture, geometry, face_model, estimate, *, measurements=None,
     its regions and albedo map, eq. 4's scale undone) under the measurement's camera and light."""
     undo = (np.pi / capture.reflectance_scale()).astype(np.float32)  # eq. 4's scale: albedo in the lights' units
     brdf, albedo = estimate.to_json(), estimate.albedo.albedo * undo
-    camera = capture.camera
-    small = coarse_camera(camera, width)
     chosen = [m for m in capture.measurements
               if m.name in geometry and (measurements is None or m.name in measurements)]
     out = {}
     for m in progress_bar(chosen, desc="interreflection", unit="photo", enabled=progress):
+        camera = capture.camera_of(m)
+        small = coarse_camera(camera, width)
         scene = mi.load_dict(FaceScene(face_model, geometry[m.name]).scene(brdf, albedo, small, capture.light(m.light),
                                                                           spp=spp, max_depth=INDIRECT_DEPTH))
         direct_only = mi.load_dict({"type": "path", "max_depth": 2})  # the same scene loaded once, two integrators

@@ -484,7 +484,7 @@ def capture_samples(capture, geometry, face_model, resolution: int = 512, *, mea
     for m in progress_bar(chosen, desc="reflectance samples", unit="photo", enabled=progress):
         light = capture.light(m.light)
         light.require_incidence(f"measurement {m.name!r}")
-        parts.append(measurement_samples(capture.camera, light, m.image.pixels, geometry[m.name],
+        parts.append(measurement_samples(capture.camera_of(m), light, m.image.pixels, geometry[m.name],
                                          face_model.triangles, face_model.uv, raster, saturated=m.image.saturated,
                                          scale=scale, erosion=erosion, min_cosine=min_cosine, name=m.name,
                                          indirect=None if indirect is None else indirect.get(m.name)))

@@ -186,17 +186,42 @@ def shapes_markdown(report: dict) -> list[str]:
              + (f"; the simulated truth drew on {face['truth_shape_modes']}"
                 + (" plus fine detail outside the span" if face.get("truth_detail") else "")
                 + ", so it lies outside the fitted span by construction" if "truth_shape_modes" in face else "")
-             + ".", "", "| photograph | status | feature RMS (px) | photometric residual | world error (mm) "
+             + ".", "", "| photograph | status | feature RMS (px) | reprojection in its camera (px) "
+                        "| photometric residual | world error (mm) "
                         "| after rigid alignment (mm) | depth (mm) | size against the truth (%) "
-                        "| after that size about the camera (mm) | normals (°) |", "|---" * 10 + "|"]
+                        "| after that size about the camera (mm) | after a similarity alignment, whole head (mm) "
+                        "| normals (°) |", "|---" * 12 + "|"]
     for name, entry in report["shapes"].items():
         e = entry.get("errors") or {}
         cells = [f"{e[k]:.2f}" if k in e else "" for k in ("world_mm", "aligned_mm", "depth_mm")]
-        cells += [f"{e['scale_pct']:+.2f}" if "scale_pct" in e else "", f"{e['scaled_mm']:.2f}" if "scaled_mm" in e
-                  else "", f"{e['normal_deg']:.2f}" if "normal_deg" in e else ""]
+        cells += [f"{e['scale_pct']:+.2f}" if "scale_pct" in e else ""]
+        cells += [f"{e[k]:.2f}" if k in e else "" for k in ("scaled_mm", "similarity_mm", "normal_deg")]
         fit = [f"{entry[k]:.{d}f}" if entry.get(k) is not None else "" for k, d in (("feature_rms_px", 2),
+                                                                                   ("reprojection_px", 2),
                                                                                    ("image_rms", 3))]
         lines.append(f"| {name} | {entry['status']} | " + " | ".join(fit + cells) + " |")
+    return lines + cameras_markdown(report)
+
+
+def cameras_markdown(report: dict) -> list[str]:
+    """The report's lines on the cameras: each one's reprojection error, and for one camera how well
+    the face's depth is known (:func:`mifaces.shape.views.depth_uncertainty`)."""
+    lines = []
+    cameras = report.get("cameras") or {}
+    if len(cameras) > 1:
+        lines += ["", "Reprojection error per camera (the fitted face's landmarks against each photograph's "
+                      "feature points, in its own camera): " + ", ".join(
+                          f"{camera} {entry['reprojection_px']:.2f} px ({entry['photographs']} photographs)"
+                          for camera, entry in cameras.items())
+                  + ". Several calibrated cameras fix the face's depth: the world-frame errors can be trusted."]
+    depth = report.get("depth") or {}
+    if depth:
+        lines += ["", f"One camera: a face's depth and size are not observable from one camera (it sees a face "
+                      f"twice as large and twice as far as the same picture). The fit's depth comes from "
+                      f"{depth['size_from']}, known to {100 * depth['relative_size_sd']:.1f} % (1 sd), which "
+                      f"leaves {depth['depth_sd_mm']:.1f} mm (1 sd) along the camera's axis at "
+                      f"{depth['camera_distance_mm']:.0f} mm: no world-frame figure can be trusted to better than "
+                      f"that. What one camera observes is the error after a similarity alignment."]
     return lines
 
 

@@ -81,6 +81,14 @@ class Energy:
     freeze : bool
         Replay the kernels of an evaluation (``dr.freeze``) instead of tracing it again, while
         the arrays keep their sizes (recorded anew per sample set).
+    views : dict, optional
+        Photographs taken by another calibrated camera of the same shot: key -> ``(camera, A, b)``,
+        that camera and the map ``x -> A x + b`` from ``camera``'s frame (the fit's) to its own.
+        The face is shaded in the fit's frame, seen from that camera's centre, and projected
+        through it; the others are ``camera``'s.
+    view_features : sequence of (camera, A, b, vertices, pixels)
+        Feature points clicked in another camera's photograph of the shot (its frame as in
+        ``views``): they join E_F, in that camera's pixels.
 
     Notes
     -----
@@ -98,8 +106,10 @@ class Energy:
 
     def __init__(self, model, camera, layout: Layout, weights: Weights, images: dict, feature_vertices,
                  feature_pixels, distances, centre, light_distance: dict | None = None, freeze: bool = True,
-                 adjacency=None):
+                 adjacency=None, views: dict | None = None, view_features=()):
         self.model, self.camera, self.layout, self.weights = model, camera, layout, weights
+        self.views, self.view_features = dict(views or {}), list(view_features)
+        self.n_features = len(feature_vertices) + sum(len(view[3]) for view in self.view_features)
         self.images = images
         self.image_names = list(images)
         self.feature_vertices, self.feature_pixels = feature_vertices, feature_pixels
@@ -118,12 +128,14 @@ class Energy:
         self.dr_index = [dr.opaque(mi.UInt32, i) for i in range(max(len(self.slots), 8))]
         self.dr_fade_index = [dr.opaque(mi.UInt32, layout.size + k) for k in range(2)]
         # per measurement, opaque: the kernels do not depend on them
-        self.dr_inv_features = dr.opaque(mi.Float, 1.0 / len(feature_vertices))
+        self.dr_inv_features = dr.opaque(mi.Float, 1.0 / self.n_features)
         self.dr_inv_distances = dr.opaque(mi.Float, 1.0 / max(len(distances), 1))
         self.dr_light_distance = {key: dr.opaque(mi.Float, d if math.isfinite(d) else 0.0)
                                   for key, d in self.light_distance.items()}
         self.dr_feature_u = device_array(np.float32, np.asarray(feature_pixels)[:, 0])
         self.dr_feature_v = device_array(np.float32, np.asarray(feature_pixels)[:, 1])
+        self.dr_view_feature_u = [device_array(np.float32, np.asarray(view[4])[:, 0]) for view in self.view_features]
+        self.dr_view_feature_v = [device_array(np.float32, np.asarray(view[4])[:, 1]) for view in self.view_features]
         if len(distances):  # (an empty array cannot enter a frozen function)
             self.dr_distance_mm = device_array(np.float32, [d for _, _, d in distances])
         self._prior_weights()
@@ -153,7 +165,8 @@ class Energy:
         valid = adj >= 0
         ring_tris = m.triangles[np.where(valid, adj, 0)]  # (S, D, 3)
         needed = np.unique(np.concatenate([samples, ring_tris[valid].ravel(), self.feature_vertices,
-                                           self.distance_vertices.ravel()]))
+                                           self.distance_vertices.ravel()]
+                                          + [np.asarray(view[3], np.int64) for view in self.view_features]))
         local = np.full(m.vertex_count, -1, np.int64)
         local[needed] = np.arange(len(needed))
         self.n_samples, self.degree = len(samples), adj.shape[1]
@@ -172,6 +185,8 @@ class Energy:
         self.dr_basis = [device_array(np.float32, columns[k]) for k in range(self.n_modes)]
         self.dr_sample_local = device_array(np.uint32, local[samples])
         self.dr_feature_local = device_array(np.uint32, local[self.feature_vertices])
+        self.dr_view_feature_local = [device_array(np.uint32, local[np.asarray(view[3], np.int64)])
+                                      for view in self.view_features]
         if len(self.distances):
             self.dr_distance_local = [device_array(np.uint32, local[self.distance_vertices[:, k]])
                                       for k in range(2)]
@@ -192,11 +207,13 @@ class Energy:
         ones = np.ones(len(samples), np.float32)
         self.set_visibility(ones)
 
-    def set_visibility(self, seen: np.ndarray, lit: dict | None = None):
-        """Per sample: seen by the camera (every image), and per photograph with a directed light
-        (:func:`directed`), lit by its lamp (0 or 1; 1 for every sample where ``lit`` lacks it)."""
+    def set_visibility(self, seen: np.ndarray, lit: dict | None = None, seen_by: dict | None = None):
+        """Per sample: seen by the camera (every image but those of :attr:`views`, each seen as
+        ``seen_by`` says), and per photograph with a directed light (:func:`directed`), lit by its
+        lamp (0 or 1; 1 for every sample where ``lit`` or ``seen_by`` lacks it)."""
         self.dr_visible = device_array(np.float32, seen)
         ones = np.ones(len(seen), np.float32)
+        self.dr_visible_by = {key: device_array(np.float32, (seen_by or {}).get(key, ones)) for key in self.views}
         self.dr_shadow = {key: device_array(np.float32, (lit or {}).get(key, ones))
                           for key in self.light_distance}
 
@@ -261,9 +278,16 @@ class Energy:
         q = [p[0] - c[0], p[1] - c[1], p[2] - c[2]]
         return [R[i][0] * q[0] + R[i][1] * q[1] + R[i][2] * q[2] + t[i] for i in range(3)]
 
-    def _project(self, pc, focal):
-        """Pixel coordinates of camera-space points (OpenCV model with distortion)."""
-        cam = self.camera
+    @staticmethod
+    def _moved(pc, A, b):
+        """``A pc + b`` of points ``pc`` (3 Floats): into another camera's frame (:attr:`views`)."""
+        return [float(A[i][0]) * pc[0] + float(A[i][1]) * pc[1] + float(A[i][2]) * pc[2] + float(b[i])
+                for i in range(3)]
+
+    def _project(self, pc, focal, cam=None):
+        """Pixel coordinates of camera-space points (OpenCV model with distortion) in ``cam``
+        (default: the fit's camera)."""
+        cam = cam or self.camera
         z = dr.maximum(pc[2], 1.0)
         x, y = pc[0] / z, pc[1] / z
         if np.any(cam.distortion):
@@ -276,9 +300,11 @@ class Energy:
                     y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
         return focal * cam.fx * x + cam.cx, focal * cam.fy * y + cam.cy
 
-    def _bilinear(self, image, u, v):
-        """Image (flat RGB Float) at pixel coordinates (u, v), bilinear; returns (rgb, inside)."""
-        w, h = self.camera.width, self.camera.height
+    def _bilinear(self, image, u, v, cam=None):
+        """Image (flat RGB Float) at pixel coordinates (u, v) of ``cam`` (default: the fit's camera),
+        bilinear; returns (rgb, inside)."""
+        cam = cam or self.camera
+        w, h = cam.width, cam.height
         inside = (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
         uc, vc = dr.clip(u, 0, w - 1.001), dr.clip(v, 0, h - 1.001)
         x0, y0 = dr.floor(uc), dr.floor(vc)
@@ -323,7 +349,7 @@ class Energy:
     def terms(self, values, use_image: bool) -> dict:
         """The terms (see :meth:`evaluate`) of the packed values of :meth:`energy`."""
         terms = dict(zip(("E", "E_I", "E_F", "E_P", "E_D"), (float(v) for v in values[:5])))
-        terms["feature_rms_px"] = math.sqrt(max(values[5], 0.0) / len(self.feature_vertices)) * self.scale_px
+        terms["feature_rms_px"] = math.sqrt(max(values[5], 0.0) / self.n_features) * self.scale_px
         if use_image:
             terms["image_rms"] = math.sqrt(values[6] / max(values[7], 1.0) / 3.0)
         return terms
@@ -392,6 +418,14 @@ class Energy:
         fu, fv = self._project(self._to_camera(fp, R, t), focal)
         f_sq = (dr.square(fu - self.dr_feature_u) + dr.square(fv - self.dr_feature_v)) / (self.scale_px ** 2)
         dr.scatter_add(acc, f_sq, dr.full(mi.UInt32, self.slots["features"], width))
+        for i, (cam, A, b, vertices, _) in enumerate(self.view_features):  # other cameras' clicks, their pixels
+            width = len(vertices)
+            R, t, _ = self._pose(theta, width)
+            fp = dr.gather(mi.Vector3f, pos, self.dr_view_feature_local[i])
+            fu, fv = self._project(self._moved(self._to_camera(fp, R, t), A, b), 1.0, cam)
+            f_sq = (dr.square(fu - self.dr_view_feature_u[i]) + dr.square(fv - self.dr_view_feature_v[i])) / (
+                self.scale_px ** 2)
+            dr.scatter_add(acc, f_sq, dr.full(mi.UInt32, self.slots["features"], width))
 
     def _prior_sums(self, acc, theta):
         """The quadratic prior of E_P (see :meth:`_prior_weights`) into slot ``prior``."""
@@ -422,9 +456,17 @@ class Energy:
         facing = dr.maximum(dr.dot(nc, view), 0.0)
         albedo = self._albedo(acc, theta)
         for key in self.image_names:
-            colour = self._shade(theta, key, albedo, nc, view, pcv, t)
-            observed, inside = self._bilinear(self.dr_images[key], u, v)
-            weight = self.dr_visible * dr.select(inside, 1.0, 0.0) * dr.clip((facing - 0.1) * 5.0, 0.0, 1.0)
+            if key in self.views:  # another camera of the shot: seen from its centre, through its lens
+                cam, A, b = self.views[key]
+                centre = -np.asarray(A, np.float64).T @ np.asarray(b, np.float64)
+                seen_from = dr.normalize(mi.Vector3f(*[float(c) for c in centre]) - pcv)
+                uk, vk = self._project(self._moved(pc, A, b), 1.0, cam)
+                facing_k, visible = dr.maximum(dr.dot(nc, seen_from), 0.0), self.dr_visible_by[key]
+            else:
+                cam, seen_from, uk, vk, facing_k, visible = None, view, u, v, facing, self.dr_visible
+            colour = self._shade(theta, key, albedo, nc, seen_from, pcv, t)
+            observed, inside = self._bilinear(self.dr_images[key], uk, vk, cam)
+            weight = visible * dr.select(inside, 1.0, 0.0) * dr.clip((facing_k - 0.1) * 5.0, 0.0, 1.0)
             residual = dr.squared_norm(colour - observed)
             dr.scatter_add(acc, weight * residual, dr.full(mi.UInt32, self.slots[f"{key}.num"], width))
             dr.scatter_add(acc, weight, dr.full(mi.UInt32, self.slots[f"{key}.den"], width))

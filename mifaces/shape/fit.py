@@ -19,7 +19,7 @@ from ..runtime.status import CONVERGED, DIVERGED, NOT_CONVERGED
 from .energy import DIFFUSE, POINT, directed, lit_key
 from .fitter import Fitter
 from .io import model_source, write_fit, write_index
-from .poses import companions, one_face, own_lights, pose_groups, shared_fit
+from .poses import companions, one_face, own_lights, pose_groups, seen_by, shared_fit
 from .result import (FEATURE_NOISE, MAX_FEATURE_ERROR, MAX_IMAGE_RMS, ShapeFit, ShapeFitError, ShapeOptions,
                      ShapeSchedule, Weights)
 from .targets import (eye_distance_px, feature_targets, light_angles, normalised, reference_measurement,
@@ -42,15 +42,17 @@ def feature_limit(vertices_camera, model, focal_px: float, max_feature_error: fl
     return max_feature_error * eye_distance_px(vertices_camera, model, focal_px) + feature_noise
 
 
-def estimated_quantities(camera, distances, fit_focal: bool = True) -> tuple[str, ...]:
-    """What a fit estimates that the capture does not give (:attr:`ShapeFit.estimated`)."""
-    return (("scale",) if not len(distances or ()) else ()) + \
+def estimated_quantities(camera, distances, fit_focal: bool = True, views: int = 1) -> tuple[str, ...]:
+    """What a fit estimates that the capture does not give (:attr:`ShapeFit.estimated`): the scale
+    where neither metric distances nor a second calibrated camera (``views``) fix it."""
+    return (("scale",) if not len(distances or ()) and views < 2 else ()) + \
         (("focal_length",) if fit_focal and not getattr(camera, "calibrated", True) else ())
 
 
 def fit_measurement(measurement, camera, model="builtin", light=None, *, schedule: ShapeSchedule | None = None,
                     weights: Weights | None = None, options: ShapeOptions | None = None, initial: dict | None = None,
-                    initial_color=None, fixed=(), distances=(), companions=(), progress=True) -> ShapeFit:
+                    initial_color=None, fixed=(), distances=(), companions=(), progress=True,
+                    camera_of=None) -> ShapeFit:
     """Fit the morphable model to one measurement (paper sec. 4.2), from the mean face.
 
     Parameters
@@ -93,6 +95,11 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
         geometry, each photograph with its own light, ambient, gain and offset (and cast
         shadow), as image ``point_1``, ``point_2``, ... (:func:`~mifaces.shape.energy.lit_key`).
         Their lights start from their calibration where the capture has one.
+    camera_of : callable, optional
+        A companion measurement's camera (:meth:`~mifaces.capture.Capture.camera_of`), where the
+        shot's photographs come from several calibrated cameras: a companion taken by another
+        camera is compared with the face seen through that camera, and its feature points join
+        E_F in its pixels, which fixes the face's depth. Default: every companion by ``camera``.
     progress : bool or progress bar
         Show a progress bar (or update the one given).
 
@@ -114,13 +121,19 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
         used[POINT], lights[POINT] = measurement.image, light
     if options.use_diffuse and measurement.diffuse is not None:
         used[DIFFUSE] = measurement.diffuse
+    views, view_targets = {}, []
     for index, (companion, companion_light) in enumerate(companions, start=1):
         used[lit_key(index)], lights[lit_key(index)] = companion.image, companion_light
+        view = camera_of(companion) if camera_of is not None else camera
+        if view is not camera:
+            views[lit_key(index)] = view
+            view_targets.append((view, *feature_targets(companion, model)[1:]))
     images = {key: image.pixels for key, image in used.items()}
     for key, img in images.items():
-        if img.shape[:2] != (camera.height, camera.width):
+        view = views.get(key, camera)
+        if img.shape[:2] != (view.height, view.width):
             raise ShapeFitError(f"measurement {measurement.name!r}: {key} image is {img.shape[1]}x{img.shape[0]}, "
-                                f"the camera {camera.width}x{camera.height}")
+                                f"the camera {view.width}x{view.height}")
     initial = dict(initial or {})
     positions = {}
     for key, source in lights.items():
@@ -136,9 +149,9 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
         initial.update(dict.fromkeys(held, 0.0))
         fixed = tuple(fixed) + tuple(held)
     fitter = Fitter(model, camera, images, targets, weights, schedule, np.random.default_rng(options.seed),
-                    light_world=positions, fit_focal=options.fit_focal, initial_color=initial_color,
+                    light_world=positions, fit_focal=options.fit_focal and not views, initial_color=initial_color,
                     initial=initial, fixed=fixed, distances=distances,
-                    facing_min=options.facing_min)
+                    facing_min=options.facing_min, views=views, view_targets=view_targets)
     greyscale = bool(used) and all(getattr(image, "greyscale", False) for image in used.values())
     fitter.energy.greyscale = greyscale  # read by Energy._shade
     own_bar = progress is True
@@ -162,7 +175,8 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
                                options.feature_noise) if np.all(np.isfinite(theta)) else math.inf)
         status, message = _status(theta, terms, history, limit, options.max_image_rms)
     return replace(fit, status=status, message=message, seconds=time.perf_counter() - t0,
-                   estimated=estimated_quantities(camera, distances, options.fit_focal))
+                   estimated=estimated_quantities(camera, distances, options.fit_focal,
+                                                  1 + len({id(view) for view in views.values()})))
 
 
 def _rms(num: float, den: float) -> float:
@@ -307,9 +321,9 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
                                        facing_min=facing_min))
     for leader, *others in groups:
         light = capture.light(leader.light) if leader.light else None
-        fit = fit_measurement(leader, capture.camera, model, light=light, schedule=schedule,
+        fit = fit_measurement(leader, capture.camera_of(leader), model, light=light, schedule=schedule,
                               initial_color=initial_color, fixed=fixed,
-                              companions=companions(capture, others), **shared)
+                              companions=companions(capture, others, leader), camera_of=capture.camera_of, **shared)
         if leader.name == reference and fit.converged:
             initial_color = fit.color
         leaders[leader.name] = fit
@@ -321,11 +335,11 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
         for leader, *others in groups:
             first = leaders[leader.name]
             light = capture.light(leader.light) if leader.light else None
-            together = companions(capture, others)
-            fit = fit_measurement(leader, capture.camera, model, light=light, schedule=second,
+            together = companions(capture, others, leader)
+            fit = fit_measurement(leader, capture.camera_of(leader), model, light=light, schedule=second,
                                   initial_color=initial_color, fixed=tuple(fixed) + ("shape",),
                                   initial=dict(_start_from(first, model, leader, together), shape=identity),
-                                  companions=together, **shared)
+                                  companions=together, camera_of=capture.camera_of, **shared)
             leaders[leader.name] = replace(fit, seconds=fit.seconds + first.seconds,
                                            message=(fit.message + "; " if fit.message else "")
                                            + f"identity shared by {len(groups)} poses")
@@ -333,7 +347,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
             bar.set_postfix(last=leader.name, status=fit.status)
     for leader, *others in groups:
         fit = leaders[leader.name]
-        keys = {m.name: lit_key(i) for i, (m, _) in enumerate(companions(capture, others), start=1)}
+        keys = {m.name: lit_key(i) for i, (m, _) in enumerate(companions(capture, others, leader), start=1)}
         for fit_m in [own_lights(fit)] + [_member_fit(fit, m, capture, model, schedule, shared, keys.get(m.name))
                                           for m in others]:
             fits[fit_m.measurement] = fit_m
@@ -353,9 +367,12 @@ def _member_fit(fit: ShapeFit, measurement, capture, model, schedule: ShapeSched
     capture does not know it (:func:`fit_light`); else :func:`~mifaces.shape.poses.shared_fit`.
     ``shared``: :func:`fit_measurement`'s ``weights``, ``distances``, ``progress`` and ``options``."""
     light = capture.light(measurement.light) if measurement.light else None
+    leader, own = capture.camera_of(fit.measurement), capture.camera_of(measurement)
+    if own is not leader:  # another camera of the shot: the face seen from there
+        return seen_by(shared_fit(fit, measurement, capture, key), leader, own)
     if key is not None or light is None or not light.fitted_on_face or not fit.converged:
         return shared_fit(fit, measurement, capture, key)
-    return fit_light(fit, measurement, capture.camera, model, light, schedule, **shared)
+    return fit_light(fit, measurement, own, model, light, schedule, **shared)
 
 
 def fit_light(fit: ShapeFit, measurement, camera, model, light, schedule: ShapeSchedule | None = None, *,

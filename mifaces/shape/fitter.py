@@ -16,6 +16,7 @@ import mitsuba as mi
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..capture.camera import relative_pose
 from ..model.geometry import rotation_matrix
 from ..model.mesh import mitsuba_mesh
 from ..runtime.status import DIVERGED, NOT_CONVERGED
@@ -24,7 +25,7 @@ from .energy import POINT, Energy, directed
 from .layout import Layout, adjacency
 from .result import ShapeFit, ShapeOptions, ShapeSchedule, Weights
 from .targets import (FRONTAL, light_direction, metric_distances, normalised, rotation_centre, start_light,
-                      start_translation)
+                      start_translation, triangulated_translation)
 
 #: Steps between the host's reads of the fit's terms (the history's spacing).
 CHUNK = 10
@@ -89,8 +90,12 @@ class Fitter:
 
     def __init__(self, model, camera, images: dict, targets, weights: Weights, schedule: ShapeSchedule, rng,
                  light_world=None, fit_focal=True, initial_color=None, initial=None, fixed=(), distances=(),
-                 facing_min: float = ShapeOptions.facing_min):
+                 facing_min: float = ShapeOptions.facing_min, views: dict | None = None, view_targets=()):
+        """``views``: image key -> the camera of each photograph another camera of the shot took;
+        ``view_targets``: ``(camera, vertices, pixels)`` of the feature points clicked in them
+        (:class:`~mifaces.shape.energy.Energy`'s ``views`` and ``view_features``)."""
         self.model, self.camera, self.weights, self.schedule, self.rng = model, camera, weights, schedule, rng
+        self.views = {key: (view, *relative_pose(camera, view)) for key, view in (views or {}).items()}
         self.fit_focal = fit_focal
         self.facing_min = float(facing_min)  # ShapeOptions.facing_min
         _, self.feature_vertices, self.feature_pixels = targets
@@ -115,8 +120,12 @@ class Fitter:
         if len(self.candidates) < 100:
             self.candidates = np.flatnonzero(used)
         self.initial_color = initial_color
-        self.start_translation = start_translation(model, camera, self.feature_vertices, self.feature_pixels,
-                                                   self.centre)
+        view_features = [(view, *relative_pose(camera, view), vertices, pixels)
+                         for view, vertices, pixels in view_targets]
+        triangulated = triangulated_translation(model, camera, self.feature_vertices, self.feature_pixels,
+                                                self.centre, view_features) if view_features else None
+        self.start_translation = triangulated if triangulated is not None else start_translation(
+            model, camera, self.feature_vertices, self.feature_pixels, self.centre)
         #: per photograph with a directed light (:func:`~mifaces.shape.energy.directed`): its start
         #: angles and its lamp's distance (mm) from the face centre, infinite (a directional light)
         #: unless the capture's calibration gives the lamp's position
@@ -130,7 +139,8 @@ class Fitter:
             self.light_angles[key], self.light_distance[key] = (el, az), distance
         self.energy = Energy(model, camera, self.layout, weights, self.images, self.feature_vertices,
                              self.feature_pixels, metric_distances(distances, model), self.centre,
-                             self.light_distance, adjacency=self.arrays.adjacency)
+                             self.light_distance, adjacency=self.arrays.adjacency, views=self.views,
+                             view_features=view_features)
         self._scene = None  # the Mitsuba scene of the full mesh, its positions updated per visibility update
 
     def initial(self) -> np.ndarray:
@@ -193,8 +203,14 @@ class Fitter:
         d = -p / dist[:, None]  # towards the camera
         origin = p + eps * n
 
-        # rays towards the camera, then towards each directed light's lamp: one ray_test
+        # rays towards the camera, towards the shot's other cameras, then towards each directed
+        # light's lamp: one ray_test
         origins, directions, lengths = [origin], [d], [np.maximum(dist - 2 * eps, eps)]
+        for _, A, b in self.views.values():
+            to_view = -A.T @ b - p
+            length = np.linalg.norm(to_view, axis=1)
+            origins.append(origin), directions.append(to_view / length[:, None])
+            lengths.append(np.maximum(length - 2 * eps, eps))
         for key, distance in self.light_distance.items():
             el, az = theta[L[f"{key}.light_angles"]]
             ld = np.broadcast_to(light_direction(el, az), p.shape)
@@ -210,8 +226,10 @@ class Fitter:
         ray.maxt = mi.Float(np.concatenate(lengths).astype(np.float32))
         occluded = np.asarray(scene.ray_test(ray), bool).reshape(-1, len(p))
         seen = ~occluded[0] & (np.sum(n * d, axis=1) > self.facing_min)
-        lit = {key: ~occluded[1 + i] for i, key in enumerate(self.light_distance)}
-        self.energy.set_visibility(seen, lit)
+        seen_by = {key: ~occluded[1 + i] & (np.sum(n * directions[1 + i], axis=1) > self.facing_min)
+                   for i, key in enumerate(self.views)}
+        lit = {key: ~occluded[1 + len(self.views) + i] for i, key in enumerate(self.light_distance)}
+        self.energy.set_visibility(seen, lit, seen_by)
         dr.eval()
 
     # ---- optimisation ------------------------------------------------------------------------

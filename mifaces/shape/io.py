@@ -78,6 +78,8 @@ def write_index(out, capture, model, fits: list[ShapeFit], reference=None, model
              "model_shape_modes": int(model.metadata.get("shape_modes_of", model.shape_dim)),
              "frame": "camera (OpenCV), mm",
              "camera": capture.camera.to_json(), "texture_reference": reference,
+             **({"cameras": {ident: camera.to_json() for ident, camera in capture.cameras.items()}}
+                if capture.several_cameras else {}),
              "ambient": "fitted" if capture.ambient_light else "held at zero (the capture's \"ambient\": \"none\")",
              "measurements": {}}
     old = out / INDEX
@@ -93,6 +95,8 @@ def write_index(out, capture, model, fits: list[ShapeFit], reference=None, model
                  "feature_rms_px": fit.loss.get("feature_rms_px"), "image_rms": fit.loss.get("image_rms"),
                  "message": fit.message,
                  "shared_with": fit.shared_with, "estimated": list(fit.estimated)}
+        if capture.several_cameras:  # its vertices are in the frame of the camera that took it
+            entry["camera"] = next(m.camera for m in capture.measurements if m.name == fit.measurement)
         entry["sha256"] = {name: file_sha256(out / name) for name in (entry["vertices"], entry["parameters"])
                            if name is not None and (out / name).is_file()}
         index["measurements"][fit.measurement] = entry
@@ -129,10 +133,10 @@ def shapes_in_world(fits: list[ShapeFit], capture) -> dict[str, np.ndarray]:
         Measurement name -> (N, 3) float32 vertices, world frame, mm. Fits that
         did not converge are left out, with a warning.
     """
-    camera = load_capture(capture).camera
+    capture = load_capture(capture)
     _warn_left_out([f"{fit.measurement} ({fit.status})" for fit in fits if not fit.converged])
-    return {fit.measurement: camera.to_world(fit.vertices_camera.astype(np.float32)).astype(np.float32)
-            for fit in fits if fit.converged}
+    return {fit.measurement: capture.camera_of(fit.measurement).to_world(fit.vertices_camera.astype(np.float32))
+            .astype(np.float32) for fit in fits if fit.converged}
 
 
 def _load_vertices(path: Path, name: str, entry: dict) -> np.ndarray:
@@ -175,18 +179,21 @@ def load_fitted_shapes(path, capture=None) -> dict[str, np.ndarray]:
         raise FileNotFoundError(f"no {INDEX} in {path}: not a fit-shape output folder")
     index = json.loads(index_path.read_text())
     if capture is not None:
-        camera = load_capture(capture).camera
+        capture = load_capture(capture)
+        camera_of = capture.camera_of
     else:
-        c = index["camera"]
-        camera = Camera(c["width"], c["height"], c["fx"], c["fy"], c["cx"], c["cy"], np.asarray(c["distortion"]),
-                        np.asarray(c["rotation"]), np.asarray(c["translation"]))
+        cameras = {ident: Camera.from_json(c) for ident, c in index.get("cameras", {}).items()}
+        first = Camera.from_json(index["camera"])
+
+        def camera_of(name):
+            return cameras.get(index["measurements"][name].get("camera"), first)
     out = {}
     skipped = []
     for name, entry in index["measurements"].items():
         if entry.get("status") != CONVERGED or not entry.get("vertices"):
             skipped.append(f"{name} ({entry.get('status')})")
             continue
-        out[name] = camera.to_world(_load_vertices(path, name, entry)).astype(np.float32)
+        out[name] = camera_of(name).to_world(_load_vertices(path, name, entry)).astype(np.float32)
     _warn_left_out(skipped)
     return out
 

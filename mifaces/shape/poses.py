@@ -9,10 +9,12 @@ import warnings
 from dataclasses import replace
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
+from ..capture.camera import relative_pose
 from .energy import DIFFUSE, POINT
 from .result import ShapeFit
-from .targets import light_direction, reference_measurement, start_light_angles
+from .targets import FRONTAL, light_direction, reference_measurement, start_light_angles
 
 #: Feature points of measurements labelled with one pose that differ from the pose's fitted
 #: measurement's by more than this fraction of their spread (RMS) are not one pose: fitted apart.
@@ -24,9 +26,10 @@ JOINT_PHOTOGRAPHS = 8
 
 def pose_groups(capture, measurements) -> list[list]:
     """``measurements`` grouped by their ``pose`` label, each group led by the measurement its
-    shared fit is made on (:func:`~mifaces.shape.targets.reference_measurement` among them);
-    unlabelled measurements, and labelled ones whose feature points disagree with the leader's
-    (:data:`POSE_AGREEMENT`), are groups of their own."""
+    shared fit is made on (:func:`~mifaces.shape.targets.reference_measurement` among those of the
+    first camera that took the pose); unlabelled measurements, and labelled ones whose feature
+    points disagree with the leader's (:data:`POSE_AGREEMENT`; compared within one camera: a shot's
+    other cameras see the face elsewhere), are groups of their own."""
     labelled: dict[str, list] = {}
     groups = []
     for m in measurements:
@@ -35,12 +38,13 @@ def pose_groups(capture, measurements) -> list[list]:
         else:
             labelled.setdefault(m.pose, []).append(m)
     for pose, members in labelled.items():
-        leader = next(m for m in members if m.name == reference_measurement(capture, members))
+        first = [m for m in members if m.camera == members[0].camera]
+        leader = next(m for m in first if m.name == reference_measurement(capture, first))
         group = [leader]
         for m in members:
             if m is leader:
                 continue
-            if points_agree(leader.feature_points, m.feature_points):
+            if m.camera != leader.camera or points_agree(leader.feature_points, m.feature_points):
                 group.append(m)
             else:
                 warnings.warn(f"measurement {m.name!r} is labelled pose {pose!r} but its feature points differ "
@@ -63,13 +67,31 @@ def points_agree(a: dict, b: dict) -> bool:
     return float(np.sqrt(np.mean(np.sum((pa - pb) ** 2, axis=1)))) <= POSE_AGREEMENT * spread
 
 
-def companions(capture, others) -> list:
-    """The photographs of a pose fitted with its leader: those whose light the capture gives
-    (an unknown light is fitted afterwards on the pose's face, :func:`~mifaces.shape.fit.fit_light`),
+def companions(capture, others, leader=None) -> list:
+    """The photographs of a pose fitted with its ``leader``: every one another camera took (the
+    shot's views, which fix the face's depth), then those whose light the capture gives (an unknown
+    light is fitted afterwards on the pose's face, :func:`~mifaces.shape.fit.fit_light`),
     :data:`JOINT_PHOTOGRAPHS` at most with the leader, in the capture's order, each with its light."""
+    camera = None if leader is None else leader.camera
     given = [(m, capture.light(m.light) if m.light else None) for m in others]
-    return [(m, light) for m, light in given
-            if light is None or not light.direction_fitted][:JOINT_PHOTOGRAPHS - 1]
+    views = [(m, light) for m, light in given if camera is not None and m.camera != camera]
+    seen = {m.name for m, _ in views}
+    lit = [(m, light) for m, light in given
+           if m.name not in seen and (light is None or not light.direction_fitted)]
+    return (views + lit)[:JOINT_PHOTOGRAPHS - 1]
+
+
+def seen_by(fit: ShapeFit, source, target) -> ShapeFit:
+    """``fit``, made in camera ``source``'s frame, in camera ``target``'s: its camera-space
+    vertices, pose and light directions (the world-frame vertices are the same)."""
+    A, b = relative_pose(source, target)
+    rotation = A @ fit.rotation
+    light = {key: dict(values, direction=A @ np.asarray(values["direction"], np.float64)) if "direction" in values
+             else values for key, values in (fit.light or {}).items()}
+    turn = Rotation.from_matrix(FRONTAL.T @ rotation).as_euler("YXZ", degrees=True)  # R_y R_x R_z
+    return replace(fit, vertices_camera=(fit.vertices_camera @ A.T + b).astype(np.float32), rotation=rotation,
+                   translation=A @ fit.translation + b, yaw_pitch_roll=turn, light=light,
+                   focal_length=np.array([target.fx, target.fy], np.float64))
 
 
 def own_lights(fit: ShapeFit) -> ShapeFit:
@@ -90,7 +112,7 @@ def shared_fit(fit: ShapeFit, measurement, capture, key: str | None = None) -> S
     else:
         source = capture.light(measurement.light) if measurement.light else None
         head = fit.vertices_world.mean(axis=0)
-        angles = start_light_angles(source, capture.camera, head) if np.all(np.isfinite(head)) else None
+        angles = start_light_angles(source, capture.camera_of(fit.measurement), head) if np.all(np.isfinite(head)) else None
         if angles is not None:
             light[POINT] = {"direction": light_direction(*angles)}
     joint = f"fitted jointly with {fit.measurement!r}" if fitted is not None else f"geometry of {fit.measurement!r}"

@@ -133,6 +133,29 @@ def start_translation(model, camera, feature_vertices, feature_pixels, centre) -
     return np.array([xy[0], xy[1], z])
 
 
+def triangulated_translation(model, camera, feature_vertices, feature_pixels, centre, views) -> np.ndarray | None:
+    """The start of :func:`start_translation` for a shot that other calibrated cameras saw too: the
+    feature points both ``camera`` and a view see, triangulated (the midpoint of the two rays), and
+    the frontal mean face moved onto their centroid; the face's depth then comes from the rays, not
+    from the mean face's size. ``views``: ``(view, A, b, vertices, pixels)`` per other photograph,
+    ``x_view = A x + b`` from ``camera``'s frame. None where no view shares three points."""
+    own = {int(v): p for v, p in zip(feature_vertices, feature_pixels)}
+    points, model_points = [], []
+    for view, A, b, vertices, pixels in views:
+        origin = -np.asarray(A).T @ np.asarray(b)
+        for v, p in zip(vertices, pixels):
+            if int(v) not in own:
+                continue
+            d0 = camera.pixel_rays(own[int(v)])
+            d1 = np.asarray(A).T @ view.pixel_rays(p)
+            (s, u), *_ = np.linalg.lstsq(np.stack([d0, -d1], axis=1), origin, rcond=None)
+            points.append((s * d0 + origin + u * d1) / 2)
+            model_points.append((model.shape_mean[int(v)].astype(np.float64) - centre) @ FRONTAL.T)
+    if len(points) < 3:
+        return None
+    return np.mean(points, axis=0) - np.mean(model_points, axis=0)
+
+
 def start_light(camera, translation, light_world) -> tuple[float, float, float]:
     """The calibrated lamp seen from the face at camera-space position ``translation`` (mm):
     ``(elevation, azimuth, distance)``, angles in radians as in :func:`light_direction`,
@@ -162,7 +185,7 @@ def light_axis_angle(capture, measurement) -> float:
     an unknown light without a stated guess (its estimate starts frontal)."""
     if not measurement.light:
         return 0.0
-    light, cam = capture.light(measurement.light), capture.camera
+    light, cam = capture.light(measurement.light), capture.camera_of(measurement)
     fp = np.array(list(measurement.feature_points.values()))
     distance = max(float(np.linalg.norm(cam.translation)), 1.0)
     centre = cam.to_world(cam.pixel_rays(fp.mean(0)) * distance)

@@ -13,7 +13,7 @@ every photograph (:func:`head_turns`). Lengths in mm, world frame.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -41,6 +41,9 @@ POSES = [(0.0, 0.0, 0.0), (-25.0, 0.0, 0.0), (25.0, 0.0, 0.0)]
 #: The head turns of an environment-lit capture spread over these yaw and pitch ranges (degrees).
 TURN_YAW = (-35.0, 35.0)
 TURN_PITCH = (-12.0, 12.0)
+#: Yaw (degrees, about the head's vertical axis) of each camera of a simulated rig (``simulate(cameras=N)``
+#: takes the first N): the studio camera in front, then others turned to either side.
+RIG_YAWS = (0.0, -30.0, 30.0, -50.0, 50.0)
 #: Mitsuba's path tracer: shadows and one-bounce-and-more interreflection.
 INTEGRATOR = {"type": "path", "max_depth": 4, "hide_emitters": False}
 #: The diffuse light of the companion and steel-sphere outline pictures: uniform white from all around.
@@ -79,6 +82,9 @@ class Studio:
         The environment lighting every photograph instead of the point light
         (then ``light_positions`` is empty, ``exposure`` 1 and ``per_light``
         one condition holding every measurement).
+    rig : tuple of Camera
+        Several calibrated cameras photographing each shot (:func:`rig_cameras`; the first is
+        ``camera``), or empty: ``camera`` alone.
     """
 
     camera: Camera
@@ -92,6 +98,13 @@ class Studio:
     integrator: dict = field(default_factory=lambda: dict(INTEGRATOR))
     poses: list[tuple[float, float, float]] = field(default_factory=lambda: list(POSES))
     environment: EnvironmentLight | None = None
+    rig: tuple[Camera, ...] = ()
+
+    @property
+    def views(self) -> tuple[Camera, ...]:
+        """The cameras that photograph the face: the rig's (the first is :attr:`camera`, whose frame
+        the lights and the environment are placed in), or the one camera."""
+        return self.rig or (self.camera,)
 
     @property
     def schedule(self) -> list[tuple[int, int]]:
@@ -138,6 +151,20 @@ def studio_camera(width: int, height: int, head: np.ndarray) -> Camera:
     position = head + np.array([0.0, 0.0, CAMERA_DISTANCE])
     return Camera(width, height, fy, fy, width / 2 - 0.5, height / 2 - 0.5, np.zeros(5), rotation,
                   -rotation @ position)
+
+
+def rig_cameras(camera: Camera, head: np.ndarray, count: int) -> tuple[Camera, ...]:
+    """``count`` cameras like ``camera``, turned about the vertical axis through ``head`` by the first
+    ``count`` of :data:`RIG_YAWS` (the first is ``camera`` itself)."""
+    if not 1 <= count <= len(RIG_YAWS):
+        raise ValueError(f"cameras must be from 1 to {len(RIG_YAWS)}, got {count!r}")
+    out = [camera]
+    for yaw in np.radians(RIG_YAWS[1:count]):
+        turn = np.array([[np.cos(yaw), 0.0, np.sin(yaw)], [0.0, 1.0, 0.0], [-np.sin(yaw), 0.0, np.cos(yaw)]])
+        rotation = camera.rotation @ turn.T
+        position = head + turn @ (camera.position - head)
+        out.append(replace(camera, rotation=rotation, translation=-rotation @ position))
+    return tuple(out)
 
 
 def set_up_studio(width: int, height: int, head: np.ndarray, measurements: int, rng: np.random.Generator,

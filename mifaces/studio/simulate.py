@@ -75,17 +75,17 @@ from ..render import check_render_size
 from ..io.result_set import check_result_target, result_set
 from ..model import load_model
 from ..runtime.progress import progress as progress_bar
-from ..render import face_meshes, region_bsdf, region_meshes
+from ..render import face_meshes, mitsuba_sensor, region_bsdf, region_meshes
 from .photograph import albedo_texture, annotate, photograph_face, photograph_spheres, visible_feature_points
 from . import subsurface as translucent
 from .detail import fine_detail, span_residual
 from .environment_light import check_environment
-from .scene import set_up_studio
+from .scene import RIG_YAWS, rig_cameras, set_up_studio
 from .subject import head_pose, make_subject, with_detail
 from .truth import brdf_with_overrides
 from .varying import VARYING, map_textures, region_means, varying_maps
-from .write import (ground_truth, light_names, pose_name, true_measurement, write_environment, write_manifest,
-                    write_photographs, write_sphere_photographs)
+from .write import (camera_id, ground_truth, light_names, pose_name, true_measurement, view_name, write_environment,
+                    write_manifest, write_photographs, write_sphere_photographs)
 
 PRESETS = {"paper": {"measurements": 22}}
 #: Most measurements one simulated capture holds.
@@ -115,7 +115,8 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
              measurements: int = 6, resolution: tuple[int, int] = (512, 512), seed: int = 0,
              preset: str | None = None, spp: int = 64, companion: str = "diffuse",
              albedo_resolution: int = 1024, progress: bool = True, force: bool = False, varying: bool = False,
-             detail: bool = False, subsurface: bool = False, environment: str | None = None) -> SimulationResult:
+             detail: bool = False, subsurface: bool = False, environment: str | None = None,
+             cameras: int = 1) -> SimulationResult:
     """Simulate a capture session and write it, with ground truth, to ``out``.
 
     Parameters
@@ -178,6 +179,13 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
         exactly it; no steel spheres, no point lights, no white target; each measurement
         its own head turn (:func:`mifaces.studio.scene.head_turns`).
 
+    cameras : int
+        Calibrated cameras photographing every shot (:func:`mifaces.studio.scene.rig_cameras`: the
+        studio camera, then others turned by :data:`mifaces.studio.scene.RIG_YAWS` about the head):
+        each measurement is then one photograph per camera, ``m00`` from the first, ``m00_c1``,
+        ``m00_c2``, ... from the others, sharing a ``shot`` (one head pose). The steel spheres and
+        the lights' calibration use the first camera.
+
     Returns
     -------
     SimulationResult
@@ -206,6 +214,7 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     measurements, (width, height) = _check_arguments(measurements, resolution, preset, companion, spp,
                                                      albedo_resolution, seed)
     check_environment(environment)
+    cameras = _integer("cameras", cameras, 1, len(RIG_YAWS))
     out = check_result_target(out, KIND, force)  # before the work: writable, and nothing to lose
     face_model = load_model(model)
     truth = brdf_with_overrides(brdf, brdf_params)
@@ -220,11 +229,13 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     info = {"measurements": measurements, "resolution": [width, height], "companion": companion}
     if environment is not None:
         info["environment"] = environment
+    if cameras > 1:
+        info["cameras"] = cameras
     with result_set(out, KIND, force=force, info=info) as folder:
         lights, render_seconds = _simulate_into(folder, face_model, truth, measurements, width, height, seed, spp, companion,
                                                 albedo_resolution, progress, {"varying": varying, "detail": detail,
                                                                            "subsurface": subsurface},
-                                                environment)
+                                                environment, cameras)
     return SimulationResult(out, measurements, lights, time.perf_counter() - t_start, render_seconds)
 
 
@@ -250,19 +261,21 @@ def _truth_subject(face_model, truth: dict, rng: np.random.Generator, seed: int,
 
 def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width: int, height: int, seed: int,
                    spp: int, companion: str, albedo_resolution: int, progress: bool,
-                   variation: dict, environment: str | None = None) -> tuple[int, list[float]]:
+                   variation: dict, environment: str | None = None, cameras: int = 1) -> tuple[int, list[float]]:
     """The simulation of :func:`simulate`, written into folder ``out``: the number of light
     conditions and each measurement's render time."""
     rng = np.random.default_rng(seed)  # one generator, drawn from in a fixed order: subject, lights, frames
     subject, maps, recorded, description = _truth_subject(face_model, truth, rng, seed, albedo_resolution, variation)
     texture, textures = albedo_texture(subject.albedo), map_textures(maps)
     studio = set_up_studio(width, height, subject.head, measurements, rng, spp, environment)
+    if cameras > 1:
+        studio = replace(studio, rig=rig_cameras(studio.camera, subject.head, cameras))
     if studio.environment is not None:
         description.update(studio.environment.description)
     if variation["subsurface"]:
         studio = replace(studio, integrator=translucent.INTEGRATOR)
     seeds = itertools.count(seed * 1000 + 1)  # Monte Carlo seed of each render, in order
-    frames = measurements * (1 + (companion in ("diffuse", "both")) + (companion in ("exposures", "both")))
+    frames = measurements * cameras * (1 + (companion in ("diffuse", "both")) + (companion in ("exposures", "both")))
     spheres = 0 if studio.environment is not None else 2 * len(studio.per_light)
     bar = progress_bar(total=frames + spheres, desc="simulating", unit="frame", enabled=progress)
 
@@ -282,13 +295,18 @@ def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width:
         pose = head_pose(face_model, subject, studio.poses[pi], rng)
         vertices = pose.vertices.astype(np.float32)
         meshes = true_face_meshes(face_model, vertices, truth, texture, textures, variation["subsurface"])
-        photographs = photograph_face(studio, meshes, li, companion, spp, seeds, rng)
-        bar.update(1 + (photographs.diffuse is not None) + bool(photographs.exposures))
-        entry = write_photographs(out, name, light_name[li], pose_name(studio, li, pi), photographs)
-        # feature points: the visible landmarks, as an annotator would click them
-        entry["feature_points"], exact = annotate(meshes, pose.vertices, face_model, names, studio.camera, rng)
-        entries.append(entry)
-        true_measurements.append(true_measurement(name, light_name[li], pose, exact, face_model))
+        for view, camera in enumerate(studio.views):  # one shot: every camera, the same head pose
+            seen_by = replace(studio, sensor=mitsuba_sensor(camera, spp)) if view else studio
+            photographs = photograph_face(seen_by, meshes, li, companion, spp, seeds, rng)
+            bar.update(1 + (photographs.diffuse is not None) + bool(photographs.exposures))
+            taken = view_name(name, view)
+            entry = write_photographs(out, taken, light_name[li], pose_name(studio, li, pi), photographs)
+            if studio.rig:
+                entry["camera"], entry["shot"] = camera_id(view), entry.pop("pose")
+            # feature points: the visible landmarks, as an annotator would click them
+            entry["feature_points"], exact = annotate(meshes, pose.vertices, face_model, names, camera, rng)
+            entries.append(entry)
+            true_measurements.append(true_measurement(taken, light_name[li], pose, exact, face_model))
         render_seconds.append(time.perf_counter() - t0)
     bar.close()
 

@@ -36,6 +36,17 @@ def light_names(studio: Studio) -> list[str]:
     return [light_name(light) for light in range(len(studio.per_light))]
 
 
+def camera_id(view: int) -> str:
+    """The manifest id of camera ``view`` of a simulated rig."""
+    return f"c{view}"
+
+
+def view_name(name: str, view: int) -> str:
+    """The name of measurement ``name``'s photograph by camera ``view`` of a rig: the first camera's
+    keeps ``name`` (a one-camera capture's names), the others' add ``_c<view>``."""
+    return name if view == 0 else f"{name}_{camera_id(view)}"
+
+
 def pose_name(studio: Studio, light: int, pose: int) -> str:
     """The manifest's name of pose ``pose`` of condition ``light``: each head turn of an
     environment-lit capture its own."""
@@ -85,14 +96,18 @@ def write_photographs(out: Path, name: str, light: str, pose: str, photographs: 
 
 def write_manifest(out: Path, studio: Studio, face_model, neutral: np.ndarray, lights: list[dict],
                    measurements: list[dict]) -> None:
-    """Write ``capture.json``: the camera, the white target (none for an environment-lit capture:
+    """Write ``capture.json``: the camera (or a rig's cameras), the white target (none for an environment-lit capture:
     its map is in pixel value), three metric distances on the ``neutral`` face, and the light and
     measurement entries."""
     landmarks = face_model.ibug_landmarks
     distances = [{"from": a, "to": b, "mm": round(float(np.linalg.norm(
         neutral[landmarks[FEATURE_POINTS[a]]] - neutral[landmarks[FEATURE_POINTS[b]]])), 3)}
         for a, b in DISTANCE_PAIRS]
-    manifest = {"format": FORMAT, "version": VERSION, "camera": studio.camera.to_json()}
+    manifest = {"format": FORMAT, "version": VERSION}
+    if studio.rig:
+        manifest["cameras"] = [{"id": camera_id(view), **camera.to_json()} for view, camera in enumerate(studio.rig)]
+    else:
+        manifest["camera"] = studio.camera.to_json()
     if studio.environment is None:
         manifest["white_target"] = {"value": white_value(studio).tolist(), "reflectance": 1.0,
                                     "distance_mm": LIGHT_DISTANCE, "intensity": studio.intensity.tolist(),

@@ -3,7 +3,7 @@
 A fit can put the right shape at the wrong place: a face a few mm too far
 from the camera looks almost the same in the photograph, yet every
 reflectance sample then sits on the wrong surface. So the error is measured
-three ways, over the front of the face (:func:`front_of_face`: the vertices
+several ways, over the front of the face (:func:`front_of_face`: the vertices
 of the true face that look forward, from the chin up, hair left out; ears,
 neck and the back of the head may stay coarse):
 
@@ -23,6 +23,10 @@ neck and the back of the head may stay coarse):
   off in depth at 1.2 m. Where ``scaled_mm`` is far below ``world_mm``, the
   world error is that ambiguity; a face of the right size at the wrong depth
   leaves ``scaled_mm`` equal to ``world_mm`` (``docs/shape_estimation.md``).
+* ``similarity_mm``: the mean distance over every vertex (the whole head) after
+  the best similarity transform (rotation, translation and one scale) of the
+  fitted face onto the true one: all that one camera can observe, since it
+  cannot tell a face's distance from its size (:func:`similarity_error`).
 * ``normal_deg``: the mean angle between the fitted and the true vertex
   normals, in the world frame: what shading sees. A face moved along its
   depth keeps it, a turned face or a bent surface does not. Vertex distances
@@ -33,6 +37,7 @@ neck and the back of the head may stay coarse):
 from __future__ import annotations
 
 import numpy as np
+from skimage.transform import SimilarityTransform
 
 from ..model.geometry import vertex_normals
 from ..model.regions import REGIONS
@@ -59,10 +64,20 @@ def rigid_alignment(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray,
     return rotation, mt - rotation @ ms
 
 
+def similarity_error(fitted: np.ndarray, true: np.ndarray) -> float:
+    """Mean distance (mm) of ``fitted`` from ``true`` vertices after the similarity transform (rotation,
+    translation, one scale) that brings them closest (Umeyama's, ``skimage``): what one camera can
+    observe of a face, whose distance and size it cannot tell apart."""
+    f, t = np.asarray(fitted, np.float64), np.asarray(true, np.float64)
+    transform = SimilarityTransform.from_estimate(f, t)
+    return float(np.linalg.norm(transform(f) - t, axis=1).mean())
+
+
 def shape_errors(fitted: np.ndarray, true: np.ndarray, mask: np.ndarray, camera, triangles=None) -> dict:
     """World-frame errors of one fitted face against the true one (both (V, 3) world mm, the same
-    model's vertices), over the vertices ``mask`` selects; ``camera`` gives the viewing axis; with the
-    model's ``triangles``, the normals' error too."""
+    model's vertices), over the vertices ``mask`` selects (``similarity_mm``: over every vertex, the
+    whole head); ``camera`` gives the viewing axis; with the model's ``triangles``, the normals' error
+    too."""
     out = {}
     if triangles is not None:
         cosine = np.sum(vertex_normals(fitted, triangles) * vertex_normals(true, triangles), axis=1)[mask]
@@ -77,6 +92,7 @@ def shape_errors(fitted: np.ndarray, true: np.ndarray, mask: np.ndarray, camera,
             "depth_mm": float(np.mean((f - t) @ axis)),
             "scale_pct": 100.0 * (scale - 1.0),
             "scaled_mm": float(np.linalg.norm(f - centre - scale * (t - centre), axis=1).mean()),
+            "similarity_mm": similarity_error(fitted, true),
             **out, "vertices": int(mask.sum())}
 
 
@@ -90,7 +106,7 @@ def capture_shape_errors(face_model, shapes: dict, true_shapes: dict, camera) ->
             out[name] = shape_errors(fitted, true_shapes[name], mask, camera, face_model.triangles)
     if out:
         out["summary"] = {f"{stat}_{key}": float(fn([e[key] for e in out.values()]))
-                          for key in ("world_mm", "aligned_mm", "scaled_mm", "normal_deg")
+                          for key in ("world_mm", "aligned_mm", "scaled_mm", "similarity_mm", "normal_deg")
                           for stat, fn in (("max", np.max), ("mean", np.mean))}
         out["summary"]["max_abs_depth_mm"] = float(max(abs(e["depth_mm"]) for k, e in out.items() if k != "summary"))
         out["summary"]["max_abs_scale_pct"] = float(max(abs(e["scale_pct"]) for k, e in out.items()
