@@ -5,11 +5,16 @@ is simulated twice: with the studio camera alone, and with ``cameras=3`` (the st
 more turned by :data:`mifaces.studio.scene.RIG_YAWS` about the head, every shot photographed by all
 three). The same face, lights and poses; the default shape fit (:func:`mifaces.shape.fit_shape`)
 on each. Per photograph: the mean distance from the truth over the front of the face in the world
-frame, after a rigid alignment, the depth offset along the first camera's axis, and the fit's
-status (:func:`mifaces.validation.shape_errors.capture_shape_errors`). Nothing was tuned on these
+frame, after a rigid alignment, the depth offset along the first camera's axis, the mean distance
+over the whole head after a similarity alignment (what one camera can observe), and the fit's
+status (:func:`mifaces.validation.shape_errors.capture_shape_errors`). Then the Cook–Torrance fit
+(:func:`mifaces.reflectance.fit_brdf`, default options: a 512² texture) on those shapes, samples from
+every photograph of every camera in one texture, and its albedo map against the truth's
+(:func:`mifaces.validation.truth_errors.ground_truth_errors`): RMSE over the texels with samples,
+over every face texel, and how many texels have samples. Nothing was tuned on these
 seeds (``roles.py``: report seeds).
 
-    python validation/multi_camera.py --seeds 2001 2002 --resolution 256 --work DIR
+    python validation/multi_camera.py --seeds 2001 2002 --resolution 512 --work DIR
 
 Writes ``validation/results/multi_camera.json`` (or ``--out``).
 """
@@ -29,13 +34,15 @@ import numpy as np
 from mifaces import load_capture, simulate
 from mifaces.io.atomic import write_json
 from mifaces.shape.io import load_geometry
+from mifaces.reflectance import fit_brdf
 from mifaces.shape import fit_shape, shapes_in_world
+from mifaces.validation.truth_errors import ground_truth_errors
 from mifaces.validation.shape_errors import capture_shape_errors
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: The rigs compared: cameras per shot.
 RIGS = (1, 3)
-KEYS = ("world_mm", "aligned_mm", "depth_mm")
+KEYS = ("world_mm", "aligned_mm", "depth_mm", "similarity_mm")
 
 
 def rig_run(seed: int, cameras: int, resolution: int, work: Path) -> dict:
@@ -56,9 +63,14 @@ def rig_run(seed: int, cameras: int, resolution: int, work: Path) -> dict:
                                      **{k: round(float(errors[fit.measurement][k]), 3) for k in KEYS
                                         if fit.measurement in errors}}
                    for fit in fits}
+    t = time.perf_counter()
+    estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, progress=False)
+    albedo = {k: (round(v, 5) if isinstance(v, float) else v)
+              for k, v in ground_truth_errors(estimate, capture)["albedo"].items()}
+    albedo["fit_seconds"] = round(time.perf_counter() - t, 1)
     first = [name for name, p in photographs.items() if p["camera"] in ("c0", "camera") and "world_mm" in p]
     return {"cameras": cameras, "photographs": photographs, "converged": sum(f.converged for f in fits),
-            "fits": len(fits), "fit_seconds": round(seconds, 1),
+            "fits": len(fits), "fit_seconds": round(seconds, 1), "albedo": albedo,
             # each shot once (the first camera's photograph; the others share its face)
             "shots": {f"{stat}_{k}": round(float(fn([abs(photographs[n][k]) if k == "depth_mm" else photographs[n][k]
                                                       for n in first])), 3)
@@ -68,7 +80,7 @@ def rig_run(seed: int, cameras: int, resolution: int, work: Path) -> dict:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[2001, 2002])
-    parser.add_argument("--resolution", type=int, default=256)
+    parser.add_argument("--resolution", type=int, default=512)
     parser.add_argument("--work", type=Path, default=Path("out/multi_camera"))
     parser.add_argument("--out", type=Path, default=RESULTS / "multi_camera.json")
     args = parser.parse_args(argv)
@@ -81,6 +93,9 @@ def main(argv: list[str] | None = None) -> None:
                   + ", ".join(f"{k} {v}" for k, v in run["shots"].items()), flush=True)
     pooled = {str(c): {k: round(float(np.mean([r["shots"][k] for r in runs if r["cameras"] == c])), 3)
                        for k in runs[0]["shots"]} for c in RIGS}
+    for c in RIGS:
+        pooled[str(c)].update({f"albedo_{k}": round(float(np.mean([r["albedo"][k] for r in runs if r["cameras"] == c])), 5)
+                               for k in ("rmse_sampled", "rmse_face", "texels_sampled")})
     write_json(args.out, {
         "label": "SIMULATED", "command": "python validation/" + Path(__file__).name + " " + " ".join(sys.argv[1:]),
         "settings": {"seeds": args.seeds, "resolution": args.resolution, "rigs": list(RIGS)},

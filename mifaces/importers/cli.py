@@ -1,5 +1,5 @@
 """The command line of the importers (:mod:`mifaces.cli.commands` adds them): ``mifaces import yaleb |
-diligent | colmap | transforms`` and ``mifaces export-calibration``, each one API call."""
+diligent | colmap | transforms | photos`` and ``mifaces export-calibration``, each one API call."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from ..capture.types import TRANSFERS
 from ..cli.options import default
 from .calibration_io import SPARSE, TRANSFORMS, export_calibration, import_calibration, import_colmap, import_transforms
 from .diligent import ARCHIVE as DILIGENT_ARCHIVE, SPLIT as DILIGENT_SPLIT, import_object as import_diligent
+from .photos import DEFAULT_FOCAL_35MM, import_photos
 from .yaleb import SPLIT, import_subject
 
 
@@ -90,6 +91,28 @@ def transforms(transforms_json: str, out: str, force: bool, diffuse: str | None,
     capture at OUT: its cameras, one unknown light per image (docs/capture.md)."""
     path = import_transforms(transforms_json, out, force=force, diffuse=diffuse, transfer=transfer, scale=scale)
     click.echo(f"wrote the capture {path}")
+
+
+@import_.command("photos")
+@click.argument("photo_dir", type=click.Path(exists=True, file_okay=False))
+@click.argument("out", type=click.Path(file_okay=False))
+@click.option("--focal-35mm", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="The lens's focal length in 35 mm terms (default: from the pictures' EXIF, else "
+                   f"{DEFAULT_FOCAL_35MM:g} mm).")
+@click.option("--force", is_flag=True, help="Write over an existing capture at OUT.")
+def photos(photo_dir: str, out: str, focal_35mm: float | None, force: bool) -> None:
+    """Write the JPEG and PNG photographs of one face in PHOTO_DIR as a capture at OUT: one uncalibrated camera
+    (focal length from EXIF), each photograph its own unknown light and pose, feature points detected
+    (docs/capture.md)."""
+    try:
+        result = import_photos(photo_dir, out, force=force, focal_35mm=focal_35mm,
+                               progress=lambda name: click.echo(f"  {name}: face found"))
+    except (FileExistsError, ValueError) as error:
+        raise click.ClickException(str(error)) from None
+    for name, why in result.skipped.items():
+        click.echo(f"  {name}: left out, {why}")
+    click.echo(f"wrote the capture {result.path}: {result.measurements} photographs, focal length guess "
+               f"{result.focal_px:.0f} px ({result.focal_from})")
 
 
 @click.command("export-calibration")

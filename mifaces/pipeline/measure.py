@@ -355,7 +355,7 @@ def _refine_shapes(out: Path, taken: SampleSet, fits, model: str, report: dict, 
         report["shape_errors_refined"] = capture_shape_errors(face, result.shapes, true_shapes,
                                                               capture.camera).get("summary")
     if fits is not None:
-        refined = refined_fits(fits, result, capture.camera)
+        refined = refined_fits(fits, result, capture)
         for fit in refined:
             write_fit(out / REFINED_SHAPES, fit, face)
         write_index(out / REFINED_SHAPES, capture, face, refined, model_source=model_source(face))
@@ -381,7 +381,8 @@ def _fit_model(out: Path, taken: SampleSet, model: str, scene: FaceScene, first,
     if estimated_lights(capture.lights):
         estimate = replace(estimate, lighting={"lights": "estimated", "reflectance": "relative", "note": RELATIVE_NOTE})
     light = capture.light(first.light)
-    write_estimate(estimate, out / "brdf" / model, scene, capture.camera, light, force=True)  # measure's own folder
+    camera = capture.camera_of(first)
+    write_estimate(estimate, out / "brdf" / model, scene, camera, light, force=True)  # measure's own folder
     lamp = estimate.fitted_light(light)
     timings[f"fit_brdf_{model}"] = time.perf_counter() - t
     entry = estimate.to_json()
@@ -389,9 +390,9 @@ def _fit_model(out: Path, taken: SampleSet, model: str, scene: FaceScene, first,
     entry["ground_truth"] = ground_truth_errors(estimate, capture)
     brdf, albedo = estimate.to_json(), estimate.albedo.albedo
     maps = {"normals": estimate.normal_texture(), "specular": estimate.specular_texture()}
-    rendered = scene.render(brdf, albedo, capture.camera, lamp, spp=options.spp, **maps)
-    relit = scene.render(brdf, albedo, capture.camera, novel, spp=options.spp, **maps)
+    rendered = scene.render(brdf, albedo, camera, lamp, spp=options.spp, **maps)
+    relit = scene.render(brdf, albedo, camera, novel, spp=options.spp, **maps)
     photo = first.image.pixels
-    on_face = face_pixels(scene, capture.camera)  # the fitted face's pixels, whatever the background shows
+    on_face = face_pixels(scene, camera)  # the fitted face's pixels, whatever the background shows
     entry["training_rmse"] = relative_rmse(rendered, photo, on_face)
     return entry, FittedModel(model, photo, rendered, relit, estimate)

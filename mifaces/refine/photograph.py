@@ -133,7 +133,7 @@ def photograph_view(capture, m, face: FaceScene, brdf: dict, albedo: np.ndarray,
     PhotographView
     """
     k = downsample
-    camera = capture.camera
+    camera = capture.camera_of(m)
     light, lamp = _light(capture, m, lamp_radius)
     kind = "sphere" if lamp is not None else light.emitter_kind
     description = face.scene(brdf, albedo, camera, light, normals=normals, specular=specular)

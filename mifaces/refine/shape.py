@@ -179,7 +179,7 @@ class ShapeProblem:
             vertices = self.shapes[m.name]
             face = FaceScene(face_model, vertices)
             view = photograph_view(capture, m, face, appearance["brdf"], appearance["albedo"],
-                                   face_model.region_map, scale, lamp_radius, schedule.factor(capture.camera),
+                                   face_model.region_map, scale, lamp_radius, schedule.factor(capture.camera_of(m)),
                                    schedule.spp, schedule.integrator(), normals=appearance["normals"],
                                    specular=appearance["specular"], sample_border=True)
             self.light_kinds.add(view.light_kind)

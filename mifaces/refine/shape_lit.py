@@ -58,12 +58,13 @@ def refine_fits(capture, fits: list, face_model, resolution: int = 256, brdf: st
         shapes = shapes_in_world(fits, capture)
     samples = capture_samples(capture, shapes, face_model, resolution, progress=False)
     result = refine_lit(capture, shapes, face_model, samples, brdf, resolution, schedule, progress=progress)
-    return refined_fits(fits, result, capture.camera), result
+    return refined_fits(fits, result, capture), result
 
 
-def refined_fits(fits: list, result: ShapeRefinement, camera) -> list:
+def refined_fits(fits: list, result: ShapeRefinement, capture) -> list:
     """``fits`` with the refined vertices of ``result`` where it was accepted (converged fits only;
-    the others, and all of them for a refinement not accepted, come back unchanged)."""
+    the others, and all of them for a refinement not accepted, come back unchanged), each in the frame
+    of its photograph's camera (``capture.camera_of``)."""
     if not result.accepted:
         return list(fits)
     out = []
@@ -73,7 +74,8 @@ def refined_fits(fits: list, result: ShapeRefinement, camera) -> list:
             out.append(fit)
             continue
         out.append(replace(fit, vertices_world=np.asarray(world, np.float32),
-                           vertices_camera=camera.to_camera(np.asarray(world, np.float64)).astype(np.float32),
+                           vertices_camera=capture.camera_of(fit.measurement).to_camera(
+                               np.asarray(world, np.float64)).astype(np.float32),
                            message=(fit.message + "; " if fit.message else "") + "refined by differentiable rendering"))
     return out
 
