@@ -139,6 +139,7 @@ REGISTRY: tuple[Entry, ...] = (
           **_FIT),
     Entry("depth_cameras", _py("depth_cameras", "--seeds", "0", "1", "2"), ("depth_cameras.json",),
           kind="deterministic", minutes=4, rtol=1e-9, atol=1e-12),
+    Entry("multi_camera", _py("multi_camera", "--work", "{work}"), ("multi_camera.json",), minutes=15, **_FIT),
     Entry("shape_depth", _py("shape_depth", "--work", "{work}"), ("shape_depth.json",), minutes=30, **_FIT),
     Entry("shape_depth_tuning", _py("shape_depth", "--seeds", "11", "12", "--work", "{work}", "--out",
                                     "shape_depth_tuning.json"), ("shape_depth_tuning.json",), minutes=30, **_FIT),

@@ -40,7 +40,7 @@ from results_format import DASH, get  # noqa: E402  (the formatting helpers)
 from results_tables_design import sec_design_metrics  # noqa: E402  (the redesign issue's measuring stick)
 from results_tables_studies import sec_refine_judge  # noqa: E402
 from results_tables_fits import (  # noqa: E402  (one function per result layout)
-    sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_depth_cameras, sec_floor_depth,
+    sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_depth_cameras, sec_floor_depth, sec_multi_camera,
     sec_joint_outline, sec_light_balance_measure, sec_light_calibration_bias, sec_refine, sec_refine_gradient,
     sec_refine_seeds, sec_refine_shape_default, sec_shape_depth, sec_shape_estimation, sec_silhouette_depth,
     sec_truths, sec_uncertainty_cost, sec_uncertainty_measure, sec_uncertainty_texel_albedo, sec_unknown,
@@ -191,6 +191,8 @@ LAYOUTS = {
     "design_metrics": ("The redesign's measuring stick (issue 49)", "no data: a count over the source",
                        sec_design_metrics),
     "depth_cameras": ("What the clicks pin of a face's depth, with one camera or two", "SIMULATED", sec_depth_cameras),
+    "multi_camera": ("The shape fit with one camera and with three calibrated cameras", "SIMULATED",
+                     sec_multi_camera),
     "silhouette_depth": ("Whether the head's outline could pin each photograph's depth", "SIMULATED",
                          sec_silhouette_depth),
     "joint_outline": ("One identity over all photographs, with the head's outline", "SIMULATED", sec_joint_outline),

@@ -302,6 +302,26 @@ def sec_depth_cameras(d):
                           "feature points, mean error (mm)"], rows)
 
 
+def sec_multi_camera(d):
+    settings = d.get("settings") or {}
+    lines = [f"The default capture at {text(settings.get('resolution'))}², seeds "
+             f"{text(', '.join(map(str, settings.get('seeds') or [])))} (report seeds), photographed by one camera "
+             "and by a rig of three (`simulate --cameras 3`); the default shape fit, then the Cook–Torrance fit. "
+             "Shots: each head pose once (mm; the depth offset as an absolute value along the first camera's axis); "
+             "the albedo map against the truth's.", ""]
+    rows = []
+    for run in rows_of(d.get("runs")):
+        s, a = run.get("shots") or {}, run.get("albedo") or {}
+        rows.append([text(run.get("seed")), text(run.get("cameras")), f"{text(run.get('converged'))}/{text(run.get('fits'))}",
+                     f"{fixed(s.get('mean_world_mm'), 2)}, {fixed(s.get('max_world_mm'), 2)}",
+                     f"{fixed(s.get('mean_aligned_mm'), 2)}, {fixed(s.get('max_aligned_mm'), 2)}",
+                     f"{fixed(s.get('mean_depth_mm'), 2)}, {fixed(s.get('max_depth_mm'), 2)}",
+                     fixed(s.get("mean_similarity_mm"), 2), fixed(a.get("rmse_sampled"), 4), text(a.get("texels_sampled"))])
+    return lines + table(["seed", "cameras", "converged", "world (mm): mean, worst", "rigidly aligned: mean, worst",
+                          "depth: mean, worst", "similarity-aligned, whole head", "albedo RMSE (sampled texels)",
+                          "texels with samples"], rows)
+
+
 def sec_shape_depth(d):
     lines = [f"Default capture (512², six photographs), seeds {text(', '.join(map(str, get(d, 'seeds') or [])))}; "
              "the fitted faces against the truth over the front of the face (mm). `size`: the fitted face's size "

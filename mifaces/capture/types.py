@@ -199,7 +199,7 @@ class Capture:
             name, measurement = measurement, next((m for m in self.measurements if m.name == measurement), None)
             if measurement is None:
                 raise KeyError(f"no measurement {name!r} in {self.path}")
-        if not self.cameras:
+        if not self.several_cameras:  # the one camera is `camera` (a replaced one included)
             return self.camera
         return self.cameras[measurement.camera]
 
