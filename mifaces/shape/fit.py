@@ -51,7 +51,7 @@ def estimated_quantities(camera, distances, fit_focal: bool = True, views: int =
 
 def fit_measurement(measurement, camera, model="builtin", light=None, *, schedule: ShapeSchedule | None = None,
                     weights: Weights | None = None, options: ShapeOptions | None = None, initial: dict | None = None,
-                    initial_color=None, fixed=(), distances=(), companions=(), progress=True,
+                    fixed=(), distances=(), companions=(), progress=True,
                     camera_of=None) -> ShapeFit:
     """Fit the morphable model to one measurement (paper sec. 4.2), from the mean face.
 
@@ -79,11 +79,9 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
         Start values of parameter blocks by name, overriding the defaults:
         ``'rotation'`` (yaw, pitch, roll in radians), ``'translation'`` (camera-space
         position of :func:`~mifaces.shape.targets.rotation_centre`, mm), ``'log_focal'``,
-        ``'shape'``, ``'expression'``, ``'color'``, and per image (``'point.'``/``'diffuse.'``)
+        ``'shape'``, ``'expression'``, ``'color'`` (texture coefficients: the paper starts every fit
+        from the texture of a frontal, frontally lit view), and per image (``'point.'``/``'diffuse.'``)
         ``light_angles``, ``light_color``, ``ambient``, ``specular``, ``contrast``, ``gain``, ``offset``.
-    initial_color : (C,) array, optional
-        Texture coefficients to start from (the paper starts every fit from the
-        texture of a frontal, frontally lit view).
     fixed : iterable of str
         Parameter blocks held at their start values.
     distances : iterable of mifaces.capture.Distance
@@ -121,16 +119,15 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
         used[POINT], lights[POINT] = measurement.image, light
     if options.use_diffuse and measurement.diffuse is not None:
         used[DIFFUSE] = measurement.diffuse
-    views, view_targets = {}, []
+    views = {}
     for index, (companion, companion_light) in enumerate(companions, start=1):
         used[lit_key(index)], lights[lit_key(index)] = companion.image, companion_light
         view = camera_of(companion) if camera_of is not None else camera
         if view is not camera:
-            views[lit_key(index)] = view
-            view_targets.append((view, *feature_targets(companion, model)[1:]))
+            views[lit_key(index)] = (view, *feature_targets(companion, model)[1:])
     images = {key: image.pixels for key, image in used.items()}
     for key, img in images.items():
-        view = views.get(key, camera)
+        view = views.get(key, (camera,))[0]
         if img.shape[:2] != (view.height, view.width):
             raise ShapeFitError(f"measurement {measurement.name!r}: {key} image is {img.shape[1]}x{img.shape[0]}, "
                                 f"the camera {view.width}x{view.height}")
@@ -149,9 +146,9 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
         initial.update(dict.fromkeys(held, 0.0))
         fixed = tuple(fixed) + tuple(held)
     fitter = Fitter(model, camera, images, targets, weights, schedule, np.random.default_rng(options.seed),
-                    light_world=positions, fit_focal=options.fit_focal and not views, initial_color=initial_color,
+                    light_world=positions, fit_focal=options.fit_focal and not views,
                     initial=initial, fixed=fixed, distances=distances,
-                    facing_min=options.facing_min, views=views, view_targets=view_targets)
+                    facing_min=options.facing_min, views=views)
     greyscale = bool(used) and all(getattr(image, "greyscale", False) for image in used.values())
     fitter.energy.greyscale = greyscale  # read by Energy._shade
     own_bar = progress is True
@@ -176,7 +173,7 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
         status, message = _status(theta, terms, history, limit, options.max_image_rms)
     return replace(fit, status=status, message=message, seconds=time.perf_counter() - t0,
                    estimated=estimated_quantities(camera, distances, options.fit_focal,
-                                                  1 + len({id(view) for view in views.values()})))
+                                                  1 + len({id(view[0]) for view in views.values()})))
 
 
 def _rms(num: float, den: float) -> float:
@@ -322,7 +319,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     for leader, *others in groups:
         light = capture.light(leader.light) if leader.light else None
         fit = fit_measurement(leader, capture.camera_of(leader), model, light=light, schedule=schedule,
-                              initial_color=initial_color, fixed=fixed,
+                              initial=None if initial_color is None else {"color": initial_color}, fixed=fixed,
                               companions=companions(capture, others, leader), camera_of=capture.camera_of, **shared)
         if leader.name == reference and fit.converged:
             initial_color = fit.color
@@ -337,7 +334,7 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
             light = capture.light(leader.light) if leader.light else None
             together = companions(capture, others, leader)
             fit = fit_measurement(leader, capture.camera_of(leader), model, light=light, schedule=second,
-                                  initial_color=initial_color, fixed=tuple(fixed) + ("shape",),
+                                  fixed=tuple(fixed) + ("shape",),
                                   initial=dict(_start_from(first, model, leader, together), shape=identity),
                                   companions=together, camera_of=capture.camera_of, **shared)
             leaders[leader.name] = replace(fit, seconds=fit.seconds + first.seconds,

@@ -89,13 +89,13 @@ class Fitter:
     """One fit: the start, the sample sets, visibility, and Adam over the schedule's stages."""
 
     def __init__(self, model, camera, images: dict, targets, weights: Weights, schedule: ShapeSchedule, rng,
-                 light_world=None, fit_focal=True, initial_color=None, initial=None, fixed=(), distances=(),
-                 facing_min: float = ShapeOptions.facing_min, views: dict | None = None, view_targets=()):
-        """``views``: image key -> the camera of each photograph another camera of the shot took;
-        ``view_targets``: ``(camera, vertices, pixels)`` of the feature points clicked in them
-        (:class:`~mifaces.shape.energy.Energy`'s ``views`` and ``view_features``)."""
+                 light_world=None, fit_focal=True, initial=None, fixed=(), distances=(),
+                 facing_min: float = ShapeOptions.facing_min, views: dict | None = None):
+        """``views``: image key -> ``(camera, vertices, pixels)`` of each photograph another camera
+        of the shot took: that camera, and the model vertices and pixels of the feature points clicked
+        in it (:class:`~mifaces.shape.energy.Energy`'s ``views`` and ``view_features``)."""
         self.model, self.camera, self.weights, self.schedule, self.rng = model, camera, weights, schedule, rng
-        self.views = {key: (view, *relative_pose(camera, view)) for key, view in (views or {}).items()}
+        self.views = {key: (view[0], *relative_pose(camera, view[0])) for key, view in (views or {}).items()}
         self.fit_focal = fit_focal
         self.facing_min = float(facing_min)  # ShapeOptions.facing_min
         _, self.feature_vertices, self.feature_pixels = targets
@@ -119,9 +119,8 @@ class Fitter:
         self.candidates = np.flatnonzero(used & (model.vertex_regions() != 0) & inner)
         if len(self.candidates) < 100:
             self.candidates = np.flatnonzero(used)
-        self.initial_color = initial_color
         view_features = [(view, *relative_pose(camera, view), vertices, pixels)
-                         for view, vertices, pixels in view_targets]
+                         for view, vertices, pixels in (views or {}).values()]
         triangulated = triangulated_translation(model, camera, self.feature_vertices, self.feature_pixels,
                                                 self.centre, view_features) if view_features else None
         self.start_translation = triangulated if triangulated is not None else start_translation(
@@ -157,8 +156,6 @@ class Fitter:
             theta[L[f"{image}.specular"]] = 0.05 if lit else 0.0
             theta[L[f"{image}.contrast"]] = 1.0
             theta[L[f"{image}.gain"]] = 1.0
-        if m.has_texture and self.initial_color is not None:
-            theta[L["color"]] = np.asarray(self.initial_color, np.float64)[: m.color_dim]
         if not m.has_texture:
             theta[L["albedo"]] = np.tile([0.55, 0.42, 0.36], m.vertex_count)
         for name, value in self.initial_blocks.items():
