@@ -16,6 +16,7 @@ import pytest
 import scipy.ndimage as ndi
 
 from mifaces.capture import Camera
+from mifaces.shape.projection import project as project_on_device
 from mifaces.model.geometry import rotation_matrix
 from mifaces.model.landmarks import FEATURE_POINTS
 from mifaces.shape import Weights, light_direction, rotation_centre
@@ -175,7 +176,7 @@ def test_energy_projects_as_the_camera(setup):
     rng = np.random.default_rng(5)
     depth = rng.uniform(300.0, 2000.0, 500)
     points = np.column_stack([rng.uniform(-1.0, 1.0, (500, 2)) * depth[:, None], depth])
-    u, v = energy._project([mi.Float(c.astype(np.float32)) for c in points.T], mi.Float(1.1))
+    u, v = project_on_device([mi.Float(c.astype(np.float32)) for c in points.T], mi.Float(1.1), energy.camera)
     camera = dataclasses.replace(CAMERA, fx=CAMERA.fx * 1.1, fy=CAMERA.fy * 1.1)
     np.testing.assert_allclose(np.column_stack([np.array(u), np.array(v)]), camera.project(points), rtol=1e-5,
                                atol=1e-3)

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..runtime.arrays import device_array
 from .layout import Layout
+from .projection import bilinear, moved, project
 from .layout import adjacency as triangle_adjacency
 from .result import Weights
 from .targets import FRONTAL, blurred
@@ -278,46 +279,6 @@ class Energy:
         q = [p[0] - c[0], p[1] - c[1], p[2] - c[2]]
         return [R[i][0] * q[0] + R[i][1] * q[1] + R[i][2] * q[2] + t[i] for i in range(3)]
 
-    @staticmethod
-    def _moved(pc, A, b):
-        """``A pc + b`` of points ``pc`` (3 Floats): into another camera's frame (:attr:`views`)."""
-        return [float(A[i][0]) * pc[0] + float(A[i][1]) * pc[1] + float(A[i][2]) * pc[2] + float(b[i])
-                for i in range(3)]
-
-    def _project(self, pc, focal, cam=None):
-        """Pixel coordinates of camera-space points (OpenCV model with distortion) in ``cam``
-        (default: the fit's camera)."""
-        cam = cam or self.camera
-        z = dr.maximum(pc[2], 1.0)
-        x, y = pc[0] / z, pc[1] / z
-        if np.any(cam.distortion):
-            d = np.zeros(8)
-            d[:len(cam.distortion)] = cam.distortion
-            k1, k2, p1, p2, k3, k4, k5, k6 = (float(v) for v in d)
-            r2 = x * x + y * y
-            radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-            x, y = (x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
-                    y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
-        return focal * cam.fx * x + cam.cx, focal * cam.fy * y + cam.cy
-
-    def _bilinear(self, image, u, v, cam=None):
-        """Image (flat RGB Float) at pixel coordinates (u, v) of ``cam`` (default: the fit's camera),
-        bilinear; returns (rgb, inside)."""
-        cam = cam or self.camera
-        w, h = cam.width, cam.height
-        inside = (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
-        uc, vc = dr.clip(u, 0, w - 1.001), dr.clip(v, 0, h - 1.001)
-        x0, y0 = dr.floor(uc), dr.floor(vc)
-        fx, fy = uc - x0, vc - y0
-        i0 = mi.UInt32(y0) * w + mi.UInt32(x0)
-
-        def at(i):
-            return dr.gather(mi.Vector3f, image, i)
-
-        top = at(i0) * (1 - fx) + at(i0 + 1) * fx
-        bottom = at(i0 + w) * (1 - fx) + at(i0 + w + 1) * fx
-        return top * (1 - fy) + bottom * fy, inside
-
     # ---- the energy ----------------------------------------------------------------------------
     def evaluate(self, theta_np: np.ndarray, feature_weight: float, image_weight: float, grad: bool = True):
         """E and its terms for parameters ``theta_np``; with ``grad``, also dE/dtheta (numpy).
@@ -415,14 +376,14 @@ class Energy:
         width = len(self.feature_vertices)
         R, t, focal = self._pose(theta, width)
         fp = dr.gather(mi.Vector3f, pos, self.dr_feature_local)
-        fu, fv = self._project(self._to_camera(fp, R, t), focal)
+        fu, fv = project(self._to_camera(fp, R, t), focal, self.camera)
         f_sq = (dr.square(fu - self.dr_feature_u) + dr.square(fv - self.dr_feature_v)) / (self.scale_px ** 2)
         dr.scatter_add(acc, f_sq, dr.full(mi.UInt32, self.slots["features"], width))
         for i, (cam, A, b, vertices, _) in enumerate(self.view_features):  # other cameras' clicks, their pixels
             width = len(vertices)
             R, t, _ = self._pose(theta, width)
             fp = dr.gather(mi.Vector3f, pos, self.dr_view_feature_local[i])
-            fu, fv = self._project(self._moved(self._to_camera(fp, R, t), A, b), 1.0, cam)
+            fu, fv = project(moved(self._to_camera(fp, R, t), A, b), 1.0, cam)
             f_sq = (dr.square(fu - self.dr_view_feature_u[i]) + dr.square(fv - self.dr_view_feature_v[i])) / (
                 self.scale_px ** 2)
             dr.scatter_add(acc, f_sq, dr.full(mi.UInt32, self.slots["features"], width))
@@ -452,7 +413,7 @@ class Energy:
         nc = mi.Vector3f(*[R[i][0] * n[0] + R[i][1] * n[1] + R[i][2] * n[2] for i in range(3)])
         pcv = mi.Vector3f(*pc)
         view = dr.normalize(-pcv)
-        u, v = self._project(pc, focal)
+        u, v = project(pc, focal, self.camera)
         facing = dr.maximum(dr.dot(nc, view), 0.0)
         albedo = self._albedo(acc, theta)
         for key in self.image_names:
@@ -460,12 +421,12 @@ class Energy:
                 cam, A, b = self.views[key]
                 centre = -np.asarray(A, np.float64).T @ np.asarray(b, np.float64)
                 seen_from = dr.normalize(mi.Vector3f(*[float(c) for c in centre]) - pcv)
-                uk, vk = self._project(self._moved(pc, A, b), 1.0, cam)
+                uk, vk = project(moved(pc, A, b), 1.0, cam)
                 facing_k, visible = dr.maximum(dr.dot(nc, seen_from), 0.0), self.dr_visible_by[key]
             else:
                 cam, seen_from, uk, vk, facing_k, visible = None, view, u, v, facing, self.dr_visible
             colour = self._shade(theta, key, albedo, nc, seen_from, pcv, t)
-            observed, inside = self._bilinear(self.dr_images[key], uk, vk, cam)
+            observed, inside = bilinear(self.dr_images[key], uk, vk, cam or self.camera)
             weight = visible * dr.select(inside, 1.0, 0.0) * dr.clip((facing_k - 0.1) * 5.0, 0.0, 1.0)
             residual = dr.squared_norm(colour - observed)
             dr.scatter_add(acc, weight * residual, dr.full(mi.UInt32, self.slots[f"{key}.num"], width))

@@ -1,0 +1,48 @@
+"""The camera geometry of the shape fit's energy on the Dr.Jit side (:mod:`mifaces.shape.energy`):
+points moved into another camera's frame, projected through a camera's lens (OpenCV's model), and
+a photograph read bilinearly where they land."""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+
+def moved(pc, A, b):
+    """``A pc + b`` of points ``pc`` (3 Floats): into another camera's frame (``Energy.views``)."""
+    return [float(A[i][0]) * pc[0] + float(A[i][1]) * pc[1] + float(A[i][2]) * pc[2] + float(b[i])
+            for i in range(3)]
+
+
+def project(pc, focal, cam):
+    """Pixel coordinates of camera-space points ``pc`` (3 Floats) in camera ``cam`` (OpenCV model with
+    distortion), its focal lengths times ``focal``."""
+    z = dr.maximum(pc[2], 1.0)
+    x, y = pc[0] / z, pc[1] / z
+    if np.any(cam.distortion):
+        d = np.zeros(8)
+        d[:len(cam.distortion)] = cam.distortion
+        k1, k2, p1, p2, k3, k4, k5, k6 = (float(v) for v in d)
+        r2 = x * x + y * y
+        radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+        x, y = (x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+                y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
+    return focal * cam.fx * x + cam.cx, focal * cam.fy * y + cam.cy
+
+
+def bilinear(image, u, v, cam):
+    """Image (flat RGB Float, ``cam``'s size) at pixel coordinates (u, v), bilinear; returns (rgb, inside)."""
+    w, h = cam.width, cam.height
+    inside = (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
+    uc, vc = dr.clip(u, 0, w - 1.001), dr.clip(v, 0, h - 1.001)
+    x0, y0 = dr.floor(uc), dr.floor(vc)
+    fx, fy = uc - x0, vc - y0
+    i0 = mi.UInt32(y0) * w + mi.UInt32(x0)
+
+    def at(i):
+        return dr.gather(mi.Vector3f, image, i)
+
+    top = at(i0) * (1 - fx) + at(i0 + 1) * fx
+    bottom = at(i0 + w) * (1 - fx) + at(i0 + w + 1) * fx
+    return top * (1 - fy) + bottom * fy, inside
