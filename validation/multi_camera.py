@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
@@ -35,7 +34,7 @@ from mifaces import load_capture, simulate
 from mifaces.io.atomic import write_json
 from mifaces.shape.io import load_geometry
 from mifaces.reflectance import fit_brdf
-from mifaces.shape import fit_shape, shapes_in_world
+from shape_depth import fitted_shapes
 from mifaces.validation.truth_errors import ground_truth_errors
 from mifaces.validation.shape_errors import capture_shape_errors
 
@@ -51,12 +50,7 @@ def rig_run(seed: int, cameras: int, resolution: int, work: Path) -> dict:
     capture = load_capture(folder)
     face = mifaces.load_model()
     _, truth = load_geometry(capture, "ground-truth")
-    t = time.perf_counter()
-    fits = fit_shape(capture, face, progress=False)
-    seconds = time.perf_counter() - t
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a failed fit is left out, and its status says so
-        shapes = shapes_in_world(fits, capture)
+    fits, shapes, seconds = fitted_shapes(capture, face)  # the default fit, as shape_depth.py runs it
     errors = capture_shape_errors(face, shapes, truth, capture.camera)
     camera = {m.name: m.camera for m in capture.measurements}
     photographs = {fit.measurement: {"status": fit.status, "camera": camera[fit.measurement],
