@@ -74,6 +74,8 @@ from mifaces.pipeline.measure import SHAPES, NoUsableShapeError, measure
 from mifaces.reflectance import FitOptions, fit_brdf, load_estimate
 from mifaces.refine.shape import ShapeRefineSchedule
 from mifaces.render import FaceScene
+from mifaces.render.face_pixels import texture_coordinates, texture_lookup
+from mifaces.validation.validator import relative_rmse
 from mifaces.reflectance.io import write_fitted
 from mifaces.refine import refine_estimate
 
@@ -96,6 +98,27 @@ def diffuse_only(brdf: dict) -> dict:
     """``brdf`` without its glossy part (a Phong lobe of zero weight over the same albedo)."""
     return {"model": "phong", "options": {}, "regions": {r: {"specular_reflectance": 0.0, "exponent": 1.0}
                                                          for r in brdf["regions"]}}
+
+
+def albedo_detail(albedo_map: np.ndarray, reference: np.ndarray, uv: np.ndarray, region_map: np.ndarray,
+                  valid: np.ndarray) -> float:
+    """Pearson r between the detail of a fitted albedo map seen through the fitted face (``uv``: each
+    pixel's texture coordinate, :func:`mifaces.render.face_pixels.texture_coordinates`) and a per-pixel
+    ``reference`` albedo (photometric stereo's), each less its mean over each region's pixels, over the
+    ``valid`` pixels. The map's grey value; NaN where either has no spread (a map constant per region)."""
+    ours = texture_lookup(np.asarray(albedo_map, np.float64).mean(axis=2), uv)
+    ref = np.asarray(reference, np.float64)
+    ref = ref.mean(axis=2) if ref.ndim == 3 else ref
+    valid = valid & np.isfinite(ref) & ~np.isnan(uv[..., 0])
+    region = texture_lookup(region_map, uv)
+    x, y = np.zeros_like(ours), np.zeros_like(ref)
+    for label in np.unique(region[valid]):
+        chosen = valid & (region == label)
+        x[chosen] = ours[chosen] - ours[chosen].mean()
+        y[chosen] = ref[chosen] - ref[chosen].mean()
+    if np.std(x[valid]) == 0 or np.std(y[valid]) == 0:
+        return float("nan")
+    return float(np.corrcoef(x[valid], y[valid])[0, 1])
 
 
 class Errors:
@@ -177,6 +200,13 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     errors = Errors()
     per_light = {}
     estimates = {m: load_estimate(out / "measure" / "brdf" / m) for m in models}
+    # the albedo maps' detail against photometric stereo's, seen through the fitted face; and photometric
+    # stereo's own residual on the first training photograph, beside each fit's (report.json's training_rmse)
+    uv = texture_coordinates(scene, camera)
+    detail = {m: albedo_detail(estimates[m]["albedo"], albedo_ps, uv, face.region_map, mask) for m in models}
+    first_photo = next(i for i in train_images if i.stem == first)
+    training_ps = relative_rmse(photometric_stereo.predict(albedo_ps, normals_ps, first_photo.direction)[..., None],
+                                first_photo.pixels[..., None], mask & (first_photo.pixels < SATURATED))
     estimates.update({f"{m}_refined": load_estimate(out / "refined" / m) for m in refined})
     t_render = time.perf_counter()
     for model in estimates:
@@ -216,9 +246,19 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     return {"subject": name, "train": [i.stem for i in train_images], "heldout": len(heldout),
             "fitted_yaw_pitch_roll_deg": poses,
             "training_rmse": {m: report["models"][m].get("training_rmse") for m in models},
+            "training_rmse_photometric_stereo": training_ps, "albedo_detail_r": detail,
             "face_pixels": int(mask.sum()), "relative_rmse": errors.relative_rmse(), "per_light": per_light,
             "shapes": report.get("shapes"), "refinement": refined or None,
             "shape_refinement": report.get("shape_refinement"), "seconds": seconds, "errors": errors}
+
+
+def spread(values) -> dict:
+    """Mean, standard deviation (n - 1), least and largest of per-subject figures (NaN left out)."""
+    values = np.asarray([v for v in values if v is not None and np.isfinite(v)], np.float64)
+    if not len(values):
+        return {"mean": None, "sd": None, "min": None, "max": None, "n": 0}
+    return {"mean": float(values.mean()), "sd": float(values.std(ddof=1)) if len(values) > 1 else None,
+            "min": float(values.min()), "max": float(values.max()), "n": int(len(values))}
 
 
 def summary(results: list[dict], models) -> dict:
@@ -238,7 +278,11 @@ def summary(results: list[dict], models) -> dict:
            "training_rmse": training, "lowest_heldout_model": min(models, key=lambda m: overall[m]["all"]),
            "fitted_pitch_deg": {"mean": float(np.mean(pitch)), "max_abs": float(np.max(np.abs(pitch)))}
            if pitch else None,
-           "best_vs_photometric_stereo": overall[best]["all"] / overall["photometric_stereo"]["all"]}
+           "best_vs_photometric_stereo": overall[best]["all"] / overall["photometric_stereo"]["all"],
+           "training_rmse_photometric_stereo": float(np.mean([r["training_rmse_photometric_stereo"] for r in results])),
+           # the spread over subjects (each subject's own pooled error), and the albedo maps' detail
+           "per_subject": {key: spread([r["relative_rmse"][key]["all"] for r in results]) for key in overall},
+           "albedo_detail_r": {m: spread([r["albedo_detail_r"][m] for r in results]) for m in models}}
     if f"{best}_refined" in overall:
         out["refined_vs_unrefined"] = {m: {g: overall[f"{m}_refined"][g] / overall[m][g] for g in overall[m]}
                                        for m in models}

@@ -3,10 +3,15 @@
 1. The plan: the options as the fit runs them (:meth:`FitOptions.resolved`), resolved once.
 2. The face's regions: each sample labelled with the region of its texel, the samples off the face
    left out, the arguments every region fit shares (:class:`FaceRegions`).
-3. The glossy fit, by the plan's strategy from :data:`GLOSSY_FITS`: one albedo per region
+3. With ``normals`` (the default), a normal per texel alternated with a fit of one albedo per region
+   with its per-texel offsets taken out (:func:`~mifaces.reflectance.maps.normals.refine_texel_normals`),
+   the samples then turned into the normals' frames: as photometric stereo solves a normal with each
+   pixel's albedo, the shading the fitted shape gets wrong is not read as albedo or gloss. The glossy
+   fit is then the last round's, refitted ``albedo_rounds`` times (at least once) with its intervals.
+4. Otherwise (``--no-normals``, or no texel with the samples a normal needs) the glossy fit, by the
+   plan's strategy from :data:`GLOSSY_FITS`, with its intervals: one albedo per region
    (``region``), refitted with the albedo's per-texel offsets taken out (``albedo_rounds``), or an
-   albedo per texel (``texel_albedo``, the default).
-4. With ``normals``, a normal per texel alternated with the fit.
+   albedo per texel (``texel_albedo``).
 5. The maps: the diffuse albedo per texel with the glossy part fixed, and with ``specular_maps`` the
    specular reflectance per texel.
 
@@ -69,6 +74,12 @@ class FaceRegions:
                       seed=options.seed, cluster=tile_clusters(on_face.texel, resolution, label=on_face.label))
         return cls(on_face, region_map, names, shared)
 
+    def with_samples(self, samples) -> FaceRegions:
+        """These regions with other samples of their texels (the samples in per-texel normals' frames):
+        the intervals' clusters made of those."""
+        cluster = tile_clusters(samples.texel, len(self.region_map), label=samples.label)
+        return FaceRegions(samples, self.region_map, self.names, {**self.shared, "cluster": cluster})
+
     def in_tiles(self) -> dict:
         """:attr:`shared` with the intervals' clusters tiles of texels (an albedo per texel)."""
         tile = max(1, round(TEXEL_TILE_AT_128 * len(self.region_map) / 128))
@@ -82,12 +93,18 @@ def fit_samples(taken, brdf, options: FitOptions, *, progress: bool = True) -> B
     t0 = time.perf_counter()
     plan = options.resolved()
     regions = FaceRegions.of(taken, brdf, options, progress)
-    fits, texel_albedo = GLOSSY_FITS[glossy_strategy(plan)](brdf, regions, plan)
-    samples, normals = regions.samples, None
-    if plan.normals:
-        normals = _refine_normals(brdf, fits, regions, options.normal_options, progress)
-        if normals is not None:
-            samples, fits = normals.samples, normals.fits
+    normals = None
+    if plan.normals:  # normals per texel from one albedo per region; its offsets, with intervals, in their frames
+        start = _refit(brdf, regions.samples, regions.names, **regions.shared, uncertainty=None)  # the next fit warns
+        normals = _refine_normals(brdf, start, regions, options.normal_options, progress)
+    if normals is not None:
+        regions = regions.with_samples(normals.samples)
+        fits, texel_albedo = _albedo_rounds(brdf, regions, normals.fits, plan.albedo_rounds, plan.uncertainty,
+                                            regions.shared, starts=True), False
+    else:
+        plan = dataclasses.replace(options, normals=False).resolved()
+        fits, texel_albedo = GLOSSY_FITS[glossy_strategy(plan)](brdf, regions, plan)
+    samples = regions.samples
     t_fit = time.perf_counter()
     by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
     albedo = refine_diffuse(brdf, by_label, samples, regions.region_map)

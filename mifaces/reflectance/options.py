@@ -40,10 +40,15 @@ class FitOptions:
     seed : int
         Seed of the subset draws.
     normals : bool
-        Estimate a normal per texel from its samples, alternating with the
-        region fit (:func:`mifaces.reflectance.maps.normals.refine_texel_normals`):
-        for fitted shapes, whose normals are a few degrees off. Left out, with
-        a warning, when no texel has the samples it needs.
+        Estimate a normal per texel from its samples, alternating with a fit of one
+        albedo per region (:func:`mifaces.reflectance.maps.normals.refine_texel_normals`),
+        then refit the glossy part in the normals' frames with the albedo's per-texel
+        offsets taken out (``albedo_rounds``, at least one), with its intervals
+        (conditional on the normals): fitted shapes' normals are a few degrees off, and
+        real faces have detail no model shape has. On by default: on the ten
+        development Yale subjects it took the held-out relighting error below photometric
+        stereo's (``docs/results.md``). Left out, with a warning, when no texel has the
+        samples it needs.
     normal_options : dict, optional
         Keyword arguments of ``refine_texel_normals`` (``prior_weight``, ``rounds``, ``tol``).
     specular_maps : bool
@@ -53,16 +58,16 @@ class FitOptions:
     uncertainty : str or None
         How each region fit's parameter uncertainty is estimated
         (:data:`mifaces.reflectance.fit.uncertainty.METHODS`; the jackknife over
-        texel tiles by default, see ``docs/uncertainty.md``), or None. Not
-        estimated with ``normals`` (whose fits see texels through their normals
-        too): those fits get empty ``uncertainty``.
+        texel tiles by default, see ``docs/uncertainty.md``), or None. With
+        ``normals``, the intervals of the last fit in the normals' frames: they hold
+        the normals as measured and leave out their own uncertainty.
     albedo_rounds : int
         Alternations of the region fit with the per-texel albedo: each refits the
         regions on the reflectance less each sample's albedo offset from its
         region's mean (:func:`mifaces.reflectance.maps.diffuse.albedo_offsets`), the
         albedo map refitted with the last round's glossy parts. 0: none (the fit
-        ``texel_albedo`` chooses). Given, it replaces ``texel_albedo``'s fit. (With
-        ``normals``, whose rounds do the same, ignored.)
+        ``texel_albedo`` chooses). Given, it replaces ``texel_albedo``'s fit. With
+        ``normals``, the rounds after theirs (at least one).
         The offsets are each texel's mean (not shrunk); the last round's intervals
         re-estimate them in every jackknife or sandwich replicate
         (:mod:`mifaces.reflectance.fit.uncertainty`), and still hold the truth less often
@@ -77,7 +82,7 @@ class FitOptions:
         that optimum), over tiles of
         :data:`~mifaces.reflectance.fit.uncertainty.TEXEL_TILE_AT_128`. On by default
         (``docs/uncertainty.md`` says why); False: the paper's one albedo per region.
-        Ignored with ``normals`` or ``albedo_rounds``. Where it measures no lobe on skin and
+        Ignored with ``normals`` (on by default: ``--no-normals`` for this fit) or ``albedo_rounds``. Where it measures no lobe on skin and
         the region fit does (too few photographs per texel), the region fit is kept, with a
         warning.
     balance_lights : bool
@@ -100,8 +105,9 @@ class FitOptions:
     fixed: dict | None = None
     schedule: SubsetSchedule | None = option(None, nested=SubsetSchedule)
     seed: int = option(0, bounds=(0, None))
-    normals: bool = option(False, help="Estimate a normal per texel alternating with each fit (normals.exr, which "
-                                       "scene.xml and the renders read).")
+    normals: bool = option(True, help="Estimate a normal per texel alternating with a fit of one albedo per "
+                                      "region, the glossy fit then in its frames (normals.exr, which scene.xml and "
+                                      "the renders read); --no-normals: the fitted shape's normals.")
     normal_options: dict | None = None
     specular_maps: bool = option(False, help="Estimate the specular reflectance per texel (specular.exr; renders "
                                              "read it).")
@@ -130,13 +136,13 @@ class FitOptions:
         return from_record(cls, data)
 
     def resolved(self) -> FitOptions:
-        """These options as :func:`~mifaces.reflectance.fit_brdf` plans to run them: ``normals``
-        (whose rounds refit the albedo) turns off ``albedo_rounds``, ``texel_albedo`` and the
-        uncertainty; ``albedo_rounds`` turns off ``texel_albedo``. (What the fit then left out,
+        """These options as :func:`~mifaces.reflectance.fit_brdf` plans to run them: ``normals`` (whose
+        rounds take the albedo's per-texel offsets out) makes ``albedo_rounds`` at least 1 and turns off
+        ``texel_albedo``; ``albedo_rounds`` turns off ``texel_albedo``. (What the fit then left out,
         where the data did not allow it: :meth:`BRDFEstimate.effective_options
         <mifaces.reflectance.result.BRDFEstimate.effective_options>`.)"""
         if self.normals:
-            return dataclasses.replace(self, albedo_rounds=0, texel_albedo=False, uncertainty=None)
+            return dataclasses.replace(self, albedo_rounds=max(1, self.albedo_rounds), texel_albedo=False)
         return dataclasses.replace(self, texel_albedo=self.texel_albedo and not self.albedo_rounds)
 
     def brdf_options(self) -> dict:

@@ -112,8 +112,9 @@ class BRDFEstimate:
         where no texel had the samples, specular maps for a model without a specular reflectance."""
         if self.fit_options is None:
             return None
-        return dataclasses.replace(self.fit_options.resolved(), texel_albedo=bool(self.texel_albedo),
-                                   normals=self.normals is not None, specular_maps=self.specular is not None)
+        ran = dataclasses.replace(self.fit_options, normals=self.fit_options.normals and self.normals is not None)
+        return dataclasses.replace(ran.resolved(), texel_albedo=bool(self.texel_albedo),
+                                   specular_maps=self.specular is not None)
 
     def fitted_light(self, light):
         """``light`` as this estimate was fitted under it (:func:`fitted_light`)."""

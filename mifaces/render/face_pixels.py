@@ -59,25 +59,40 @@ def face_pixels(scene: FaceScene, camera, spp: int | None = FOOTPRINT_SPP, regio
         coordinate its centre's ray hits (at least 1, the face's texels without a region), 0 where
         the ray misses the face.
     """
-    meshes = {key: part.mesh({"type": "diffuse"}) for key, part in scene.meshes.items()}
     if spp is not None:
         if region_map is not None:
             raise ValueError("region labels are those of the pixel centres' rays: give region_map with spp=None")
-        return depth_image(camera, meshes, spp) > 0
+        return depth_image(camera, {key: part.mesh({"type": "diffuse"}) for key, part in scene.meshes.items()},
+                           spp) > 0
+    uv = texture_coordinates(scene, camera)
+    hit = ~np.isnan(uv[..., 0])
+    if region_map is None:
+        return hit
+    return np.where(hit, np.maximum(texture_lookup(region_map, uv), 1), 0)
+
+
+def texture_coordinates(scene: FaceScene, camera) -> np.ndarray:
+    """The texture coordinate (u, v) where the ray through each pixel's centre first meets the face of
+    ``scene``: (H, W, 2) float32, NaN where it misses."""
+    meshes = {key: part.mesh({"type": "diffuse"}) for key, part in scene.meshes.items()}
     ys, xs = np.mgrid[0:camera.height, 0:camera.width]
     directions = camera.pixel_rays(np.stack([xs, ys], -1).reshape(-1, 2)) @ camera.rotation  # to world: R^T d
     origin = [mi.Float(np.full(len(directions), c, np.float32)) for c in camera.position]
     ray = mi.Ray3f(mi.Point3f(*origin), mi.Vector3f(np.ascontiguousarray(directions.T, np.float32)))
     si = mi.load_dict({"type": "scene", **meshes}).ray_intersect(ray)
-    hit = np.asarray(si.is_valid())
-    if region_map is None:
-        return hit.reshape(camera.height, camera.width)
-    uv = np.asarray(si.uv).T
-    r = region_map.shape[0]
-    col = np.clip((uv[:, 0] * r).astype(int), 0, r - 1)
-    row = np.clip((uv[:, 1] * r).astype(int), 0, r - 1)
-    labels = np.where(hit, np.maximum(region_map[row, col], 1), 0)
-    return labels.reshape(camera.height, camera.width)
+    uv = np.asarray(si.uv, np.float32).T
+    uv[~np.asarray(si.is_valid())] = np.nan
+    return uv.reshape(camera.height, camera.width, 2)
+
+
+def texture_lookup(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """``texture`` (R, R, ...) (row 0 at v = 0) at the texel of each coordinate of ``uv`` (..., 2), nearest
+    texel; coordinates that are NaN read texel (0, 0)."""
+    r = texture.shape[0]
+    uv = np.nan_to_num(uv, nan=0.0)
+    col = np.clip((uv[..., 0] * r).astype(int), 0, r - 1)
+    row = np.clip((uv[..., 1] * r).astype(int), 0, r - 1)
+    return texture[row, col]
 
 
 def front_of_face_pixels(face_model, vertices: np.ndarray, camera, spp: int = FOOTPRINT_SPP) -> np.ndarray:
@@ -99,4 +114,4 @@ def front_of_face_pixels(face_model, vertices: np.ndarray, camera, spp: int = FO
     return (face > 0) & (np.abs(face - whole) <= 1e-3 * np.maximum(whole, 1.0))
 
 
-__all__ = ["FOOTPRINT_SPP", "depth_image", "face_pixels", "front_of_face_pixels"]
+__all__ = ["FOOTPRINT_SPP", "depth_image", "face_pixels", "front_of_face_pixels", "texture_coordinates", "texture_lookup"]

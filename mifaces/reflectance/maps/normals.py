@@ -70,6 +70,11 @@ MIN_OBSERVATIONS = 3
 #: The start search of the normal step (radius, step, levels in degrees; see
 #: :func:`mifaces.reflectance.maps.normal_fit.search_start`): fitted shapes are off by a few degrees.
 SEARCH = (9.0, 3.0, 3)
+#: Most rounds of normal step and region fit. Chosen on development data (2026-12-06): on Yale B01 the
+#: rounds' loss fell 311.8, 295.6, 291.5 and 287.9 after eight; on the simulated default capture
+#: Cook-Torrance's held-out relative RMSE was 0.1183, 0.1131 and 0.1113 after one, two and three rounds
+#: against 0.1106 after eight, the fit 8 s against 15 s.
+NORMAL_ROUNDS = 3
 
 
 @dataclass
@@ -190,7 +195,7 @@ class _Region:
 
 
 def refine_texel_normals(model, fit, fits: dict, samples: ReflectanceSamples, names: dict, *,
-                         prior_weight: float = PRIOR_WEIGHT, rounds: int = 8, tol: float = 1e-3, search=SEARCH,
+                         prior_weight: float = PRIOR_WEIGHT, rounds: int = NORMAL_ROUNDS, tol: float = 1e-3, search=SEARCH,
                          smooth: float = 0.0, progress=None) -> TexelNormals:
     """Alternate the per-texel normal step with the region BRDF fit (module docstring).
 
