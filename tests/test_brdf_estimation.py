@@ -198,7 +198,7 @@ def test_scene_xml_is_the_scene_rendered_from_memory(capture_dir, estimate):
     light = capture.light(first.light)
     from_file = np.array(mi.render(mi.load_file(str(out / "scene.xml"), spp=4), seed=5))[..., :3]
     in_memory = FaceScene(face, shapes[first.name]).render(result.to_json(), result.albedo.albedo, capture.camera,
-                                                           light, spp=4, seed=5)
+                                                           light, spp=4, seed=5, normals=result.normal_texture())
     assert from_file.shape == in_memory.shape and in_memory.max() > 0
     np.testing.assert_allclose(from_file, in_memory, rtol=1e-4, atol=1e-5)
 
@@ -228,7 +228,7 @@ def test_render_in_a_novel_pose(capture_dir, estimate, tmp_path):
     by_hand = (vertices - centre) @ rotation_about(-capture.camera.rotation[1], 30).T + centre
     light = capture.light(capture.measurements[0].light)
     expected = FaceScene(face, by_hand).render(result.to_json(), result.albedo.albedo, capture.camera,
-                                               light, spp=4)
+                                               light, spp=4, normals=result.normal_texture())
     # the same samples: equal up to the rounding of the vertices (a pixel or two on the silhouette)
     assert np.mean(np.abs(turned - expected)[on_face]) < 1e-4 * np.mean(expected[on_face])
 
@@ -255,7 +255,7 @@ def test_brdf_moves_to_another_face(estimate, other_dir, tmp_path):
     assert np.mean(np.abs(moved - own)[on_face]) > 0.05 * np.mean(own[on_face])
     light = capture.light(capture.measurements[0].light)
     expected = FaceScene(face, shapes["m00"]).render(result.to_json(), result.albedo.albedo, capture.camera,
-                                                     light, spp=4)
+                                                     light, spp=4, normals=result.normal_texture())
     np.testing.assert_allclose(moved, expected, rtol=1e-5, atol=1e-6)
 
 

@@ -431,7 +431,8 @@ def test_a_result_folder_reads_back_as_the_estimate_written(small_capture, tmp_p
                                 (model.validate(fit.params), fit.status, fit.loss))  # (a prior's loss: NaN)
     np.testing.assert_array_equal(read.albedo.albedo, fitted.albedo.albedo.astype(np.float32))
     np.testing.assert_array_equal(read.specular_texture(), fitted.specular_texture().astype(np.float32))
-    assert read.normal_texture() is None and fitted.normal_texture() is None
+    assert fitted.normal_texture() is not None  # per-texel normals, the default: written and read back
+    np.testing.assert_allclose(read.normal_texture(), fitted.normal_texture(), atol=1e-6)
     (memory,) = export_face(fitted, tmp_path / "memory.glb", source=str(tmp_path / "ct"))
     (folder,) = export_face(tmp_path / "ct", tmp_path / "folder.glb")
     assert memory.read_bytes() == folder.read_bytes()

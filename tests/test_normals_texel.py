@@ -317,10 +317,13 @@ def test_cli_normals_flags_reach_the_api(monkeypatch, tmp_path):
     assert calls.get("specular_maps") is False  # measure: its own flag, off unless given
     calls.clear()
     CliRunner().invoke(main, ["measure", str(capture), "--out", str(tmp_path / "s"), "--specular-maps"])
-    assert calls.get("specular_maps") is True and calls.get("normals") is False
+    assert calls.get("specular_maps") is True and calls.get("normals") is True  # on by default
+    calls.clear()
+    CliRunner().invoke(main, ["measure", str(capture), "--out", str(tmp_path / "n"), "--no-normals"])
+    assert calls.get("normals") is False
     calls.clear()
     CliRunner().invoke(main, ["fit-brdf", str(capture), "--out", str(tmp_path / "p")])
-    assert calls.get("normals") is False and calls.get("specular_maps") is False
+    assert calls.get("normals") is True and calls.get("specular_maps") is False  # the defaults
     calls.clear()
     CliRunner().invoke(main, ["fit-brdf", str(capture), "--out", str(tmp_path / "q"), "--specular-maps"])
     assert calls.get("specular_maps") is True

@@ -87,9 +87,12 @@ def test_old_and_new_spellings_give_the_same_options(recwarn):
 
 
 def test_resolved_is_the_fits_plan():
-    assert FitOptions().resolved() == FitOptions()
-    assert FitOptions(normals=True).resolved() == FitOptions(normals=True, texel_albedo=False, uncertainty=None)
-    assert FitOptions(albedo_rounds=2).resolved() == FitOptions(albedo_rounds=2, texel_albedo=False)
+    # per-texel normals, the default: their glossy fit takes the albedo offsets out, once at least
+    assert FitOptions().resolved() == FitOptions(albedo_rounds=1, texel_albedo=False)
+    assert FitOptions(albedo_rounds=3).resolved() == FitOptions(albedo_rounds=3, texel_albedo=False)
+    assert FitOptions(normals=False).resolved() == FitOptions(normals=False)
+    assert FitOptions(normals=False, albedo_rounds=2).resolved() == FitOptions(normals=False, albedo_rounds=2,
+                                                                               texel_albedo=False)
     assert MeasureOptions(fit=FitOptions(normals=True)).resolved().fit == FitOptions(normals=True).resolved()
 
 

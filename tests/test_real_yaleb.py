@@ -68,9 +68,19 @@ def test_summary_pools_subjects_and_picks_the_best_model_by_its_training_error(r
                 errors.add(key, "small_shadows", prediction, photo, v)
                 e, p = sums.get(key, (0.0, 0.0))
                 sums[key] = (e + np.sum((prediction[v] - photo[v]) ** 2), p + np.sum(photo[v] ** 2))
+        detail = {"phong": 0.6 if subject == "a" else 0.8, "ward": float("nan")}  # ward's map constant per region
         results.append({"subject": subject, "errors": errors, "training_rmse": training,
-                        "fitted_yaw_pitch_roll_deg": {}})
+                        "fitted_yaw_pitch_roll_deg": {}, "relative_rmse": errors.relative_rmse(),
+                        "training_rmse_photometric_stereo": 0.05 if subject == "a" else 0.07,
+                        "albedo_detail_r": detail})
     out = real_yaleb.summary(results, models)
+    assert out["training_rmse_photometric_stereo"] == pytest.approx(0.06)
+    assert out["albedo_detail_r"]["phong"] == pytest.approx({"mean": 0.7, "sd": np.sqrt(0.02), "min": 0.6, "max": 0.8,
+                                                             "n": 2})
+    assert out["albedo_detail_r"]["ward"]["n"] == 0 and out["albedo_detail_r"]["ward"]["mean"] is None
+    per_subject = [r["relative_rmse"]["ward"]["all"] for r in results]
+    assert out["per_subject"]["ward"]["mean"] == pytest.approx(np.mean(per_subject))
+    assert out["per_subject"]["ward"]["sd"] == pytest.approx(np.std(per_subject, ddof=1))
     for key, (e, p) in sums.items():
         assert out["relative_rmse"][key]["all"] == pytest.approx(np.sqrt(e / p), rel=1e-12)
     assert out["best_model"] == "phong" and out["lowest_heldout_model"] == "ward"
@@ -78,6 +88,26 @@ def test_summary_pools_subjects_and_picks_the_best_model_by_its_training_error(r
                                                              / np.sqrt(sums["photometric_stereo"][0]
                                                                        / sums["photometric_stereo"][1]))
     assert out["best_vs_photometric_stereo"] > 1
+
+
+def test_albedo_detail_is_the_correlation_within_regions(real_yaleb):
+    """Each region's mean removed from both: a map that is the reference plus an offset per region
+    correlates perfectly; one constant per region has no detail (NaN); noise lowers r."""
+    rng = np.random.default_rng(3)
+    region_map = np.repeat(np.array([[1, 2], [3, 3]], np.uint8), 4, axis=0).repeat(4, axis=1)  # 8 x 8 texels
+    uv = np.stack(np.meshgrid((np.arange(8) + 0.5) / 8, (np.arange(8) + 0.5) / 8), axis=-1)  # pixel = texel
+    reference = rng.uniform(0.2, 0.8, (8, 8))
+    offsets = np.take(np.array([0.0, 0.3, -0.1, 0.2]), region_map)
+    valid = np.ones((8, 8), bool)
+    same = (reference + offsets)[..., None].repeat(3, axis=2)
+    assert real_yaleb.albedo_detail(same, reference, uv, region_map, valid) == pytest.approx(1.0)
+    flat = offsets[..., None].repeat(3, axis=2)
+    assert np.isnan(real_yaleb.albedo_detail(flat, reference, uv, region_map, valid))
+    noisy = same + rng.normal(0, 0.2, same.shape)
+    assert 0.2 < real_yaleb.albedo_detail(noisy, reference, uv, region_map, valid) < 0.95
+    missed = uv.copy()
+    missed[:4] = np.nan  # rays that miss the face do not count
+    assert real_yaleb.albedo_detail(same, reference, missed, region_map, valid) == pytest.approx(1.0)
 
 
 def test_only_the_largest_code_counts_as_saturated(real_yaleb):
