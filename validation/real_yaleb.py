@@ -162,12 +162,12 @@ def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> 
 
 
 def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shadow_angle: float,
-                resolution: int, normals: bool = False, refine: bool = False, refine_shape=False,
+                resolution: int, normals: bool | None = None, refine: bool = False, refine_shape=False,
                 unknown_lights: bool = False, interreflection: bool = False, texel_albedo: bool | None = None) -> dict:
     """Import, measure and relight one subject; its errors and timings. With ``unknown_lights`` the
     capture hides its light directions (``mifaces import yaleb --unknown-lights``) and ``measure``
     estimates them (``validation/unknown_lights.py``); the held-out lights are rendered as known.
-    ``texel_albedo`` None: :class:`FitOptions`' default."""
+    ``normals`` and ``texel_albedo`` None: :class:`FitOptions`' defaults (per-texel normals on)."""
     t0 = time.perf_counter()
     name = subject_dir.name
     capture_dir = import_subject(subject_dir, out / "capture", train=train, force=True, unknown_lights=unknown_lights)
@@ -175,8 +175,9 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     train_images, heldout = default_split(list(images.values()), train)
     t_measure = time.perf_counter()
     report = measure(out / "measure", capture_dir, models=models, progress=True, refine_shape=refine_shape,
-                     options=FitOptions(resolution=resolution, normals=normals, interreflection=interreflection,
-                                        **({} if texel_albedo is None else {"texel_albedo": texel_albedo})))
+                     options=FitOptions(resolution=resolution, interreflection=interreflection,
+                                        **{k: v for k, v in (("normals", normals), ("texel_albedo", texel_albedo))
+                                           if v is not None}))
     seconds = {"import": t_measure - t0, "measure": time.perf_counter() - t_measure}
     capture = load_capture(capture_dir, detect=False)
     # the faces the BRDFs were fitted on: the refined ones where this run kept a refinement

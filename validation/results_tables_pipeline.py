@@ -325,6 +325,44 @@ def _yale_table(overall, subjects):
     return lines
 
 
+#: Light elevation bands of the per-elevation breakdown (degrees, lower bound inclusive).
+ELEVATION_BANDS = ((-90, -15, "below (−40° to −20°)"), (-15, 15, "level (−10° to +10°)"),
+                   (15, 50, "above (+15° to +45°)"), (50, 91, "high (+50° to +90°)"))
+
+
+def _yale_albedo_and_training(overall):
+    """The albedo maps' detail against photometric stereo's, and the training residuals, over the subjects."""
+    detail = items(overall.get("albedo_detail_r"))
+    if not detail:
+        return []
+    lines = ["Albedo maps: Pearson r of each map's detail (seen through the fitted face in the frontal view, each "
+             "region's mean removed) with photometric stereo's per-pixel albedo, over the subjects:", ""]
+    lines += table(["model", "mean r", "sd", "least", "largest", "training RMSE (first photograph)"],
+                   [[m, fixed(get(v, "mean"), 3), fixed(get(v, "sd"), 3), fixed(get(v, "min"), 3),
+                     fixed(get(v, "max"), 3), pct(get(overall, "training_rmse", m))] for m, v in detail])
+    lines += [f"Photometric stereo's own residual on the same first training photograph: "
+              f"{pct(overall.get('training_rmse_photometric_stereo'))}.", ""]
+    return lines
+
+
+def _yale_by_elevation(subjects, best):
+    """Mean per-light relative RMSE of the best model and photometric stereo by the held-out light's elevation."""
+    lights = [v for _, s in subjects for _, v in items(get(s, "per_light"))]
+    if not lights or best is None:
+        return []
+    rows = []
+    for low, high, name in ELEVATION_BANDS:
+        chosen = [v for v in lights if isinstance(get(v, "elevation"), (int, float)) and low <= v["elevation"] < high]
+        if not chosen:
+            continue
+        ours, peer = (mean([get(v, k) for v in chosen]) for k in (best, "photometric_stereo"))
+        rows.append([name, str(len(chosen)), fixed(ours, 3), fixed(peer, 3),
+                     fixed(ours / peer, 2) if finite(ours) and finite(peer) and peer > 0 else DASH])
+    lines = [f"By the held-out light's elevation (mean per-light relative RMSE over the lights and subjects; best "
+             f"model {text(best)}):", ""]
+    return lines + table(["elevation", "held-out photographs", text(best), "photometric stereo", "ratio"], rows)
+
+
 def sec_real_yaleb(d):
     if isinstance(d.get("runs"), dict):  # --normals, --interreflection: runs without and with
         what = {"normals": "per-texel normals", "interreflection": "the bounced light taken out (interreflection)"}
@@ -344,6 +382,8 @@ def sec_real_yaleb(d):
              f"best model {text(overall.get('best_model'))}, {fixed(overall.get('best_vs_photometric_stereo'), 2)}× "
              "photometric stereo's error.", ""]
     lines += _yale_table(overall, subjects)
+    lines += _yale_albedo_and_training(overall)
+    lines += _yale_by_elevation(subjects, overall.get("best_model"))
     failed = rows_of(d.get("failed_subjects"))
     if failed:
         lines += ["Left out, their faces not fitted (`mifaces measure` stops on them too): "
