@@ -286,12 +286,20 @@ def test_fit_brdf_with_normals_writes_the_normal_map(capture_dir, tmp_path):
     assert 'type="normalmap"' in text and 'value="normals.exr"' in text and 'value="specular.exr"' in text
     image = np.array(mi.render(mi.load_file(str(out / "scene.xml"), spp=2)))
     assert np.isfinite(image).all() and image.max() > 0
+    # the glossy fit in the normals' frames has its intervals (the normals taken as measured), and the
+    # options record what ran: one albedo round after the normals, no albedo per texel
+    assert "interval95" in estimate.fits["skin"].uncertainty["roughness"]
+    assert estimate.effective_options() == FitOptions(resolution=32, normals=True, normal_options={"rounds": 1},
+                                                      specular_maps=True, albedo_rounds=1, texel_albedo=False)
     # one measurement: no texel has the samples a normal needs; left out with a message
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         single = fit_brdf(capture_dir, measurements=["m00"], progress=False,
                           options=FitOptions(resolution=32, normals=True))
     assert single.normals is None and any("normals left out" in str(w.message) for w in caught)
+    # and the fit is the one without them
+    assert single.effective_options().normals is False
+    assert single.fits["skin"].uncertainty  # with its intervals, as any fit
 
 
 def test_cli_normals_flags_reach_the_api(monkeypatch, tmp_path):
