@@ -96,6 +96,8 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light, 
             write_exr(folder / FILES["albedo_std"], estimate.albedo.std)
         if envmap is not None:
             write_exr(folder / FILES["environment"], envmap)
+        for name, image in face.region_maps(document, estimate.resolution, specular is not None).items():
+            write_exr(folder / face.region_map_file(name), image)
         face.write_meshes(folder)
         with atomic_write(folder / FILES["scene"], "w") as f:
             f.write(scene_xml(scene, {"spp": SPP_PATH}, comment))

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..model.regions import REGIONS
+from ..render.blend import BLEND_KEY, BLEND_MM
 from .fit.region_fit import RegionFit
 from .maps.diffuse import DiffuseMap
 from .maps.normals import encode
@@ -145,7 +146,7 @@ class BRDFEstimate:
                                for k in FIT_KEYS} for name, fit in self.fits.items()},
                 "samples": int(self.samples), "resolution": self.resolution,
                 "measurements": list(self.measurements), "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
-                "albedo": FILES["albedo"], "refinement": self.refinement,
+                "albedo": FILES["albedo"], "refinement": self.refinement, BLEND_KEY: BLEND_MM,
                 "uncertainty": {name: fit.uncertainty for name, fit in self.fits.items()},
                 **({} if self.albedo.std is None else {"albedo_std": FILES["albedo_std"]}),
                 **({} if self.lighting is None else {"lighting": self.lighting}),

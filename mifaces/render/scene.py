@@ -11,6 +11,7 @@ import numpy as np
 from .. import brdf as brdf_models
 from ..io.atomic import atomic_path
 from ..lights.emitters import light_emitters
+from .blend import blended_parameters, region_maps
 from .materials import ALBEDO, ALBEDO_REF, NORMALS, SPECULAR, region_bsdf, with_textures
 from .meshes import MESH_FOLDER, region_meshes
 from .sensor import check_render_size, mitsuba_sensor
@@ -50,6 +51,29 @@ class FaceScene:
         mesh, _, parameter = key.partition(".bsdf.")
         return (self.meshes[mesh].region, parameter) if mesh in self.meshes and parameter else None
 
+    def blended(self, brdf: dict, specular_map: bool = False) -> list[str]:
+        """The parameters of ``brdf`` this face renders from blended textures
+        (:func:`mifaces.render.blend.blended_parameters`; not ``specular_reflectance``
+        where a per-texel ``specular_map`` replaces it)."""
+        return blended_parameters(brdf, [m.region for m in self.meshes.values()],
+                                  exclude={"specular_reflectance"} if specular_map else ())
+
+    def region_maps(self, brdf: dict, size: int, specular_map: bool = False) -> dict[str, np.ndarray]:
+        """:meth:`blended`'s textures on this face, (size, size, 3) each
+        (:func:`mifaces.render.blend.region_maps`)."""
+        return region_maps(brdf, self.meshes, size,
+                           exclude={"specular_reflectance"} if specular_map else ())
+
+    @staticmethod
+    def region_map_id(name: str) -> str:
+        """The scene id of parameter ``name``'s blended texture."""
+        return f"region_{name}"
+
+    @staticmethod
+    def region_map_file(name: str) -> str:
+        """The file of parameter ``name``'s blended texture, relative to the scene's folder."""
+        return f"region_maps/{name}.exr"
+
     def description(self, brdf: dict, camera, light=None, *, envmap=None, envmap_scale: float = 1.0,
                     spp: int = 64, max_depth: int = 4, albedo: str = "albedo.exr", normals: str | None = None,
                     specular: str | None = None) -> dict:
@@ -81,6 +105,10 @@ class FaceScene:
             ``albedo``, linear RGB: :mod:`mifaces.reflectance.maps.specular`),
             read by every region's ``specular_reflectance`` in place of the
             region's value (models that have one).
+
+        A ``brdf`` with ``region_blend_mm`` (a fit's) takes each parameter that differs
+        between regions from a blended texture (:mod:`mifaces.render.blend`), named
+        :meth:`region_map_file` (:meth:`region_maps` makes them).
         """
         brdf = brdf_models.validate_brdf(brdf)
         check_render_size(camera.width, camera.height, spp, "face scene")
@@ -93,7 +121,11 @@ class FaceScene:
             if filename is not None:
                 scene[name] = {"type": "bitmap", "filename": filename, "raw": True, "filter_type": "bilinear",
                                "wrap_mode": "clamp"}
-        maps = None if specular is None else {"specular_reflectance": {"type": "ref", "id": SPECULAR}}
+        maps = {} if specular is None else {"specular_reflectance": {"type": "ref", "id": SPECULAR}}
+        for name in self.blended(brdf, specular is not None):
+            scene[self.region_map_id(name)] = {"type": "bitmap", "filename": self.region_map_file(name), "raw": True,
+                                               "filter_type": "bilinear", "wrap_mode": "clamp"}
+            maps[name] = {"type": "ref", "id": self.region_map_id(name)}
         for key, part in self.meshes.items():
             bsdf = region_bsdf(brdf, part.region, ALBEDO_REF, maps=maps)
             if normals is not None:
@@ -113,7 +145,9 @@ class FaceScene:
                                  max_depth=max_depth, normals=None if normals is None else NORMALS,
                                  specular=None if specular is None else SPECULAR)
         textures = {}
-        for name, data in ((ALBEDO, albedo), (NORMALS, normals), (SPECULAR, specular)):
+        blended = self.region_maps(brdf, albedo.shape[0], specular is not None).items()
+        for name, data in ((ALBEDO, albedo), (NORMALS, normals), (SPECULAR, specular),
+                           *((self.region_map_id(k), v) for k, v in blended)):
             if data is not None:
                 texture = {k: v for k, v in scene.pop(name).items() if k != "filename"}
                 textures[name] = mi.load_dict({**texture, "bitmap": mi.Bitmap(np.ascontiguousarray(data, np.float32))})

@@ -8,7 +8,9 @@ the samples of one texel alone is then linear in ρ_d, with the closed form
     ρ_d(texel) = Σ_s w_s (r_s - π f_s) / Σ_s w_s,   w_s = 1/σ_s²,
 
 computed per colour channel for all texels at once. Texels without samples
-take their region's fitted albedo.
+take the local mean of their region's sampled texels (:data:`FILL_TEXELS`:
+the band along a region border whose samples were dropped), else their
+region's fitted albedo.
 
 **Shrinkage** (on by default; not in the paper). A texel seen once, at a
 grazing angle, gets an albedo as noisy as that one sample. Treating the
@@ -44,6 +46,7 @@ from dataclasses import dataclass
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+import scipy.ndimage as ndi
 
 from ... import brdf as brdf_models
 from ..samples import ReflectanceSamples
@@ -184,6 +187,23 @@ def albedo_offsets(albedo, texel, label, where=None) -> np.ndarray:
     return offsets.astype(np.float32)
 
 
+#: A texel without samples takes the mean of its region's sampled texels around
+#: it, Gaussian-weighted with this σ (texels), where they are near (a thin band
+#: along a region border, whose samples mixed in the neighbour's light:
+#: :func:`mifaces.reflectance.samples.region_mixed`); further away, its region's albedo.
+FILL_TEXELS = 2.0
+
+
+def _local_mean(albedo: np.ndarray, seen: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The Gaussian-weighted mean (σ :data:`FILL_TEXELS`) of ``albedo`` (size², 3) over the
+    flat mask ``seen`` around every texel, and the weight of ``seen`` there (1 inside it)."""
+    mask = seen.reshape(size, size).astype(np.float64)
+    weight = ndi.gaussian_filter(mask, FILL_TEXELS, mode="constant")
+    image = albedo.reshape(size, size, 3) * mask[..., None]
+    total = np.stack([ndi.gaussian_filter(image[..., c], FILL_TEXELS, mode="constant") for c in range(3)], -1)
+    return (total / np.maximum(weight, 1e-12)[..., None]).reshape(-1, 3), weight.ravel()
+
+
 def refine_diffuse(model, params_by_region: dict[int, dict], samples: ReflectanceSamples, region_map: np.ndarray,
                    shrinkage: bool = True) -> DiffuseMap:
     """Refit ρ_d per texel with each region's glossy part fixed (sec. 5.3).
@@ -240,13 +260,16 @@ def refine_diffuse(model, params_by_region: dict[int, dict], samples: Reflectanc
             variance[t] = s0 / (total[t, None] + weight)
             variance[(total <= 0) & (labels == label)] = tau if shrinkage else np.nan
     empty = total <= 0
+    r = region_map.shape[0]
     for label in np.unique(labels[empty]):
         fill = empty & (labels == label)
         if label in params_by_region:
             albedo[fill] = np.broadcast_to(params_by_region[label]["diffuse_reflectance"], (3,))
+            local, weight = _local_mean(albedo, ~empty & (labels == label), r)
+            close = fill & (weight > 0.05)
+            albedo[close] = local[close]
         else:
             albedo[fill] = 0.0  # outside the face: no region, no BRDF
-    r = region_map.shape[0]
     return DiffuseMap(albedo=np.clip(albedo, 0.0, None).reshape(r, r, 3).astype(np.float32),
                       weight=total.reshape(r, r).astype(np.float32), samples=counts.reshape(r, r),
                       std=np.sqrt(variance).reshape(r, r, 3).astype(np.float32), shrinkage=weights)
