@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mifaces import brdf
-from mifaces.reflectance.maps.diffuse import refine_diffuse, specular_reflectance_factor
+from mifaces.reflectance.maps.diffuse import FILL_TEXELS, refine_diffuse, specular_reflectance_factor
 from mifaces.reflectance.samples import ReflectanceSamples
 
 REGIONS = {
@@ -49,12 +49,27 @@ def test_refinement_recovers_a_known_albedo_map(jit_variant):
     result = refine_diffuse(model, REGIONS, labelled(light, view, r, sigma, texel, region), region_map)
     flat = result.albedo.reshape(-1, 3)
     np.testing.assert_allclose(flat[observed], albedo.reshape(-1, 3)[observed], atol=2e-5)
-    # face texels without samples take their region's albedo; outside the face is 0
+    # face texels without samples take the Gaussian-weighted mean of their region's sampled texels
+    # around them (never another region's); outside the face is 0
     missing = np.setdiff1d(np.flatnonzero(region_map.ravel() > 0), observed)
     assert missing.size > 0
+    size, labels = region_map.shape[0], region_map.ravel()
+    seen = np.zeros(size * size, bool)
+    seen[observed] = True
+    rows, cols = np.divmod(np.arange(size * size), size)
+    reach = int(4 * FILL_TEXELS + 0.5)  # scipy's Gaussian truncates there
     for t in missing:
-        np.testing.assert_allclose(flat[t], REGIONS[region_map.ravel()[t]]["diffuse_reflectance"], rtol=1e-6)
+        same = seen & (labels == labels[t]) & (np.abs(rows - rows[t]) <= reach) & (np.abs(cols - cols[t]) <= reach)
+        w = np.exp(-((rows[same] - rows[t]) ** 2 + (cols[same] - cols[t]) ** 2) / (2 * FILL_TEXELS ** 2))
+        expected = (w[:, None] * albedo.reshape(-1, 3)[same]).sum(0) / w.sum()
+        np.testing.assert_allclose(flat[t], expected, rtol=1e-4)
     assert np.all(flat[region_map.ravel() == 0] == 0)
+    # a region without a sampled texel near: its region's albedo
+    alone = region != 2
+    without = refine_diffuse(model, REGIONS, labelled(light[alone], view[alone], r[alone], sigma[alone], texel[alone],
+                                                      region[alone]), region_map)
+    np.testing.assert_allclose(without.albedo.reshape(-1, 3)[labels == 2], np.broadcast_to(
+        REGIONS[2]["diffuse_reflectance"], ((labels == 2).sum(), 3)), rtol=1e-6)
     assert result.samples.sum() == texel.size and np.all(result.weight.ravel()[observed] > 0)
 
 

@@ -116,6 +116,7 @@ REGISTRY: tuple[Entry, ...] = (
           ignore=("line", "lines")),
     Entry("brdf_fit_stiff", _py("brdf_fit_stiff"), ("brdf_fit_stiff.json",), quick=True, kind="deterministic",
           ignore=("iterations", "reason"), **_FIT),
+    Entry("region_seams", _py("region_seams"), ("region_seams.json",), quick=True, rtol=1e-3, atol=1e-4),
     # BRDF fits, plugins and benchmarks
     Entry("bench_bsdf", _py("bench_bsdf"), ("bench_bsdf.json",), kind="benchmark", minutes=5),
     Entry("bench_brdf_fit", _py("bench_brdf_fit"), ("bench_brdf_fit.json",), kind="benchmark", minutes=10, **_FIT),

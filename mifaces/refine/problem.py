@@ -15,6 +15,7 @@ import numpy as np
 from .. import brdf as brdf_models
 from ..model.regions import REGIONS
 from ..render import FaceScene
+from ..render.blend import hard_borders
 from ..reflectance.fit.parameters import ParameterSpace
 from ..reflectance.result import BRDFEstimate
 from .albedo_correction import AlbedoCorrection
@@ -86,7 +87,8 @@ class RefineProblem:
         self.estimate, self.schedule = estimate, schedule
         self.rng = np.random.default_rng([seed, 27])
         self.model = brdf_models.model(estimate.model, **estimate.options)
-        brdf, albedo = estimate.to_json(), estimate.albedo.albedo
+        # each region's values up to its border: the variables are the regions' values
+        brdf, albedo = hard_borders(estimate.to_json()), estimate.albedo.albedo
         names = list(measurements or estimate.measurements)
         scale = capture.reflectance_scale() / np.pi
         self.light_kinds = set()

@@ -34,6 +34,7 @@ from ..model.geometry import tangent_frames
 from ..model.mesh import mitsuba_mesh
 from ..runtime.progress import progress as progress_bar
 from .environment import LUMINANCE, equivalent_lights
+from .mixed_pixels import region_mixed
 from ..model.regions import texel_regions_of_mesh
 from ..model.texture_space import rasterize
 
@@ -41,10 +42,6 @@ from ..model.texture_space import rasterize
 MIN_COSINE = np.cos(np.radians(80.0))
 #: Eq. 10's d_max at the paper's texture resolution of 1000².
 D_MAX_AT_1000 = 10.0
-#: A sample is dropped when a pixel this close (pixels, in x and in y) to its
-#: projection also sees another region: the bilinear read and the pixel's own
-#: footprint mix that region's light into it (:func:`region_mixed`).
-MIX_REACH = 1
 
 
 def reflectance(radiance, light_distance, intensity, cos_light, scale: float = np.pi):
@@ -321,39 +318,6 @@ def read_photograph(camera, pixels, saturated, points) -> tuple[np.ndarray, np.n
     return radiance, ok
 
 
-def region_mixed(xy: np.ndarray, label: np.ndarray, seen: np.ndarray, shape: tuple[int, int],
-                 reach: int = MIX_REACH) -> np.ndarray:
-    """(N,) bool: the texels whose reading of the photograph mixes in another
-    region's light. ``xy`` (N, 2): the texels' projections (pixel centres at
-    integers); ``label`` (N,): their regions; ``seen`` (N,): the texels the
-    photograph shows (in front, unoccluded, inside it); ``shape``: (H, W).
-    A texel is mixed when a pixel within ``reach`` of its nearest pixel (the
-    bilinear read's taps and the camera's blur) shows a texel of another region.
-    Where two regions' reflectance differs (dark eyebrows on skin) such
-    samples carry the neighbour's, and the fitted map would outline the region."""
-    height, width = shape
-    pixel = np.rint(xy).astype(np.int64)
-    inside = seen & (pixel[:, 0] >= 0) & (pixel[:, 0] < width) & (pixel[:, 1] >= 0) & (pixel[:, 1] < height)
-    mixed = np.zeros(len(xy), bool)
-    labels = np.unique(label[inside])
-    if len(labels) < 2:
-        return mixed
-    window = np.ones((2 * reach + 1, 2 * reach + 1), bool)
-    near = {}
-    for k in labels:
-        hit = np.zeros((height, width), bool)
-        which = inside & (label == k)
-        hit[pixel[which, 1], pixel[which, 0]] = True
-        near[k] = scipy.ndimage.binary_dilation(hit, window)
-    rows, cols = pixel[inside, 1], pixel[inside, 0]
-    own = label[inside]
-    other = np.zeros(len(rows), bool)
-    for k in labels:
-        other |= near[k][rows, cols] & (own != k)
-    mixed[inside] = other
-    return mixed
-
-
 def measurement_samples(camera, light, pixels, vertices, triangles, uv, raster, *, saturated=None,
                         scale: float = np.pi, erosion: int = 1, min_cosine: float = MIN_COSINE, name: str = "",
                         offset: float | None = None, indirect=None, regions=None) -> ReflectanceSamples:
@@ -382,14 +346,12 @@ def measurement_samples(camera, light, pixels, vertices, triangles, uv, raster, 
     indirect : (H, W, 3) array, optional
         Light bounced off the face, units of ``pixels`` (:mod:`mifaces.reflectance.interreflection`): subtracted.
     regions : (R, R) int array, optional
-        Region label of every texel: a texel whose reading mixes in another
-        region's pixels gives no sample (:func:`region_mixed`).
+        Region label of every texel: no sample from a texel that reads another region's pixels (:func:`region_mixed`).
 
     Returns
     -------
     ReflectanceSamples
-        Valid texels only: visible from the camera, not in cast shadow, not
-        grazing, inside the image, unsaturated, not mixed with another region; σ by eq. 10.
+        Valid texels only (seen, lit, not grazing, in the image, unsaturated, unmixed); σ by eq. 10.
     """
     pixels = np.asarray(pixels, np.float32)
     if pixels.shape != (camera.height, camera.width, 3):
@@ -445,8 +407,8 @@ def measurement_samples(camera, light, pixels, vertices, triangles, uv, raster, 
     valid = valid_samples(image(cos_l, 0.0), image(cos_v, 0.0), image(lit & ok, False),
                           image(visible & np.all(np.isfinite(r), axis=1), False), erosion, min_cosine)
     if regions is not None:  # after the erosion: a region border is no hole in the valid region
-        valid &= ~image(region_mixed(camera.project(p), np.asarray(regions).ravel()[geo.texel], visible & ok,
-                                     (camera.height, camera.width)), False)
+        mixed = region_mixed(camera.project(p), np.ravel(regions)[geo.texel], visible & ok, pixels.shape[:2])
+        valid &= ~image(mixed, False)
     keep = valid.ravel()[geo.texel]
     distance = distance_to_missing(valid).ravel()[geo.texel[keep]]
     frame = np.stack([geo.tangent[keep], geo.bitangent[keep], n[keep]], axis=1)  # (M, 3 axes, 3)

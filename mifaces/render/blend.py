@@ -43,6 +43,12 @@ def blend_width(brdf: Mapping) -> float:
     return width
 
 
+def hard_borders(brdf: Mapping) -> dict:
+    """``brdf`` without its blend width: rendered with each region's own values up to its
+    border (the refinement, which moves each region's values, renders so)."""
+    return {k: v for k, v in brdf.items() if k != BLEND_KEY}
+
+
 def blended_parameters(brdf: Mapping, regions, *, exclude=()) -> list[str]:
     """The glossy parameters of ``brdf`` (the ``brdf.json`` layout) that differ
     between the ``regions`` a face shows (names; a region without an entry takes
@@ -137,4 +143,4 @@ def _mm_per_texel(parts, size: int) -> float:
     return float(scale[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])]) / size
 
 
-__all__ = ["BLEND_MM", "BLEND_KEY", "blend_width", "blended_parameters", "region_maps", "texel_parts"]
+__all__ = ["BLEND_MM", "BLEND_KEY", "blend_width", "hard_borders", "blended_parameters", "region_maps", "texel_parts"]
