@@ -87,8 +87,9 @@ def test_a_fitted_scene_file_carries_its_region_maps(face):
 # ---------------------------------------------------------------------------
 # The seam test: one BRDF everywhere, fitted, rendered
 
-#: The lids' border, where the fitted render is 12-13 % darker on the eyes' side with or without
-#: the region-border samples (an open defect: test_the_eyes_border_has_no_seam).
+#: The lids' border, where the fitted render is darker on the eyes' side with or without the
+#: region-border samples: few eyeball texels get a sample at a 256² texture, and the rest take the
+#: eyes' region albedo, a mean over iris and sclera (an open defect: test_the_eyes_border_has_no_seam).
 EYES = "skin/eyes"
 
 

@@ -19,8 +19,8 @@ left without samples (their region's local mean against the nearest sampled texe
 albedo) were chosen on seeds 3, 4 and 5 (and ``tests/test_region_blend.py`` runs seed 3); nothing was
 chosen on the seeds reported here.
 
-Run:  python validation/region_seams.py        (about a minute on 2 cores)
-Writes validation/results/region_seams.json.
+Run:  python validation/region_seams.py
+Writes validation/results/region_seams.json (about a minute on 2 cores).
 """
 
 from __future__ import annotations

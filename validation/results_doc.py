@@ -38,7 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import doc_figures  # noqa: E402  (the figures of the hand-written docs, checked with --check)
 from results_format import DASH, get  # noqa: E402  (the formatting helpers)
 from results_tables_design import sec_design_metrics  # noqa: E402  (the redesign issue's measuring stick)
-from results_tables_studies import sec_refine_judge  # noqa: E402
+from results_tables_studies import sec_refine_judge, sec_region_seams  # noqa: E402
 from results_tables_fits import (  # noqa: E402  (one function per result layout)
     sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_depth_cameras, sec_floor_depth, sec_multi_camera,
     sec_joint_outline, sec_light_balance_measure, sec_light_calibration_bias, sec_refine, sec_refine_gradient,
@@ -175,6 +175,8 @@ LAYOUTS = {
     "model_span": ("The built-in model's span", "model samples (Surrey Face Model faces)", sec_model_span),
     "mutations": ("Mutations: whether the tests catch the bugs they name", "no data: a check of the test suite", sec_mutations),
     "normals_faces": ("Per-texel normals on faces", "SIMULATED", sec_normals_faces),
+    "region_seams": ("Region outlines in fitted renders: faces with one BRDF everywhere", "SIMULATED",
+                     sec_region_seams),
     "pareto": ("Error against run time of the whole pipeline", "SIMULATED", sec_pareto),
     "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
     "real_yaleb": ("Held-out relighting on the Yale face database", "real photographs", sec_real_yaleb),

@@ -1,5 +1,6 @@
 """Tables of ``docs/results.md`` for one-question studies (used by ``validation/results_doc.py``):
-the shape refinement's judges (``refine_judge.json``, ``validation/refine_judge.py``)."""
+the shape refinement's judges (``refine_judge.json``, ``validation/refine_judge.py``) and the region
+outlines in fitted renders (``region_seams.json``, ``validation/region_seams.py``)."""
 
 from __future__ import annotations
 
@@ -29,3 +30,17 @@ def sec_refine_judge(d):
                              f"{r.get('aligned_before_mm', 0):.3f} → {r.get('aligned_refined_mm', 0):.3f}",
                              f"{r.get('normal_before_deg', 0):.2f} → {r.get('normal_refined_deg', 0):.2f}"])
     return lines + table(["seed", "judged", "verdict", "aligned error (mm)", "normal error (°)"], per_seed)
+
+
+def sec_region_seams(d):
+    """Per seed and fit, the borders whose step exceeds the noise, and the largest step."""
+    lines = [f"Seeds {text(d.get('seeds'))}, {text(d.get('spp'))} spp; a seam: a step of log(fitted / true) across "
+             f"a border beyond three standard errors plus {text(d.get('allowance'))}. `default`: border samples "
+             "dropped, region parameters blended; `mixed_kept`: border samples kept; `glossy_step`: the control, "
+             "3 × the skin's ρs on hard borders.", ""]
+    rows = []
+    for seed, run in items(d.get("runs")):
+        for fit, r in items(run):
+            found = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in items(r.get("seams"))) or "none"
+            rows.append([text(seed), fit, found, f"{text(r.get('max_abs_step_pct'))} %"])
+    return lines + table(["seed", "fit", "seams", "largest step"], rows)
