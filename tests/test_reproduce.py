@@ -117,3 +117,14 @@ def test_provenance_records_where_a_result_came_from(monkeypatch, tmp_path):
     deps = [str(d) for d in provenance.dependencies(VALIDATION / "model_span.py")]
     assert "validation/model_span.py" in deps and "mifaces/validation/shape_errors.py" in deps
     assert "validation/provenance.py" in deps  # model_span.py imports it
+
+
+def test_every_mutation_still_finds_its_text(monkeypatch):
+    """mutations.json can only be rerun while each mutation's original text occurs once in its file:
+    a change to the code it mutates must move the mutation with it (mutations.check)."""
+    monkeypatch.syspath_prepend(str(VALIDATION))
+    mutations = importlib.import_module("mutations")
+    mutations.check(mutations.MUTATIONS)
+    broken = [(mid, area, path, "no such text", new, why) for mid, area, path, _, new, why in mutations.MUTATIONS[:1]]
+    with pytest.raises(SystemExit, match="occurs 0 times"):
+        mutations.check(broken)
