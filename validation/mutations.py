@@ -387,8 +387,8 @@ def scratch_copy(root: Path) -> Path:
     """The package, its plugins (as ``mifaces/plugins``, where the import finds them first), the
     validation scripts (without their results), the tests and the example scenes, copied under ``root``."""
     skip = shutil.ignore_patterns("__pycache__")
-    shutil.copytree(REPO / "mifaces", root / "mifaces", ignore=skip)
-    shutil.copytree(REPO / "plugins", root / "mifaces" / "plugins", ignore=skip)
+    shutil.copytree(REPO / "mifaces", root / "mifaces", ignore=skip)  # (reproduce.py's copy holds mifaces/plugins)
+    shutil.copytree(REPO / "plugins", root / "mifaces" / "plugins", ignore=skip, dirs_exist_ok=True)
     shutil.copytree(REPO / "plugins", root / "plugins", ignore=skip)
     shutil.copytree(REPO / "validation", root / "validation", ignore=shutil.ignore_patterns("__pycache__", "results"))
     shutil.copytree(REPO / "tests", root / "tests", ignore=skip)
