@@ -101,3 +101,24 @@ def test_taking_the_bounced_light_out_brings_skins_lobe_to_the_direct_light_fit(
     rho = {k: float(np.mean(v["specular_reflectance"])) for k, v in fits.items()}
     assert rho["default"] < rho["direct"]  # the bounced light biases the lobe low
     assert abs(rho["corrected"] - rho["direct"]) < 0.5 * abs(rho["default"] - rho["direct"]), (rho, truth)
+
+
+def test_samples_the_bounced_light_was_taken_out_of_are_shared_not_corrected_twice(captures):
+    """``without_bounced_light`` takes the light out once: samples it already corrected come back as
+    they are (``measure`` corrects once and every model shares them), and the record names the model
+    whose fit rendered the light."""
+    from mifaces import brdf as brdf_models
+    from mifaces.reflectance.sample_stage import take_samples, without_bounced_light
+
+    mifaces.set_variant("llvm_ad_rgb")
+    capture, _ = captures
+    face, shapes = load_geometry(capture, "ground-truth")
+    options = FitOptions(resolution=TEXTURE, interreflection=True, uncertainty=None, normals=False)
+    taken = take_samples(capture, shapes, face, options, progress=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        corrected = without_bounced_light(taken, brdf_models.model("phong"), options, progress=False)
+        again = without_bounced_light(corrected, brdf_models.model("cooktorrance"), options, progress=False)
+    assert taken.interreflection is None and corrected.interreflection["fitted_with"] == "phong"
+    assert again is corrected
+    assert not np.array_equal(corrected.samples.reflectance, taken.samples.reflectance)

@@ -65,6 +65,35 @@ def test_table_follows_the_json(tmp_path):
     assert sorted(p.name for p in out.parent.iterdir()) == ["results.md"]  # no temporary file left behind
 
 
+def test_a_page_embeds_a_table_that_follows_the_json(tmp_path):
+    doc = _module()
+    results = _fake_results(tmp_path)
+    out = tmp_path / "docs" / "results.md"
+    page = tmp_path / "docs" / "speed.md"
+    page.parent.mkdir(parents=True)
+    page.write_text("# Speed\n\nHand-written.\n\n<!-- generated: bench_pipeline.json -->\nold table\n"
+                    "<!-- end generated -->\n\nMore prose.\n")
+    assert doc.main(["--results", str(results), "--out", str(out)]) == 0
+    text = page.read_text()
+    assert "old table" not in text and "| wall time (s) | 97.8 |" in text
+    assert text.startswith("# Speed\n\nHand-written.\n") and text.endswith("<!-- end generated -->\n\nMore prose.\n")
+    assert "`validation/results/bench_pipeline.json`" in text  # the section names its file
+    assert doc.main(["--results", str(results), "--out", str(out), "--check"]) == 0
+
+    # the JSON moves: --check fails on the page, and a write follows it
+    (results / "bench_pipeline.json").write_text(json.dumps(_pipeline(123.4)))
+    assert doc.main(["--results", str(results), "--out", str(out), "--check"]) == 1
+    assert doc.main(["--results", str(results), "--out", str(out)]) == 0
+    assert "| wall time (s) | 123.4 |" in page.read_text() and "97.8" not in page.read_text()
+    (results / "bench_pipeline.json").write_text(json.dumps(_pipeline(97.8)))
+    assert doc.main(["--results", str(results), "--out", str(out)]) == 0
+    page.write_text(page.read_text().replace("97.8", "97.9"))  # a hand edit inside the table
+    assert doc.main(["--results", str(results), "--out", str(out), "--check"]) == 1
+    assert "97.9" in page.read_text()  # --check writes nothing
+    assert doc.main(["--results", str(results), "--out", str(out)]) == 0
+    assert "| wall time (s) | 97.8 |" in page.read_text()
+
+
 def test_a_changed_layout_does_not_crash(tmp_path):
     doc = _module()
     results = tmp_path / "validation" / "results"

@@ -230,6 +230,8 @@ REGISTRY: tuple[Entry, ...] = (
           minutes=40, **_FIT),
     Entry("normals_faces", _py("normals_faces", "--work", "{work}"), ("normals_faces.json",), minutes=20, **_FIT),
     Entry("region_seams", _py("region_seams"), ("region_seams.json",), rtol=1e-3, atol=1e-4, minutes=1),
+    Entry("reflectance_bias", _py("reflectance_bias", "--work", "{work}"), ("reflectance_bias.json",), minutes=45,
+          **_FIT),
     Entry("unknown_lights_simulated", _py("unknown_lights", "--simulated", "--out", "{work}"),
           ("unknown_lights_simulated.json",), minutes=10, **_FIT),
     Entry("unknown_lights_simulated_ambient_none", _py("unknown_lights", "--simulated", "--ambient", "none", "--out",

@@ -4,7 +4,7 @@ outlines in fitted renders (``region_seams.json``, ``validation/region_seams.py`
 
 from __future__ import annotations
 
-from results_format import get, items, rows_of, table, text
+from results_format import fixed, get, items, pct, rows_of, table, text
 
 
 def sec_refine_judge(d):
@@ -44,3 +44,51 @@ def sec_region_seams(d):
             found = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in items(r.get("seams"))) or "none"
             rows.append([text(seed), fit, found, f"{text(r.get('max_abs_step_pct'))} %"])
     return lines + table(["seed", "fit", "seams", "largest step"], rows)
+
+
+#: What each run of ``reflectance_bias.json`` is, in words (its reference in brackets).
+BIAS_RUNS = {"as_captured": "the default fit on the capture as simulated",
+             "ideal": "every capture effect off, true lights",
+             "effect:bounces": "+ light bounced off the face (path depth 4)",
+             "effect:albedo_detail": "+ the albedo map's detail",
+             "effect:camera_noise": "+ sensor noise",
+             "effect:eta": "+ the truth's η above the fit's",
+             "effect:light_calibration": "+ lights from the steel spheres",
+             "fit:no_normals": "no per-texel normals",
+             "fit:region_albedo": "one albedo per region",
+             "fit:uniform_weights": "every sample weight 1",
+             "fit:no_erosion": "valid mask not eroded",
+             "fit:erosion_2": "valid mask eroded by 2 texels",
+             "fit:texture_256": "texture 256²",
+             "fit:interreflection": "bounced light taken out"}
+
+
+def sec_reflectance_bias(d):
+    """The bias breakdown: per run, skin's ρs and roughness errors over the breakdown seeds and the shift
+    from its reference; then the spread of the default fit and its intervals' coverage."""
+    capture = get(d, "capture") or {}
+    ranges = "; ".join(f"{'ρs' if k == 'specular_reflectance' else k} in [{text(v)}]" for k, v in items(d.get("skin_ranges")))
+    lines = [f"Cook–Torrance truths, skin drawn per seed ({ranges}), "
+             f"{text(capture.get('measurements'))} measurements, {text(get(capture, 'image', 0))}² photographs, "
+             f"{text(capture.get('spp'))} spp, fitted with the defaults on the true shape; development seeds "
+             f"{text(d.get('breakdown_seeds'))}. ρs: the mean over channels of fitted / true − 1. Each effect is "
+             "switched on alone in the ideal capture, its shift measured from `ideal`; each fit variant changes "
+             "one thing of the default fit on the capture as simulated, its shift measured from `as_captured`.", ""]
+    rows = []
+    for run, s in items(d.get("breakdown")):
+        shift = s.get("rho_s_shift_mean")
+        rows.append([f"`{run}`", BIAS_RUNS.get(run, ""), f"{pct(s.get('rho_s_error_mean'), 1)} ± {pct(s.get('rho_s_error_sd'), 1)}",
+                     "" if shift is None else f"{pct(shift, 1)} ± {pct(s.get('rho_s_shift_sd'), 1)}",
+                     pct(s.get("roughness_error_mean"), 1), fixed(s.get("seconds_mean"), 0)])
+    lines += table(["run", "what", "skin ρs error (mean ± sd)", "shift from its reference", "roughness error",
+                    "fit (s)"], rows)
+    spread = get(d, "spread") or {}
+    if spread:
+        coverage = spread.get("coverage") or {}
+        lines += ["", f"**Spread** over {text(spread.get('captures'))} captures (seeds {text(d.get('spread_seeds'))}): "
+                      f"skin's ρs error {pct(spread.get('rho_s_error_mean'), 1)} ± {pct(spread.get('rho_s_error_sd'), 1)} "
+                      f"(from {pct(spread.get('rho_s_error_min'), 1)} to {pct(spread.get('rho_s_error_max'), 1)}), "
+                      f"within 3 % on {text(spread.get('rho_s_within_3_percent'))}; the 95 % intervals hold the truth "
+                      f"for {pct(coverage.get('specular_reflectance'), 0)} of ρs channels and "
+                      f"{pct(coverage.get('roughness'), 0)} of roughnesses."]
+    return lines

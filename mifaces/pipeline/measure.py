@@ -252,6 +252,11 @@ def measure(out, capture=None, options: MeasureOptions | FitOptions | None = Non
         timings["validation_truth"] = time.perf_counter() - t
         report["validation"] = validator.summary
     fitted, validation_images = [], {}
+    if options.fit.interreflection:  # the bounced light, rendered once with the first model's fit, for every model
+        t = time.perf_counter()
+        taken = without_bounced_light(taken, brdf_models.model(models[0], **options.fit.brdf_options()), options.fit,
+                                      progress=progress)
+        timings["interreflection"] = time.perf_counter() - t
     for model in models:
         entry, result = _fit_model(out, taken, model, scene, first, novel, timings, progress, options)
         if validator is not None:

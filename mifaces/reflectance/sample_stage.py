@@ -62,7 +62,8 @@ class SampleSet:
         t = time.perf_counter()
         samples = capture_samples(self.capture, shapes, self.face, self.resolution,
                                   measurements=self.samples.measurement_names, progress=progress)
-        return dataclasses.replace(self, shapes=shapes, samples=samples, seconds=time.perf_counter() - t)
+        return dataclasses.replace(self, shapes=shapes, samples=samples, interreflection=None,
+                                   seconds=time.perf_counter() - t)
 
 
 def take_samples(capture: Capture, shapes: dict, face, options: FitOptions, *,
@@ -94,8 +95,11 @@ def take_samples(capture: Capture, shapes: dict, face, options: FitOptions, *,
 def without_bounced_light(taken: SampleSet, brdf, options: FitOptions, *, progress: bool = True) -> SampleSet:
     """``taken``, and where ``options.interreflection``, its samples taken again without the light bounced
     between parts of the face: a first fit of ``brdf`` (no intervals, normals or specular maps), its
-    bounced light rendered, the photographs sampled again less it."""
-    if not options.interreflection:
+    bounced light rendered, the photographs sampled again less it. Samples it already took the
+    bounced light out of come back as they are: :func:`mifaces.measure` takes it out once, with its
+    first model, and every model's fit shares those samples (the bounced light is mostly the
+    albedo's, which every model fits alike)."""
+    if not options.interreflection or taken.interreflection is not None:
         return taken
     t = time.perf_counter()
     first = fit_samples(taken, brdf, dataclasses.replace(options, interreflection=False, uncertainty=None,
@@ -105,7 +109,8 @@ def without_bounced_light(taken: SampleSet, brdf, options: FitOptions, *, progre
     samples = capture_samples(taken.capture, taken.shapes, taken.face, taken.resolution,
                               measurements=first.measurements, progress=progress, indirect=bounced)
     seconds = time.perf_counter() - t
-    record = {"depth": INDIRECT_DEPTH, "width": INDIRECT_WIDTH, "spp": INDIRECT_SPP, "seconds": seconds}
+    record = {"depth": INDIRECT_DEPTH, "width": INDIRECT_WIDTH, "spp": INDIRECT_SPP, "fitted_with": brdf.name,
+              "seconds": seconds}
     return dataclasses.replace(taken, samples=samples, interreflection=record, seconds=taken.seconds + seconds)
 
 
