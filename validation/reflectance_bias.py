@@ -47,7 +47,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
-import sys
 import time
 import warnings
 from dataclasses import replace
@@ -57,7 +56,6 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import write_result  # noqa: E402
 from roles import SIMULATED, refuse_report_data  # noqa: E402
 
