@@ -60,7 +60,9 @@ BIAS_RUNS = {"as_captured": "the default fit on the capture as simulated",
              "fit:no_erosion": "valid mask not eroded",
              "fit:erosion_2": "valid mask eroded by 2 texels",
              "fit:texture_256": "texture 256²",
-             "fit:interreflection": "bounced light taken out"}
+             "fit:interreflection": "bounced light taken out",
+             "fit:balance_lights": "lights balanced against a quick fit",
+             "fit:interreflection_balance": "bounced light taken out, then the lights balanced"}
 
 
 def sec_reflectance_bias(d):
@@ -82,13 +84,18 @@ def sec_reflectance_bias(d):
                      pct(s.get("roughness_error_mean"), 1), fixed(s.get("seconds_mean"), 0)])
     lines += table(["run", "what", "skin ρs error (mean ± sd)", "shift from its reference", "roughness error",
                     "fit (s)"], rows)
-    spread = get(d, "spread") or {}
-    if spread:
+    for key, which in (("spread", "the default fit"), ("spread_candidate", None)):
+        spread = get(d, key) or {}
+        if not spread:
+            continue
+        which = which or f"the `{spread.get('fit')}` fit"
         coverage = spread.get("coverage") or {}
-        lines += ["", f"**Spread** over {text(spread.get('captures'))} captures (seeds {text(d.get('spread_seeds'))}): "
-                      f"skin's ρs error {pct(spread.get('rho_s_error_mean'), 1)} ± {pct(spread.get('rho_s_error_sd'), 1)} "
-                      f"(from {pct(spread.get('rho_s_error_min'), 1)} to {pct(spread.get('rho_s_error_max'), 1)}), "
-                      f"within 3 % on {text(spread.get('rho_s_within_3_percent'))}; the 95 % intervals hold the truth "
-                      f"for {pct(coverage.get('specular_reflectance'), 0)} of ρs channels and "
-                      f"{pct(coverage.get('roughness'), 0)} of roughnesses."]
+        lines += ["", f"**Spread of {which}** over {text(spread.get('captures'))} captures (seeds "
+                      f"{text(d.get('spread_seeds'))}): skin's ρs error {pct(spread.get('rho_s_error_mean'), 1)} ± "
+                      f"{pct(spread.get('rho_s_error_sd'), 1)} (from {pct(spread.get('rho_s_error_min'), 1)} to "
+                      f"{pct(spread.get('rho_s_error_max'), 1)}), within 3 % on {text(spread.get('rho_s_within_3_percent'))}"
+                      + ("" if spread.get("roughness_within_3_percent") is None else
+                         f", roughness within 3 % on {text(spread.get('roughness_within_3_percent'))}")
+                      + f"; the 95 % intervals hold the truth for {pct(coverage.get('specular_reflectance'), 0)} of "
+                      f"ρs channels and {pct(coverage.get('roughness'), 0)} of roughnesses."]
     return lines

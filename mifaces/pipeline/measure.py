@@ -45,7 +45,7 @@ from ..options.measure import GEOMETRIES, MeasureOptions
 from .. import brdf as brdf_models
 from ..reflectance import BRDFEstimate, FitOptions, capture_samples, write_estimate
 from ..reflectance.fitting import fit_samples
-from ..reflectance.sample_stage import SampleSet, take_samples, without_bounced_light
+from ..reflectance.sample_stage import SampleSet, take_samples, with_balanced_lights, without_bounced_light
 from ..refine import refine_estimate
 from ..refine.shape import ShapeRefineSchedule
 from ..refine.shape_lit import refine_lit, refined_fits
@@ -228,9 +228,6 @@ def measure(out, capture=None, options: MeasureOptions | FitOptions | None = Non
         if balanced is not capture:
             capture, samples = balanced, None
     taken = take_samples(capture, shapes, face, options.fit, samples=samples, progress=progress)
-    capture = taken.capture  # its given lights balanced, with balance_lights
-    if options.fit.balance_lights:
-        report["light_balance"] = taken.light_balance
     timings["reflectance_samples"] = time.perf_counter() - t
     if not options.refine and any(light.radiance_map is not None for light in capture.lights):
         report["environment_note"] = MAP_WITHOUT_REFINE
@@ -257,6 +254,11 @@ def measure(out, capture=None, options: MeasureOptions | FitOptions | None = Non
         taken = without_bounced_light(taken, brdf_models.model(models[0], **options.fit.brdf_options()), options.fit,
                                       progress=progress)
         timings["interreflection"] = time.perf_counter() - t
+    if options.fit.balance_lights:  # the given lights' balance, found once with the first model's fit, for every model
+        t = time.perf_counter()
+        taken = with_balanced_lights(taken, brdf_models.model(models[0], **options.fit.brdf_options()), options.fit)
+        report["light_balance"] = taken.light_balance
+        timings["light_balance"] = time.perf_counter() - t
     for model in models:
         entry, result = _fit_model(out, taken, model, scene, first, novel, timings, progress, options)
         if validator is not None:
@@ -379,7 +381,8 @@ def _fit_model(out: Path, taken: SampleSet, model: str, scene: FaceScene, first,
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         brdf = brdf_models.model(model, **options.fit.brdf_options())
-        estimate = fit_samples(without_bounced_light(taken, brdf, options.fit, progress=progress), brdf, options.fit,
+        estimate = fit_samples(with_balanced_lights(without_bounced_light(taken, brdf, options.fit, progress=progress),
+                                                    brdf, options.fit), brdf, options.fit,
                                progress=progress)
         if options.refine:
             estimate = refine_estimate(estimate, capture, shapes, face, seed=options.fit.seed, progress=progress)

@@ -35,7 +35,7 @@ from .fitting import fit_samples
 from .io import write_fitted
 from .options import FitOptions, fit_options
 from .result import BRDFEstimate
-from .sample_stage import take_samples, without_bounced_light
+from .sample_stage import take_samples, with_balanced_lights, without_bounced_light
 from .samples import ReflectanceSamples
 
 
@@ -43,7 +43,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
              options: FitOptions | None = None, samples: ReflectanceSamples | None = None, measurements=None,
              out=None, progress: bool = True, force: bool = False, **deprecated) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture: the samples stage
-    (:func:`~mifaces.reflectance.sample_stage.take_samples`, then ``without_bounced_light``), then
+    (:func:`~mifaces.reflectance.sample_stage.take_samples`, then ``without_bounced_light`` and
+    ``with_balanced_lights``), then
     :func:`~mifaces.reflectance.fitting.fit_samples`.
 
     Parameters
@@ -72,7 +73,7 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     brdf = brdf_models.model(model, **options.brdf_options())
     face, shapes = load_geometry(capture := load_capture(capture), geometry, face_model)
     taken = take_samples(capture, shapes, face, options, samples=samples, measurements=measurements, progress=progress)
-    taken = without_bounced_light(taken, brdf, options, progress=progress)
+    taken = with_balanced_lights(without_bounced_light(taken, brdf, options, progress=progress), brdf, options)
     estimate = fit_samples(taken, brdf, options, progress=progress)
     if out is not None:
         write_fitted(estimate, out, taken.capture, face, shapes, force=force)

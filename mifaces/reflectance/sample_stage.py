@@ -1,11 +1,12 @@
 """The samples stage: the one owner of the reflectance samples, which ``measure`` and ``fit_brdf`` call
 alike.
 
-:func:`take_samples` takes the photographs' samples on the faces (:func:`capture_samples`) and, with
-``balance_lights``, corrects the given lights' relative intensities by the face's one albedo
-(:func:`balance_given_lights`). :func:`without_bounced_light` then, with ``interreflection``, fits once,
-renders the light that fit bounces between parts of the face (:func:`bounced_light`) and samples the
-photographs again without it. Both return a :class:`SampleSet`: the samples with the capture whose
+:func:`take_samples` takes the photographs' samples on the faces (:func:`capture_samples`).
+:func:`without_bounced_light` then, with ``interreflection``, fits once, renders the light that fit
+bounces between parts of the face (:func:`bounced_light`) and samples the photographs again without
+it. :func:`with_balanced_lights` last, with ``balance_lights``, corrects the given lights' relative
+intensities by the face's one albedo (:func:`balance_given_lights`), less the glossy part of a quick
+fit, in rounds: after the bounced light, which differs from light to light too. Each returns a :class:`SampleSet`: the samples with the capture whose
 lights they were taken under, and what the stage did, for the fit's record.
 """
 
@@ -18,7 +19,9 @@ from dataclasses import dataclass
 from ..capture.types import Capture
 from .fitting import fit_samples
 from .interreflection import INDIRECT_DEPTH, INDIRECT_SPP, INDIRECT_WIDTH, bounced_light
-from .light_balance import balance_given_lights
+from .light_balance import BALANCE_FIT_ROUNDS, balance_given_lights
+from ..model.regions import REGIONS
+from .maps.diffuse import specular_reflectance_factor
 from .options import FitOptions
 from .samples import ReflectanceSamples, capture_samples
 
@@ -69,8 +72,7 @@ class SampleSet:
 def take_samples(capture: Capture, shapes: dict, face, options: FitOptions, *,
                  samples: ReflectanceSamples | None = None, measurements=None, progress: bool = True) -> SampleSet:
     """The samples of ``capture``'s photographs on ``shapes`` at ``options.resolution``, or the ``samples``
-    given (taken before, at that resolution), with the given lights balanced where
-    ``options.balance_lights``.
+    given (taken before, at that resolution).
 
     Raises
     ------
@@ -85,11 +87,7 @@ def take_samples(capture: Capture, shapes: dict, face, options: FitOptions, *,
         raise ValueError(f"the samples are at resolution {samples.resolution}, not {options.resolution}")
     if len(samples) == 0:
         raise ValueError("no valid reflectance samples: every texel is hidden, shadowed, grazing or saturated")
-    light_balance = None
-    if options.balance_lights:
-        capture, samples = balance_given_lights(capture, samples)
-        light_balance = capture.metadata.get("light_balance")
-    return SampleSet(capture, shapes, face, samples, light_balance, seconds=time.perf_counter() - t)
+    return SampleSet(capture, shapes, face, samples, seconds=time.perf_counter() - t)
 
 
 def without_bounced_light(taken: SampleSet, brdf, options: FitOptions, *, progress: bool = True) -> SampleSet:
@@ -114,4 +112,27 @@ def without_bounced_light(taken: SampleSet, brdf, options: FitOptions, *, progre
     return dataclasses.replace(taken, samples=samples, interreflection=record, seconds=taken.seconds + seconds)
 
 
-__all__ = ["SampleSet", "take_samples", "without_bounced_light"]
+def with_balanced_lights(taken: SampleSet, brdf, options: FitOptions) -> SampleSet:
+    """``taken``, and where ``options.balance_lights``, its given lights' relative intensities corrected
+    (:func:`balance_given_lights`): :data:`BALANCE_FIT_ROUNDS` times, a quick fit of ``brdf`` (no
+    normals, intervals or specular maps) predicts each sample's glossy part, and the lights are balanced
+    on what is left. Samples balanced before come back as they are (:func:`mifaces.measure` balances
+    once, with its first model, for every model's fit: a lamp's error is the capture's, not a model's)."""
+    if not options.balance_lights or taken.light_balance is not None:
+        return taken
+    t = time.perf_counter()
+    quick = dataclasses.replace(options, interreflection=False, balance_lights=False, uncertainty=None,
+                                normals=False, specular_maps=False)
+    capture, samples = taken.capture, taken.samples
+    for _ in range(BALANCE_FIT_ROUNDS):
+        fit = fit_samples(dataclasses.replace(taken, capture=capture, samples=samples), brdf, quick, progress=False)
+        glossy = specular_reflectance_factor(brdf, {REGIONS[name]: f.params for name, f in fit.fits.items()},
+                                             samples.light, samples.view, samples.labels())
+        capture, samples = balance_given_lights(capture, samples, glossy)
+    seconds = time.perf_counter() - t
+    return dataclasses.replace(taken, capture=capture, samples=samples,
+                               light_balance=capture.metadata.get("light_balance") or {},
+                               seconds=taken.seconds + seconds)
+
+
+__all__ = ["SampleSet", "take_samples", "with_balanced_lights", "without_bounced_light"]
