@@ -149,11 +149,10 @@ class BuiltinBSDF:
     def check_complete(self, params: dict, where: str) -> None:
         """Nothing to check: Mitsuba gives every parameter a region leaves out its default."""
 
-    def region_plugin(self, document: dict, region: str, texture) -> dict:
-        """The Mitsuba dict of ``region`` of ``document`` (the skin's where the
-        region has no entry) over albedo ``texture`` (None: Mitsuba's default)."""
-        params = document["regions"].get(region, document["regions"]["skin"])
-        d = {"type": self.name, **document.get("options", {})}
+    def region_plugin(self, params: dict, texture, options: dict | None = None) -> dict:
+        """The Mitsuba dict of a region's ``params`` over albedo ``texture`` (None: Mitsuba's
+        default), with the document's ``options``."""
+        d = {"type": self.name, **(options or {})}
         if texture is not None:
             d[self.albedo] = texture
         kinds = {p.name: p.kind for p in self.table}

@@ -269,13 +269,11 @@ class BRDFModel:
         parameters a scene names (:meth:`from_properties`)."""
         return {k: v for k, v in options.items() if k != "lobes"}
 
-    def region_plugin(self, document: Mapping, region: str, texture) -> dict:
-        """The Mitsuba dict of ``region`` of ``document`` (the skin's
-        parameters where the region has no entry) over diffuse ``texture``
-        (None: the plugin's default)."""
-        params = document["regions"].get(region, document["regions"]["skin"])
+    def region_plugin(self, params: Mapping, texture, options: Mapping | None = None) -> dict:
+        """The Mitsuba dict of a region's ``params`` over diffuse ``texture`` (None: the plugin's
+        default), with the model's ``options`` (a ``brdf.json``'s)."""
         d = {"type": self.name} if texture is None else {"type": self.name, DIFFUSE.name: texture}
-        d.update(self.plugin_options(document.get("options", {})))
+        d.update(self.plugin_options(options or {}))
         kinds = {p.name: p.kind for p in self.specular_parameters()}
         for k, v in params.items():
             d[k] = rgb(v) if kinds.get(k) == "rgb" else float(v)

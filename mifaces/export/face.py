@@ -37,7 +37,7 @@ from ..brdf.materials import SKIN_REFRACTIVE_INDEX
 from ..brdf.model import BRDFModel
 from ..io.result_set import ResultSetError, verify_set
 from ..model import MorphableModel, load_model
-from ..model.regions import REGION_NAMES, REGIONS, texel_regions_of_mesh
+from ..model.regions import FALLBACK_REGION, REGION_NAMES, REGIONS, texel_regions_of_mesh
 from ..reflectance.io import KIND, read_estimate
 from ..reflectance.result import FILES, BRDFEstimate
 from ..reflectance.maps.normals import decode, encode, mitsuba_frames
@@ -155,10 +155,11 @@ def gltf_normals(texture: np.ndarray, face_model: MorphableModel, vertices: np.n
 
 
 def _region_table(brdf: BRDFModel, regions: dict, labels: np.ndarray) -> dict[int, GltfLobe]:
-    """Label -> glTF lobe for every label in ``labels`` (background and unfitted regions: skin's)."""
+    """Label -> glTF lobe for every label in ``labels`` (background and unfitted regions:
+    :data:`~mifaces.model.regions.FALLBACK_REGION`'s)."""
     lobes, known = {}, {}
     for label in np.unique(labels):
-        name = REGION_NAMES[label] if REGION_NAMES[label] in regions else "skin"
+        name = REGION_NAMES[label] if REGION_NAMES[label] in regions else FALLBACK_REGION
         values = brdf.region_values(regions[name], name)
         key = json.dumps({k: np.asarray(v, np.float64).tolist() for k, v in values.items()}, sort_keys=True)
         if key not in known:  # regions of equal values (fallen back to another's) share its lobe

@@ -15,6 +15,7 @@ from ..brdf import model as brdf_model
 from ..brdf.gltf_lobe import FIT_GRID, gltf_brdf
 from ..brdf.hemisphere import hemisphere_pairs
 from ..brdf.parameter import rgb
+from ..model.regions import region_entry
 from ..render import region_bsdf
 from ..validation.brdf_error import eval_bsdf
 
@@ -30,7 +31,7 @@ def mapping_rmse(document: dict, region: str, albedo, grid: int = FIT_GRID) -> d
     lobes' RMS).
     """
     wi, wo = hemisphere_pairs(grid)
-    params = document["regions"].get(region, document["regions"]["skin"])
+    params = region_entry(document["regions"], region)
     brdf = brdf_model(document["model"], **document.get("options", {}))
     lobe = brdf.gltf_lobe(brdf.region_values(params, region))
     albedo = np.broadcast_to(np.asarray(albedo, np.float64), 3).copy()

@@ -30,6 +30,9 @@ REGIONS: dict[str, int] = {
 }
 #: label value -> name.
 REGION_NAMES: tuple[str, ...] = tuple(sorted(REGIONS, key=REGIONS.get))
+#: The region whose parameters a region without its own takes (one nothing was fitted to, or the
+#: background's texels a render still shades).
+FALLBACK_REGION = "skin"
 
 #: iBUG 68-point indices (1-based) of the features used to outline regions.
 IBUG_EYEBROWS = (tuple(range(18, 23)), tuple(range(23, 28)))
@@ -45,6 +48,19 @@ def label(name: str) -> int:
         return REGIONS[name]
     except KeyError:
         raise ValueError(f"unknown region {name!r}; the vocabulary is {list(REGIONS)}") from None
+
+
+def region_entry(table: Mapping, region: str):
+    """``table[region]`` (a ``brdf.json``'s ``regions``, or any table by region name), or
+    :data:`FALLBACK_REGION`'s where ``region`` has no entry."""
+    return table[region] if region in table else table[FALLBACK_REGION]
+
+
+def region_name(label: int) -> str:
+    """The region a texel or triangle of ``label`` is shaded as: its name, :data:`FALLBACK_REGION` for
+    the background or a label outside the vocabulary."""
+    name = REGION_NAMES[label] if 0 <= label < len(REGION_NAMES) else FALLBACK_REGION
+    return FALLBACK_REGION if name == "background" else name
 
 
 def regions_present(region_map: np.ndarray) -> list[str]:

@@ -13,7 +13,7 @@ import mitsuba as mi
 import numpy as np
 
 from .. import brdf as brdf_models
-from ..model.regions import REGIONS
+from ..model.regions import FALLBACK_REGION, REGIONS
 from ..render import FaceScene
 from ..render.blend import hard_borders
 from ..reflectance.fit.parameters import ParameterSpace
@@ -160,7 +160,7 @@ class RefineProblem:
         names = {label: name for name, label in REGIONS.items()}
         pixels = {}
         for label, n in zip(*np.unique(view.labels[view.mask], return_counts=True)):
-            region = names.get(int(label), "skin")
+            region = names.get(int(label), FALLBACK_REGION)
             pixels[region] = pixels.get(region, 0) + int(n)
         held = holdout_pixels(view.mask, self.schedule.holdout, self.schedule.holdout_block, self.rng)
         envmap_key = "environment.data" if "environment.data" in view.params else None

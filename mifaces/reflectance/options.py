@@ -87,9 +87,11 @@ class FitOptions:
         warning.
     balance_lights : bool
         Correct the given lights' relative intensities by the face's one albedo before
-        fitting (:func:`mifaces.reflectance.light_balance.balance_given_lights`; the mean
-        kept): a calibrated lamp a percent off in distance biases the glossy fit
-        (``docs/uncertainty.md``).
+        fitting, less the glossy part of a quick fit, in rounds
+        (:func:`mifaces.reflectance.sample_stage.with_balanced_lights`; the mean kept),
+        after the bounced light where ``interreflection``: a calibrated lamp a fraction of
+        a percent off in distance biases the glossy fit by several percent
+        (``docs/reflectance.md``, "Where skin's bias comes from").
     interreflection : bool
         Take the light bounced between parts of the face out of the samples: fit, render
         that light with the fit (:func:`mifaces.reflectance.interreflection.bounced_light`),
@@ -118,8 +120,8 @@ class FitOptions:
     texel_albedo: bool = option(True, help="An albedo per texel in the glossy fit; --no-: one per region, as the "
                                            "paper (docs/uncertainty.md).")
     balance_lights: bool = option(False, help="Correct the given lights' relative intensities by the face's one "
-                                              "albedo before the BRDF fits (a lamp a percent off biases the glossy "
-                                              "fit).")
+                                              "albedo, less a quick fit's glossy part, before the BRDF fits (a lamp "
+                                              "a fraction of a percent off biases the glossy fit).")
     interreflection: bool = option(False, help="Take the light bounced between parts of the face out of the "
                                                "samples (a second fit; bounced light biases skin's lobe low).")
 

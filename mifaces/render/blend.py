@@ -23,6 +23,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from .. import brdf as brdf_models
+from ..model.regions import region_entry
 from ..model.texture_space import rasterize
 
 #: The distance on the face (mm) over which a region's parameters turn into
@@ -52,14 +53,14 @@ def hard_borders(brdf: Mapping) -> dict:
 def blended_parameters(brdf: Mapping, regions, *, exclude=()) -> list[str]:
     """The glossy parameters of ``brdf`` (the ``brdf.json`` layout) that differ
     between the ``regions`` a face shows (names; a region without an entry takes
-    the skin's), in the model's order: the ones a render takes as blended
+    :func:`~mifaces.model.regions.region_entry`'s fallback), in the model's order: the ones a render takes as blended
     textures. Empty when the document does not ask for blending; ``exclude``:
     parameters that already have a map of their own (a per-texel specular map)."""
     if blend_width(brdf) == 0:
         return []
     model = brdf_models.bsdf(brdf["model"], **brdf.get("options", {}))
     table = brdf["regions"]
-    values = [table.get(r, table["skin"]) for r in sorted(set(regions))]
+    values = [region_entry(table, r) for r in sorted(set(regions))]
     out = []
     for p in model.specular_parameters():
         if p.name in exclude:
@@ -92,7 +93,7 @@ def region_maps(brdf: Mapping, meshes: Mapping, size: int, *, exclude=()) -> dic
     sigma = blend_width(brdf) / _RISE_SD / _mm_per_texel(parts, size)
     out = {}
     for name in names:
-        values = np.array([np.broadcast_to(np.asarray(table.get(m.region, table["skin"])[name], np.float64), 3)
+        values = np.array([np.broadcast_to(np.asarray(region_entry(table, m.region)[name], np.float64), 3)
                            for m in parts])
         image = values[part]
         out[name] = ndi.gaussian_filter(image, sigma=(sigma, sigma, 0), mode="nearest").astype(np.float32)

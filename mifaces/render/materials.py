@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from .. import brdf as brdf_models
+from ..model.regions import region_entry
 
 
 #: Id of the albedo texture in a face scene; its BSDFs refer to it.
@@ -35,11 +36,13 @@ def region_bsdf(truth: dict, region: str, texture, *, maps: Mapping | None = Non
     (:data:`mifaces.brdf.BUILTINS`: ``roughplastic``, ``principled``), whose
     albedo property (``diffuse_reflectance``, ``base_color``) takes
     ``texture``: :func:`mifaces.brdf.bsdf`'s ``region_plugin`` builds it.
+    A region without an entry takes :data:`~mifaces.model.regions.FALLBACK_REGION`'s.
     ``maps`` (parameter name -> texture) puts spatially varying parameters in
     place of the region's values (a spatially varying ground truth,
     :mod:`mifaces.studio.varying`)."""
     model = truth["model"]
-    d = brdf_models.bsdf(model, **truth.get("options", {})).region_plugin(truth, region, texture)
+    options = truth.get("options", {})
+    d = brdf_models.bsdf(model, **options).region_plugin(region_entry(truth["regions"], region), texture, options)
     for k, value in (maps or {}).items():
         if k not in d:
             raise ValueError(f"a {model} BSDF has no parameter {k!r} to take a map")

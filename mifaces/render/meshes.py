@@ -9,7 +9,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..model.mesh import mitsuba_mesh
-from ..model.regions import REGIONS, triangle_regions
+from ..model.regions import region_name, triangle_regions
 from .materials import region_bsdf
 
 
@@ -45,12 +45,10 @@ def region_meshes(model, vertices: np.ndarray, normals: np.ndarray | None = None
     ``vertices``). Keys are ``face_<region>_<label>``."""
     vertices = np.asarray(vertices, np.float32)
     normals = model.vertex_normals(vertices) if normals is None else normals
-    names = {label: name for name, label in REGIONS.items()}
     labels = triangle_regions(model.region_map, model.uv, model.triangles)
     meshes = {}
     for label in np.unique(labels):
-        name = names.get(int(label), "skin")
-        name = "skin" if name == "background" else name
+        name = region_name(int(label))
         tri = model.triangles[labels == label]
         used, inverse = np.unique(tri, return_inverse=True)
         meshes[f"face_{name}_{int(label)}"] = RegionMesh(name, vertices[used], inverse.reshape(-1, 3), model.uv[used],

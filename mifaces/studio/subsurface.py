@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.regions import REGIONS
+from ..model.regions import REGIONS, region_entry
 from .varying import texel_regions
 
 #: Jensen et al. 2001, measured "Skin1": reduced scattering and absorption coefficients, mm⁻¹ (RGB).
@@ -88,7 +88,7 @@ def dipole_albedo(coefficients: dict = SKIN1, eta: float = 1.38) -> np.ndarray:
 
 def boundary_bsdf(truth: dict, region: str) -> dict:
     """The ``skinboundary`` BSDF (Mitsuba dict) of ``region`` of the Cook–Torrance ``truth``."""
-    params = truth["regions"].get(region, truth["regions"]["skin"])
+    params = region_entry(truth["regions"], region)
     return {"type": "skinboundary", "specular_reflectance": {"type": "rgb", "value": list(
         np.broadcast_to(np.asarray(params["specular_reflectance"], np.float64), 3).tolist())},
         "roughness": float(params["roughness"]), "eta": float(params["eta"])}
@@ -99,7 +99,7 @@ def subsurface_albedo(face_model, albedo: np.ndarray, truth: dict) -> np.ndarray
     labels = texel_regions(face_model, albedo.shape[0])
     out = np.array(albedo, np.float32)
     for region in TRANSLUCENT:
-        eta = float(truth["regions"].get(region, truth["regions"]["skin"])["eta"])
+        eta = float(region_entry(truth["regions"], region)["eta"])
         out[labels == REGIONS[region]] = dipole_albedo(SKIN1, eta).astype(np.float32)
     return out
 
