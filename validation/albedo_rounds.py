@@ -37,7 +37,6 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 import uncertainty as U  # noqa: E402  (the captures and checks of validation/uncertainty.py)
 from roles import SIMULATED, refuse_report_data  # noqa: E402
 

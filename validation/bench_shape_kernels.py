@@ -39,7 +39,6 @@ import argparse
 import json
 import os
 import platform
-import sys
 import tempfile
 import time
 from collections import Counter
@@ -54,7 +53,6 @@ from mifaces.capture import load_capture
 from mifaces.io.atomic import write_json
 from mifaces.shape import ShapeSchedule, fit_measurement
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from shape_estimation import ensure_capture, evaluated, same_topology_metrics, truth  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -39,7 +39,6 @@ from mifaces.io.atomic import write_json
 from mifaces.validation.shape_errors import front_of_face, rigid_alignment, shape_errors
 from mifaces.validation.validator import Validator
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from shape_depth import RESULTS, WORLD_TARGET_MM, fitted_shapes, simulated_default  # noqa: E402
 
 #: The shape floor's aim in issue 22 (held-out lights).

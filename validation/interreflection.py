@@ -28,7 +28,6 @@ Writes ``validation/results/interreflection.json``.
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -37,7 +36,6 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 import uncertainty as U  # noqa: E402  (the captures and checks of validation/uncertainty.py)
 
 import mifaces.studio.scene as studio_scene  # noqa: E402

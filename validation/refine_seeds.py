@@ -50,7 +50,6 @@ from mifaces.reflectance import FitOptions, fit_brdf
 from mifaces.refine import RefineSchedule, refine_estimate
 from mifaces.studio.simulate import simulate
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from refine import novel_light_errors, region_errors  # noqa: E402  (validation/refine.py)
 from roles import SIMULATED, refuse_report_data  # noqa: E402
 

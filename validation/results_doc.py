@@ -37,7 +37,6 @@ import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import doc_figures  # noqa: E402  (the figures of the hand-written docs, checked with --check)
 from results_format import DASH, get  # noqa: E402  (the formatting helpers)

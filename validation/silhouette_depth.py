@@ -36,7 +36,6 @@ from mifaces.render.face_pixels import face_pixels
 from mifaces.render import FaceScene
 from mifaces.validation.shape_errors import capture_shape_errors
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from shape_depth import fitted_shapes, simulated_default  # noqa: E402  (the captures of validation/shape_depth.py)
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -48,7 +48,6 @@ from mifaces.io.atomic import save_figure, write_json
 from mifaces.importers.yaleb import default_split, read_subject
 from mifaces.light_estimation.unknown import LIGHTS_FILE
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_yaleb import RESULTS, SHADOW_ANGLE, subject_run, summary  # noqa: E402
 
 #: Targets of issue 26 on the Yale subjects: median and largest angular error (degrees).
