@@ -6,12 +6,13 @@ a directional light (``direction``), an environment map (``kind`` ``'environment
 light nobody measured (``unknown``), which :mod:`mifaces.light_estimation` estimates as a directional
 light or an environment map (``estimated``). Its users ask it:
 
-- the incidence at surface points: :meth:`Light.towards`, :meth:`Light.direction_from`, and
-  :meth:`Light.require_incidence` where it must be known;
+- the incidence at surface points: :meth:`Light.towards`, :meth:`Light.direction_from`,
+  :meth:`Light.first_seen_from`, :meth:`Light.main_direction`, and :meth:`Light.require_incidence`
+  where it must be known;
 - where a shape fit starts it: :meth:`Light.start_direction`, :attr:`Light.held_position`,
   :attr:`Light.direction_fitted`, :attr:`Light.fitted_on_face`;
 - copies: :meth:`Light.calibrated`, :meth:`Light.moved_to`, :meth:`Light.with_intensity`,
-  :meth:`Light.with_estimated_map`;
+  :meth:`Light.with_estimated_map`, :meth:`Light.as_simulated`; new lamps like them: :func:`lamp_towards`;
 - the emitters for a scene: :attr:`Light.emitter_kind`, :meth:`Light.sphere_lamp`, :attr:`Light.radiance_map`,
   :attr:`Light.estimated_map`;
 - what it is made of: :attr:`Light.pictures`, :attr:`Light.intensity_given`.
@@ -121,6 +122,42 @@ class Light:
             return None
         return self.towards(points)[0]
 
+    def first_seen_from(self, points) -> np.ndarray | None:
+        """Unit directions (N, 3) from world ``points`` towards the light as a shape fit first sees it: a
+        light to estimate's stated guess (as given), else :meth:`direction_from`; None for an environment
+        map and a light without either (its estimate starts frontal)."""
+        if self.unknown and not self.environment:
+            return None if self.guess is None else np.broadcast_to(np.asarray(self.guess, np.float64),
+                                                                   np.shape(np.atleast_2d(points)))
+        return self.direction_from(points)
+
+    def main_direction(self, centre, camera) -> np.ndarray:
+        """The one direction (unit, world) most of the light reaches ``centre`` from: towards a point
+        light, a directional light's direction, where most of an environment map's light comes from."""
+        if self.environment:
+            axis = np.asarray(dominant_direction(self.envmap, camera), np.float64)
+        elif self.directional:
+            axis = np.asarray(self.direction, np.float64)
+        else:
+            axis = np.asarray(self.position, np.float64) - np.asarray(centre, np.float64)
+        return axis / np.linalg.norm(axis)
+
+    def as_simulated(self, true: Light | None, rendered_map=None) -> Light:
+        """The light as the simulator made it, to judge a run that estimated it under the lights of one
+        that was given them: itself where given; for a light estimated or to estimate, ``true``'s position
+        and intensity (the point light the simulator placed), or for an environment the map it rendered
+        with (``rendered_map()``, read only then). ``ValueError`` where neither says."""
+        if not (self.estimated or self.unknown):
+            return self
+        if true is not None:
+            return replace(self, position=np.asarray(true.position, np.float64), direction=None,
+                           intensity=np.asarray(true.intensity, np.float64), envmap=None,
+                           unknown=False, estimated=False, relative=False)
+        if self.environment and rendered_map is not None:
+            return replace(self, envmap=rendered_map(), unknown=False, estimated=False, relative=False)
+        raise ValueError(f"light {self.name!r} was estimated, and the ground truth does not say where the "
+                         "simulator placed it")
+
     def require_incidence(self, where: str) -> None:
         """Raise ``ValueError`` (naming ``where``) unless the light's incidence on a face is known: a light
         to estimate must be estimated first, a point light needs its position."""
@@ -219,6 +256,21 @@ class Light:
         return replace(self, envmap=np.asarray(envmap, np.float32))
 
 
+def lamp_towards(lights, name: str, direction, centre, irradiance: float) -> Light:
+    """A new lamp of the kind ``lights``' lamps are, in ``direction`` (unit, world) from ``centre``: a point
+    light at their mean distance with the first one's intensity; a directional light where they are
+    directional, and for lights that are environment maps alone (irradiance ``irradiance``)."""
+    lamps = [light for light in lights if not light.environment]
+    direction = np.asarray(direction, np.float64)
+    if not lamps:
+        return Light(name, None, np.full(3, irradiance), direction=direction)
+    intensity = np.asarray(lamps[0].intensity, np.float64)
+    if lamps[0].directional:
+        return Light(name, None, intensity, direction=direction)
+    distance = float(np.mean([np.linalg.norm(lamp.position - centre) for lamp in lamps]))
+    return Light(name, centre + distance * direction, intensity)
+
+
 def unknown_lights(lights) -> tuple[Light, ...]:
     """The lights nobody measured, to estimate with the face (:attr:`Light.unknown`)."""
     return tuple(light for light in lights if light.unknown)
@@ -234,4 +286,4 @@ def any_relative(lights) -> bool:
     return any(light.relative for light in lights)
 
 
-__all__ = ["Light", "any_relative", "estimated_lights", "unknown_lights"]
+__all__ = ["Light", "any_relative", "estimated_lights", "lamp_towards", "unknown_lights"]

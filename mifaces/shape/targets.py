@@ -189,14 +189,9 @@ def light_axis_angle(capture, measurement) -> float:
     fp = np.array(list(measurement.feature_points.values()))
     distance = max(float(np.linalg.norm(cam.translation)), 1.0)
     centre = cam.to_world(cam.pixel_rays(fp.mean(0)) * distance)
-    if light.environment:  # light from everywhere: no one axis
+    towards = light.first_seen_from(centre[None])  # a guess as the fit starts from it; None: no one axis
+    if towards is None:
         return 0.0
-    if light.unknown and light.guess is not None:  # its stated guess, as the fit starts from it
-        towards = np.asarray(light.guess, np.float64)[None]
-    elif not light.directional and light.position is None:  # unknown (taken as frontal, where it starts)
-        return 0.0
-    else:
-        towards, _ = light.towards(centre[None])
     d2 = (cam.position - centre) / np.linalg.norm(cam.position - centre)
     return math.degrees(math.acos(float(np.clip(towards[0] @ d2, -1, 1))))
 

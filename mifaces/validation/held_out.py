@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from ..capture.types import RELATIVE_IRRADIANCE
 from ..capture import Light
-from ..lights.environment import dominant_direction
+from ..lights.light import lamp_towards
 from ..io.image_files import read_exr
 
 #: The novel pose: yaw about the camera's up axis, then pitch about its right
@@ -49,45 +49,22 @@ def true_lights(capture, truth):
     its lights is judged under the same held-out lights as one that was given them."""
     placed = {light.name: light for light in truth.lights}
     rendered = truth.description.get("map")  # an environment-lit capture's one map, inside the capture
-    lights = []
-    for light in capture.lights:
-        if not (light.estimated or light.unknown):
-            lights.append(light)
-        elif light.name in placed:
-            true = placed[light.name]
-            lights.append(replace(light, position=np.asarray(true.position, np.float64), direction=None,
-                                  intensity=np.asarray(true.intensity, np.float64), envmap=None,
-                                  unknown=False, estimated=False, relative=False))
-        elif light.environment and rendered is not None:
-            lights.append(replace(light, envmap=read_exr(Path(capture.path) / rendered)[..., :3], unknown=False,
-                                  estimated=False, relative=False))
-        else:
-            raise ValueError(f"light {light.name!r} was estimated, and the ground truth does not say where the "
-                             "simulator placed it")
-    return replace(capture, lights=tuple(lights))
+    read_map = None if rendered is None else (lambda: read_exr(Path(capture.path) / rendered)[..., :3])
+    return replace(capture, lights=tuple(light.as_simulated(placed.get(light.name), read_map)
+                                         for light in capture.lights))
 
 
-def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -> list[tuple[Light, float]]:
+def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS,
+                    names=None) -> list[tuple[Light, float]]:
     """``count`` lights none of the capture's photographs used (:class:`~mifaces.capture.Light`
-    values named ``held_out_<k>``), each with its angle to the capture's lights: of
+    values named ``held_out_<k>``, or ``names``), each with its angle to the capture's lights: of
     :data:`LIGHT_CANDIDATES`, those whose smallest angle (seen from
     ``centre``) to every capture light and to each other is largest; point
     lights at the capture lights' mean distance with the first light's
     intensity (directional lights for a capture of directional lights, and for one lit by environment
     maps alone: irradiance :data:`~mifaces.capture.types.RELATIVE_IRRADIANCE`); away from where most
     of each environment map's light comes from, too; that angle (degrees) is the smallest to any of them."""
-    maps = [dominant_direction(light.envmap, capture.camera) for light in capture.lights if light.environment]
-    lights = [light for light in capture.lights if not light.environment]  # the point or directional ones
-    environment = not lights
-    directional = environment or lights[0].directional
-    if environment:
-        used = np.zeros((0, 3))
-    elif directional:
-        used = np.array([light.direction for light in lights], np.float64)
-    else:
-        used = np.array([light.position for light in lights], np.float64) - centre
-    used = np.concatenate([used, np.reshape(maps, (-1, 3))])  # and where most of each map's light comes from
-    used /= np.linalg.norm(used, axis=1, keepdims=True)
+    used = np.array([light.main_direction(centre, capture.camera) for light in capture.lights], np.float64)
     candidates = np.array([capture.camera.direction(a, e) for a, e in LIGHT_CANDIDATES])
     chosen = []
     for _ in range(count):
@@ -95,15 +72,11 @@ def held_out_lights(capture, centre: np.ndarray, count: int = HELD_OUT_LIGHTS) -
         separation = np.degrees(np.arccos(np.clip(candidates @ taken.T, -1, 1))).min(axis=1)
         separation[chosen] = -1
         chosen.append(int(np.argmax(separation)))
-    distance = 1.0 if directional else float(np.mean([np.linalg.norm(l.position - centre) for l in lights]))
     out = []
     for i, k in enumerate(chosen):
         angle = float(np.degrees(np.arccos(np.clip(used @ candidates[k], -1, 1))).min())
-        intensity = np.full(3, RELATIVE_IRRADIANCE) if environment else np.asarray(lights[0].intensity, np.float64)
-        name = f"held_out_{i + 1}"
-        light = (Light(name, None, intensity, direction=candidates[k]) if directional
-                 else Light(name, centre + distance * candidates[k], intensity))
-        out.append((light, angle))
+        name = names[i] if names is not None else f"held_out_{i + 1}"
+        out.append((lamp_towards(capture.lights, name, candidates[k], centre, RELATIVE_IRRADIANCE), angle))
     return out
 
 
@@ -111,8 +84,8 @@ def novel_light(capture, centre: np.ndarray) -> Light:
     """The light none of the measurements used that :func:`mifaces.pipeline.measure.measure`
     renders each fit under beside its photograph: the first of :func:`held_out_lights`
     (of ``capture``'s lights, seen from ``centre``), named ``'novel'``."""
-    light, _ = held_out_lights(capture, centre, 1)[0]
-    return replace(light, name="novel")
+    light, _ = held_out_lights(capture, centre, 1, names=("novel",))[0]
+    return light
 
 
 __all__ = ["NOVEL_POSE", "HELD_OUT_LIGHTS", "LIGHT_CANDIDATES", "novel_rotation", "true_lights",
