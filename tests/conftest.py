@@ -47,13 +47,20 @@ def jit_variant(request):
 def small_capture(tmp_path_factory):
     """A factory: ``small_capture(name, **options)`` simulates a small capture
     in the LLVM variant (:func:`mifaces.studio.simulate.simulate` with ``options``)
-    and returns its folder."""
+    and returns its folder; ``direct_only=True``: path depth 2, no light bounced off the face."""
+    import mifaces.studio.scene as studio_scene
     from mifaces.studio.simulate import simulate
 
-    def make(name: str, **options):
+    def make(name: str, direct_only: bool = False, **options):
         mifaces.set_variant("llvm_ad_rgb")
         out = tmp_path_factory.mktemp(name) / "capture"
-        simulate(out, progress=False, **options)
+        default = studio_scene.INTEGRATOR
+        if direct_only:
+            studio_scene.INTEGRATOR = {**default, "max_depth": 2}
+        try:
+            simulate(out, progress=False, **options)
+        finally:
+            studio_scene.INTEGRATOR = default
         return out
 
     return make

@@ -10,7 +10,6 @@ import warnings
 import numpy as np
 import pytest
 
-import mifaces.studio.scene as studio_scene
 from mifaces.capture import Camera, load_capture, read_ground_truth
 from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
 from mifaces.reflectance.interreflection import bounced_light, coarse_camera
@@ -44,12 +43,7 @@ def captures(small_capture):
     """The same simulated face twice: path traced with bounces (the simulator's depth 4) and with
     direct light only (depth 2): same face, lights, poses and noise draws."""
     with_bounces = small_capture("bounces", **CAPTURE)
-    default = studio_scene.INTEGRATOR
-    studio_scene.INTEGRATOR = {**default, "max_depth": 2}
-    try:
-        direct = small_capture("direct", **CAPTURE)
-    finally:
-        studio_scene.INTEGRATOR = default
+    direct = small_capture("direct", direct_only=True, **CAPTURE)
     return load_capture(with_bounces), load_capture(direct)
 
 

@@ -204,12 +204,27 @@ def test_report_page_shows_the_lights_picture_when_there_is_one(tmp_path):
     assert f'<img src="{LIGHTS_PICTURE}"' in write_html(tmp_path / "report.html", report).read_text()
 
 
+def _two_light_samples(reflectance):
+    """Samples of the same n texels under 'top' (measurement m0) then 'side' (m1), ``reflectance``
+    (2n, 3): light and view 50 degrees from the normal in planes at right angles, so the half vector
+    is 40 degrees off and the balance reads them."""
+    from mifaces.reflectance.samples import ReflectanceSamples
+
+    n = len(reflectance) // 2
+    a = np.radians(50.0)
+    light = np.tile(np.array([[np.sin(a), 0.0, np.cos(a)]], np.float32), (2 * n, 1))
+    view = np.tile(np.array([[0.0, np.sin(a), np.cos(a)]], np.float32), (2 * n, 1))
+    return ReflectanceSamples(light=light, view=view, reflectance=np.asarray(reflectance, np.float32),
+                              sigma=np.ones(2 * n, np.float32), texel=np.tile(np.arange(n, dtype=np.int32), 2),
+                              measurement=np.repeat(np.arange(2, dtype=np.int16), n), resolution=32,
+                              measurement_names=("m0", "m1"))
+
+
 def test_balance_given_lights_finds_a_lamp_that_is_off(tmp_path):
     """Two given lights over the same texels, 'side' stated 6 % too strong: its samples read 6 %
     too dark. The balance finds the factor (the two lights' mean kept), corrects the intensities
     and the samples, and leaves a capture of one given light alone."""
     from mifaces.reflectance.light_balance import balance_given_lights
-    from mifaces.reflectance.samples import ReflectanceSamples
 
     capture = load_capture(write_directional(tmp_path), detect=False)
     rng = np.random.default_rng(0)
@@ -217,14 +232,7 @@ def test_balance_given_lights_finds_a_lamp_that_is_off(tmp_path):
     albedo = rng.uniform(0.2, 0.6, (n, 1)) * np.ones(3)
     highlight = np.where(rng.random((n, 1)) < 0.1, 0.5, 0.0)  # a few highlights under 'top' only
     reflectance = np.concatenate([albedo + highlight, albedo / 1.06]).astype(np.float32)
-    # light and view 50 degrees from the normal in planes at right angles: the half vector 40 degrees off
-    a = np.radians(50.0)
-    light = np.tile(np.array([[np.sin(a), 0.0, np.cos(a)]], np.float32), (2 * n, 1))
-    view = np.tile(np.array([[0.0, np.sin(a), np.cos(a)]], np.float32), (2 * n, 1))
-    samples = ReflectanceSamples(light=light, view=view, reflectance=reflectance, sigma=np.ones(2 * n, np.float32),
-                                 texel=np.tile(np.arange(n, dtype=np.int32), 2),
-                                 measurement=np.repeat(np.arange(2, dtype=np.int16), n), resolution=32,
-                                 measurement_names=("m0", "m1"))
+    samples = _two_light_samples(reflectance)
     balanced, corrected = balance_given_lights(capture, samples)
     factor = balanced.metadata["light_balance"]
     assert factor["side"] / factor["top"] == pytest.approx(1.06, rel=1e-3)
@@ -251,7 +259,6 @@ def test_balance_given_lights_reads_the_albedo_less_the_glossy_part_a_fit_predic
     light: the factor comes out wrong. With the glossy part a fit predicts taken out, it is exact; a
     second balance from there changes nothing, and the record stays the product of both."""
     from mifaces.reflectance.light_balance import balance_given_lights
-    from mifaces.reflectance.samples import ReflectanceSamples
 
     capture = load_capture(write_directional(tmp_path), detect=False)
     rng = np.random.default_rng(1)
@@ -259,13 +266,7 @@ def test_balance_given_lights_reads_the_albedo_less_the_glossy_part_a_fit_predic
     albedo = rng.uniform(0.2, 0.6, (n, 1)) * np.ones(3)
     tail = np.concatenate([np.full((n, 3), 0.02), np.zeros((n, 3))]).astype(np.float32)
     reflectance = (np.concatenate([albedo, albedo / 1.06]) + tail).astype(np.float32)
-    a = np.radians(50.0)
-    light = np.tile(np.array([[np.sin(a), 0.0, np.cos(a)]], np.float32), (2 * n, 1))
-    view = np.tile(np.array([[0.0, np.sin(a), np.cos(a)]], np.float32), (2 * n, 1))
-    samples = ReflectanceSamples(light=light, view=view, reflectance=reflectance, sigma=np.ones(2 * n, np.float32),
-                                 texel=np.tile(np.arange(n, dtype=np.int32), 2),
-                                 measurement=np.repeat(np.arange(2, dtype=np.int16), n), resolution=32,
-                                 measurement_names=("m0", "m1"))
+    samples = _two_light_samples(reflectance)
     blind = balance_given_lights(capture, samples)[0].metadata["light_balance"]
     assert abs(blind["side"] / blind["top"] - 1.06) > 0.02  # the tail read as light
     balanced, corrected = balance_given_lights(capture, samples, tail)

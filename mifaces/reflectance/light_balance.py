@@ -32,9 +32,9 @@ BALANCE_ROUNDS = 20
 #: 100-104 (``validation/light_calibration_bias.py``: ``balance_sweep``; docs/uncertainty.md).
 GIVEN_MAX_HALF_COSINE = 0.8
 #: Rounds of quick fit and balance (:func:`mifaces.reflectance.sample_stage.with_balanced_lights`): the
-#: first fit's lobe has absorbed part of the lights' errors, so one round finds about four fifths of
-#: them; the factors moved by less than 0.05 % after the third on the development seeds 100-104
-#: (``docs/reflectance.md``).
+#: first fit's lobe has absorbed part of the lights' errors, so one round finds most of them, not all.
+#: Chosen on development seed 100 (its ideal capture of ``validation/reflectance_bias.py``, the steel
+#: spheres' lamps; a look, not kept): the factors stopped moving (to 0.01 %) after the third round.
 BALANCE_FIT_ROUNDS = 3
 
 
