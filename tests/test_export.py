@@ -26,7 +26,9 @@ def measured(small_capture, tmp_path_factory):
     capture = small_capture("export", measurements=2, resolution=(256, 256), spp=8, albedo_resolution=128, seed=4)
     out = tmp_path_factory.mktemp("export") / "m"
     mifaces.set_variant("llvm_ad_rgb")
-    measure(out, capture, geometry="ground-truth", spp=2, progress=False, options=FitOptions(resolution=64))
+    # the corrections off: two photographs hold no lobe for the bounced light's second fit to start from
+    measure(out, capture, geometry="ground-truth", spp=2, progress=False,
+            options=FitOptions(resolution=64, interreflection=False, balance_lights=False))
     return out
 
 
@@ -420,7 +422,7 @@ def test_a_result_folder_reads_back_as_the_estimate_written(small_capture, tmp_p
 
     capture = small_capture("read_back", measurements=4, resolution=(192, 192), spp=4, albedo_resolution=64, seed=2)
     fitted = fit_brdf(capture, "cooktorrance", out=tmp_path / "ct", progress=False,
-                      options=FitOptions(resolution=16, specular_maps=True))
+                      options=FitOptions(resolution=16, specular_maps=True, interreflection=False))
     read = read_estimate(tmp_path / "ct")
     assert (read.model, read.options, read.measurements) == (fitted.model, fitted.options, fitted.measurements)
     model = brdf.model(fitted.model, **fitted.options)  # values as brdf.json keeps them (RGB as three)

@@ -27,6 +27,11 @@ TEXTURE = 96
 FARTHER = 1.01
 
 
+#: The fit without the balance (the default balances), and without the bounced light's correction: the
+#: capture is direct light only, so there is none to take out.
+UNBALANCED = {"balance_lights": False, "interreflection": False}
+
+
 @pytest.fixture(scope="module")
 def lamp_off(small_capture):
     """The capture with the simulator's true light positions, and the same with its first lamp
@@ -44,7 +49,8 @@ def _skin_rho(capture, face, shapes, **options) -> tuple[float, object]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         estimate = fit_brdf(capture, "cooktorrance", shapes, face_model=face, progress=False,
-                            options=FitOptions(resolution=TEXTURE, uncertainty=None, **options))
+                            options=FitOptions(resolution=TEXTURE, uncertainty=None,
+                                               **{**UNBALANCED, **options}))
     return float(np.mean(estimate.fits["skin"].params["specular_reflectance"])), estimate
 
 
@@ -77,7 +83,7 @@ def test_samples_balanced_once_are_shared_not_balanced_again(lamp_off):
     """``with_balanced_lights`` balances once: what it balanced comes back as it is (``measure``
     balances with its first model and every model shares the samples), and nothing without the option."""
     _, off, face, shapes = lamp_off
-    options = FitOptions(resolution=TEXTURE, uncertainty=None, balance_lights=True)
+    options = FitOptions(resolution=TEXTURE, uncertainty=None, balance_lights=True, interreflection=False)
     taken = take_samples(off, shapes, face, options, progress=False)
     assert with_balanced_lights(taken, brdf_models.model("phong"), replace(options, balance_lights=False)) is taken
     with warnings.catch_warnings():

@@ -208,12 +208,15 @@ def test_covariance_estimates_match_their_definitions_on_a_linear_problem():
         assert estimate.dof == dof, method
 
 
-def test_intervals_are_t_quantiles_of_the_covariance_mapped_back():
+def test_intervals_are_t_quantiles_of_the_covariance_mapped_back(monkeypatch):
     """x̂_k ± t_{0.975, dof} √Cov_kk in the fit's coordinates, mapped to the parameter's units; std by the
-    delta method |∂p/∂x| √Cov_kk; fixed and held parameters get a status instead."""
+    delta method |∂p/∂x| √Cov_kk; fixed and held parameters get a status instead (no systematic term)."""
     from scipy.stats import t
 
+    from mifaces.reflectance.fit import intervals
     from mifaces.reflectance.fit.intervals import Covariance, parameter_intervals
+
+    monkeypatch.setattr(intervals, "SYSTEMATIC", {})
 
     space = ParameterSpace(brdf_models.model("cooktorrance"), FIXED)
     x = space.vector({**TRUTH, "specular_reflectance": [0.8, 0.05, 0.8]})
@@ -238,10 +241,13 @@ def test_intervals_are_t_quantiles_of_the_covariance_mapped_back():
         assert f.lower <= lo < space.entry_value(f, x[k]) < hi <= f.upper
 
 
-def test_a_lafortune_coefficients_interval_stays_within_its_energy_bound():
+def test_a_lafortune_coefficients_interval_stays_within_its_energy_bound(monkeypatch):
     """A coefficient the fit scales by its lobe's energy bound c_max(n) gets value ± t·std, clipped to
     ±c_max."""
+    from mifaces.reflectance.fit import intervals
     from mifaces.reflectance.fit.intervals import Covariance, parameter_intervals
+
+    monkeypatch.setattr(intervals, "SYSTEMATIC", {})
 
     model = brdf_models.model("lafortune")
     space = ParameterSpace(model)
@@ -253,6 +259,65 @@ def test_a_lafortune_coefficients_interval_stays_within_its_energy_bound():
     (lo, hi), std = out["cz"]["interval95"], out["cz"]["std"]
     assert hi == pytest.approx([bound] * 3) and all(v + 2 * s > bound for v, s in zip(values["cz"], std))
     assert lo == pytest.approx([v - 2.0086 * s for v, s in zip(values["cz"], std)], rel=1e-3)
+
+
+def test_the_systematic_term_widens_the_interval_in_quadrature(monkeypatch):
+    """With a relative systematic s for a parameter, its interval is x̂_k ± t√(Cov_kk + (s·p/|∂p/∂x|)²)
+    mapped back; ``std`` stays the statistical one and ``systematic_std`` is s·p; a parameter without
+    one keeps the statistical interval; an energy-coupled coefficient takes value ± t·√(std² + (s·p)²)."""
+    from scipy.stats import t
+
+    from mifaces.reflectance.fit import intervals
+    from mifaces.reflectance.fit.intervals import Covariance, parameter_intervals
+
+    space = ParameterSpace(brdf_models.model("cooktorrance"), FIXED)
+    x = space.vector({**TRUTH, "specular_reflectance": [0.8, 0.6, 0.7]})
+    var = np.full(len(x), 1e-4)
+    cov = Covariance(x, np.diag(var), np.zeros(len(x), bool), 40.0, "jackknife")
+    plain = parameter_intervals(space, cov)
+    monkeypatch.setattr(intervals, "SYSTEMATIC", {"cooktorrance": {"specular_reflectance": 0.05}})
+    out = parameter_intervals(space, cov)
+    q, values = t.ppf(0.975, 40.0), space.values(x)
+    assert out["roughness"] == plain["roughness"]  # no term named for it
+    for k, f in enumerate(space.free):
+        if f.name != "specular_reflectance":
+            continue
+        value = values[f.name][f.channel]
+        slope = (space.entry_value(f, x[k] + 1e-6) - space.entry_value(f, x[k] - 1e-6)) / 2e-6
+        half = q * np.sqrt(var[k] + (0.05 * value / slope) ** 2)
+        lo, hi = out[f.name]["interval95"][0][f.channel], out[f.name]["interval95"][1][f.channel]
+        assert (lo, hi) == pytest.approx((space.entry_value(f, x[k] - half), space.entry_value(f, x[k] + half)),
+                                         rel=1e-6)
+        assert out[f.name]["std"][f.channel] == pytest.approx(plain[f.name]["std"][f.channel])
+        assert out[f.name]["systematic_std"][f.channel] == pytest.approx(0.05 * value)
+        assert hi - lo > 0.05 * 2 * 1.9 * value > plain[f.name]["interval95"][1][f.channel] - \
+            plain[f.name]["interval95"][0][f.channel]
+    model = brdf_models.model("lafortune")
+    space = ParameterSpace(model)
+    x = np.zeros(len(space))
+    x[[k for k, f in enumerate(space.free) if f.name == "cz"]] = 1.0
+    cov = Covariance(x, np.eye(len(x)) * 1e-6, np.zeros(len(x), bool), 50.0, "jackknife")
+    monkeypatch.setattr(intervals, "SYSTEMATIC", {"lafortune": {"cz": 0.1}})
+    out, values = parameter_intervals(space, cov), space.values(x)
+    (lo, hi), std = out["cz"]["interval95"], out["cz"]["std"]
+    total = np.hypot(std, 0.1 * np.abs(values["cz"]))
+    assert np.all(total > 2 * np.asarray(std))  # the systematic part dominates here
+    assert lo == pytest.approx(np.asarray(values["cz"]) - t.ppf(0.975, 50.0) * total, rel=1e-6)
+
+
+def test_the_systematic_terms_are_those_the_tuning_chose():
+    """:data:`intervals.SYSTEMATIC` holds what ``validation/reflectance_coverage.py --tune`` chose, model by
+    model and parameter by parameter (a zero choice is left out)."""
+    import json
+    from pathlib import Path
+
+    from mifaces.reflectance.fit.intervals import SYSTEMATIC
+
+    tuning = json.loads((Path(__file__).resolve().parents[1] / "validation/results/"
+                         "reflectance_coverage_tuning.json").read_text())
+    chosen = {model: {name: row["chosen_systematic"] for name, row in params.items() if row["chosen_systematic"]}
+              for model, params in tuning["summary"].items()}
+    assert SYSTEMATIC == {model: params for model, params in chosen.items() if params}
 
 
 def test_cluster_sums_match_the_per_sample_jacobian():

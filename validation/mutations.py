@@ -274,7 +274,7 @@ MUTATIONS = [
     ("intervals-normal", "intervals", "mifaces/reflectance/fit/intervals.py",
      "scipy.stats.t.ppf(0.5 + level / 2, max(self.dof, 1.0))", "scipy.stats.norm.ppf(0.5 + level / 2)",
      "normal quantile in place of Student's t"),
-    ("intervals-variance", "intervals", "mifaces/reflectance/fit/intervals.py", "q * np.sqrt(var[k])", "q * var[k]",
+    ("intervals-variance", "intervals", "mifaces/reflectance/fit/intervals.py", "q * np.sqrt(var[k] + (", "q * (var[k] + (",
      "interval half-width from the variance, sqrt dropped"),
     ("intervals-std-sqrt", "intervals", "mifaces/reflectance/fit/intervals.py",
      "float(np.sqrt(max(float(row[idx] @ block @ row[idx]), 0.0)))",

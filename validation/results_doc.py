@@ -178,7 +178,7 @@ LAYOUTS = {
     "model_span": ("The built-in model's span", "model samples (Surrey Face Model faces)", sec_model_span),
     "mutations": ("Mutations: whether the tests catch the bugs they name", "no data: a check of the test suite", sec_mutations),
     "normals_faces": ("Per-texel normals on faces", "SIMULATED", sec_normals_faces),
-    "reflectance_bias": ("Where the default fit's bias on skin's lobe comes from", "SIMULATED", sec_reflectance_bias),
+    "reflectance_bias": ("Where the uncorrected fit's bias on skin's lobe comes from", "SIMULATED", sec_reflectance_bias),
     "region_seams": ("Region outlines in fitted renders: faces with one BRDF everywhere", "SIMULATED",
                      sec_region_seams),
     "pareto": ("Error against run time of the whole pipeline", "SIMULATED", sec_pareto),

@@ -47,7 +47,7 @@ def sec_region_seams(d):
 
 
 #: What each run of ``reflectance_bias.json`` is, in words (its reference in brackets).
-BIAS_RUNS = {"as_captured": "the default fit on the capture as simulated",
+BIAS_RUNS = {"as_captured": "the uncorrected fit (the default before issue 48) on the capture as simulated",
              "ideal": "every capture effect off, true lights",
              "effect:bounces": "+ light bounced off the face (path depth 4)",
              "effect:albedo_detail": "+ the albedo map's detail",
@@ -72,10 +72,11 @@ def sec_reflectance_bias(d):
     ranges = "; ".join(f"{'ρs' if k == 'specular_reflectance' else k} in [{text(v)}]" for k, v in items(d.get("skin_ranges")))
     lines = [f"Cook–Torrance truths, skin drawn per seed ({ranges}), "
              f"{text(capture.get('measurements'))} measurements, {text(get(capture, 'image', 0))}² photographs, "
-             f"{text(capture.get('spp'))} spp, fitted with the defaults on the true shape; development seeds "
+             f"{text(capture.get('spp'))} spp, fitted on the true shape with the defaults as they were before this study "
+             "(no bounced light taken out, the lights as calibrated: both are now on by default); development seeds "
              f"{text(d.get('breakdown_seeds'))}. ρs: the mean over channels of fitted / true − 1. Each effect is "
              "switched on alone in the ideal capture, its shift measured from `ideal`; each fit variant changes "
-             "one thing of the default fit on the capture as simulated, its shift measured from `as_captured`.", ""]
+             "one thing of that uncorrected fit on the capture as simulated, its shift measured from `as_captured`.", ""]
     rows = []
     for run, s in items(d.get("breakdown")):
         shift = s.get("rho_s_shift_mean")
@@ -84,11 +85,11 @@ def sec_reflectance_bias(d):
                      pct(s.get("roughness_error_mean"), 1), fixed(s.get("seconds_mean"), 0)])
     lines += table(["run", "what", "skin ρs error (mean ± sd)", "shift from its reference", "roughness error",
                     "fit (s)"], rows)
-    for key, which in (("spread", "the default fit"), ("spread_candidate", None)):
+    for key, which in (("spread", "the uncorrected fit"), ("spread_candidate", None)):
         spread = get(d, key) or {}
         if not spread:
             continue
-        which = which or f"the `{spread.get('fit')}` fit"
+        which = which or f"the `{spread.get('fit')}` fit (today's default)"
         coverage = spread.get("coverage") or {}
         lines += ["", f"**Spread of {which}** over {text(spread.get('captures'))} captures (seeds "
                       f"{text(d.get('spread_seeds'))}): skin's ρs error {pct(spread.get('rho_s_error_mean'), 1)} ± "

@@ -51,6 +51,7 @@ CHOOSERS = {
     "validation/refine_seeds.py": "the refinement's held regions and light gains (--role training)",
     "validation/refine_shape_default.py": "the shape refinement's render size (--seed 11)",
     "validation/shape_depth.py": "the image term's silhouette cut (--seeds 11 12)",
+    "validation/reflectance_coverage.py": "the intervals' systematic term per model and parameter (--tune)",
     "validation/refine_judge.py": "the shape refinement's judge: the pixel loss or held-out photographs (seeds 11, "
                                   "12, 100-103)",
 }

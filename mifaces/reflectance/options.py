@@ -91,14 +91,17 @@ class FitOptions:
         (:func:`mifaces.reflectance.sample_stage.with_balanced_lights`; the mean kept),
         after the bounced light where ``interreflection``: a calibrated lamp a fraction of
         a percent off in distance biases the glossy fit by several percent
-        (``docs/reflectance.md``, "Where skin's bias comes from").
+        (``docs/reflectance.md``, "Where skin's bias comes from"). On by default, with
+        ``interreflection``: the two together take skin's glossy bias from -6.6 % to
+        +0.8 % over 20 development captures (``validation/results/reflectance_bias.json``);
+        either alone does not.
     interreflection : bool
         Take the light bounced between parts of the face out of the samples: fit, render
         that light with the fit (:func:`mifaces.reflectance.interreflection.bounced_light`),
         sample the photographs again without it and fit again. It removes most of skin's
-        glossy bias on simulated captures (``docs/uncertainty.md``); off by default until
-        measured on the other validations. Costs a second fit and two coarse renders per
-        photograph.
+        glossy bias on simulated captures (``docs/reflectance.md``). On by default;
+        costs a second fit and two coarse renders per photograph, once per capture in
+        :func:`~mifaces.pipeline.measure` (shared by every model).
     """
 
     resolution: int = option(512, bounds=(8, MAX_TEXTURE), help="Texture resolution R (R x R texels).")
@@ -119,10 +122,10 @@ class FitOptions:
     albedo_rounds: int = option(0, bounds=(0, None))
     texel_albedo: bool = option(True, help="An albedo per texel in the glossy fit; --no-: one per region, as the "
                                            "paper (docs/uncertainty.md).")
-    balance_lights: bool = option(False, help="Correct the given lights' relative intensities by the face's one "
+    balance_lights: bool = option(True, help="Correct the given lights' relative intensities by the face's one "
                                               "albedo, less a quick fit's glossy part, before the BRDF fits (a lamp "
                                               "a fraction of a percent off biases the glossy fit).")
-    interreflection: bool = option(False, help="Take the light bounced between parts of the face out of the "
+    interreflection: bool = option(True, help="Take the light bounced between parts of the face out of the "
                                                "samples (a second fit; bounced light biases skin's lobe low).")
 
     def __post_init__(self):

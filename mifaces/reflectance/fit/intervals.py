@@ -18,6 +18,14 @@ LEVEL = 0.95
 FIXED, AT_BOUND, PRUNED, PRIOR, ESTIMATED = "fixed", "at_bound", "pruned", "prior", "estimated"
 #: Status of a parameter the samples do not constrain (JᵀJ singular in its direction).
 NOT_IDENTIFIED = "not_identified"
+#: What the default fit leaves in a glossy parameter that no replicate of the photographs shows (the
+#: light's calibration, bounced light not quite taken out, the albedo's detail: ``docs/reflectance.md``,
+#: "Where skin's bias comes from"), as a relative standard deviation per model and parameter: it
+#: enters every interval beside the statistical one, √(std² + (s·value)²). Chosen on development
+#: captures by ``python validation/reflectance_coverage.py --tune``
+#: (``validation/results/reflectance_coverage_tuning.json``; ``tests/test_intervals.py`` holds the two
+#: equal); a parameter not named here has none.
+SYSTEMATIC: dict[str, dict[str, float]] = {}
 
 
 @dataclass
@@ -50,7 +58,8 @@ class Covariance:
 
 def parameter_intervals(space: ParameterSpace, cov: Covariance, statuses: dict | None = None,
                         level: float = LEVEL) -> dict:
-    """Per parameter of the model, ``{"std", "interval95"}`` or ``{"status"}``.
+    """Per parameter of the model, ``{"std", "interval95"}`` (and ``"systematic_std"`` where
+    :data:`SYSTEMATIC` names one for the model's parameter) or ``{"status"}``.
 
     ``std`` and the interval's ends are floats, or lists per channel for RGB
     parameters (``interval95`` is then ``[[lo_r, lo_g, lo_b], [hi_r, hi_g, hi_b]]``,
@@ -64,33 +73,48 @@ def parameter_intervals(space: ParameterSpace, cov: Covariance, statuses: dict |
     q = cov.quantile(level)
     values = space.values(x)
     jac = _value_jacobian(space, x)
+    systematic = SYSTEMATIC.get(space.model.name, {})
     out: dict = {name: {"status": FIXED} for name in space.fixed}
     entries: dict = {}
     for k, f in enumerate(space.free):
         if cov.held[k]:
-            entry = (statuses.get(k, AT_BOUND), None, None, None)
+            entry = (statuses.get(k, AT_BOUND), None, None, None, None)
         else:
             std = _std(jac[k], cov.covariance)
             if np.isfinite(std):
-                lo, hi = _interval(space, x, k, f, q * np.sqrt(var[k]), std, q, values)
-                entry = (ESTIMATED, std, lo, hi)
+                value = values[f.name] if f.channel is None else values[f.name][f.channel]
+                shared = systematic.get(f.name, 0.0) * abs(float(value))
+                # the systematic part in the fit's own coordinates, through the entry's own map
+                half_x = q * np.sqrt(var[k] + (shared / abs(jac[k, k]) if jac[k, k] else 0.0) ** 2)
+                lo, hi = _interval(space, x, k, f, half_x, float(np.hypot(std, shared)), q, values)
+                entry = (ESTIMATED, std, lo, hi, shared)
             else:
-                entry = (NOT_IDENTIFIED, None, None, None)
+                entry = (NOT_IDENTIFIED, None, None, None, None)
         entries.setdefault(f.name, {})[f.channel] = entry
     for name, channels in entries.items():
         if None in channels:
-            status, std, lo, hi = channels[None]
-            out[name] = {"status": status} if status != ESTIMATED else {"std": std, "interval95": [lo, hi]}
+            status, std, lo, hi, shared = channels[None]
+            out[name] = {"status": status} if status != ESTIMATED else _estimated(std, lo, hi, shared)
             continue
         parts = [channels[c] for c in range(3)]
         kinds = {p[0] for p in parts}
         if kinds != {ESTIMATED} and len(kinds) == 1:
             out[name] = {"status": parts[0][0]}
             continue
-        out[name] = {"std": [p[1] for p in parts], "interval95": [[p[2] for p in parts], [p[3] for p in parts]]}
+        out[name] = _estimated([p[1] for p in parts], [p[2] for p in parts], [p[3] for p in parts],
+                               [p[4] for p in parts])
         if kinds != {ESTIMATED}:
             out[name]["status"] = [p[0] for p in parts]
     return out
+
+
+def _estimated(std, lo, hi, shared) -> dict:
+    """An estimated parameter's entry: its statistical ``std``, the interval (both parts in it) and,
+    where :data:`SYSTEMATIC` names one, ``systematic_std``."""
+    entry = {"std": std, "interval95": [lo, hi]}
+    if any(s for s in np.atleast_1d(np.asarray(shared, dtype=object)) if s is not None):
+        entry["systematic_std"] = shared
+    return entry
 
 
 def _std(row: np.ndarray, cov: np.ndarray) -> float:
@@ -104,7 +128,8 @@ def _std(row: np.ndarray, cov: np.ndarray) -> float:
 
 def _interval(space: ParameterSpace, x, k: int, f, half_x: float, std: float, q: float, values: dict):
     """Ends of the interval of free entry ``k``: x ± ``half_x`` mapped back, or for an
-    energy-coupled coefficient the value ± q·std clipped to its bound."""
+    energy-coupled coefficient the value ± q·std clipped to its bound (``std`` the total: statistical
+    and systematic)."""
     if f.name in space.coupled:
         value = values[f.name][f.channel] if f.channel is not None else values[f.name]
         bound = float(space.model.coefficient_bound(float(values[space.coupled[f.name]]), np.log, np.exp))
@@ -153,5 +178,5 @@ def prior_intervals(params: dict) -> dict:
     return {name: {"status": PRIOR} for name in params}
 
 
-__all__ = ["LEVEL", "FIXED", "AT_BOUND", "PRUNED", "PRIOR", "ESTIMATED", "NOT_IDENTIFIED", "Covariance",
+__all__ = ["LEVEL", "SYSTEMATIC", "FIXED", "AT_BOUND", "PRUNED", "PRIOR", "ESTIMATED", "NOT_IDENTIFIED", "Covariance",
            "parameter_intervals", "held_entries", "prior_intervals"]
