@@ -262,10 +262,11 @@ def test_a_lafortune_coefficients_interval_stays_within_its_energy_bound(monkeyp
 
 
 def test_the_systematic_term_widens_the_interval_in_quadrature(monkeypatch):
-    """With a relative systematic s for a parameter, its interval is x̂_k ± t√(Cov_kk + (s·p/|∂p/∂x|)²)
-    mapped back; ``std`` stays the statistical one and ``systematic_std`` is s·p; a parameter without
-    one keeps the statistical interval; an energy-coupled coefficient takes value ± t·√(std² + (s·p)²)."""
-    from scipy.stats import t
+    """With a relative systematic s for a parameter, its interval is x̂_k ± √((t√Cov_kk)² + (z·s·p/|∂p/∂x|)²)
+    mapped back (t Student's quantile, z the normal one); ``std`` stays the statistical one and
+    ``systematic_std`` is s·p; a parameter without one keeps the statistical interval; an energy-coupled
+    coefficient takes value ± √((t·std)² + (z·s·p)²)."""
+    from scipy.stats import norm, t
 
     from mifaces.reflectance.fit import intervals
     from mifaces.reflectance.fit.intervals import Covariance, parameter_intervals
@@ -274,6 +275,7 @@ def test_the_systematic_term_widens_the_interval_in_quadrature(monkeypatch):
     x = space.vector({**TRUTH, "specular_reflectance": [0.8, 0.6, 0.7]})
     var = np.full(len(x), 1e-4)
     cov = Covariance(x, np.diag(var), np.zeros(len(x), bool), 40.0, "jackknife")
+    monkeypatch.setattr(intervals, "SYSTEMATIC", {})
     plain = parameter_intervals(space, cov)
     monkeypatch.setattr(intervals, "SYSTEMATIC", {"cooktorrance": {"specular_reflectance": 0.05}})
     out = parameter_intervals(space, cov)
@@ -284,7 +286,7 @@ def test_the_systematic_term_widens_the_interval_in_quadrature(monkeypatch):
             continue
         value = values[f.name][f.channel]
         slope = (space.entry_value(f, x[k] + 1e-6) - space.entry_value(f, x[k] - 1e-6)) / 2e-6
-        half = q * np.sqrt(var[k] + (0.05 * value / slope) ** 2)
+        half = np.hypot(q * np.sqrt(var[k]), norm.ppf(0.975) * 0.05 * value / slope)
         lo, hi = out[f.name]["interval95"][0][f.channel], out[f.name]["interval95"][1][f.channel]
         assert (lo, hi) == pytest.approx((space.entry_value(f, x[k] - half), space.entry_value(f, x[k] + half)),
                                          rel=1e-6)
@@ -300,9 +302,9 @@ def test_the_systematic_term_widens_the_interval_in_quadrature(monkeypatch):
     monkeypatch.setattr(intervals, "SYSTEMATIC", {"lafortune": {"cz": 0.1}})
     out, values = parameter_intervals(space, cov), space.values(x)
     (lo, hi), std = out["cz"]["interval95"], out["cz"]["std"]
-    total = np.hypot(std, 0.1 * np.abs(values["cz"]))
-    assert np.all(total > 2 * np.asarray(std))  # the systematic part dominates here
-    assert lo == pytest.approx(np.asarray(values["cz"]) - t.ppf(0.975, 50.0) * total, rel=1e-6)
+    half = np.hypot(t.ppf(0.975, 50.0) * np.asarray(std), norm.ppf(0.975) * 0.1 * np.abs(values["cz"]))
+    assert np.all(half > 4 * np.asarray(std))  # the systematic part dominates here
+    assert lo == pytest.approx(np.asarray(values["cz"]) - half, rel=1e-6)
 
 
 def test_the_systematic_terms_are_those_the_tuning_chose():

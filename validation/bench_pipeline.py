@@ -31,8 +31,11 @@ from pathlib import Path
 import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 
 from mifaces.io.atomic import save_figure, write_json
+from mifaces.validation.validator import TRUE_SHAPE
 
 RESULTS = Path(__file__).resolve().parent / "results"
+#: Per model, the report's validation figures recorded beside the time.
+MODEL_FIGURES = ("heldout_rmse", "environment_rmse", f"heldout_rmse{TRUE_SHAPE}", f"environment_rmse{TRUE_SHAPE}")
 MIFACES = Path(sys.executable).parent / "mifaces"
 
 
@@ -52,6 +55,12 @@ def run(out: Path, home: Path, cache: Path, extra: list[str]) -> dict:
     return {"wall_s": round(wall, 1), "stages_s": {k: round(v, 1) for k, v in report["seconds"].items()},
             "peak_rss_mib": round(max(peak, before) / 1024, 1),
             "skin_cooktorrance_error": (skin.get("regions") or {}).get("skin"),
+            # the report's figures per model: skin's BRDF error and relighting on the fitted faces (and with
+            # the fitted reflectance on the true shapes), and the ranking by held-out lights
+            "models": {name: {key: (entry.get("validation") or {}).get(key) for key in MODEL_FIGURES}
+                       | {"skin_brdf_rmse": ((entry.get("validation") or {}).get("brdf_rmse") or {}).get("skin")}
+                       for name, entry in report["models"].items()},
+            "ranking": (report.get("ranking") or {}).get("heldout_rmse"),
             "face_model": report.get("face_model"), "shape_errors": report.get("shape_errors"),
             # the true reflectance on the fitted shapes, and the truth against itself with other random numbers
             "shape_floor": (report.get("validation") or {}).get("shape_floor"),

@@ -11,10 +11,12 @@ over the plausible range) converted to that model as the simulator converts its 
 :data:`reflectance_bias.LIPS_MIN_SAMPLES` samples, the lips are recorded: every glossy parameter's
 value, truth, statistical standard deviation, the systematic one and the interval.
 
-``--tune`` (development seeds :data:`TUNING_SEEDS`) chooses the systematic term: per model and
-parameter, the smallest relative standard deviation of :data:`GRID` with which the intervals
-(±t·√(std² + (s·value)²), the statistical std as the fit reports it) hold the truth at least
-:data:`TARGET` of the time, channels, regions and seeds pooled. It writes
+``--tune`` (development seeds :data:`TUNING_SEEDS`) chooses the systematic term. It fits with the
+statistical intervals alone (``intervals.SYSTEMATIC`` emptied for the run) and, per model and parameter,
+takes the smallest relative standard deviation s of :data:`GRID` with which the intervals as the
+library widens them (the statistical half-width on the truth's side and z·s·value in quadrature, z
+the normal quantile) hold the truth at least :data:`TARGET` of the time, channels, regions and seeds
+pooled. It writes
 ``validation/results/reflectance_coverage_tuning.json``; the values go into
 :data:`mifaces.reflectance.fit.intervals.SYSTEMATIC` (a test checks that they agree).
 
@@ -24,7 +26,7 @@ what it would be without that term: ``validation/results/reflectance_coverage.js
 
 ``--held-out`` fits the issue's own capture instead (report seed 4242, Cook–Torrance skin ρs 0.55
 in each channel and roughness 0.31, chosen by the issue, not here) and writes
-``validation/results/reflectance_heldout.json``.
+``validation/results/reflectance_coverage_heldout.json``.
 
     python validation/reflectance_coverage.py [--tune | --held-out] [--seeds S ...] [--work DIR]
 
@@ -34,6 +36,7 @@ Machine: 2 CPU cores; about a minute and a half per capture.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import time
 import warnings
@@ -42,6 +45,7 @@ from pathlib import Path
 import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 
 import numpy as np
+import scipy.stats
 
 from provenance import write_result  # noqa: E402
 from reflectance_bias import LIPS_MIN_SAMPLES, MEASUREMENTS, SIDE, SPP, skin_truth  # noqa: E402
@@ -70,6 +74,8 @@ GRID = (0.0, 0.005, 0.01, 0.015, 0.02, 0.025, 0.03, 0.04, 0.05, 0.06, 0.08, 0.1,
 #: The coverage ``--tune`` asks of the intervals (that of the level they are stated at).
 TARGET = intervals.LEVEL
 REGIONS_RECORDED = ("skin", "lips")
+#: The normal quantile the library gives the systematic part at the intervals' level.
+Z = float(scipy.stats.norm.ppf(0.5 + intervals.LEVEL / 2))
 
 
 def model_of(seed: int) -> str:
@@ -135,9 +141,21 @@ def fit(folder: Path, model: str) -> dict:
     return out
 
 
+@contextlib.contextmanager
+def statistical_only(on: bool):
+    """The fits' intervals without the library's systematic term while ``on`` (``--tune``)."""
+    saved = intervals.SYSTEMATIC
+    try:
+        if on:
+            intervals.SYSTEMATIC = {}
+        yield
+    finally:
+        intervals.SYSTEMATIC = saved
+
+
 def _entries(runs: list, model: str, name: str):
-    """(value, truth, statistical std, covered by the reported interval) per channel of ``name`` over the
-    recorded regions of ``runs`` of ``model``; a channel without an interval has std NaN."""
+    """(value, truth, interval's lower end, upper end, covered) per channel of ``name`` over the recorded
+    regions of ``runs`` of ``model``; a channel without an interval has NaN ends."""
     for run in runs:
         if run["model"] != model:
             continue
@@ -145,22 +163,26 @@ def _entries(runs: list, model: str, name: str):
             rec = region.get(name)
             if rec is None:
                 continue
+            n = len(rec["fitted"])
+            lo, hi = rec.get("interval95", [[np.nan] * n, [np.nan] * n])
             for i, (v, t) in enumerate(zip(rec["fitted"], rec["truth"])):
-                std = rec.get("std", [np.nan] * len(rec["fitted"]))[i]
-                covered = rec.get("covered", [False] * len(rec["fitted"]))[i]
-                yield v, t, std, covered
+                yield v, t, lo[i], hi[i], rec.get("covered", [False] * n)[i]
 
 
-def coverage_with(entries: list, s: float, q: float = 1.96) -> float:
-    """The share of ``entries`` whose truth is within q·√(std² + (s·value)²) of the value (none without
-    a std counts as held)."""
-    held = [np.isfinite(std) and abs(v - t) <= q * np.hypot(std, s * abs(v)) for v, t, std, _ in entries]
-    return float(np.mean(held)) if held else None
+def coverage_with(entries: list, s: float) -> float:
+    """The share of ``entries`` whose truth lies within their statistical interval widened as the library
+    widens it by a systematic s: the half-width on the truth's side and Z·s·|value| in quadrature (an
+    entry without an interval counts as missed)."""
+    def held(v, t, lo, hi):
+        half = (v - lo) if t < v else (hi - v)
+        return bool(np.isfinite(half)) and abs(v - t) <= np.hypot(half, Z * s * abs(v))
+    return float(np.mean([held(v, t, lo, hi) for v, t, lo, hi, _ in entries])) if entries else None
 
 
 def summarise(runs: list, tune: bool) -> dict:
-    """Per model and glossy parameter: the reported intervals' coverage, the statistical ones' and, with
-    ``tune``, the chosen systematic term (the smallest of :data:`GRID` reaching :data:`TARGET`)."""
+    """Per model and glossy parameter: the errors and how often the reported intervals hold the truth;
+    with ``tune`` (statistical intervals), the coverage each systematic term of :data:`GRID` would give
+    and the smallest reaching :data:`TARGET`."""
     table = {}
     for model in MODELS:
         glossy = [p.name for p in brdf.model(model).specular_parameters()]
@@ -169,11 +191,10 @@ def summarise(runs: list, tune: bool) -> dict:
             entries = list(_entries(runs, model, name))
             if not entries:
                 continue
-            errors = [v / t - 1 for v, t, _, _ in entries]
+            errors = [v / t - 1 for v, t, *_ in entries]
             row = {"entries": len(entries), "without_interval": int(sum(not np.isfinite(e[2]) for e in entries)),
                    "error_mean": float(np.mean(errors)), "error_rms": float(np.sqrt(np.mean(np.square(errors)))),
-                   "coverage_reported": float(np.mean([e[3] for e in entries])),
-                   "coverage_statistical": coverage_with(entries, 0.0)}
+                   "coverage_reported": float(np.mean([e[4] for e in entries]))}
             if tune:
                 row["coverage_by_systematic"] = {str(s): coverage_with(entries, s) for s in GRID}
                 reached = [s for s in GRID if coverage_with(entries, s) >= TARGET]
@@ -194,7 +215,7 @@ def main() -> None:
     parser.add_argument("--reuse", action="store_true", help="fit captures already simulated in --work")
     args = parser.parse_args()
     if args.held_out:
-        seeds, name = [HELD_OUT_SEED], "reflectance_heldout.json"
+        seeds, name = [HELD_OUT_SEED], "reflectance_coverage_heldout.json"
     else:
         seeds = args.seeds or list(TUNING_SEEDS if args.tune else STATED_SEEDS)
         refuse_report_data(parser, SIMULATED, seeds, "the intervals' systematic term")
@@ -206,7 +227,9 @@ def main() -> None:
         skin_ct = HELD_OUT_SKIN if args.held_out else skin_truth(seed)
         try:
             folder = simulate_capture(args.work / f"s{seed}_{model}", seed, model, skin_ct, args.reuse)
-            runs.append({"seed": seed, "model": model, "skin_cook_torrance": skin_ct, "fit": fit(folder, model)})
+            with statistical_only(args.tune):
+                fitted = fit(folder, model)
+            runs.append({"seed": seed, "model": model, "skin_cook_torrance": skin_ct, "fit": fitted})
         except Exception as error:  # one capture's failure is recorded, not fatal to the others
             runs.append({"seed": seed, "model": model, "skin_cook_torrance": skin_ct, "error": repr(error)})
         print(f"seed {seed} ({model}): {time.perf_counter() - t0:.0f} s", flush=True)
@@ -215,6 +238,7 @@ def main() -> None:
               "capture": {"measurements": MEASUREMENTS, "image": [SIDE, SIDE], "spp": SPP},
               "seeds": seeds, "models": {str(r["seed"]): r["model"] for r in runs},
               "systematic_in_library": {m: dict(intervals.SYSTEMATIC.get(m, {})) for m in MODELS},
+              "systematic_in_fits": not args.tune,
               "summary": summarise(ok, args.tune), "failed": [r["seed"] for r in runs if "fit" not in r],
               "runs": runs, "seconds": round(time.perf_counter() - t0, 1)}
     write_result(RESULTS / name, result, script=__file__, seeds=seeds)

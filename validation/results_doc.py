@@ -41,7 +41,8 @@ from pathlib import Path
 import doc_figures  # noqa: E402  (the figures of the hand-written docs, checked with --check)
 from results_format import DASH, get  # noqa: E402  (the formatting helpers)
 from results_tables_design import sec_design_metrics  # noqa: E402  (the redesign issue's measuring stick)
-from results_tables_studies import sec_reflectance_bias, sec_refine_judge, sec_region_seams  # noqa: E402
+from results_tables_studies import (sec_reflectance_bias, sec_reflectance_coverage, sec_refine_judge,  # noqa: E402
+                                    sec_region_seams)
 from results_tables_fits import (  # noqa: E402  (one function per result layout)
     sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_depth_cameras, sec_floor_depth, sec_multi_camera,
     sec_joint_outline, sec_light_balance_measure, sec_light_calibration_bias, sec_refine, sec_refine_gradient,
@@ -179,6 +180,8 @@ LAYOUTS = {
     "mutations": ("Mutations: whether the tests catch the bugs they name", "no data: a check of the test suite", sec_mutations),
     "normals_faces": ("Per-texel normals on faces", "SIMULATED", sec_normals_faces),
     "reflectance_bias": ("Where the uncorrected fit's bias on skin's lobe comes from", "SIMULATED", sec_reflectance_bias),
+    "reflectance_coverage": ("Do the default fit's intervals hold the truth? Four models' truths", "SIMULATED",
+                             sec_reflectance_coverage),
     "region_seams": ("Region outlines in fitted renders: faces with one BRDF everywhere", "SIMULATED",
                      sec_region_seams),
     "pareto": ("Error against run time of the whole pipeline", "SIMULATED", sec_pareto),

@@ -67,6 +67,18 @@ def sec_bench_pipeline(d):
                                         if get(s, "status") == "converged")) + " / "
                                + text(len(get(r, "shapes") or {})) for _, r in runs]],
     ])
+    models = [m for m in (get(runs[-1][1], "ranking") or [])] if runs else []
+    if models:
+        lines += ["", "The report's figures per model (the last run; ranked by the held-out lights): skin's BRDF error "
+                      "over the hemisphere, relighting error on the fitted faces under the held-out lights and the "
+                      "environments, and the same with the fitted reflectance on the true shapes.", ""]
+        last = runs[-1][1]
+        lines += table(["model", "skin BRDF", "held-out lights", "environments", "held-out, true shape",
+                        "environments, true shape"],
+                       [[m, *[pct(get(last, "models", m, key), 2) for key in
+                              ("skin_brdf_rmse", "heldout_rmse", "environment_rmse", "heldout_rmse_true_shape",
+                               "environment_rmse_true_shape")]] for m in models])
+        lines.append("")
     refined = [(name, r) for name, r in runs if get(r, "shape_refinement")]
     if refined:
         lines += ["With `--refine-shape`:", ""]

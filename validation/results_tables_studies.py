@@ -100,3 +100,49 @@ def sec_reflectance_bias(d):
                       + f"; the 95 % intervals hold the truth for {pct(coverage.get('specular_reflectance'), 0)} of "
                       f"ρs channels and {pct(coverage.get('roughness'), 0)} of roughnesses."]
     return lines
+
+
+def sec_reflectance_coverage(d):
+    """Per model and glossy parameter: the relative errors over skin and lips (channels pooled), how often
+    the reported intervals hold the truth and how often the statistical part alone would; with
+    ``--tune``, the systematic term chosen; for a capture or two, each parameter as fitted."""
+    capture = get(d, "capture") or {}
+    library = {m: p for m, p in items(d.get("systematic_in_library")) if p}
+    lines = [f"Truths drawn per seed (seeds {text(d.get('seeds'))}: the model in turn, skin's lobe drawn over the "
+             f"plausible range), {text(capture.get('measurements'))} measurements, {text(get(capture, 'image', 0))}² "
+             f"photographs, {text(capture.get('spp'))} spp, fitted with the defaults on the true shape; skin and "
+             "lips, channels pooled. *Coverage*: how often the intervals the fits reported hold the truth, "
+             + ("the library's systematic term in (" + "; ".join(
+                 f"{m}: " + ", ".join(f"{k} {pct(v, 1)}" for k, v in items(p)) for m, p in library.items()) + ")"
+                if d.get("systematic_in_fits") and library else
+                "the statistical part alone (the systematic term left out for this run, which chooses it: the "
+                "smallest relative sd with which the widened intervals would hold at least 95 %)") + ".", ""]
+    rows = []
+    tuned = False
+    for model, params in items(d.get("summary")):
+        for name, r in items(params):
+            tuned = tuned or "chosen_systematic" in r
+            rows.append([model, name, text(r.get("entries")), pct(r.get("error_mean"), 1), pct(r.get("error_rms"), 1),
+                         pct(r.get("coverage_reported"), 0)]
+                        + ([pct(r.get("chosen_systematic"), 1) if r.get("chosen_systematic") is not None else "—"]
+                           if "chosen_systematic" in r else []))
+    lines += table(["model", "parameter", "values", "error (mean)", "error (rms)", "coverage"]
+                   + (["systematic chosen"] if tuned else []), rows)
+    runs = rows_of(d.get("runs"))
+    if 0 < len(runs) <= 2:
+        detail = []
+        for run in runs:
+            for region, r in items(get(run, "fit", "regions")):
+                for name, p in items(r):
+                    if not isinstance(p, dict) or "fitted" not in p:
+                        continue
+                    interval = p.get("interval95")
+                    span = "—" if not interval else ", ".join(
+                        f"[{fixed(lo, 4)}, {fixed(hi, 4)}]" for lo, hi in zip(*interval))
+                    detail.append([text(run.get("seed")), region, name, ", ".join(fixed(v, 4) for v in p["fitted"]),
+                                   ", ".join(fixed(v, 4) for v in p["truth"]),
+                                   ", ".join(pct(v, 1) for v in p["error"]), span,
+                                   ", ".join("yes" if c else "no" for c in p.get("covered", []))])
+        lines += [""] + table(["seed", "region", "parameter", "fitted", "truth", "error", "95 % interval", "holds"],
+                              detail)
+    return lines

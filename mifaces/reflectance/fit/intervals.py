@@ -21,11 +21,18 @@ NOT_IDENTIFIED = "not_identified"
 #: What the default fit leaves in a glossy parameter that no replicate of the photographs shows (the
 #: light's calibration, bounced light not quite taken out, the albedo's detail: ``docs/reflectance.md``,
 #: "Where skin's bias comes from"), as a relative standard deviation per model and parameter: it
-#: enters every interval beside the statistical one, √(std² + (s·value)²). Chosen on development
+#: enters every interval beside the statistical part, the half-widths in quadrature,
+#: √((t·std)² + (z·s·value)²) (t the statistical part's Student quantile, z the normal one: the
+#: systematic part is known from many captures, not estimated from this one). Chosen on development
 #: captures by ``python validation/reflectance_coverage.py --tune``
-#: (``validation/results/reflectance_coverage_tuning.json``; ``tests/test_intervals.py`` holds the two
+#: (``validation/results/reflectance_coverage_tuning.json``; ``tests/test_uncertainty.py`` holds the two
 #: equal); a parameter not named here has none.
-SYSTEMATIC: dict[str, dict[str, float]] = {}
+SYSTEMATIC: dict[str, dict[str, float]] = {
+    "cooktorrance": {"specular_reflectance": 0.02, "roughness": 0.01},
+    "ward": {"specular_reflectance": 0.03, "alpha": 0.01},
+    "phong": {"specular_reflectance": 0.02, "exponent": 0.05},
+    "lafortune": {"cxy": 0.02, "cz": 0.08, "exponent": 0.04},
+}
 
 
 @dataclass
@@ -71,6 +78,7 @@ def parameter_intervals(space: ParameterSpace, cov: Covariance, statuses: dict |
     statuses = statuses or {}
     x, var = cov.x, np.diag(cov.covariance)
     q = cov.quantile(level)
+    z = float(scipy.stats.norm.ppf(0.5 + level / 2))  # the systematic part is known, not estimated: normal
     values = space.values(x)
     jac = _value_jacobian(space, x)
     systematic = SYSTEMATIC.get(space.model.name, {})
@@ -84,9 +92,10 @@ def parameter_intervals(space: ParameterSpace, cov: Covariance, statuses: dict |
             if np.isfinite(std):
                 value = values[f.name] if f.channel is None else values[f.name][f.channel]
                 shared = systematic.get(f.name, 0.0) * abs(float(value))
-                # the systematic part in the fit's own coordinates, through the entry's own map
-                half_x = q * np.sqrt(var[k] + (shared / abs(jac[k, k]) if jac[k, k] else 0.0) ** 2)
-                lo, hi = _interval(space, x, k, f, half_x, float(np.hypot(std, shared)), q, values)
+                # the two half-widths in quadrature, the systematic one in the fit's own coordinates
+                # through the entry's own map
+                half_x = float(np.hypot(q * np.sqrt(var[k]), z * shared / abs(jac[k, k]) if jac[k, k] else 0.0))
+                lo, hi = _interval(space, x, k, f, half_x, float(np.hypot(q * std, z * shared)), values)
                 entry = (ESTIMATED, std, lo, hi, shared)
             else:
                 entry = (NOT_IDENTIFIED, None, None, None, None)
@@ -126,14 +135,13 @@ def _std(row: np.ndarray, cov: np.ndarray) -> float:
     return float(np.sqrt(max(float(row[idx] @ block @ row[idx]), 0.0)))
 
 
-def _interval(space: ParameterSpace, x, k: int, f, half_x: float, std: float, q: float, values: dict):
+def _interval(space: ParameterSpace, x, k: int, f, half_x: float, half: float, values: dict):
     """Ends of the interval of free entry ``k``: x ± ``half_x`` mapped back, or for an
-    energy-coupled coefficient the value ± q·std clipped to its bound (``std`` the total: statistical
-    and systematic)."""
+    energy-coupled coefficient the value ± ``half`` (in the parameter's units) clipped to its bound."""
     if f.name in space.coupled:
         value = values[f.name][f.channel] if f.channel is not None else values[f.name]
         bound = float(space.model.coefficient_bound(float(values[space.coupled[f.name]]), np.log, np.exp))
-        return max(value - q * std, -bound), min(value + q * std, bound)
+        return max(value - half, -bound), min(value + half, bound)
     return space.entry_value(f, x[k] - half_x), space.entry_value(f, x[k] + half_x)
 
 
