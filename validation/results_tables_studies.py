@@ -102,6 +102,12 @@ def sec_reflectance_bias(d):
     return lines
 
 
+#: The parameter families the coverage is pooled over: the lobe's scale and its width.
+COVERAGE_FAMILIES = {"specular_reflectance": "scale (ρs; Lafortune's cxy, cz)", "cxy": "scale (ρs; Lafortune's cxy, cz)",
+                     "cz": "scale (ρs; Lafortune's cxy, cz)", "roughness": "width (roughness, α, exponent)",
+                     "alpha": "width (roughness, α, exponent)", "exponent": "width (roughness, α, exponent)"}
+
+
 def sec_reflectance_coverage(d):
     """Per model and glossy parameter: the relative errors over skin and lips (channels pooled), how often
     the reported intervals hold the truth and how often the statistical part alone would; with
@@ -128,6 +134,17 @@ def sec_reflectance_coverage(d):
                            if "chosen_systematic" in r else []))
     lines += table(["model", "parameter", "values", "error (mean)", "error (rms)", "coverage"]
                    + (["systematic chosen"] if tuned else []), rows)
+    families = {}
+    for model, params in items(d.get("summary")):
+        for name, r in items(params):
+            family = COVERAGE_FAMILIES.get(name)
+            if family and r.get("entries") and r.get("coverage_reported") is not None:
+                held, n = families.get(family, (0.0, 0))
+                families[family] = (held + r["coverage_reported"] * r["entries"], n + r["entries"])
+    if families:
+        lines += ["", "Per parameter family, every model pooled:", ""]
+        lines += table(["family", "values", "coverage"],
+                       [[family, text(n), pct(held / n, 1)] for family, (held, n) in families.items()])
     runs = rows_of(d.get("runs"))
     if 0 < len(runs) <= 2:
         detail = []
