@@ -100,6 +100,10 @@ _FIT = dict(rtol=1e-3, atol=1e-6)   # fits whose float32 sums may end an iterati
 #: errors (refine_shape_default.json, rerun at 9e56701 and 9a56297); its verdict (kept or not) is compared
 #: exactly, its reason (the losses in words) not.
 _REFINE = dict(rtol=2e-2, atol=1e-3, ignore=("reason",))
+#: The coverage study records relative errors near 0 and standard deviations: two runs of one commit (the
+#: captures simulated again) moved skin's ρs error from -0.6371 % to -0.6352 % and a std by 0.3 %
+#: (reflectance_coverage_heldout.json at 0d196db), within these.
+_COVERAGE = dict(rtol=1e-2, atol=1e-4)
 
 #: Every result file's command. ``tests/test_reproduce.py`` checks that each JSON in
 #: ``validation/results/`` is some entry's output.
@@ -236,11 +240,11 @@ REGISTRY: tuple[Entry, ...] = (
     Entry("reflectance_bias", _py("reflectance_bias", "--work", "{work}"), ("reflectance_bias.json",), minutes=45,
           **_FIT),
     Entry("reflectance_coverage_tuning", _py("reflectance_coverage", "--tune", "--work", "{work}"),
-          ("reflectance_coverage_tuning.json",), minutes=30, **_FIT),
+          ("reflectance_coverage_tuning.json",), minutes=30, **_COVERAGE),
     Entry("reflectance_coverage", _py("reflectance_coverage", "--work", "{work}"), ("reflectance_coverage.json",),
-          minutes=30, **_FIT),
+          minutes=30, **_COVERAGE),
     Entry("reflectance_coverage_heldout", _py("reflectance_coverage", "--held-out", "--work", "{work}"),
-          ("reflectance_coverage_heldout.json",), minutes=3, **_FIT),
+          ("reflectance_coverage_heldout.json",), minutes=3, **_COVERAGE),
     Entry("unknown_lights_simulated", _py("unknown_lights", "--simulated", "--out", "{work}"),
           ("unknown_lights_simulated.json",), minutes=10, **_FIT),
     Entry("unknown_lights_simulated_ambient_none", _py("unknown_lights", "--simulated", "--ambient", "none", "--out",
