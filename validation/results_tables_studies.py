@@ -103,9 +103,8 @@ def sec_reflectance_bias(d):
 
 
 #: The parameter families the coverage is pooled over: the lobe's scale and its width.
-COVERAGE_FAMILIES = {"specular_reflectance": "scale (ρs; Lafortune's cxy, cz)", "cxy": "scale (ρs; Lafortune's cxy, cz)",
-                     "cz": "scale (ρs; Lafortune's cxy, cz)", "roughness": "width (roughness, α, exponent)",
-                     "alpha": "width (roughness, α, exponent)", "exponent": "width (roughness, α, exponent)"}
+COVERAGE_FAMILIES = {**dict.fromkeys(("specular_reflectance", "cxy", "cz"), "scale (ρs; Lafortune's cxy, cz)"),
+                     **dict.fromkeys(("roughness", "alpha", "exponent"), "width (roughness, α, exponent)")}
 
 
 def sec_reflectance_coverage(d):
