@@ -24,7 +24,7 @@ from mifaces.reflectance.maps import normals as tn
 from mifaces.reflectance.fit.region_fit import FULL_DATA
 from mifaces.reflectance.fit.regions import fit_regions
 from mifaces.reflectance.samples import ReflectanceSamples
-from mifaces.reflectance.samples import texel_geometry
+from mifaces.model.texture_space import texel_geometry
 from mifaces.reflectance.maps.specular import refine_specular
 from mifaces.render import FaceScene, scene_xml
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from mifaces import brdf
+from mifaces.capture.camera import PIXEL_BLUR_STD
 from mifaces.capture import Camera, Light
 from mifaces.model.mesh import mitsuba_mesh
 from mifaces.model.texture_space import rasterize
@@ -145,6 +146,12 @@ def test_resampled_reflectance_matches_the_brdf(jit_variant):
     rel = np.abs(samples.reflectance - expected) / expected
     assert np.median(rel) < 0.01, np.median(rel)
     assert np.percentile(rel, 95) < 0.05, np.percentile(rel, 95)
+    # each sample carries its pixel's footprint: the cap's normals turn by (depth / fx) / radius per
+    # pixel where it faces the camera (depth 180 mm), more where it turns away (foreshortening)
+    assert samples.footprint.shape == (len(samples), 3)
+    facing = 2 * (PIXEL_BLUR_STD ** 2 + 1 / 6) * (180.0 / 230.0 / 80.0) ** 2  # the bilinear read's mean f(1 - f)
+    ratio = np.median(samples.footprint[:, 0] + samples.footprint[:, 2]) / facing
+    assert 1.0 < ratio < 2.0, ratio
 
 
 def test_directional_light_reflectance_matches_the_brdf(jit_variant):

@@ -44,7 +44,7 @@ from mifaces.shape.io import load_geometry
 from mifaces.model.regions import REGIONS
 from mifaces.model.texture_space import rasterize
 from mifaces.reflectance.estimate import fit_brdf
-from mifaces.reflectance.samples import texel_geometry
+from mifaces.model.texture_space import texel_geometry
 from mifaces.reflectance.maps.normals import mitsuba_tangent_normals
 from mifaces.reflectance import FitOptions
 

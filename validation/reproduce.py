@@ -245,6 +245,8 @@ REGISTRY: tuple[Entry, ...] = (
           minutes=30, **_COVERAGE),
     Entry("reflectance_coverage_heldout", _py("reflectance_coverage", "--held-out", "--work", "{work}"),
           ("reflectance_coverage_heldout.json",), minutes=3, **_COVERAGE),
+    Entry("interreflection_rounds", _py("interreflection_rounds", "--work", "{work}"),
+          ("interreflection_rounds.json",), minutes=15, **_COVERAGE),
     Entry("unknown_lights_simulated", _py("unknown_lights", "--simulated", "--out", "{work}"),
           ("unknown_lights_simulated.json",), minutes=10, **_FIT),
     Entry("unknown_lights_simulated_ambient_none", _py("unknown_lights", "--simulated", "--ambient", "none", "--out",

@@ -52,6 +52,7 @@ CHOOSERS = {
     "validation/refine_shape_default.py": "the shape refinement's render size (--seed 11)",
     "validation/shape_depth.py": "the image term's silhouette cut (--seeds 11 12)",
     "validation/reflectance_coverage.py": "the intervals' systematic term per model and parameter (--tune)",
+    "validation/interreflection_rounds.py": "the bounced light's rounds and render sizes (seeds 120, 124, 128)",
     "validation/refine_judge.py": "the shape refinement's judge: the pixel loss or held-out photographs (seeds 11, "
                                   "12, 100-103)",
 }

@@ -9,6 +9,11 @@ import numpy as np
 
 from ..model.geometry import camera_frame_direction
 
+#: The optics' blur: a photograph's pixel is the image under a Gaussian point spread function of
+#: this standard deviation (pixels). The simulator renders with it; the reflectance fit takes it
+#: for a pixel's footprint (:mod:`mifaces.reflectance.footprint`).
+PIXEL_BLUR_STD = 0.5
+
 
 @dataclass(frozen=True, eq=False)
 class Camera:

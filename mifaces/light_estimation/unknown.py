@@ -41,11 +41,11 @@ from ..lights.environment import texel_directions, to_world
 from ..io.atomic import save_figure, write_json
 from ..io.image_files import write_exr
 from ..model.mesh import mitsuba_mesh
-from ..model.texture_space import rasterize
+from ..model.texture_space import rasterize, texel_geometry
 from ..runtime.progress import progress as progress_bar
 from ..reflectance.environment import estimate_map, transport
 from ..reflectance.light_balance import log_light_errors
-from ..reflectance.samples import _unoccluded, read_photograph, texel_geometry
+from ..reflectance.samples import _unoccluded, read_photograph
 from ..shape.fit import fit_light
 from ..shape.result import ShapeOptions
 from ..shape.targets import light_angles

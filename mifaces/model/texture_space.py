@@ -17,6 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.ndimage as ndi
 
+from .geometry import tangent_frames
+
 
 @dataclass(frozen=True)
 class TextureRaster:
@@ -150,3 +152,40 @@ def bake(uv: np.ndarray, triangles: np.ndarray, values: np.ndarray, size: int,
     image[covered] = np.einsum("nk,nkc->nc", raster.barycentric[covered], values[tri])
     _, (rows, cols) = ndi.distance_transform_edt(~covered, return_indices=True)
     return image[rows, cols]
+@dataclass
+class TexelGeometry:
+    """Surface point and local frame of every covered texel of one mesh.
+
+    ``texel`` are flat indices; ``position`` etc. are (M, 3) in the mesh's
+    frame (world, mm); (tangent, bitangent, normal) is right-handed."""
+
+    texel: np.ndarray
+    position: np.ndarray
+    tangent: np.ndarray
+    bitangent: np.ndarray
+    normal: np.ndarray
+
+
+def texel_geometry(vertices, triangles, uv, raster) -> TexelGeometry:
+    """Interpolate positions and the per-vertex shading frames of
+    :func:`mifaces.model.geometry.tangent_frames` at the texel centres that
+    ``raster`` (:func:`mifaces.model.texture_space.rasterize`) finds."""
+    vertices = np.asarray(vertices, np.float64)
+    triangles = np.asarray(triangles, np.int64)
+    tangent, _, normal = (np.asarray(a, np.float64) for a in tangent_frames(vertices, triangles, uv))
+    texel = np.flatnonzero(raster.triangle.ravel() >= 0)
+    tri = triangles[raster.triangle.ravel()[texel]]
+    bary = raster.barycentric.reshape(-1, 3)[texel].astype(np.float64)
+
+    def interpolate(a):
+        return np.einsum("mk,mkc->mc", bary, a[tri])
+
+    n = interpolate(normal)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    t = interpolate(tangent)
+    t -= n * np.sum(t * n, axis=1, keepdims=True)
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-30)
+    return TexelGeometry(texel=texel.astype(np.int32), position=interpolate(vertices), tangent=t,
+                         bitangent=np.cross(n, t), normal=n)
+
+

@@ -16,8 +16,18 @@ regions and albedo map, under the photograph's camera and light at a coarse reso
 the direct light cancels in their difference. The difference, blurred and brought to the
 photograph's size, is the bounced light in each pixel; :func:`~mifaces.reflectance.samples.capture_samples`
 (``indirect=``) subtracts it before turning radiance into reflectance.
-``fit_brdf(..., options=FitOptions(interreflection=True))`` fits, renders, samples again and fits again
-(one round: a second moved skin's parameters by under 0.5 % on simulated captures).
+``fit_brdf(..., options=FitOptions(interreflection=True))`` fits, renders, samples again and fits
+again, in the rounds :data:`INDIRECT_ROUNDS` lists
+(:func:`mifaces.reflectance.sample_stage.without_bounced_light`).
+
+**Two rounds, the second at the photograph's size.** The first fit's albedo still holds the
+bounced light it is about to lose, so the light it renders bounced is too strong; and a coarse
+render mixes a thin region's bounced light with its neighbours' (the lips', red, with the skin's
+around them). Both over-correct the lips: with one coarse round their ρs came out 2–13 % high on
+development captures. A second round, fitted on the samples the first corrected and rendered at
+the photograph's own size, brought them within 2.5 % (and skin within 1.9 %): seeds 120, 124 and
+128 of the coverage study's tuning seeds (``validation/results/interreflection_rounds.json``,
+``python validation/interreflection_rounds.py``).
 """
 
 from __future__ import annotations
@@ -33,18 +43,21 @@ from ..render.scene import FaceScene
 #: The path tracer's depth of the render the bounced light is taken from (2 is direct light only):
 #: light that bounced up to twice off the face before reaching the camera's point.
 INDIRECT_DEPTH = 4
-#: Width in pixels of the renders (at most the photograph's; the height follows the aspect).
+#: Width in pixels of the renders (at most the photograph's; the height follows the aspect) of the
+#: first round, and its samples per pixel.
 INDIRECT_WIDTH = 128
-#: Samples per pixel of the two renders.
 INDIRECT_SPP = 64
+#: The rounds of :func:`~mifaces.reflectance.sample_stage.without_bounced_light`: (width, samples per
+#: pixel) of each round's renders, None for the photograph's own width (module docstring).
+INDIRECT_ROUNDS = ((INDIRECT_WIDTH, INDIRECT_SPP), (None, 16))
 #: Standard deviation, in pixels of the renders, of the blur that takes their noise out.
 INDIRECT_BLUR = 1.0
 
 
-def coarse_camera(camera, width: int):
-    """``camera`` with its image scaled to ``width`` pixels (at most its own; same field of view and
-    frame; pixel centres at integers, as :class:`~mifaces.capture.Camera` has them)."""
-    return camera.scaled(1.0 / max(1.0, camera.width / float(width)))
+def coarse_camera(camera, width: int | None):
+    """``camera`` with its image scaled to ``width`` pixels (at most its own; None: its own; same field
+    of view and frame; pixel centres at integers, as :class:`~mifaces.capture.Camera` has them)."""
+    return camera if width is None else camera.scaled(1.0 / max(1.0, camera.width / float(width)))
 
 
 def _upsample(image: np.ndarray, small, camera) -> np.ndarray:
@@ -56,7 +69,7 @@ def _upsample(image: np.ndarray, small, camera) -> np.ndarray:
                      for c in range(image.shape[-1])], axis=-1)
 
 
-def bounced_light(capture, geometry, face_model, estimate, *, measurements=None, width: int = INDIRECT_WIDTH,
+def bounced_light(capture, geometry, face_model, estimate, *, measurements=None, width: int | None = INDIRECT_WIDTH,
                   spp: int = INDIRECT_SPP, progress: bool = False) -> dict[str, np.ndarray]:
     """Per measurement, the (H, W, 3) radiance, in the photograph's units, that reached each pixel's
     point after bouncing off the face (module docstring): from renders of ``face_model`` at
@@ -77,8 +90,9 @@ def bounced_light(capture, geometry, face_model, estimate, *, measurements=None,
                         for integrator in (scene.integrator(), direct_only))
         bounced = np.clip(full - direct, 0.0, None)
         bounced = np.stack([scipy.ndimage.gaussian_filter(bounced[..., c], INDIRECT_BLUR) for c in range(3)], axis=-1)
-        out[m.name] = _upsample(bounced, small, camera).astype(np.float32)
+        out[m.name] = (bounced if small is camera else _upsample(bounced, small, camera)).astype(np.float32)
     return out
 
 
-__all__ = ["INDIRECT_DEPTH", "INDIRECT_WIDTH", "INDIRECT_SPP", "INDIRECT_BLUR", "coarse_camera", "bounced_light"]
+__all__ = ["INDIRECT_DEPTH", "INDIRECT_WIDTH", "INDIRECT_SPP", "INDIRECT_ROUNDS", "INDIRECT_BLUR", "coarse_camera",
+           "bounced_light"]

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 from ..capture.types import Capture
 from .fitting import fit_samples
-from .interreflection import INDIRECT_DEPTH, INDIRECT_SPP, INDIRECT_WIDTH, bounced_light
+from .interreflection import INDIRECT_DEPTH, INDIRECT_ROUNDS, bounced_light
 from .light_balance import BALANCE_FIT_ROUNDS, balance_given_lights
 from ..model.regions import REGIONS
 from .maps.diffuse import specular_reflectance_factor
@@ -92,23 +92,26 @@ def take_samples(capture: Capture, shapes: dict, face, options: FitOptions, *,
 
 def without_bounced_light(taken: SampleSet, brdf, options: FitOptions, *, progress: bool = True) -> SampleSet:
     """``taken``, and where ``options.interreflection``, its samples taken again without the light bounced
-    between parts of the face: a first fit of ``brdf`` (no intervals, normals or specular maps), its
-    bounced light rendered, the photographs sampled again less it. Samples it already took the
+    between parts of the face: in each round of :data:`~mifaces.reflectance.interreflection.INDIRECT_ROUNDS`,
+    a fit of ``brdf`` (no intervals, normals or specular maps) to the samples so far, its bounced light
+    rendered, the photographs sampled again less it. Samples it already took the
     bounced light out of come back as they are: :func:`mifaces.measure` takes it out once, with its
     first model, and every model's fit shares those samples (the bounced light is mostly the
     albedo's, which every model fits alike)."""
     if not options.interreflection or taken.interreflection is not None:
         return taken
     t = time.perf_counter()
-    first = fit_samples(taken, brdf, dataclasses.replace(options, interreflection=False, uncertainty=None,
-                                                         normals=False, specular_maps=False), progress=progress)
-    bounced = bounced_light(taken.capture, taken.shapes, taken.face, first, measurements=first.measurements,
-                            progress=progress)
-    samples = capture_samples(taken.capture, taken.shapes, taken.face, taken.resolution,
-                              measurements=first.measurements, progress=progress, indirect=bounced)
+    quick = dataclasses.replace(options, interreflection=False, uncertainty=None, normals=False, specular_maps=False)
+    samples = taken.samples
+    for width, spp in INDIRECT_ROUNDS:
+        fit = fit_samples(dataclasses.replace(taken, samples=samples), brdf, quick, progress=progress)
+        bounced = bounced_light(taken.capture, taken.shapes, taken.face, fit, measurements=fit.measurements,
+                                width=width, spp=spp, progress=progress)
+        samples = capture_samples(taken.capture, taken.shapes, taken.face, taken.resolution,
+                                  measurements=fit.measurements, progress=progress, indirect=bounced)
     seconds = time.perf_counter() - t
-    record = {"depth": INDIRECT_DEPTH, "width": INDIRECT_WIDTH, "spp": INDIRECT_SPP, "fitted_with": brdf.name,
-              "seconds": seconds}
+    record = {"depth": INDIRECT_DEPTH, "rounds": [{"width": w, "spp": n} for w, n in INDIRECT_ROUNDS],
+              "fitted_with": brdf.name, "seconds": seconds}
     return dataclasses.replace(taken, samples=samples, interreflection=record, seconds=taken.seconds + seconds)
 
 

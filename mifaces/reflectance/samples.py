@@ -30,13 +30,13 @@ import scipy.ndimage
 import skimage.morphology
 
 from ..io.atomic import atomic_path
-from ..model.geometry import tangent_frames
 from ..model.mesh import mitsuba_mesh
 from ..runtime.progress import progress as progress_bar
 from .environment import LUMINANCE, equivalent_lights
+from .footprint import normal_spread
 from .mixed_pixels import region_mixed
 from ..model.regions import texel_regions_of_mesh
-from ..model.texture_space import rasterize
+from ..model.texture_space import rasterize, texel_geometry
 
 #: Samples seen or lit at cos θ below this are dropped (θ > 80°).
 MIN_COSINE = np.cos(np.radians(80.0))
@@ -163,6 +163,10 @@ class ReflectanceSamples:
     region_map : (R, R) uint8 or None
         That region map: the region of every texel, as the rendered face
         assigns materials (computed once, with the samples).
+    footprint : (N, 3) float32 or None
+        The covariance of the normal's tilt over each sample's pixel (tt, tb, bb, radians², along
+        the local tangent and bitangent; :func:`mifaces.reflectance.footprint.normal_spread`): the
+        fit averages the model over it. None: point samples.
     """
 
     light: np.ndarray
@@ -175,6 +179,7 @@ class ReflectanceSamples:
     measurement_names: tuple = ()
     label: np.ndarray | None = None
     region_map: np.ndarray | None = None
+    footprint: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.sigma)
@@ -197,12 +202,13 @@ class ReflectanceSamples:
         -------
         ReflectanceSamples
             Every per-sample array (``light``, ``view``, ``reflectance``, ``sigma``, ``texel``,
-            ``measurement`` and ``label`` where present) indexed by ``mask``; ``resolution``,
-            ``measurement_names`` and ``region_map`` kept.
+            ``measurement``, and ``label`` and ``footprint`` where present) indexed by ``mask``;
+            ``resolution``, ``measurement_names`` and ``region_map`` kept.
         """
         return replace(self, light=self.light[mask], view=self.view[mask], reflectance=self.reflectance[mask],
                        sigma=self.sigma[mask], texel=self.texel[mask], measurement=self.measurement[mask],
-                       label=None if self.label is None else self.label[mask])
+                       label=None if self.label is None else self.label[mask],
+                       footprint=None if self.footprint is None else self.footprint[mask])
 
     def region(self, region_map: np.ndarray) -> np.ndarray:
         """Region label of each sample from an (R, R) region map."""
@@ -224,12 +230,14 @@ class ReflectanceSamples:
             offsets.append(len(names))
             names += list(p.measurement_names)
         labelled = all(p.label is not None for p in parts)
+        footprints = all(p.footprint is not None for p in parts)
         return ReflectanceSamples(
             *(np.concatenate([getattr(p, k) for p in parts]) for k in ("light", "view", "reflectance", "sigma", "texel")),
             measurement=np.concatenate([p.measurement + o for p, o in zip(parts, offsets)]).astype(np.int16),
             resolution=parts[0].resolution, measurement_names=tuple(names),
             label=np.concatenate([p.label for p in parts]) if labelled else None,
-            region_map=parts[0].region_map)
+            region_map=parts[0].region_map,
+            footprint=np.concatenate([p.footprint for p in parts]) if footprints else None)
 
     def save(self, path) -> None:
         """Write as a compressed ``.npz``, atomically."""
@@ -238,7 +246,8 @@ class ReflectanceSamples:
                 np.savez_compressed(f, light=self.light, view=self.view, reflectance=self.reflectance,
                                     sigma=self.sigma, texel=self.texel, measurement=self.measurement,
                                     resolution=self.resolution, measurement_names=np.array(self.measurement_names),
-                                    **({} if self.label is None else {"label": self.label}))
+                                    **({} if self.label is None else {"label": self.label}),
+                                    **({} if self.footprint is None else {"footprint": self.footprint}))
 
     @staticmethod
     def load(path) -> ReflectanceSamples:
@@ -246,44 +255,8 @@ class ReflectanceSamples:
             return ReflectanceSamples(d["light"], d["view"], d["reflectance"], d["sigma"], d["texel"],
                                       d["measurement"], int(d["resolution"]),
                                       tuple(str(n) for n in d["measurement_names"]),
-                                      d["label"] if "label" in d.files else None)
-
-
-@dataclass
-class TexelGeometry:
-    """Surface point and local frame of every covered texel of one mesh.
-
-    ``texel`` are flat indices; ``position`` etc. are (M, 3) in the mesh's
-    frame (world, mm); (tangent, bitangent, normal) is right-handed."""
-
-    texel: np.ndarray
-    position: np.ndarray
-    tangent: np.ndarray
-    bitangent: np.ndarray
-    normal: np.ndarray
-
-
-def texel_geometry(vertices, triangles, uv, raster) -> TexelGeometry:
-    """Interpolate positions and the per-vertex shading frames of
-    :func:`mifaces.model.geometry.tangent_frames` at the texel centres that
-    ``raster`` (:func:`mifaces.model.texture_space.rasterize`) finds."""
-    vertices = np.asarray(vertices, np.float64)
-    triangles = np.asarray(triangles, np.int64)
-    tangent, _, normal = (np.asarray(a, np.float64) for a in tangent_frames(vertices, triangles, uv))
-    texel = np.flatnonzero(raster.triangle.ravel() >= 0)
-    tri = triangles[raster.triangle.ravel()[texel]]
-    bary = raster.barycentric.reshape(-1, 3)[texel].astype(np.float64)
-
-    def interpolate(a):
-        return np.einsum("mk,mkc->mc", bary, a[tri])
-
-    n = interpolate(normal)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-    t = interpolate(tangent)
-    t -= n * np.sum(t * n, axis=1, keepdims=True)
-    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-30)
-    return TexelGeometry(texel=texel.astype(np.int32), position=interpolate(vertices), tangent=t,
-                         bitangent=np.cross(n, t), normal=n)
+                                      d["label"] if "label" in d.files else None,
+                                      footprint=d["footprint"] if "footprint" in d.files else None)
 
 
 def _unoccluded(scene, origin, target, normal, offset: float) -> np.ndarray:
@@ -406,8 +379,9 @@ def measurement_samples(camera, light, pixels, vertices, triangles, uv, raster, 
 
     valid = valid_samples(image(cos_l, 0.0), image(cos_v, 0.0), image(lit & ok, False),
                           image(visible & np.all(np.isfinite(r), axis=1), False), erosion, min_cosine)
+    xy = camera.project(p)
     if regions is not None:  # after the erosion: a region border is no hole in the valid region
-        mixed = region_mixed(camera.project(p), np.ravel(regions)[geo.texel], visible & ok, pixels.shape[:2])
+        mixed = region_mixed(xy, np.ravel(regions)[geo.texel], visible & ok, pixels.shape[:2])
         valid &= ~image(mixed, False)
     keep = valid.ravel()[geo.texel]
     distance = distance_to_missing(valid).ravel()[geo.texel[keep]]
@@ -415,11 +389,13 @@ def measurement_samples(camera, light, pixels, vertices, triangles, uv, raster, 
     light_local = np.einsum("mij,mj->mi", frame, l_world[keep])
     view_local = np.einsum("mij,mj->mi", frame, v_world[keep])
     sigma = confidence_with_distance(light_local[:, 2], view_local[:, 2], distance, d_max(resolution))
+    spread = normal_spread(xy, n, geo.tangent, geo.bitangent, geo.texel, resolution)[keep]
     m = int(keep.sum())
     return ReflectanceSamples(light=light_local.astype(np.float32), view=view_local.astype(np.float32),
                               reflectance=r[keep].astype(np.float32), sigma=sigma.astype(np.float32),
                               texel=geo.texel[keep].astype(np.int32), measurement=np.zeros(m, np.int16),
-                              resolution=resolution, measurement_names=(name,))
+                              resolution=resolution, measurement_names=(name,),
+                              footprint=spread.astype(np.float32))
 
 
 def capture_samples(capture, geometry, face_model, resolution: int = 512, *, measurements=None,

@@ -7,6 +7,7 @@ import math
 import mitsuba as mi
 import numpy as np
 
+from ..capture.camera import PIXEL_BLUR_STD
 from ..io.image_files import check_image_size
 from ..runtime.progress import progress
 
@@ -59,8 +60,8 @@ def mitsuba_sensor(camera, spp: int) -> dict:
             "principal_point_offset_y": (camera.height / 2 - camera.cy - 0.5) / camera.height,
             "near_clip": 10.0, "far_clip": 1e5, "to_world": mi.ScalarTransform4f(to_world.tolist()),
             "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
-                     # the optics' blur: a Gaussian point spread function of 0.5 px
-                     "rfilter": {"type": "gaussian", "stddev": 0.5}, "pixel_format": "rgb"},
+                     # the optics' blur: a Gaussian point spread function
+                     "rfilter": {"type": "gaussian", "stddev": PIXEL_BLUR_STD}, "pixel_format": "rgb"},
             "sampler": {"type": "independent", "sample_count": spp}}
 
 

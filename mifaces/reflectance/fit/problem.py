@@ -2,7 +2,8 @@
 one set of samples and the sums the solver and the uncertainty need, each one Dr.Jit kernel over the
 samples (:class:`Problem`).
 
-The model is evaluated by the same Dr.Jit functions the plugins use; its Jacobian comes from
+The model is evaluated by the same Dr.Jit functions the plugins use, averaged over each sample's
+pixel footprint where the samples have one (:mod:`mifaces.reflectance.footprint`); its Jacobian comes from
 Dr.Jit's forward mode (a tangent per free parameter), and the normal equations are summed in the
 same kernel, one pass over the samples per step, accumulated in float64 (:func:`_sums`), frozen per
 model, parameter space and sample count (``dr.freeze``).
@@ -15,6 +16,7 @@ import mitsuba as mi
 import numpy as np
 
 from ...runtime.arrays import device_array
+from ..footprint import tilted
 from .parameters import ParameterSpace
 
 
@@ -28,15 +30,18 @@ class Problem:
     (``dr.freeze``), so a step replays the kernel instead of tracing the model again.
     """
 
-    def __init__(self, model, space, light, view, reflectance, sigma, texel=None):
+    def __init__(self, model, space, light, view, reflectance, sigma, texel=None, footprint=None):
         self.model, self.space = model, space
         # in Dr.Jit's own memory (device_array): a mapped NumPy array's alignment would enter the kernels
         self.wi = mi.Vector3f(*(device_array(np.float32, light[:, k]) for k in range(3)))
         self.wo = mi.Vector3f(*(device_array(np.float32, view[:, k]) for k in range(3)))
+        #: each sample's footprint (tt, tb, bb; :mod:`mifaces.reflectance.footprint`), or none: points
+        self.spread = () if footprint is None else tuple(device_array(np.float32, np.asarray(footprint)[:, k])
+                                                         for k in range(3))
         self.r = mi.Color3f(*(device_array(np.float32, reflectance[:, k]) for k in range(3)))
         self.w = device_array(np.float32, 1.0 / np.asarray(sigma, np.float32))
         self.n = len(sigma)
-        key = _signature(space)
+        key = _signature(space) + (bool(self.spread),)
         if key not in _FROZEN:
             def sums(arrays, u, jacobian):
                 return _sums(space, arrays, u, jacobian)
@@ -54,11 +59,10 @@ class Problem:
             self.texels = int(self.texel_index.max()) + 1 if len(self.texel_index) else 0
 
     def _residuals(self, u):
-        params = self.space.drjit_params(u)
-        return (self.r - dr.pi * self.model.eval(self.wi, self.wo, params)) * self.w
+        return (self.r - dr.pi * _model(self.space, self.wi, self.wo, self.spread, u)) * self.w
 
     def _run(self, x, jacobian: bool) -> np.ndarray:
-        arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w}
+        arrays = {"wi": self.wi, "wo": self.wo, "spread": self.spread, "r": self.r, "w": self.w}
         # opaque scalars: the kernel does not depend on the parameters' values
         return np.asarray(self._sums(arrays, [dr.opaque(mi.Float, float(v)) for v in x], jacobian), np.float64)
 
@@ -133,12 +137,12 @@ class Problem:
         """``kernel(space, arrays, u, groups)``'s per-group sums at ``x`` for the samples' ``group``
         (N,) numbers 0 … ``groups`` - 1, as a (groups, width) float64 array: one kernel, frozen per
         parameter space and ``name``."""
-        key = (name,) + _signature(self.space)
+        key = (name,) + _signature(self.space) + (bool(self.spread),)
         if key not in _FROZEN:
             space = self.space
             _FROZEN[key] = dr.freeze(lambda arrays, u, g: kernel(space, arrays, u, g), warn_after=1000,
                                      state_fn=lambda arrays, u, g: (dr.width(arrays["w"]), g))
-        arrays = {"wi": self.wi, "wo": self.wo, "r": self.r, "w": self.w,
+        arrays = {"wi": self.wi, "wo": self.wo, "spread": self.spread, "r": self.r, "w": self.w,
                   "c": device_array(np.uint32, np.asarray(group, np.uint32))}
         sums = _FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x], int(groups))
         return np.asarray(sums, np.float64).reshape(groups, width)
@@ -159,8 +163,21 @@ class Problem:
         return r, jac
 
 
-#: The frozen :func:`_sums` per parameter space (:func:`_signature`).
+#: The frozen :func:`_sums` per parameter space (:func:`_signature`) and footprint (with or without).
 _FROZEN: dict = {}
+
+
+def _model(space: ParameterSpace, wi, wo, spread: tuple, u: list):
+    """f at the free variables ``u`` for directions ``wi``, ``wo``; with a ``spread`` per sample
+    (:mod:`mifaces.reflectance.footprint`), what the pixel saw: f over the tilted normals, weighted."""
+    params = space.drjit_params(u)
+    if not spread:
+        return space.model.eval(wi, wo, params)
+    f = None
+    for a, b, weight in tilted(wi, wo, spread):
+        term = space.model.eval(a, b, params) * weight
+        f = term if f is None else f + term
+    return f
 
 
 def _signature(space: ParameterSpace) -> tuple:
@@ -197,7 +214,7 @@ def _residual_tangents(space: ParameterSpace, arrays: dict, u: list, tangents: b
     parameter ``u[a]`` (``d[a][c]``; else none)."""
     if tangents:
         dr.enable_grad(u)
-    res = (arrays["r"] - dr.pi * space.model.eval(arrays["wi"], arrays["wo"], space.drjit_params(u))) * arrays["w"]
+    res = (arrays["r"] - dr.pi * _model(space, arrays["wi"], arrays["wo"], arrays["spread"], u)) * arrays["w"]
     r = [mi.Float64(c) for c in dr.detach(res)]
     d = []
     for uk in u if tangents else ():

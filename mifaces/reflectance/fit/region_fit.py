@@ -100,6 +100,20 @@ def validate_samples(light, view, reflectance, sigma) -> None:
         raise ValueError("sigma must be positive (it is a confidence scale, 1/weight)")
 
 
+def check_footprint(footprint, n: int) -> np.ndarray:
+    """``footprint`` as (n, 3) float64 covariances (tt, tb, bb); a ValueError unless it has that
+    shape, is finite and each is positive semi-definite."""
+    footprint = np.asarray(footprint, np.float64)
+    if footprint.shape != (n, 3):
+        raise ValueError(f"footprint must have shape {(n, 3)}, got {footprint.shape}")
+    if not np.all(np.isfinite(footprint)):
+        raise ValueError(f"footprint contains {np.count_nonzero(~np.isfinite(footprint))} NaN or infinite values")
+    tt, tb, bb = footprint.T
+    if np.any(tt < 0) or np.any(bb < 0) or np.any(tt * bb - tb * tb < -1e-5 * tt * bb - 1e-30):  # float32 rounding
+        raise ValueError("footprint must hold covariances (tt, tb, bb): tt, bb >= 0 and tt·bb >= tb²")
+    return footprint
+
+
 def min_samples(model: BRDFModel, fixed: dict | None = None) -> int:
     """Fewest samples a region needs for its own fit: 10 per free parameter."""
     return 10 * len(ParameterSpace(model, fixed))
@@ -109,7 +123,7 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
                fixed: dict | None = None, bounds: dict | None = None, schedule: SubsetSchedule | None = None,
                seed: int = 0, ftol: float = 1e-7, trace: list | None = None, cluster=None,
                uncertainty: str | None = METHODS[0], offsets: AlbedoOffsets | None = None,
-               texel=None) -> RegionFit:
+               texel=None, footprint=None) -> RegionFit:
     """Fit ``model`` to one region's samples by hierarchical Levenberg-Marquardt.
 
     Parameters
@@ -157,6 +171,10 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         Its intervals come from the projected sums, over ``cluster`` (which must hold each texel's
         samples whole; :mod:`mifaces.reflectance.fit.texel_uncertainty`); not with the bootstrap or
         ``offsets``.
+    footprint : ndarray (N, 3), optional
+        The covariance of each sample's normal tilt over its pixel
+        (:attr:`~mifaces.reflectance.samples.ReflectanceSamples.footprint`): the model is averaged
+        over it (:func:`~mifaces.reflectance.footprint.tilted`). None: point samples.
 
     Returns
     -------
@@ -169,6 +187,7 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     light, view = np.asarray(light, np.float32), np.asarray(view, np.float32)
     reflectance, sigma = np.asarray(reflectance, np.float32), np.asarray(sigma, np.float32)
     validate_samples(light, view, reflectance, sigma)
+    footprint = None if footprint is None else check_footprint(footprint, len(sigma))
     if uncertainty is not None and uncertainty not in METHODS:
         raise ValueError(f"uncertainty must be one of {METHODS} or None, got {uncertainty!r}")
     if cluster is not None and np.shape(cluster) != np.shape(sigma):
@@ -200,6 +219,7 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
     for stage, size in enumerate(sizes):
         idx = np.sort(order[:size])
         problem = Problem(model, space, light[idx], view[idx], reflectance[idx], sigma[idx],
+                          footprint=None if footprint is None else footprint[idx],
                           texel=None if texel is None else np.asarray(texel)[idx])
         last = stage == len(sizes) - 1
         result = levenberg_marquardt(None, None, x, system=problem.system,
@@ -231,7 +251,7 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
         status, reason = AT_BOUND, f"{reason}; {SPIKE}"
     intervals = {}
     if uncertainty is not None:
-        data = (light, view, reflectance, sigma)
+        data = (light, view, reflectance, sigma, footprint)
         intervals = region_uncertainty(space, problem, params, pruned, cluster, uncertainty, data, seed,
                                        offsets=offsets)
     return RegionFit(model=model.name, options=dict(model.options), params=params, loss=loss,
@@ -239,4 +259,5 @@ def fit_region(model: BRDFModel | str, light, view, reflectance, sigma, *, start
                      reason=reason, iterations=iterations, history=history, uncertainty=intervals)
 
 
-__all__ = ["SubsetSchedule", "FULL_DATA", "RegionFit", "validate_samples", "min_samples", "fit_region"]
+__all__ = ["SubsetSchedule", "FULL_DATA", "RegionFit", "validate_samples", "check_footprint", "min_samples",
+           "fit_region"]

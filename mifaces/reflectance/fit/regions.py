@@ -83,7 +83,7 @@ def fit_regions(model: BRDFModel | str, samples: ReflectanceSamples, region_name
         if starts and name in starts:
             region_options["start"] = starts[name]
         fits[name] = fit_region(model, part.light, part.view, part.reflectance, part.sigma,
-                                texel=part.texel if texel_albedo else None,
+                                texel=part.texel if texel_albedo else None, footprint=part.footprint,
                                 cluster=None if cluster is None else np.asarray(cluster)[mask],
                                 offsets=None if offsets is None else offsets[mask], **region_options)
         peak = glossy_peak(model, fits[name].params)

@@ -336,7 +336,7 @@ def region_uncertainty(space: ParameterSpace, problem: Problem, params: dict, pr
     (:mod:`mifaces.reflectance.fit.uncertainty`): the clusters' sums (and JᵀJ, E) from
     one kernel pass at the optimum; the bootstrap refits instead.
     ``pruned`` lobes' scales and exponents get the status ``pruned``; ``data``
-    is the region's (light, view, reflectance, sigma), for the bootstrap; ``offsets``
+    is the region's (light, view, reflectance, sigma, footprint or None), for the bootstrap; ``offsets``
     the albedo offsets the reflectance was corrected by (:func:`fit_region`). Where ``problem``
     has an albedo per texel (``Problem(texel=...)``), the sums are the projected ones and the
     region's albedo gets the jackknife's interval (:mod:`mifaces.reflectance.fit.texel_uncertainty`;
@@ -394,7 +394,7 @@ def bootstrap_covariance(space: ParameterSpace, x, held, cluster, data: tuple, d
     """Cov(x̂) from ``draws`` refits on clusters drawn with replacement (a
     cluster drawn m times weighs m times: σ/√m), each started at ``x`` with at
     most ``iterations`` LM steps; ``held`` entries are left out."""
-    light, view, reflectance, sigma = data
+    light, view, reflectance, sigma, footprint = data
     cluster = independent_clusters(len(sigma)) if cluster is None else np.asarray(cluster)
     index, g = cluster_index(cluster)
     rng = np.random.default_rng(seed)
@@ -403,7 +403,8 @@ def bootstrap_covariance(space: ParameterSpace, x, held, cluster, data: tuple, d
         m = np.bincount(rng.integers(0, g, g), minlength=g)[index]
         keep = m > 0
         problem = Problem(space.model, space, light[keep], view[keep], reflectance[keep],
-                           sigma[keep] / np.sqrt(m[keep]))
+                           sigma[keep] / np.sqrt(m[keep]),
+                           footprint=None if footprint is None else footprint[keep])
         xs.append(levenberg_marquardt(None, None, x, system=problem.system, max_iterations=iterations,
                                       ftol=1e-6).x)
     free = ~np.asarray(held, bool)

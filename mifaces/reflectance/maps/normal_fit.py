@@ -167,7 +167,7 @@ def _unit(normals, view) -> np.ndarray:
 
 def refine_normals(model: BRDFModel | str, params: dict, values, directions, weights, normals, albedo=None,
                    view=(0.0, 0.0, 1.0), prior=None, prior_weight: float = PRIOR_WEIGHT, iterations: int = 30,
-                   tol: float = 1e-7, search=SEARCH) -> NormalFit:
+                   tol: float = 1e-7, search=SEARCH, footprint=None) -> NormalFit:
     """The normal step: n_p and ρ_p per pixel minimising E with the glossy part θ fixed.
 
     Parameters
@@ -199,6 +199,9 @@ def refine_normals(model: BRDFModel | str, params: dict, values, directions, wei
         Stop when a step lowers E by less than ``tol`` · E.
     search : (radius, step, levels) or None
         The start search of :func:`search_start` (None: start at ``normals`` as given).
+    footprint : ndarray (K, P, 3), optional
+        Each observation's pixel footprint (:class:`~mifaces.reflectance.maps.observations.Observations`):
+        the glossy part is averaged over it.
 
     Returns
     -------
@@ -209,7 +212,7 @@ def refine_normals(model: BRDFModel | str, params: dict, values, directions, wei
     normals = _unit(normals, view)
     prior = normals.copy() if prior is None else _unit(prior, view)
     lam = prior_strength(values, weights, prior_weight)
-    obs = Observations(model, params, directions, view, len(normals), values, weights)
+    obs = Observations(model, params, directions, view, len(normals), values, weights, footprint)
     pixel_loss, albedo = obs.losses(normals, None if albedo is None else np.asarray(albedo, np.float64))
     pixel_loss += _prior_term(normals, prior, lam)
     if search is not None:

@@ -58,10 +58,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import scipy.ndimage
 
-from ...model.texture_space import rasterize
+from ...model.texture_space import rasterize, texel_geometry
 from .diffuse import albedo_offsets
 from .normal_fit import NormalFit, refine_normals
-from ..samples import MIN_COSINE, ReflectanceSamples, texel_geometry
+from ..samples import MIN_COSINE, ReflectanceSamples
 
 #: Default weight of the model's normal in a texel's normal step, in observations of mean weight.
 PRIOR_WEIGHT = 0.5
@@ -184,6 +184,9 @@ class _Region:
         self.texels, index = self.texels[enough], index[:, enough]
         self.light, self.view, self.values, self.weights = _observations(samples.light, samples.view,
                                                                          samples.reflectance, samples.sigma, index)
+        self.footprint = None  # each observation's footprint (K, P, 3), where the samples have one
+        if samples.footprint is not None:
+            self.footprint = np.where((index >= 0)[..., None], np.asarray(samples.footprint)[np.maximum(index, 0)], 0.0)
 
     def step(self, model, params, normals, prior_weight, search, iterations=30):
         """The normal step from ``normals`` (P, 3), a NormalFit; with ``iterations=0`` and no search,
@@ -192,7 +195,7 @@ class _Region:
             return NormalFit(normals, np.zeros_like(normals), 0.0, 0)
         return refine_normals(model, params, self.values, self.light, self.weights, normals, view=self.view,
                              prior=np.tile([0.0, 0.0, 1.0], (len(self.texels), 1)), prior_weight=prior_weight,
-                             search=search, iterations=iterations)
+                             search=search, iterations=iterations, footprint=self.footprint)
 
 
 def refine_texel_normals(model, fit, fits: dict, samples: ReflectanceSamples, names: dict, *,
@@ -320,7 +323,7 @@ def mitsuba_frames(face_model, vertices, resolution: int):
 
     Mitsuba (``Mesh.compute_surface_interaction``, ``SurfaceInteraction.initialize_sh_frame``): n the
     interpolated vertex normal, s = normalise(∂p/∂u - n (n·∂p/∂u)) with the triangle's ∂p/∂u, t = n × s.
-    The samples (:func:`~mifaces.reflectance.samples.texel_geometry`): the same n, the tangent
+    The samples (:func:`~mifaces.model.texture_space.texel_geometry`): the same n, the tangent
     interpolated from the vertices' accumulated ∂p/∂u.
 
     Returns

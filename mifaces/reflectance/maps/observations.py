@@ -9,6 +9,7 @@ import mitsuba as mi
 import numpy as np
 
 from ...brdf.model import BRDFModel
+from ..footprint import tilts
 
 
 def tangents(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -45,9 +46,14 @@ class Observations:
     θ, and reduces per pixel with block sums, so only per-pixel arrays cross
     to numpy. ``values`` (K, P, 3) and ``weights`` (K, P) may be None for
     :meth:`shading` alone. ``view`` is (3,), (P, 3) or, one per observation, (K, P, 3).
+    ``footprint`` (K, P, 3), optional: each observation's pixel footprint, the covariance (tt, tb,
+    bb) of the normal's tilt along the frame's x and y axes
+    (:mod:`mifaces.reflectance.footprint`): the glossy shading g is then the mean of
+    :func:`~mifaces.reflectance.footprint.tilts`' normals' π f_s cos θl.
     """
 
-    def __init__(self, model: BRDFModel, params: dict, directions, view, pixels: int, values=None, weights=None):
+    def __init__(self, model: BRDFModel, params: dict, directions, view, pixels: int, values=None, weights=None,
+                 footprint=None):
         k = len(directions)
         directions = np.broadcast_to(np.asarray(directions, np.float64).reshape(k, -1, 3), (k, pixels, 3))
         self.model, self.params, self.k, self.p = model, glossy_params(model, params), k, pixels
@@ -58,6 +64,12 @@ class Observations:
         else:
             self.view = vectors(np.repeat(np.broadcast_to(view.reshape(-1, 3), (pixels, 3)), k, axis=0))
         self.pixel = dr.arange(mi.UInt32, pixels * k) // k
+        self.tilts = ()
+        if footprint is not None:
+            spread = np.transpose(np.asarray(footprint, np.float32), (1, 0, 2)).reshape(pixels * k, 3)
+            self.tilts = tuple(mi.Vector3f(x, y, 0.0) for x, y in tilts(tuple(mi.Float(np.ascontiguousarray(c))
+                                                                              for c in spread.T)))
+            dr.eval(self.tilts)
         if values is not None:
             self.value = mi.Color3f(np.ascontiguousarray(
                 np.transpose(np.asarray(values, np.float32), (1, 0, 2)).reshape(-1, 3).T))
@@ -68,11 +80,20 @@ class Observations:
 
     def _terms(self, n, t1=None, t2=None, a=None, b=None):
         n = n if a is None else dr.normalize(n + a * t1 + b * t2)
+        s, g = self._shade(n)
+        if self.tilts:  # the footprint: the glossy part averaged over the tilted normals
+            g = dr.zeros(mi.Color3f, dr.width(s))
+            for tilt in self.tilts:
+                g += self._shade(dr.normalize(n + tilt))[1]
+            g /= len(self.tilts)
+        return s, g
+
+    def _shade(self, n):
+        """s = max(0, n·l) and g = π f_s s at normals ``n``."""
         frame = mi.Frame3f(n)
         wi, wo = frame.to_local(self.light), frame.to_local(self.view)
         s = dr.select((wi.z > 0) & (wo.z > 0), wi.z, 0.0)
-        g = dr.pi * self.model.eval(wi, wo, self.params, diffuse=False) * s
-        return s, g
+        return s, dr.pi * self.model.eval(wi, wo, self.params, diffuse=False) * s
 
     def shading(self, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """s (K, P) and g (K, P, 3) at unit ``normals`` (P, 3)."""
