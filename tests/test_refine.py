@@ -276,8 +276,16 @@ def test_the_default_schedule_lowers_the_loss_and_the_errors_against_the_truth(f
     regions closer to the simulator's truth."""
     from mifaces.validation.truth_errors import ground_truth_errors
 
+    from mifaces.capture import read_ground_truth
+
     capture, face, shapes, estimate = fitted
-    start = _off(estimate)
+    # every region's lobe 60 % weaker than the truth's: the start this test is about, whatever the sample
+    # fit made of two 64-px photographs (the beard's 123 samples gave anything from 0.4 to 2.2 times the truth)
+    truth = read_ground_truth(capture).brdf["regions"]
+    start = _off(dataclasses.replace(estimate, fits={
+        name: dataclasses.replace(fit, params={**fit.params, "specular_reflectance": list(np.broadcast_to(
+            np.asarray(truth[name]["specular_reflectance"], float), 3))}) if name in truth else fit
+        for name, fit in estimate.fits.items()}))
     refined = refine_estimate(start, capture, shapes, face, RefineSchedule(), progress=False)
     record = refined.refinement
     assert record["accepted"], record["reason"]
@@ -288,7 +296,7 @@ def test_the_default_schedule_lowers_the_loss_and_the_errors_against_the_truth(f
     after = ground_truth_errors(refined, capture)["regions"]
     regions = [r for r in record["regions"] if r in before]  # those fitted on their own samples
     print({r: (before[r]["specular_reflectance"], after[r]["specular_reflectance"]) for r in regions})  # noqa: T201
-    assert len(regions) >= 2  # skin and beard at 64 x 64 px: measured 0.68 -> 0.09 and 0.96 -> 0.84
+    assert len(regions) >= 2  # skin and beard at 64 x 64 px: measured 0.60 -> 0.05 and 0.60 -> 0.24
     assert after["skin"]["specular_reflectance"] < 0.5 * before["skin"]["specular_reflectance"]
     mean = lambda errors: np.mean([errors[r]["specular_reflectance"] for r in regions])  # noqa: E731
     assert mean(after) < 0.7 * mean(before)

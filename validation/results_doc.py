@@ -41,8 +41,8 @@ from pathlib import Path
 import doc_figures  # noqa: E402  (the figures of the hand-written docs, checked with --check)
 from results_format import DASH, get  # noqa: E402  (the formatting helpers)
 from results_tables_design import sec_design_metrics  # noqa: E402  (the redesign issue's measuring stick)
-from results_tables_studies import (sec_reflectance_bias, sec_reflectance_coverage, sec_refine_judge,  # noqa: E402
-                                    sec_region_seams)
+from results_tables_studies import (sec_interreflection_rounds, sec_reflectance_bias,  # noqa: E402
+                                    sec_reflectance_coverage, sec_refine_judge, sec_region_seams)
 from results_tables_fits import (  # noqa: E402  (one function per result layout)
     sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_depth_cameras, sec_floor_depth, sec_multi_camera,
     sec_joint_outline, sec_light_balance_measure, sec_light_calibration_bias, sec_refine, sec_refine_gradient,
@@ -184,6 +184,8 @@ LAYOUTS = {
                              sec_reflectance_coverage),
     "region_seams": ("Region outlines in fitted renders: faces with one BRDF everywhere", "SIMULATED",
                      sec_region_seams),
+    "interreflection_rounds": ("How the bounced light is taken out: rounds and render sizes", "SIMULATED",
+                               sec_interreflection_rounds),
     "pareto": ("Error against run time of the whole pipeline", "SIMULATED", sec_pareto),
     "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
     "real_yaleb": ("Held-out relighting on the Yale face database", "real photographs", sec_real_yaleb),
