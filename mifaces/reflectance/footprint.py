@@ -6,8 +6,8 @@ twice the pixels; ``docs/reflectance.md``, "The lips' lobe and the pixel's footp
 
 The fit therefore predicts what the pixel saw. Each sample carries the covariance of its
 normal's tilt over the footprint (:func:`normal_spread`, radians², in the local frame), and the
-model is averaged over four tilted normals that have that covariance (:func:`tilts`,
-:func:`tilted`: the unscented transform's points, exact to second order), for every model alike,
+model is averaged over five tilted normals that have that covariance (:func:`tilts`,
+:func:`tilted`: the unscented transform's points), for every model alike,
 inside the fit's kernels: in the region fit (:class:`~mifaces.reflectance.fit.problem.Problem`)
 and in the normal step (:class:`~mifaces.reflectance.maps.observations.Observations`).
 
@@ -24,8 +24,8 @@ import numpy as np
 
 from ..capture.camera import PIXEL_BLUR_STD
 
-#: Tilted normals per sample (:func:`tilted_directions`).
-POINTS = 4
+#: Tilted normals per sample (:func:`tilts`).
+POINTS = 5
 #: Texel neighbours further apart in the photograph (pixels), or whose normals differ by more
 #: (radians), lie across a seam of the texture layout: no derivative is taken across them; and
 #: no footprint's tilt has a standard deviation above MAX_TILT.
@@ -109,25 +109,29 @@ def normal_spread(xy: np.ndarray, normal: np.ndarray, tangent: np.ndarray, bitan
 
 def tilts(spread) -> list:
     """The :data:`POINTS` tilts (x, y) of the normal, along the frame's tangent and bitangent
-    (radians, Dr.Jit arrays), that stand for each sample's Gaussian ``spread`` (tt, tb, bb; three
-    Dr.Jit arrays): ± √2 times the columns of its Cholesky factor, equally weighted (the unscented
-    transform: mean 0 and covariance ``spread``)."""
+    (radians, Dr.Jit arrays), with their weights, that stand for each sample's Gaussian ``spread``
+    (tt, tb, bb; three Dr.Jit arrays): the untilted normal (weight 1/3) and ± √3 times the columns of
+    the spread's Cholesky factor (1/6 each): the unscented transform with κ = 1, whose points have
+    the Gaussian's covariance and fourth moments. The centre point matters: a lobe narrower than the
+    footprint (the eyes' m of 0.05 under a tilt of 0.05 rad) falls between the four outer points, and
+    without it their mean took the eyes' peak for a third of what it is."""
     tt, tb, bb = spread
     l11 = dr.sqrt(dr.maximum(tt, 0.0))
     l21 = dr.select(l11 > 0, tb / dr.maximum(l11, 1e-30), 0.0)
     l22 = dr.sqrt(dr.maximum(bb - l21 * l21, 0.0))
-    r = float(np.sqrt(2.0))
-    return [(r * l11, r * l21), (-r * l11, -r * l21), (0.0 * l22, r * l22), (0.0 * l22, -r * l22)]
+    r, zero = float(np.sqrt(3.0)), 0.0 * l11
+    return [(zero, zero, 1.0 / 3.0), (r * l11, r * l21, 1.0 / 6.0), (-r * l11, -r * l21, 1.0 / 6.0),
+            (zero, r * l22, 1.0 / 6.0), (zero, -r * l22, 1.0 / 6.0)]
 
 
 def tilted(wi, wo, spread) -> list:
     """``wi`` and ``wo`` (Dr.Jit vectors in the local frame, z the normal) in the frames of the
     normals tilted by :func:`tilts` of ``spread``, each frame the local frame turned by the smallest
-    rotation taking z onto its normal, with each one's weight cos θl' / (POINTS cos θl) in what the
-    pixel saw: the pixel sums f cos θl' over its normals, and eq. 4 divided by the cosine of the
-    sample's own normal. A list of (wi', wo', weight)."""
+    rotation taking z onto its normal, with each one's weight w cos θl' / cos θl in what the pixel
+    saw (w its weight in :func:`tilts`): the pixel sums f cos θl' over its normals, and eq. 4 divided
+    by the cosine of the sample's own normal. A list of (wi', wo', weight)."""
     out = []
-    for x, y in tilts(spread):
+    for x, y, w in tilts(spread):
         n = dr.normalize(mi.Vector3f(x, y, 1.0))
         axis = mi.Vector3f(-n.y, n.x, 0.0)  # z × n: sin θ times the rotation's axis
 
@@ -135,7 +139,7 @@ def tilted(wi, wo, spread) -> list:
             return w * n.z - dr.cross(axis, w) + axis * (dr.dot(axis, w) / (1.0 + n.z))
 
         a, b = turned(wi), turned(wo)
-        out.append((a, b, dr.maximum(a.z, 0.0) / (POINTS * wi.z)))
+        out.append((a, b, w * dr.maximum(a.z, 0.0) / wi.z))
     return out
 
 

@@ -49,7 +49,7 @@ class Observations:
     ``footprint`` (K, P, 3), optional: each observation's pixel footprint, the covariance (tt, tb,
     bb) of the normal's tilt along the frame's x and y axes
     (:mod:`mifaces.reflectance.footprint`): the glossy shading g is then the mean of
-    :func:`~mifaces.reflectance.footprint.tilts`' normals' π f_s cos θl.
+    :func:`~mifaces.reflectance.footprint.tilts`' normals' π f_s cos θl, weighted.
     """
 
     def __init__(self, model: BRDFModel, params: dict, directions, view, pixels: int, values=None, weights=None,
@@ -67,9 +67,9 @@ class Observations:
         self.tilts = ()
         if footprint is not None:
             spread = np.transpose(np.asarray(footprint, np.float32), (1, 0, 2)).reshape(pixels * k, 3)
-            self.tilts = tuple(mi.Vector3f(x, y, 0.0) for x, y in tilts(tuple(mi.Float(np.ascontiguousarray(c))
-                                                                              for c in spread.T)))
-            dr.eval(self.tilts)
+            self.tilts = tuple((mi.Vector3f(x, y, 0.0), w) for x, y, w in tilts(
+                tuple(mi.Float(np.ascontiguousarray(c)) for c in spread.T)))
+            dr.eval([t for t, _ in self.tilts])
         if values is not None:
             self.value = mi.Color3f(np.ascontiguousarray(
                 np.transpose(np.asarray(values, np.float32), (1, 0, 2)).reshape(-1, 3).T))
@@ -83,9 +83,8 @@ class Observations:
         s, g = self._shade(n)
         if self.tilts:  # the footprint: the glossy part averaged over the tilted normals
             g = dr.zeros(mi.Color3f, dr.width(s))
-            for tilt in self.tilts:
-                g += self._shade(dr.normalize(n + tilt))[1]
-            g /= len(self.tilts)
+            for tilt, weight in self.tilts:
+                g += self._shade(dr.normalize(n + tilt))[1] * weight
         return s, g
 
     def _shade(self, n):
