@@ -144,14 +144,18 @@ def _footprint_truth(light, view, spread, grid: int = 9):
     return np.pi * total
 
 
+def _directions(rng, n: int, spread: float) -> np.ndarray:
+    """``n`` random unit directions about the normal, their tangent parts of standard deviation ``spread``
+    before normalising (the light's draws first, then the view's: the order fixes the samples)."""
+    w = rng.normal(size=(n, 3)) * [spread, spread, 0.0] + [0, 0, 1]
+    return w / np.linalg.norm(w, axis=1, keepdims=True)
+
+
 @pytest.fixture(scope="module")
 def averaged_samples():
     rng = np.random.default_rng(4)
     n = 4000
-    light = rng.normal(size=(n, 3)) * [0.6, 0.6, 0.0] + [0, 0, 1]
-    view = rng.normal(size=(n, 3)) * [0.5, 0.5, 0.0] + [0, 0, 1]
-    light /= np.linalg.norm(light, axis=1, keepdims=True)
-    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    light, view = _directions(rng, n, 0.6), _directions(rng, n, 0.5)
     tt, bb = rng.uniform(0.001, 0.008, n), rng.uniform(0.0005, 0.004, n)
     tb = rng.uniform(-0.5, 0.5, n) * np.sqrt(tt * bb)
     spread = np.stack([tt, tb, bb], 1)
@@ -228,10 +232,7 @@ def test_a_lobe_as_narrow_as_the_footprint_keeps_its_scale(monkeypatch):
     monkeypatch.setitem(TRUTH, "roughness", 0.06)
     rng = np.random.default_rng(5)
     n = 6000
-    light = rng.normal(size=(n, 3)) * [0.3, 0.3, 0.0] + [0, 0, 1]
-    view = rng.normal(size=(n, 3)) * [0.3, 0.3, 0.0] + [0, 0, 1]
-    light /= np.linalg.norm(light, axis=1, keepdims=True)
-    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    light, view = _directions(rng, n, 0.3), _directions(rng, n, 0.3)
     spread = np.tile([0.0025, 0.0, 0.0025], (n, 1))
     r = _footprint_truth(light, view, spread, grid=15)
     fit = fit_region("cooktorrance", light, view, r, np.ones(n), footprint=spread, schedule=FULL_DATA,
