@@ -141,3 +141,24 @@ def test_mixed_samples_would_outline_the_eyebrows(one_brdf_capture, monkeypatch)
 def test_the_eyes_border_has_no_seam(one_brdf_capture, one_brdf_fit):
     render, true, labels = seam_renders(one_brdf_capture, one_brdf_fit, spp=SPP)
     assert EYES not in seams(border_steps(render, true, labels))
+
+
+def test_region_maps_are_the_blur_of_the_regions_values_and_follow_each_document(face):
+    """The kept masks give what smoothing the texture of region values gives, for each document
+    anew (the masks are kept, never the values), and the same face at another width smooths again."""
+    import scipy.ndimage as ndi
+
+    from mifaces.render.blend import _RISE_SD, _mm_per_texel
+
+    size = 128
+    parts = list(face.meshes.values())
+    part = texel_parts(face.meshes, size)
+    for values, width in (({"skin": 0.2, "lips": 0.8}, BLEND_MM), ({"skin": 0.5, "lips": 0.1, "eyes": 0.9}, BLEND_MM),
+                          ({"skin": 0.2, "lips": 0.8}, 2 * BLEND_MM)):
+        doc = document(values, blend=width)
+        image = region_maps(doc, face.meshes, size)["specular_reflectance"]
+        per_part = np.array([doc["regions"].get(m.region, doc["regions"]["skin"])["specular_reflectance"]
+                             for m in parts])
+        sigma = width / _RISE_SD / _mm_per_texel(parts, size)
+        expected = ndi.gaussian_filter(per_part[part].astype(np.float64), sigma=sigma, mode="nearest")
+        assert np.allclose(image[..., 0], expected, atol=1e-6)

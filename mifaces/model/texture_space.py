@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.ndimage as ndi
 
+from ..runtime.memo import ContentCache
 from .geometry import tangent_frames
 
 
@@ -47,9 +48,18 @@ class TextureRaster:
         return self.count > 0
 
 
+#: How many rasterizations :func:`rasterize` keeps (the pipeline asks for the same few again and again:
+#: every render's region textures, every set of samples).
+RASTER_CACHE_SIZE = 8
+_rasters = ContentCache(RASTER_CACHE_SIZE)
+
+
 def rasterize(uv: np.ndarray, triangles: np.ndarray, shape: tuple[int, int], chunk: int = 4_000_000
               ) -> TextureRaster:
     """Rasterize the triangles of a mesh in texture space.
+
+    The result is read-only and shared: the same ``uv``, ``triangles`` and ``shape`` (by content) give
+    the same object, from a cache of the last :data:`RASTER_CACHE_SIZE`.
 
     A texel belongs to a triangle when its centre lies inside the triangle or
     on an edge shared in the top-left sense (the half-open rule of GPU
@@ -78,6 +88,11 @@ def rasterize(uv: np.ndarray, triangles: np.ndarray, shape: tuple[int, int], chu
     tri = np.asarray(triangles).astype(np.int64)
     if uv.ndim != 2 or uv.shape[1] != 2:
         raise ValueError(f"uv must have shape (N, 2), got {uv.shape}")
+    return _rasters.get((uv, tri, (height, width)), lambda: _rasterize(uv, tri, height, width, chunk))
+
+
+def _rasterize(uv: np.ndarray, tri: np.ndarray, height: int, width: int, chunk: int) -> TextureRaster:
+    """:func:`rasterize`'s work, uncached."""
     # Texel-centre coordinates: x = u * W - 0.5, y = v * H - 0.5.
     px = uv[:, 0] * width - 0.5
     py = uv[:, 1] * height - 0.5

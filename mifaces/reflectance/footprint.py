@@ -23,6 +23,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..capture.camera import PIXEL_BLUR_STD
+from ..runtime.memo import ContentCache
 
 #: Tilted normals per sample (:func:`tilts`).
 POINTS = 5
@@ -71,8 +72,25 @@ def normal_spread(xy: np.ndarray, normal: np.ndarray, tangent: np.ndarray, bitan
         R.
     blur_std : float
         The photograph's pixel filter, a Gaussian's standard deviation in pixels.
+
+    Returns
+    -------
+    (M, 3) read-only array, shared: the same inputs (by content) give it again (from a cache of the
+    last :data:`SPREAD_CACHE_SIZE`; the samples of one shape are taken again for each round of the
+    bounced light).
     """
     xy = np.asarray(xy, np.float64)[:, :2]
+    return _spreads.get((xy, normal, tangent, bitangent, texel, resolution, blur_std),
+                        lambda: _normal_spread(xy, normal, tangent, bitangent, texel, resolution, blur_std))
+
+
+#: How many photographs' footprints :func:`normal_spread` keeps.
+SPREAD_CACHE_SIZE = 16
+_spreads = ContentCache(SPREAD_CACHE_SIZE)
+
+
+def _normal_spread(xy, normal, tangent, bitangent, texel, resolution, blur_std) -> np.ndarray:
+    """:func:`normal_spread`'s work, uncached."""
     m = len(texel)
     if m == 0:
         return np.zeros((0, 3))

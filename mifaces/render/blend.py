@@ -25,6 +25,7 @@ import scipy.ndimage as ndi
 from .. import brdf as brdf_models
 from ..model.regions import region_entry
 from ..model.texture_space import rasterize
+from ..runtime.memo import ContentCache
 
 #: The distance on the face (mm) over which a region's parameters turn into
 #: its neighbour's, from 10 % to 90 % of the step: "a few millimetres".
@@ -89,17 +90,38 @@ def region_maps(brdf: Mapping, meshes: Mapping, size: int, *, exclude=()) -> dic
     kinds = {p.name: p.kind for p in model.specular_parameters()}
     table = brdf["regions"]
     parts = list(meshes.values())
-    part = texel_parts(meshes, size)
-    sigma = blend_width(brdf) / _RISE_SD / _mm_per_texel(parts, size)
+    weights = _blurred_parts(meshes, size, blend_width(brdf))
     out = {}
     for name in names:
         values = np.array([np.broadcast_to(np.asarray(region_entry(table, m.region)[name], np.float64), 3)
                            for m in parts])
-        image = values[part]
-        out[name] = ndi.gaussian_filter(image, sigma=(sigma, sigma, 0), mode="nearest").astype(np.float32)
+        out[name] = (weights.reshape(len(parts), -1).T @ values.astype(np.float32)).reshape(size, size, 3)
         if kinds[name] != "rgb":
             out[name] = np.repeat(out[name][..., :1], 3, axis=2)
     return out
+
+
+#: How many faces' blurred region masks :func:`region_maps` keeps (a face's masks at 512² are 7 MB; one per
+#: pose of a capture, so that each round of the bounced light renders every pose without smoothing again).
+MASK_CACHE_SIZE = 8
+_MASKS = ContentCache(MASK_CACHE_SIZE)
+
+
+def _blurred_parts(meshes: Mapping, size: int, width_mm: float) -> np.ndarray:
+    """(P, size, size): for each of the ``meshes`` (in order), the texels it owns
+    (:func:`texel_parts`) as a mask, smoothed over ``width_mm`` on this face. A region's values
+    blended over the face are the sum of its values times its mask (the smoothing is linear);
+    kept by the meshes' content, so that every render of one face smooths once."""
+    parts = list(meshes.values())
+    key = [size, width_mm] + [a for m in parts for a in (m.vertices, m.uv, m.triangles)]
+
+    def masks():
+        part = texel_parts(meshes, size)
+        sigma = width_mm / _RISE_SD / _mm_per_texel(parts, size)
+        return np.stack([ndi.gaussian_filter((part == i).astype(np.float64), sigma=sigma, mode="nearest")
+                         for i in range(len(parts))]).astype(np.float32)
+
+    return _MASKS.get(key, masks)
 
 
 def texel_parts(meshes: Mapping, size: int) -> np.ndarray:
