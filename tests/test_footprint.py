@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 
+from dataclasses import replace
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -241,3 +243,35 @@ def test_a_lobe_as_narrow_as_the_footprint_keeps_its_scale(monkeypatch):
     assert abs(fit.params["specular_reflectance"][0] / 0.9 - 1) < 0.1, fit.params  # measured +6.8 %
     points = fit_region("cooktorrance", light, view, r, np.ones(n), schedule=FULL_DATA, uncertainty=None)
     assert points.params["roughness"] / 0.06 - 1 > 0.4, points.params
+
+
+def test_the_albedo_map_takes_out_the_gloss_that_the_pixel_saw(monkeypatch):
+    """The per-texel albedo (``refine_diffuse``) subtracts the fitted glossy part as the fit predicts it,
+    averaged over each sample's footprint. Read at the sample's normal alone, a narrow lobe's peak
+    was taken for the pixel's: the texels where the highlights lay came out too dark (the eyes, by 0.15)."""
+    from mifaces.model.regions import REGIONS
+    from mifaces.reflectance.maps.diffuse import refine_diffuse
+
+    monkeypatch.setitem(TRUTH, "roughness", 0.06)
+    rng = np.random.default_rng(6)
+    size, per_texel = 8, 40
+    n = size * size * per_texel
+    light, view = _directions(rng, n, 0.3), _directions(rng, n, 0.3)
+    spread = np.tile([0.0025, 0.0, 0.0025], (n, 1))
+    r = _footprint_truth(light, view, spread, grid=15)
+    skin = REGIONS["skin"]
+    samples = ReflectanceSamples(light=light.astype(np.float32), view=view.astype(np.float32),
+                                 reflectance=r.astype(np.float32), sigma=np.ones(n, np.float32),
+                                 texel=np.repeat(np.arange(size * size), per_texel).astype(np.int32),
+                                 measurement=np.zeros(n, np.int16), resolution=size, measurement_names=("a",),
+                                 footprint=spread.astype(np.float32))
+    samples.label = np.full(n, skin, np.uint8)
+    region_map = np.full((size, size), skin, np.uint8)
+    truth = np.asarray(TRUTH["diffuse_reflectance"])
+
+    def worst(s):
+        albedo = refine_diffuse("cooktorrance", {skin: TRUTH}, s, region_map, shrinkage=False).albedo
+        return np.abs(albedo.reshape(-1, 3) / truth - 1).max()
+
+    assert worst(samples) < 0.08  # measured 4.9 % (the five normals' error on a lobe this narrow)
+    assert worst(replace(samples, footprint=None)) > 0.3  # measured 50 %

@@ -130,7 +130,7 @@ def with_balanced_lights(taken: SampleSet, brdf, options: FitOptions) -> SampleS
     for _ in range(BALANCE_FIT_ROUNDS):
         fit = fit_samples(dataclasses.replace(taken, capture=capture, samples=samples), brdf, quick, progress=False)
         glossy = specular_reflectance_factor(brdf, {REGIONS[name]: f.params for name, f in fit.fits.items()},
-                                             samples.light, samples.view, samples.labels())
+                                             samples.light, samples.view, samples.labels(), samples.footprint)
         capture, samples = balance_given_lights(capture, samples, glossy)
     seconds = time.perf_counter() - t
     return dataclasses.replace(taken, capture=capture, samples=samples,

@@ -49,6 +49,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from ... import brdf as brdf_models
+from ..footprint import tilted
 from ..samples import ReflectanceSamples
 from .shrinkage import empirical_bayes
 
@@ -119,8 +120,13 @@ class AlbedoOffsets:
         return cls(albedo_offsets(diffuse.albedo.reshape(-1, 3), texel, label), texel, shrinkage)
 
 
-def specular_reflectance_factor(model, params_by_region: dict[int, dict], light, view, region) -> np.ndarray:
-    """π f_s(l̂, v̂) of each sample's region, without the diffuse term, (N, 3).
+def specular_reflectance_factor(model, params_by_region: dict[int, dict], light, view, region,
+                                footprint=None) -> np.ndarray:
+    """π f_s(l̂, v̂) of each sample's region, without the diffuse term, (N, 3); with each sample's
+    ``footprint`` (N, 3) (:attr:`ReflectanceSamples.footprint`), what its pixel saw: f_s averaged over
+    the tilted normals of :func:`~mifaces.reflectance.footprint.tilted`, as the region fit predicts it.
+    (A lobe the fit sharpened against the footprint, read at the sample's normal alone, would take
+    its peak for the pixel's: the eyes' albedo came out 0.15 too dark where the highlights lay.)
 
     All samples are evaluated in one Dr.Jit call, with each region's
     parameters gathered per sample.
@@ -145,7 +151,15 @@ def specular_reflectance_factor(model, params_by_region: dict[int, dict], light,
             params[p.name] = dr.gather(mi.Float, mi.Float(table), idx)
     wi = mi.Vector3f(np.ascontiguousarray(np.asarray(light, np.float32).T))
     wo = mi.Vector3f(np.ascontiguousarray(np.asarray(view, np.float32).T))
-    return np.pi * np.array(model.eval(wi, wo, params, diffuse=False)).T
+    if footprint is None:
+        return np.pi * np.array(model.eval(wi, wo, params, diffuse=False)).T
+    if np.shape(footprint) != (len(index), 3):
+        raise ValueError(f"footprint must have shape ({len(index)}, 3), got {np.shape(footprint)}")
+    spread = tuple(mi.Float(np.ascontiguousarray(c)) for c in np.asarray(footprint, np.float32).T)
+    f = dr.zeros(mi.Color3f, len(index))
+    for a, b, weight in tilted(wi, wo, spread):
+        f += model.eval(a, b, params, diffuse=False) * weight
+    return np.pi * np.array(f).T
 
 
 def noise_and_spread(residual, w, texel, region, mean, total, counts, labels) -> dict:
@@ -233,7 +247,8 @@ def refine_diffuse(model, params_by_region: dict[int, dict], samples: Reflectanc
     texel, region = np.asarray(samples.texel), samples.labels()
     if texel.size and (texel.min() < 0 or texel.max() >= size):
         raise ValueError(f"texel indices must lie in [0, {size}) for a {region_map.shape} region map")
-    specular = (specular_reflectance_factor(model, params_by_region, samples.light, samples.view, region)
+    specular = (specular_reflectance_factor(model, params_by_region, samples.light, samples.view, region,
+                                            samples.footprint)
                 if len(texel) else np.zeros((0, 3)))
     w = 1.0 / np.square(np.asarray(samples.sigma, np.float64))
     total = np.bincount(texel, weights=w, minlength=size)

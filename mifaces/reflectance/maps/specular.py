@@ -84,7 +84,8 @@ def refine_specular(model, params_by_region: dict[int, dict], samples: Reflectan
     """
     size = np.asarray(region_map).size
     texel, region = np.asarray(samples.texel), samples.labels()
-    g = specular_reflectance_factor(model, params_by_region, samples.light, samples.view, region)
+    g = specular_reflectance_factor(model, params_by_region, samples.light, samples.view, region,
+                                    samples.footprint)
     r = np.asarray(samples.reflectance, np.float64)
     w = 1.0 / np.square(np.asarray(samples.sigma, np.float64))
     total = np.bincount(texel, weights=w, minlength=size)
