@@ -275,3 +275,6 @@ def test_the_albedo_map_takes_out_the_gloss_that_the_pixel_saw(monkeypatch):
 
     assert worst(samples) < 0.08  # measured 4.9 % (the five normals' error on a lobe this narrow)
     assert worst(replace(samples, footprint=None)) > 0.3  # measured 50 %
+    from mifaces.reflectance.maps.diffuse import specular_reflectance_factor
+    with pytest.raises(ValueError, match="footprint must have shape"):
+        specular_reflectance_factor("cooktorrance", {skin: TRUTH}, light, view, samples.label, spread[:5])
