@@ -30,10 +30,9 @@ NOT_IDENTIFIED = "not_identified"
 SYSTEMATIC: dict[str, dict[str, float]] = {
     "cooktorrance": {"specular_reflectance": 0.02, "roughness": 0.005},
     "ward": {"specular_reflectance": 0.04, "alpha": 0.005},
-    "phong": {"specular_reflectance": 0.02, "exponent": 0.01},
-    "lafortune": {"cxy": 0.005, "cz": 0.06, "exponent": 0.025},
+    "phong": {"specular_reflectance": 0.025, "exponent": 0.005},
+    "lafortune": {"cxy": 0.01, "cz": 0.08, "exponent": 0.025},
 }
-
 
 
 @dataclass
