@@ -28,6 +28,9 @@ def test_a_content_cache_keys_by_content_and_forgets_the_oldest():
     assert cache.get((a.astype(np.float32), 1), lambda: compute(3))[0] == 3  # another dtype: another key
     assert cache.get((a, 1), lambda: compute(4))[0] == 4  # the oldest was forgotten (size 2)
     assert calls == [1, 2, 3, 4]
+    cache.clear()
+    assert cache.get((a, 1), lambda: compute(5))[0] == 5  # cleared: computed again
+    assert calls == [1, 2, 3, 4, 5]
     with pytest.raises(ValueError, match="at least one"):
         ContentCache(0)
 
