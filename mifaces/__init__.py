@@ -25,10 +25,10 @@ set_variant()
 from .capture import load_capture  # noqa: E402
 from .options.measure import MeasureOptions  # noqa: E402
 from .pipeline.measure import measure  # noqa: E402
-from .reflectance import capture_samples, fit_brdf, render_fitted  # noqa: E402
+from .reflectance import RenderOptions, capture_samples, fit_brdf, render_fitted  # noqa: E402
 from .shape import fit_shape, load_fitted_shapes  # noqa: E402
-from .studio import simulate  # noqa: E402
+from .studio import SimulationOptions, simulate  # noqa: E402
 
 __all__ = ["__version__", "MorphableModel", "load_model", "default_variant", "set_variant", "load_capture", "simulate",
-           "fit_shape", "load_fitted_shapes", "capture_samples", "fit_brdf", "render_fitted", "measure",
-           "MeasureOptions"]
+           "SimulationOptions", "fit_shape", "load_fitted_shapes", "capture_samples", "fit_brdf", "render_fitted",
+           "RenderOptions", "measure", "MeasureOptions"]

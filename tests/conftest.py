@@ -49,7 +49,7 @@ def small_capture(tmp_path_factory):
     in the LLVM variant (:func:`mifaces.studio.simulate.simulate` with ``options``)
     and returns its folder; ``direct_only=True``: path depth 2, no light bounced off the face."""
     import mifaces.studio.scene as studio_scene
-    from mifaces.studio.simulate import simulate
+    from mifaces.studio import SimulationOptions, simulate
 
     def make(name: str, direct_only: bool = False, **options):
         mifaces.set_variant("llvm_ad_rgb")
@@ -58,7 +58,7 @@ def small_capture(tmp_path_factory):
         if direct_only:
             studio_scene.INTEGRATOR = {**default, "max_depth": 2}
         try:
-            simulate(out, progress=False, **options)
+            simulate(out, SimulationOptions(**options), progress=False)
         finally:
             studio_scene.INTEGRATOR = default
         return out

@@ -44,7 +44,8 @@ def test_the_texel_albedo_takes_the_skin_lobe_nearer_the_truth(small_capture, tm
     clusters = []
 
     def spy(brdf, samples, *args, **kwargs):  # the samples and clusters of each region fit
-        clusters.append((samples, kwargs.get("cluster")))
+        uncertainty = kwargs.get("uncertainty")
+        clusters.append((samples, None if uncertainty is None else uncertainty.cluster))
         return fit_regions(brdf, samples, *args, **kwargs)
 
     monkeypatch.setattr(fitting_module, "fit_regions", spy)

@@ -19,11 +19,13 @@ from mifaces.capture import load_capture
 from mifaces.capture.ground_truth import ground_truth_folder
 from mifaces.cli.commands import main
 from mifaces.io.image_files import read_exr
+from mifaces.lights.environment import Environment
 from mifaces.shape.io import load_geometry
 from mifaces.model.regions import REGIONS, texel_regions_of_mesh
-from mifaces.reflectance import FitOptions, fit_brdf, load_estimate, render_estimate, render_fitted
+from mifaces.reflectance import FitOptions, RenderOptions, fit_brdf, load_estimate, render_estimate, render_fitted
 from mifaces.reflectance.fit.region_fit import SubsetSchedule
-from mifaces.reflectance.samples import ReflectanceSamples, capture_samples
+from mifaces.reflectance.resampling import capture_samples
+from mifaces.reflectance.samples import ReflectanceSamples
 from mifaces.render import FaceScene, face_scene, render_face
 from mifaces.studio.truth import brdf_with_overrides
 
@@ -175,9 +177,9 @@ def test_render_under_an_environment_map(capture_dir, estimate):
     point_only = face_scene(*args, light)
     assert "light" in point_only and "environment" not in point_only
     sky = np.ones((16, 32, 3), np.float32) * np.array([0.6, 0.7, 1.0], np.float32)
-    env_only = face_scene(*args, envmap=sky)
+    env_only = face_scene(*args, environment=Environment(sky))
     assert "environment" in env_only and "light" not in env_only
-    image = render_face(*args, envmap=sky, spp=4)
+    image = render_face(*args, environment=Environment(sky), spp=4)
     face = image.mean(axis=2) > 0
     assert np.all(np.isfinite(image)) and face.mean() > 0.05
     # a white sky on a face of albedo < 1: radiance below the sky's, bluish like the sky
@@ -185,7 +187,7 @@ def test_render_under_an_environment_map(capture_dir, estimate):
     with pytest.raises(ValueError, match="needs a light"):
         render_face(*args)
     with pytest.raises(FileNotFoundError, match="environment map not found"):
-        render_face(*args, envmap="/no/such.exr")
+        render_face(*args, environment=Environment("/no/such.exr"))
 
 
 def test_scene_xml_is_the_scene_rendered_from_memory(capture_dir, estimate):
@@ -218,8 +220,8 @@ def test_render_in_a_novel_pose(capture_dir, estimate, tmp_path):
     result, out = estimate
     capture = load_capture(capture_dir)
     face, shapes = load_geometry(capture)
-    straight = read_exr(render_fitted(out, capture, tmp_path / "straight", spp=4)["exr"])
-    turned = read_exr(render_fitted(out, capture, tmp_path / "turned", yaw=30, spp=4)["exr"])
+    straight = read_exr(render_fitted(out, capture, tmp_path / "straight", RenderOptions(spp=4))["exr"])
+    turned = read_exr(render_fitted(out, capture, tmp_path / "turned", RenderOptions(yaw=30, spp=4))["exr"])
     on_face = (straight.mean(axis=2) > 0) | (turned.mean(axis=2) > 0)
     assert on_face.mean() > 0.05
     assert np.mean(np.abs(turned - straight)[on_face]) > 0.2 * np.mean(straight[on_face])
@@ -247,8 +249,8 @@ def test_brdf_moves_to_another_face(estimate, other_dir, tmp_path):
     capture = load_capture(other_dir)
     face, shapes = load_geometry(capture)
     own_brdf = ground_truth_folder(other_dir)  # the other face's brdf.json and albedo.exr
-    own = read_exr(render_fitted(own_brdf, capture, tmp_path / "own", spp=4)["exr"])
-    moved = read_exr(render_fitted(out, capture, tmp_path / "moved", spp=4)["exr"])
+    own = read_exr(render_fitted(own_brdf, capture, tmp_path / "own", RenderOptions(spp=4))["exr"])
+    moved = read_exr(render_fitted(out, capture, tmp_path / "moved", RenderOptions(spp=4))["exr"])
     on_face = own.mean(axis=2) > 0
     # the same geometry (a texel of black pupil may render 0 in one of them)
     assert np.mean((moved.mean(axis=2) > 0) != on_face) < 1e-3
@@ -267,7 +269,7 @@ def test_cli_render(capture_dir, estimate, other_dir, tmp_path):
                                  str(tmp_path / "moved"), "--yaw", "-20", "--spp", "4"])
     assert moved.exit_code == 0, moved.output
     assert "wrote" in moved.output
-    api = render_fitted(out, other_dir, tmp_path / "api", yaw=-20, spp=4)
+    api = render_fitted(out, other_dir, tmp_path / "api", RenderOptions(yaw=-20, spp=4))
     # the same samples (the LLVM backend's sums may differ in the last bit)
     np.testing.assert_allclose(read_exr(tmp_path / "moved.exr"), read_exr(api["exr"]), rtol=1e-5, atol=1e-6)
     assert (tmp_path / "moved.png").stat().st_size > 0

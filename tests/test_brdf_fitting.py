@@ -12,7 +12,8 @@ from mifaces import brdf
 from mifaces.brdf.lafortune import energy_bound
 from mifaces.reflectance.fit.lobes import SPIKE
 from mifaces.reflectance.fit.parameters import ParameterSpace, conservative_start
-from mifaces.reflectance.fit.region_fit import FULL_DATA, SubsetSchedule, fit_region, min_samples
+from mifaces.reflectance.fit.region_fit import (FULL_DATA, RegionFitOptions, RegionSamples, SubsetSchedule, fit_region,
+                                               min_samples)
 from mifaces.reflectance.fit.regions import fit_regions
 from mifaces.reflectance.samples import ReflectanceSamples
 from mifaces.reflectance.fit.levenberg_marquardt import CONVERGED, levenberg_marquardt
@@ -29,6 +30,8 @@ TRUTH = {
                                  "cz": [0.9, 0.89, 0.88], "exponent": 20.0}),
 }
 
+#: The region fit in one stage over all samples.
+ONE_STAGE = RegionFitOptions(schedule=FULL_DATA)
 
 #: Where a fit of each model starts without a linear search (the glossy part).
 CONSERVATIVE = {
@@ -68,7 +71,7 @@ def test_noise_free_samples_recover_parameters(jit_variant, name, schedule):
     options, truth = TRUTH[name]
     model = brdf.model(name, **options)
     light, view, r, sigma = synthetic_samples(model, truth, 20000)
-    fit = fit_region(model, light, view, r, sigma, schedule=schedule)
+    fit = fit_region(model, RegionSamples(light, view, r, sigma), options=RegionFitOptions(schedule=schedule))
     errors = relative_errors(fit.params, truth)
     assert fit.status == CONVERGED, fit.reason
     assert max(errors.values()) < 1e-3, errors
@@ -88,7 +91,7 @@ def test_noisy_same_family_samples_recover_the_truth(jit_variant, name):
     parameters within NOISY_TOLERANCE, and say converged."""
     options, truth = TRUTH[name]
     model = brdf.model(name, **options)
-    fit = fit_region(model, *synthetic_samples(model, truth, 20000, seed=1, noise=0.05))
+    fit = fit_region(model, RegionSamples(*synthetic_samples(model, truth, 20000, seed=1, noise=0.05)))
     errors = relative_errors(fit.params, truth)
     assert fit.status == CONVERGED, fit.reason
     assert max(errors.values()) < NOISY_TOLERANCE, errors
@@ -110,7 +113,7 @@ def test_two_lafortune_lobes_from_a_nearby_start(jit_variant):
     model = brdf.model("lafortune", lobes=2)
     light, view, r, sigma = synthetic_samples(model, truth, 30000, seed=3)
     start = {k: (list(np.array(v) * 1.05) if isinstance(v, list) else v * 1.1) for k, v in truth.items()}
-    fit = fit_region(model, light, view, r, sigma, start=start, schedule=FULL_DATA)
+    fit = fit_region(model, RegionSamples(light, view, r, sigma), start=start, options=ONE_STAGE)
     assert max(relative_errors(fit.params, truth).values()) < 1e-3
 
 
@@ -119,7 +122,7 @@ def test_noisy_samples_reach_the_scipy_minimum(jit_variant):
     reaches on the same residuals (within 0.1 %)."""
     model = brdf.model("cooktorrance")
     light, view, r, sigma = synthetic_samples(model, TRUTH["cooktorrance"][1], 5000, seed=2, noise=0.05)
-    fit = fit_region(model, light, view, r, sigma)
+    fit = fit_region(model, RegionSamples(light, view, r, sigma))
     space = ParameterSpace(model, {"eta": 1.4})
     wi, wo = mi.Vector3f(light.T.astype(np.float32)), mi.Vector3f(view.T.astype(np.float32))
 
@@ -190,8 +193,8 @@ def test_regions_with_too_few_samples_take_a_neighbours_fit(jit_variant):
     region[:20] = 1  # lips: 20 samples
     names = {0: "skin", 1: "lips", 2: "eyebrows"}  # eyebrows: none
     with pytest.warns(UserWarning, match="region 'lips': 20 samples"):
-        fits = fit_regions(model, labelled(light, view, r, sigma, region), names, neighbours={"lips": ["skin"]},
-                           schedule=FULL_DATA)
+        fits = fit_regions(model, labelled(light, view, r, sigma, region), names, options=ONE_STAGE,
+                           neighbours={"lips": ["skin"]})
     assert fits["skin"].status == CONVERGED
     assert fits["lips"].status == "prior" and fits["lips"].params == fits["skin"].params
     assert fits["eyebrows"].status == "prior" and fits["eyebrows"].samples == 0
@@ -203,11 +206,11 @@ def test_bad_samples_are_named(jit_variant):
     light, view, r, sigma = synthetic_samples(model, TRUTH["phong"][1], 100)
     r[5, 1] = np.nan
     with pytest.raises(ValueError, match="reflectance contains 1 NaN"):
-        fit_region(model, light, view, r, sigma)
+        fit_region(model, RegionSamples(light, view, r, sigma))
     with pytest.raises(ValueError, match="light must have shape"):
-        fit_region(model, light[:50], view, r, sigma)
+        fit_region(model, RegionSamples(light[:50], view, r, sigma))
     with pytest.raises(ValueError, match="only 3 samples"):
-        fit_region(model, light[:3], view[:3], r[:3], sigma[:3])
+        fit_region(model, RegionSamples(light[:3], view[:3], r[:3], sigma[:3]))
 
 
 def test_fitting_reuses_compiled_kernels(jit_variant):
@@ -218,10 +221,10 @@ def test_fitting_reuses_compiled_kernels(jit_variant):
     model = brdf.model("phong")
     light, view, r, sigma = synthetic_samples(model, TRUTH["phong"][1], 3000, seed=5)
     other = synthetic_samples(model, {**TRUTH["phong"][1], "exponent": 60.0}, 3000, seed=6)
-    fit_region(model, light, view, r, sigma, schedule=FULL_DATA)  # warm the cache for these shapes
+    fit_region(model, RegionSamples(light, view, r, sigma), options=ONE_STAGE)  # warm the cache for these shapes
     with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
         dr.kernel_history()  # clear
-        fit = fit_region(model, *other, start={"exponent": 25.0}, schedule=FULL_DATA)
+        fit = fit_region(model, RegionSamples(*other), start={"exponent": 25.0}, options=ONE_STAGE)
         history = dr.kernel_history([dr.KernelType.JIT])
     misses = [k for k in history if not k["cache_hit"]]
     assert fit.iterations >= 5 and len(history) >= 5 * fit.iterations
@@ -242,7 +245,7 @@ def test_lafortune_lobes_stay_energy_bounded(jit_variant):
                                     p)).T
     sigma = 1.0 / (light[:, 2] ** 2 * view[:, 2])
     model = brdf.model("lafortune", lobes=2)
-    fit = fit_region(model, light, view, r, sigma)
+    fit = fit_region(model, RegionSamples(light, view, r, sigma))
     assert np.isfinite(fit.loss)
     for suffix in ("", "_2"):
         n = fit.params[f"exponent{suffix}"]
@@ -267,7 +270,7 @@ def test_a_lafortune_lobe_that_explains_nothing_is_removed(jit_variant):
     model = brdf.model("lafortune", lobes=2)
     start = {"cxy": [1.0] * 3, "cz": [1.0] * 3, "exponent": 9e4,
              "cxy_2": [-0.88] * 3, "cz_2": [0.88] * 3, "exponent_2": 14.0}
-    fit = fit_region(model, light, view, r, sigma, start=start, schedule=FULL_DATA)
+    fit = fit_region(model, RegionSamples(light, view, r, sigma), start=start, options=ONE_STAGE)
     assert "set to zero" in fit.reason
     assert fit.params["cxy"] == [0.0] * 3 and fit.params["cz"] == [0.0] * 3
     np.testing.assert_allclose(fit.params["cz_2"], truth["cz"], rtol=1e-2)
@@ -290,7 +293,7 @@ def test_a_fit_at_the_bound_of_its_range_is_flagged_and_replaced(jit_variant):
                                            p, diffuse=False)).T
         return l2, v2, r2 + 30.0 * lobe, s2  # a lobe far above Ward's range of ρ_s <= 1
 
-    alone = fit_region(model, *hot_samples(4000, 7), schedule=FULL_DATA)
+    alone = fit_region(model, RegionSamples(*hot_samples(4000, 7)), options=ONE_STAGE)
     assert alone.status == AT_BOUND and "specular_reflectance" in alone.reason
     for n, replaced in ((300, True), (4000, False)):
         l2, v2, r2, s2 = hot_samples(n, 7)
@@ -298,7 +301,7 @@ def test_a_fit_at_the_bound_of_its_range_is_flagged_and_replaced(jit_variant):
         with pytest.warns(UserWarning, match="at the bound"):
             fits = fit_regions(model, labelled(np.concatenate([light, l2]), np.concatenate([view, v2]),
                                                np.concatenate([r, r2]), np.concatenate([sigma, s2]), region),
-                               {1: "skin", 2: "lips"}, schedule=FULL_DATA)
+                               {1: "skin", 2: "lips"}, options=ONE_STAGE)
         assert fits["skin"].status == "converged"
         if replaced:
             assert fits["lips"].status == "prior"
@@ -326,8 +329,8 @@ def test_a_spike_takes_its_neighbours_glossy_part_whatever_the_region_size(monke
 
     model = brdf.model("ward")
 
-    def fake(model_, light, view, reflectance, sigma, **options):
-        n = len(sigma)
+    def fake(model_, samples, **options):
+        n = len(samples)
         params = {"diffuse_reflectance": [0.4, 0.3, 0.2], "specular_reflectance": [0.05] * 3, "alpha": 0.3}
         if n == 3000:  # beard: a spike
             return fitting.RegionFit("ward", {}, {**params, "specular_reflectance": [1.0] * 3, "alpha": 1e-3}, 1.0,
@@ -361,9 +364,9 @@ def test_a_lobe_brighter_than_every_sample_is_a_spike(jit_variant):
 
     real = fitting.fit_region
 
-    def fit(model_, light, view, reflectance, sigma, **options):
-        result = real(model_, light, view, reflectance, sigma, **options)
-        if len(sigma) == 89:  # the small region "converges" on a spike
+    def fit(model_, samples, **options):
+        result = real(model_, samples, **options)
+        if len(samples) == 89:  # the small region "converges" on a spike
             return fitting.RegionFit("ward", {}, narrow, result.loss, 89, 0.0, CONVERGED, "converged", 3)
         return result
 
@@ -375,16 +378,16 @@ def test_a_lobe_brighter_than_every_sample_is_a_spike(jit_variant):
 
     with unittest.mock.patch.object(fitting, "fit_region", fit), pytest.warns(UserWarning, match="spike"):
         fits = fitting.fit_regions(model, labelled(light, view, r, sigma, labels), {1: "skin", 5: "nostrils"},
-                                   schedule=FULL_DATA)
+                                   options=ONE_STAGE)
     assert fits["skin"].status == CONVERGED
     assert fits["nostrils"].status == PRIOR and "brightest sample" in fits["nostrils"].reason
     assert fits["nostrils"].params["alpha"] == pytest.approx(fits["skin"].params["alpha"])
 
     # the same for a large region whose fit ended at a bound (a Yale subject's eyebrows): it is a spike,
     # lends nothing (the hair, unseen, takes skin's lobe, not the spike) and borrows skin's
-    def at_bound(model_, light, view, reflectance, sigma, **options):
-        result = real(model_, light, view, reflectance, sigma, **options)
-        if len(sigma) == 2000:
+    def at_bound(model_, samples, **options):
+        result = real(model_, samples, **options)
+        if len(samples) == 2000:
             return fitting.RegionFit("ward", {}, narrow, result.loss, 2000, 0.0, AT_BOUND,
                                      "converged; at the bound of its range: specular_reflectance[0]", 3)
         return result
@@ -393,7 +396,7 @@ def test_a_lobe_brighter_than_every_sample_is_a_spike(jit_variant):
     labels = np.repeat([1, 4], [3000, 2000])
     with unittest.mock.patch.object(fitting, "fit_region", at_bound), pytest.warns(UserWarning, match="spike"):
         fits = fitting.fit_regions(model, labelled(light, view, r, sigma, labels),
-                                   {1: "skin", 4: "eyebrows", 7: "hair"}, schedule=FULL_DATA)
+                                   {1: "skin", 4: "eyebrows", 7: "hair"}, options=ONE_STAGE)
     assert fits["eyebrows"].status == PRIOR and "brightest sample" in fits["eyebrows"].reason
     assert fits["hair"].params["alpha"] == pytest.approx(fits["skin"].params["alpha"])
 
@@ -428,13 +431,13 @@ def test_a_real_fit_whose_lobe_runs_to_the_sharp_end_is_flagged(jit_variant):
     have borrowed skin's: never silent."""
     model = brdf.model("phong")
     light, view, r, sigma = spike_samples()
-    fit = fit_region(model, light, view, r, sigma, schedule=FULL_DATA)
+    fit = fit_region(model, RegionSamples(light, view, r, sigma), options=ONE_STAGE)
     assert fit.status == AT_BOUND and SPIKE in fit.reason, (fit.status, fit.reason)
     assert fit.params["exponent"] > 0.99 * model.parameter("exponent").upper
     few = min_samples(model) - 1
     region = np.repeat([1, 2], [len(sigma) - few, few])
     with pytest.warns(UserWarning, match="spike"):
-        fits = fit_regions(model, labelled(light, view, r, sigma, region), {1: "skin", 2: "lips"}, schedule=FULL_DATA)
+        fits = fit_regions(model, labelled(light, view, r, sigma, region), {1: "skin", 2: "lips"}, options=ONE_STAGE)
     skin = fits["skin"]
     assert skin.status == DEFAULTS and SPIKE.split(" at ")[0] in skin.reason and "no glossy part" in skin.reason
     # no highlight is invented: the lobe's scale is zero (the width is the model's default)
@@ -454,12 +457,12 @@ def test_a_fit_that_never_sees_its_lobe_ends_at_start(jit_variant):
     n = 400
     light = _direction(rng.uniform(50, 80, n), rng.uniform(0, 360, n))
     r, sigma = np.tile([0.4, 0.3, 0.2], (n, 1)), np.ones(n)
-    fit = fit_region(model, light, light, r, sigma, schedule=FULL_DATA)
+    fit = fit_region(model, RegionSamples(light, light, r, sigma), options=ONE_STAGE)
     assert fit.status == AT_START and "start values" in fit.reason, (fit.status, fit.reason)
     np.testing.assert_allclose(fit.params["diffuse_reflectance"], [0.4, 0.3, 0.2], rtol=1e-3)
     region = np.repeat([1, 2], [n - 5, 5])
     with pytest.warns(UserWarning, match="start values"):
-        fits = fit_regions(model, labelled(light, light, r, sigma, region), {1: "skin", 2: "lips"}, schedule=FULL_DATA)
+        fits = fit_regions(model, labelled(light, light, r, sigma, region), {1: "skin", 2: "lips"}, options=ONE_STAGE)
     assert fits["skin"].status == DEFAULTS and "start values" in fits["skin"].reason  # no region to borrow from
     assert fits["lips"].status == DEFAULTS
     for name in ("skin", "lips"):  # no glossy part, rather than an invented one
@@ -472,7 +475,7 @@ def test_a_fit_that_never_sees_its_lobe_ends_at_start(jit_variant):
     labels = np.repeat([1, 2], [3000, n])
     both = [np.concatenate([a, b]) for a, b in zip(good, (light, light, r, sigma))]
     with pytest.warns(UserWarning, match="start values"):
-        fits = fit_regions(model, labelled(*both, labels), {1: "skin", 2: "lips"}, schedule=FULL_DATA)
+        fits = fit_regions(model, labelled(*both, labels), {1: "skin", 2: "lips"}, options=ONE_STAGE)
     assert fits["skin"].status == CONVERGED
     assert fits["lips"].status == PRIOR and "start values" in fits["lips"].reason
     assert fits["lips"].params["exponent"] == fits["skin"].params["exponent"]
@@ -486,14 +489,14 @@ def test_a_fit_that_moves_its_lobe_is_not_at_start(jit_variant):
     options, truth = TRUTH["phong"]
     model = brdf.model("phong", **options)
     samples = synthetic_samples(model, truth, 3000)
-    fit = fit_region(model, *samples, schedule=FULL_DATA)
+    fit = fit_region(model, RegionSamples(*samples), options=ONE_STAGE)
     assert fit.status == CONVERGED, fit.reason
-    again = fit_region(model, *samples, schedule=FULL_DATA, start=fit.params)
+    again = fit_region(model, RegionSamples(*samples), start=fit.params, options=ONE_STAGE)
     assert again.status == CONVERGED, again.reason
     np.testing.assert_allclose(again.params["exponent"], fit.params["exponent"], rtol=1e-4)
     # the unmoved lobe of the test above, from a start without the exponent: still at_start
     rng = np.random.default_rng(3)
     light = _direction(rng.uniform(50, 80, 400), rng.uniform(0, 360, 400))
-    blind = fit_region(model, light, light, np.tile([0.4, 0.3, 0.2], (400, 1)), np.ones(400), schedule=FULL_DATA,
-                       start={"specular_reflectance": [0.05] * 3})
+    blind = fit_region(model, RegionSamples(light, light, np.tile([0.4, 0.3, 0.2], (400, 1)), np.ones(400)),
+                       start={"specular_reflectance": [0.05] * 3}, options=ONE_STAGE)
     assert blind.status == AT_START, blind.reason

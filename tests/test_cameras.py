@@ -18,19 +18,19 @@ from mifaces.shape import ShapeSchedule, fit_shape, shapes_in_world
 from mifaces.shape.io import load_fitted_shapes
 from mifaces.shape.poses import seen_by
 from mifaces.studio.scene import RIG_YAWS
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 from test_simulate import copy_capture
 
 #: The rig of these tests: two cameras, small pictures (the fit sees the features only).
-RIG = dict(measurements=2, resolution=(96, 96), spp=2, companion="diffuse", albedo_resolution=64, progress=False,
-           seed=5, cameras=2)
+RIG = dict(measurements=2, resolution=(96, 96), spp=2, companion="diffuse", albedo_resolution=64, seed=5, cameras=2)
 #: Feature points only: the landmark stage of the shape fit, at its default length.
 LANDMARKS = ShapeSchedule(levels=(), pose_iterations=ShapeSchedule().pose_iterations)
 
 
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
-    return simulate(tmp_path_factory.mktemp("rig") / "capture", **RIG).path
+    return simulate(tmp_path_factory.mktemp("rig") / "capture", SimulationOptions(**RIG), progress=False).path
 
 
 def _edited(rig, tmp_path, change):
@@ -63,7 +63,7 @@ def test_a_rig_loads_with_its_cameras_and_shots(rig):
 
 
 def test_a_one_camera_manifest_is_its_only_camera(tmp_path):
-    path = simulate(tmp_path / "one", **dict(RIG, cameras=1, measurements=1)).path
+    path = simulate(tmp_path / "one", SimulationOptions(**dict(RIG, cameras=1, measurements=1)), progress=False).path
     data = json.loads((path / MANIFEST).read_text())
     assert "camera" in data and "cameras" not in data
     capture = load_capture(path)

@@ -12,6 +12,7 @@ from click.testing import CliRunner
 import mifaces.pipeline.batch
 import mifaces.cli.commands as cli
 from mifaces.options.measure import MeasureOptions
+from mifaces.studio.options import SimulationOptions
 
 #: Command -> (the API function it calls, as an attribute of mifaces.cli.commands or mifaces.pipeline.batch).
 CALLS = {"simulate": (cli, "simulate_capture"), "fit-shape": (cli, "fit_shapes"), "fit-brdf": (cli, "fit_brdf_model"),
@@ -52,8 +53,10 @@ def _arguments(command: str, tmp_path):
 
 
 def _face_model(call):
+    """The face model of the call: simulate's options', fit-shape's second argument."""
     args, kwargs = call
-    return kwargs["model"] if "model" in kwargs else args[1]
+    options = [a for a in args if isinstance(a, SimulationOptions)]
+    return options[0].face_model if options else args[1]
 
 
 def _brdf(call):

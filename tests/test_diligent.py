@@ -114,8 +114,8 @@ def test_ball_normals_end_to_end_on_a_subsampled_mask(ball):
     albedo, start = ps.fit(train.images, train.directions, mask, train.saturated)
     values = train.images[:, mask]
     weights = nm.observation_weights(values, train.saturated[:, mask])
-    estimate = nm.fit_normals_and_brdf("cooktorrance", values, train.directions, weights, start[mask], albedo[mask],
-                                       rounds=3)
+    estimate = nm.fit_normals_and_brdf("cooktorrance", nm.LitPixels(values, train.directions, weights), start[mask],
+                                       albedo[mask], options=nm.AlternationOptions(rounds=3))
     truth = diligent.read_normals(folder)[mask]
     error = np.degrees(np.arccos(np.clip(np.sum(estimate.normals * truth, axis=1), -1.0, 1.0)))
     lambertian = np.degrees(np.arccos(np.clip(np.sum(start[mask] * truth, axis=1), -1.0, 1.0)))

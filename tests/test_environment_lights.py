@@ -171,11 +171,11 @@ def test_to_world_places_the_maps_centre_towards_the_camera():
 @pytest.fixture(scope="module")
 def studio_capture(tmp_path_factory):
     """A small capture of three head turns under the generated studio map."""
-    from mifaces.studio import simulate
+    from mifaces.studio import SimulationOptions, simulate
 
     out = tmp_path_factory.mktemp("studio") / "capture"
-    simulate(out, environment="studio", measurements=3, resolution=(96, 96), spp=8, albedo_resolution=128,
-             progress=False, seed=4)
+    simulate(out, SimulationOptions(environment="studio", measurements=3, resolution=(96, 96), spp=8,
+                                    albedo_resolution=128, seed=4), progress=False)
     return out
 
 

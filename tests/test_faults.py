@@ -40,6 +40,7 @@ from mifaces.io.result_set import SET_MANIFEST, TEST_PAUSE_ENV, ResultSetError, 
 from mifaces.reflectance.io import KIND, load_estimate
 from mifaces.reflectance.result import FILES
 from mifaces.shape.io import write_fit
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 from mifaces.studio.truth import default_brdf
 
@@ -80,14 +81,14 @@ def test_1_simulate_never_replaces_a_real_capture(capture, tmp_path):
     before = {p: p.read_bytes() for p in real.rglob("*") if p.is_file()}
     for force in (False, True):
         with pytest.raises(ResultSetError, match="did not write"):
-            simulate(real, progress=False, force=force, **SMALL)
+            simulate(real, SimulationOptions(**SMALL), progress=False, force=force)
     assert {p: p.read_bytes() for p in real.rglob("*") if p.is_file()} == before
 
 
 def test_1_simulate_over_a_simulated_capture_needs_force(capture):
     t = time.perf_counter()
     with pytest.raises(FileExistsError, match="--force"):
-        simulate(capture, progress=False, **SMALL)
+        simulate(capture, SimulationOptions(**SMALL), progress=False)
     assert time.perf_counter() - t < 5  # refused before any rendering
     result = _run("simulate", str(capture), "--resolution", "128x128", "--spp", "4", "--measurements", "2")
     assert result.exit_code == 1 and "--force" in result.output
@@ -242,8 +243,8 @@ def test_3_simulate_killed_at_a_random_moment(tmp_path):
     """Before: re-simulating into a capture folder and killing it left the old manifest with new images."""
     out = tmp_path / "capture"
     options = ", ".join(f"{k}={v!r}" for k, v in SMALL.items())
-    script = f"import mifaces; from mifaces.studio.simulate import simulate; " \
-             f"simulate({str(out)!r}, seed={{}}, progress=False, force=True, {options})"
+    script = f"import mifaces; from mifaces.studio import SimulationOptions, simulate; " \
+             f"simulate({str(out)!r}, SimulationOptions(seed={{}}, {options}), progress=False, force=True)"
     subprocess.run([sys.executable, "-c", script.format(1)], check=True, capture_output=True)
     first = (out / "images" / "m00_point.exr").read_bytes()
     first_diffuse = (out / "images" / "m00_diffuse.png").read_bytes()
@@ -393,7 +394,7 @@ def test_9_huge_resolutions_are_refused_at_once(tmp_path, resolution):
     """Before: 100000² ran 5 s and died inside Mitsuba; 20000² with `sample_count should be a multiple`."""
     t = time.perf_counter()
     with pytest.raises(ValueError, match="larger than mifaces handles"):
-        simulate(tmp_path / "out", resolution=resolution, progress=False)
+        simulate(tmp_path / "out", SimulationOptions(resolution=resolution), progress=False)
     assert time.perf_counter() - t < 2
     with pytest.raises(ValueError, match="more than one render pass"):
         check_render_size(8192, 8192, 1024)

@@ -14,8 +14,9 @@ import pytest
 
 from mifaces import brdf
 from mifaces.capture.camera import PIXEL_BLUR_STD
-from mifaces.reflectance.fit.region_fit import FULL_DATA, fit_region
-from mifaces.reflectance.footprint import MAX_TILT, POINTS, normal_spread, tilted, tilts
+from mifaces.reflectance.fit.region_fit import FULL_DATA, RegionFitOptions, RegionSamples, fit_region
+from mifaces.reflectance.footprint import (MAX_TILT, POINTS, normal_spread, seen_by_pixel, spread_arrays, tilted,
+                                          tilts)
 from mifaces.reflectance.samples import ReflectanceSamples
 
 TRUTH = {"diffuse_reflectance": [0.3, 0.2, 0.15], "specular_reflectance": [0.9, 0.9, 0.9], "roughness": 0.25,
@@ -45,6 +46,28 @@ def test_the_tilts_have_the_footprints_covariance():
                                rtol=1e-5, atol=1e-9)
     # and a Gaussian's fourth moment along an axis, 3 σ⁴ (what keeps a lobe narrower than the footprint right)
     np.testing.assert_allclose((w * x ** 4).sum(0)[:2], 3 * cov[:2, 0] ** 2, rtol=1e-5)
+
+
+def test_what_the_pixel_saw_is_the_weighted_sum_over_the_tilted_normals():
+    rng = np.random.default_rng(4)
+    light = rng.normal(size=(40, 3)) * [0.4, 0.4, 0.2] + [0, 0, 1]
+    light /= np.linalg.norm(light, axis=1, keepdims=True)
+    view = np.tile([0.1, 0.0, 1.0], (40, 1)) / np.hypot(0.1, 1.0)
+    wi, wo = _vectors(light), _vectors(view)
+    model = brdf.model("cooktorrance")
+    params = {k: (mi.Color3f(v) if np.ndim(v) else v) for k, v in TRUTH.items()}
+
+    def f(a, b):
+        return model.eval(a, b, params)
+
+    points = np.array(seen_by_pixel(f, wi, wo, ()))
+    np.testing.assert_array_equal(points, np.array(f(wi, wo)))  # no footprint: the lobe at the normal
+    spread = spread_arrays(np.tile([0.004, 0.001, 0.003], (40, 1)), 40)
+    by_hand = sum(np.array(f(a, b)) * np.array(w) for a, b, w in tilted(wi, wo, spread))
+    np.testing.assert_allclose(np.array(seen_by_pixel(f, wi, wo, spread)), by_hand, rtol=1e-6)
+    assert not np.allclose(by_hand, points, rtol=1e-3)  # the footprint changed what was seen
+    with pytest.raises(ValueError, match=r"footprint must have shape \(40, 3\)"):
+        spread_arrays(np.zeros((39, 3)), 40)
 
 
 def test_tilted_frames_turn_the_directions_and_weigh_by_the_lights_cosine():
@@ -166,9 +189,10 @@ def averaged_samples():
 
 def test_the_fit_recovers_the_lobe_that_the_pixels_averaged(averaged_samples):
     light, view, r, sigma, spread = averaged_samples
-    kwargs = dict(schedule=FULL_DATA, uncertainty=None)
-    with_footprint = fit_region("cooktorrance", light, view, r, sigma, footprint=spread, **kwargs)
-    as_points = fit_region("cooktorrance", light, view, r, sigma, **kwargs)
+    options = RegionFitOptions(schedule=FULL_DATA)
+    with_footprint = fit_region("cooktorrance", RegionSamples(light, view, r, sigma, footprint=spread),
+                                options=options, uncertainty=None)
+    as_points = fit_region("cooktorrance", RegionSamples(light, view, r, sigma), options=options, uncertainty=None)
     m = TRUTH["roughness"]
     assert abs(with_footprint.params["roughness"] / m - 1) < 0.005, with_footprint.params
     np.testing.assert_allclose(with_footprint.params["specular_reflectance"], TRUTH["specular_reflectance"], rtol=0.01)
@@ -181,9 +205,9 @@ def test_the_footprint_rejects_what_is_no_covariance(averaged_samples):
     bad = spread.copy()
     bad[0] = [0.001, 0.01, 0.001]  # |tb| > √(tt bb)
     with pytest.raises(ValueError, match="covariances"):
-        fit_region("cooktorrance", light, view, r, sigma, footprint=bad, uncertainty=None)
+        RegionSamples(light, view, r, sigma, footprint=bad)
     with pytest.raises(ValueError, match="shape"):
-        fit_region("cooktorrance", light, view, r, sigma, footprint=spread[:10], uncertainty=None)
+        RegionSamples(light, view, r, sigma, footprint=spread[:10])
 
 
 def test_samples_keep_their_footprint_through_select_concatenate_and_save(tmp_path):
@@ -237,11 +261,12 @@ def test_a_lobe_as_narrow_as_the_footprint_keeps_its_scale(monkeypatch):
     light, view = _directions(rng, n, 0.3), _directions(rng, n, 0.3)
     spread = np.tile([0.0025, 0.0, 0.0025], (n, 1))
     r = _footprint_truth(light, view, spread, grid=15)
-    fit = fit_region("cooktorrance", light, view, r, np.ones(n), footprint=spread, schedule=FULL_DATA,
+    one_stage = RegionFitOptions(schedule=FULL_DATA)
+    fit = fit_region("cooktorrance", RegionSamples(light, view, r, np.ones(n), footprint=spread), options=one_stage,
                      uncertainty=None)
     assert abs(fit.params["roughness"] / 0.06 - 1) < 0.15, fit.params  # measured +11 %
     assert abs(fit.params["specular_reflectance"][0] / 0.9 - 1) < 0.1, fit.params  # measured +6.8 %
-    points = fit_region("cooktorrance", light, view, r, np.ones(n), schedule=FULL_DATA, uncertainty=None)
+    points = fit_region("cooktorrance", RegionSamples(light, view, r, np.ones(n)), options=one_stage, uncertainty=None)
     assert points.params["roughness"] / 0.06 - 1 > 0.4, points.params
 
 

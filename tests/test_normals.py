@@ -82,8 +82,9 @@ def test_predict_is_the_array_api_rendering(sphere):
 
 def test_normal_step_with_the_true_brdf_beats_lambertian_stereo(sphere):
     lambertian = _degrees(sphere["ps_normals"], sphere["normals"]).mean()
-    fit = nm.refine_normals("cooktorrance", GLOSSY, sphere["values"], sphere["lights"], sphere["weights"],
-                            sphere["ps_normals"], sphere["ps_albedo"], iterations=40)
+    pixels = nm.LitPixels(sphere["values"], sphere["lights"], sphere["weights"])
+    fit = nm.refine_normals("cooktorrance", GLOSSY, pixels, sphere["ps_normals"], albedo=sphere["ps_albedo"],
+                            options=nm.NormalStepOptions(iterations=40))
     error = _degrees(fit.normals, sphere["normals"])
     assert lambertian > 1.0  # measured 1.2: the highlights tilt the Lambertian normals
     assert error.mean() < 0.45 and error.mean() < lambertian / 3  # measured 0.29 (41 x 41: 0.29)
@@ -93,8 +94,9 @@ def test_normal_step_with_the_true_brdf_beats_lambertian_stereo(sphere):
 
 def test_alternation_recovers_normals_and_brdf(sphere):
     lambertian = _degrees(sphere["ps_normals"], sphere["normals"]).mean()
-    estimate = nm.fit_normals_and_brdf("cooktorrance", sphere["values"], sphere["lights"], sphere["weights"],
-                                       sphere["ps_normals"], sphere["ps_albedo"], rounds=4)
+    pixels = nm.LitPixels(sphere["values"], sphere["lights"], sphere["weights"])
+    estimate = nm.fit_normals_and_brdf("cooktorrance", pixels, sphere["ps_normals"], sphere["ps_albedo"],
+                                       options=nm.AlternationOptions(rounds=4))
     error = _degrees(estimate.normals, sphere["normals"])
     assert error.mean() < 0.5 and error.mean() < lambertian / 2.5
     assert estimate.brdf.params["roughness"] == pytest.approx(GLOSSY["roughness"], rel=0.1)
@@ -107,8 +109,9 @@ def test_prior_keeps_an_unobserved_pixel_at_its_prior_normal(sphere):
     weights[:, 7] = 0.0  # pixel 7: no usable observation
     prior = sphere["ps_normals"].copy()
     prior[7] = [0.6, 0.0, 0.8]
-    fit = nm.refine_normals("cooktorrance", GLOSSY, sphere["values"], sphere["lights"], weights,
-                            sphere["ps_normals"], sphere["ps_albedo"], prior=prior, iterations=10)
+    fit = nm.refine_normals("cooktorrance", GLOSSY, nm.LitPixels(sphere["values"], sphere["lights"], weights),
+                            sphere["ps_normals"], albedo=sphere["ps_albedo"], prior=prior,
+                            options=nm.NormalStepOptions(iterations=10))
     np.testing.assert_allclose(fit.normals[7], prior[7], atol=1e-6)
     # a well-observed pixel is held by its data, not by a far prior
     assert _degrees(fit.normals[8:9], sphere["normals"][8:9])[0] < 2.0
@@ -131,8 +134,9 @@ def test_brdf_samples_carry_the_image_residual(sphere):
 
 def test_shapes_are_checked(sphere):
     with pytest.raises(ValueError, match="weights"):
-        nm.refine_normals("ward", {"specular_reflectance": 0.1, "alpha": 0.2}, sphere["values"], sphere["lights"],
-                          sphere["weights"][:, :5], sphere["ps_normals"])
+        nm.LitPixels(sphere["values"], sphere["lights"], sphere["weights"][:, :5])
     with pytest.raises(ValueError, match="directions"):
-        nm.refine_normals("ward", {"specular_reflectance": 0.1, "alpha": 0.2}, sphere["values"],
-                          sphere["lights"][:3], sphere["weights"], sphere["ps_normals"])
+        nm.LitPixels(sphere["values"], sphere["lights"][:3], sphere["weights"])
+    pixels = nm.LitPixels(sphere["values"], sphere["lights"], sphere["weights"])
+    with pytest.raises(ValueError, match="normals"):
+        nm.refine_normals("ward", {"specular_reflectance": 0.1, "alpha": 0.2}, pixels, sphere["ps_normals"][:5])

@@ -21,7 +21,7 @@ from mifaces.model.mesh import mitsuba_mesh
 from mifaces.model.texture_space import rasterize
 from mifaces.reflectance import FitOptions, fit_brdf, load_estimate
 from mifaces.reflectance.maps import normals as tn
-from mifaces.reflectance.fit.region_fit import FULL_DATA
+from mifaces.reflectance.fit.region_fit import FULL_DATA, RegionFitOptions
 from mifaces.reflectance.fit.regions import fit_regions
 from mifaces.reflectance.samples import ReflectanceSamples
 from mifaces.model.texture_space import texel_geometry
@@ -94,11 +94,12 @@ def test_texel_normals_recover_tilted_normals_and_the_gloss():
     fixed = {**model.fixed_defaults(), "eta": GLOSSY["eta"]}
 
     def fit(samples):
-        return fit_regions(model, samples, {1: "skin"}, fixed=fixed, schedule=FULL_DATA)
+        return fit_regions(model, samples, {1: "skin"}, options=RegionFitOptions(fixed=fixed, schedule=FULL_DATA))
 
     samples = ReflectanceSamples(light, view, r, sigma, texel, measurement, 11, label=label)
     start = fit(samples)
-    result = tn.refine_texel_normals(model, fit, start, samples, {1: "skin"}, rounds=6, prior_weight=0.05)
+    result = tn.refine_texel_normals(model, fit, start, samples, {1: "skin"},
+                                     options=tn.NormalOptions(rounds=6, prior_weight=0.05))
     found = result.normals.reshape(-1, 3)[:len(true)]
     assert result.refined.reshape(-1)[:len(true)].all() and not result.refined.reshape(-1)[len(true):].any()
     assert _angle(found, true).mean() < 1.0  # from 4 degrees at the model's normals
@@ -113,7 +114,8 @@ def test_texel_normals_recover_tilted_normals_and_the_gloss():
     assert after[0] < before[0] / 2 and after[1] < before[1] / 2
     # texels with fewer than MIN_OBSERVATIONS samples keep the model's normal
     few = measurement < tn.MIN_OBSERVATIONS - 1
-    sparse = tn.refine_texel_normals(model, fit, start, samples.select(few), {1: "skin"}, rounds=1)
+    sparse = tn.refine_texel_normals(model, fit, start, samples.select(few), {1: "skin"},
+                                     options=tn.NormalOptions(rounds=1))
     assert not sparse.refined.any() and np.all(sparse.normals[..., 2] == 1.0)
 
 

@@ -20,6 +20,7 @@ from mifaces.refine import shape_schedule
 from mifaces.refine.shape import ShapeProblem, ShapeRefineSchedule, _mesh_normals, displaced, refine_shape
 from mifaces.refine.shape_choice import chosen_iteration, judged_photographs, verdict
 from mifaces.studio.detail import cheek_bump
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 
 #: The bump's height at its centre (mm) and width (standard deviation, mm).
@@ -70,8 +71,8 @@ def bumped(tmp_path_factory, face_model):
     bump = cheek_bump(face_model, face_model.shape_mean, BUMP_MM, BUMP_SIGMA_MM)
     model = dataclasses.replace(face_model, shape_mean=(face_model.shape_mean + bump).astype(np.float32))
     out = tmp_path_factory.mktemp("bump") / "capture"
-    simulate(out, model=model, measurements=4, resolution=(128, 128), spp=16, albedo_resolution=256, seed=7,
-             progress=False)
+    simulate(out, SimulationOptions(face_model=model, measurements=4, resolution=(128, 128), spp=16,
+                                    albedo_resolution=256, seed=7), progress=False)
     capture = load_capture(out)
     truth = read_ground_truth(capture)
     flat = {t.name: (t.vertices - bump @ t.rotation.T).astype(np.float32) for t in truth.measurements}

@@ -11,9 +11,10 @@ import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 import numpy as np
 import pytest
 
+from mifaces.lights.environment import Environment
 from mifaces.model import load_model
 from mifaces.reflectance import FitOptions, fit_brdf
-from mifaces.reflectance import samples as samples_module
+from mifaces.reflectance import resampling
 from mifaces.render import FaceScene
 from mifaces.render.blend import (BLEND_KEY, BLEND_MM, blend_width, blended_parameters, hard_borders, region_maps,
                                   texel_parts)
@@ -74,13 +75,13 @@ def test_region_maps_blend_near_borders_only(face):
 def test_a_fitted_scene_file_carries_its_region_maps(face):
     """The scene description names each blended parameter's map, a reference in every region's BSDF."""
     from conftest import front_camera
-    description = face.description(document({"skin": 0.2, "lips": 0.8}), front_camera(), envmap={"type": "constant"})
+    description = face.description(document({"skin": 0.2, "lips": 0.8}), front_camera(), environment=Environment({"type": "constant"}))
     key = face.region_map_id("specular_reflectance")
     assert description[key]["filename"] == face.region_map_file("specular_reflectance") == \
         "region_maps/specular_reflectance.exr"
     bsdfs = [v["bsdf"] for k, v in description.items() if k in face.meshes]
     assert bsdfs and all(b["specular_reflectance"] == {"type": "ref", "id": key} for b in bsdfs)
-    hard = face.description(document({"skin": 0.2, "lips": 0.8}, blend=None), front_camera(), envmap={"type": "constant"})
+    hard = face.description(document({"skin": 0.2, "lips": 0.8}, blend=None), front_camera(), environment=Environment({"type": "constant"}))
     assert key not in hard
 
 
@@ -132,7 +133,7 @@ def test_one_brdf_face_renders_without_seams(one_brdf_capture, one_brdf_fit):
 def test_mixed_samples_would_outline_the_eyebrows(one_brdf_capture, monkeypatch):
     """The second control: with the samples along region borders kept, the dark eyebrows' border
     texels read the skin's light, and the fitted render outlines them."""
-    monkeypatch.setattr(samples_module, "region_mixed", lambda xy, *args: np.zeros(len(xy), bool))
+    monkeypatch.setattr(resampling, "region_mixed", lambda xy, *args: np.zeros(len(xy), bool))
     render, true, labels = seam_renders(one_brdf_capture, fit(one_brdf_capture), spp=SPP)
     assert "skin/eyebrows" in seams(border_steps(render, true, labels))
 

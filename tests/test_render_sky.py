@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mifaces.lights.environment import STUDIO_PANELS, environment_emitter, sky_emitter, studio_environment
+from mifaces.lights.environment import (STUDIO_PANELS, Environment, environment_emitter, sky_emitter,
+                                       studio_environment)
 from mifaces.render.face_pixels import face_pixels
 from mifaces.model import load_model
 from mifaces.render import FaceScene
@@ -32,7 +33,8 @@ def halves(image: np.ndarray, scene) -> tuple[float, float]:
 
 
 def render(scene, environment, spp=16) -> np.ndarray:
-    return scene.render(WHITE, np.full((8, 8, 3), 0.6, np.float32), front_camera(), envmap=environment, spp=spp)
+    return scene.render(WHITE, np.full((8, 8, 3), 0.6, np.float32), front_camera(),
+                        environment=Environment(environment), spp=spp)
 
 
 def test_sky_lights_the_face_from_the_sun_side(scene):
@@ -101,9 +103,9 @@ def test_studio_lights_the_key_side(scene):
     assert left > 1.2 * right  # a key-to-fill ratio of about 2 on the face
 
 
-def test_an_emitter_dict_carries_its_own_scale(scene):
+def test_an_emitter_dict_carries_its_own_scale():
     with pytest.raises(ValueError, match="carries its own scale"):
-        scene.description(WHITE, front_camera(), envmap=sky_emitter(front_camera()), envmap_scale=2.0)
+        Environment(sky_emitter(front_camera()), scale=2.0)
 
 
 @pytest.mark.parametrize("arguments, message", [
@@ -143,3 +145,35 @@ def test_cli_render_sky(small_capture, tmp_path):
     bad = runner.invoke(main, ["--variant", "llvm_ad_rgb", "render", str(capture / "ground_truth"), str(capture),
                                "--out", str(out), "--sky", "--sky-time", "yesterday"])
     assert bad.exit_code == 1 and "not an ISO 8601 date" in bad.output
+
+
+def test_a_relighting_states_its_conflicts_by_field():
+    """The rules between a render's light options hold in the API too, naming fields (the CLI names the flags)."""
+    from mifaces.lights.relighting import Relighting
+    from mifaces.options.fields import Conflict
+
+    for options, message in ((dict(light_position=(0, 0, 1), light_angles=(0, 0)), "give one of light_position"),
+                             (dict(sun_angles=(10, 30), turbidity=4.0), "sun_angles, turbidity need sky"),
+                             (dict(sky=True, envmap={"type": "constant"}), "give sky or envmap, not both"),
+                             (dict(sky=True, place=(45, 0, 0)), "place needs sky_time")):
+        with pytest.raises(Conflict, match=message):
+            Relighting(**options)
+    with pytest.raises(ValueError, match="environment map scale"):
+        Relighting(envmap_scale=-1.0)
+
+
+def test_a_relighting_gives_the_measurements_light_where_it_gives_none():
+    from mifaces.capture import Light
+    from mifaces.lights.relighting import Relighting
+
+    camera, lamp = front_camera(), Light("lamp", np.array([0.0, 0.0, 900.0]), np.full(3, 2.0))
+    light, environment = Relighting().lights(lamp, camera)
+    assert environment is None and np.allclose(light.position, lamp.position) and np.allclose(light.intensity, 2.0)
+    light, environment = Relighting(light_angles=(10.0, 20.0), intensity=3.0).lights(lamp, camera)
+    assert environment is None and light.position is None and light.intensity == [3.0] * 3
+    np.testing.assert_allclose(light.direction, camera.direction(10.0, 20.0))
+    light, environment = Relighting(sky=True, envmap_scale=2.0).lights(lamp, camera)
+    assert light is None and environment.scale == 1.0 and environment.source["sky_scale"] == 2.0
+    room = Light("room", None, np.ones(3), kind="environment", envmap=np.ones((4, 8, 3), np.float32))
+    light, environment = Relighting(envmap_scale=0.5).lights(room, camera)  # its own map, scaled
+    assert light is None and environment.scale == 0.5

@@ -125,7 +125,7 @@ def test_pose_recovery_surrey(surrey, camera, tmp_path):
 def check_pose_recovery(model, camera, posed, tmp_path, fixed):
     ypr, t, truth, m = posed
     fits = fit_shape(capture(camera, [m]), model, out=tmp_path, iterations=SCHEDULE, progress=False,
-                        fit_focal=False, fixed=fixed)
+                     options=ShapeOptions(fit_focal=False, fixed=fixed))
     fit = fits[0]
     assert fit.status == CONVERGED, fit.message
     # measured when written (ICT / Surrey): angles within 0.15 / 0.5 deg, x and y within 0.12 / 0.27 mm,
@@ -155,9 +155,9 @@ def test_shape_recovery_known_pose(model, camera):
     truth = pose_vertices(model, ypr, t, alpha)
     m = measurement("shape", model, camera, truth, render(model, camera, truth))
     schedule = ShapeSchedule(levels=((100, 1000, 3.0), (200, 2000, 1.0)), pose_iterations=60)
-    fit = fit_measurement(m, camera, model, schedule=schedule, progress=False, options=ShapeOptions(fit_focal=False),
-                             initial={"rotation": np.radians(ypr), "translation": t},
-                             fixed=("rotation", "translation", "expression"))
+    fit = fit_measurement(m, camera, model, schedule=schedule, progress=False,
+                          options=ShapeOptions(fit_focal=False, fixed=("rotation", "translation", "expression")),
+                          initial={"rotation": np.radians(ypr), "translation": t})
     assert fit.status == CONVERGED
     # at 128 px the leading (mostly in-plane) mode is recovered closely; the two mostly-depth
     # modes, seen only through shading, with the right sign and at least 40 % of their size
@@ -300,7 +300,7 @@ def test_shapes_in_world_equals_what_is_read_back(model, camera, posed, tmp_path
                     rotation_matrix(20.0, -10.0, 5.0), np.array([30.0, -20.0, 50.0]))
     cap = capture(turned, [m, bad])
     # a 20-step image stage cannot match the shading: the photometric limit is lifted (the pose is under test)
-    fits = fit_shape(cap, model, out=tmp_path, progress=False, max_image_rms=math.inf,
+    fits = fit_shape(cap, model, out=tmp_path, progress=False, options=ShapeOptions(max_image_rms=math.inf),
                      iterations=ShapeSchedule(levels=((20, 300, 2.0),), pose_iterations=60))
     assert [f.status for f in fits] == [CONVERGED, DIVERGED]
     with pytest.warns(UserWarning, match="scrambled"):
@@ -493,7 +493,7 @@ def test_one_pose_many_lights_is_one_fit(model, camera, posed, tmp_path, monkeyp
     ms = [Measurement(f"m{i}", f"L{i}", "frontal", m.image, m.diffuse, (), m.feature_points) for i in range(3)]
     cap = directional_capture(camera, ms, [(0.6, 0.0, -0.8), (0.05, 0.0, -1.0), (-0.5, -0.3, -0.8)])
     # a 20-step image stage cannot match the shading: the photometric limit is lifted (the sharing is under test)
-    fits = fit_shape(cap, model, out=tmp_path, progress=False, max_image_rms=math.inf,
+    fits = fit_shape(cap, model, out=tmp_path, progress=False, options=ShapeOptions(max_image_rms=math.inf),
                      iterations=ShapeSchedule(levels=((20, 300, 2.0),), pose_iterations=60))
     assert calls == ["m1"]
     assert [f.measurement for f in fits] == ["m0", "m1", "m2"]
@@ -596,9 +596,9 @@ def test_a_fit_continues_from_another(model, camera, posed):
     _, _, _, m = posed
     first = fit_measurement(m, camera, model, progress=False, options=ShapeOptions(fit_focal=False),
                             schedule=ShapeSchedule(levels=((10, 300, 2.0),), pose_iterations=30))
-    again = fit_measurement(m, camera, model, progress=False, options=ShapeOptions(fit_focal=False),
-                            initial=_start_from(first, model, m),
-                            fixed=("shape", "expression", "albedo"), schedule=ShapeSchedule(levels=(), pose_iterations=1))
+    again = fit_measurement(m, camera, model, progress=False,
+                            options=ShapeOptions(fit_focal=False, fixed=("shape", "expression", "albedo")),
+                            initial=_start_from(first, model, m), schedule=ShapeSchedule(levels=(), pose_iterations=1))
     for key in ("gain", "offset", "ambient", "color"):
         np.testing.assert_allclose(again.light["point"][key], first.light["point"][key], rtol=1e-4, atol=1e-6,
                                    err_msg=key)

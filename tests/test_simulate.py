@@ -25,13 +25,13 @@ from mifaces.io.image_files import read_exr
 from mifaces.io.result_set import SET_MANIFEST
 from mifaces.studio.truth import COOK_TORRANCE_REGIONS, brdf_with_overrides, default_brdf
 from mifaces.studio.scene import LIGHT_DISTANCE, studio_camera
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 
 #: The shared capture: two lights with two poses each, both companions.
-STUDIO = dict(measurements=4, resolution=(384, 384), spp=2, companion="both", albedo_resolution=128, seed=0,
-              progress=False)
+STUDIO = dict(measurements=4, resolution=(384, 384), spp=2, companion="both", albedo_resolution=128, seed=0)
 #: A smaller one for what needs several simulations.
-TINY = dict(measurements=1, resolution=(64, 48), spp=2, companion="both", albedo_resolution=64, progress=False)
+TINY = dict(measurements=1, resolution=(64, 48), spp=2, companion="both", albedo_resolution=64)
 
 _simulated: dict[str, Path] = {}
 
@@ -43,7 +43,7 @@ def studio(tmp_path_factory) -> Path:
     if "studio" not in _simulated:
         mifaces.set_variant(JIT_VARIANTS[0])
         path = tmp_path_factory.mktemp("studio") / "capture"
-        simulate(path, **STUDIO)
+        simulate(path, SimulationOptions(**STUDIO), progress=False)
         _simulated["studio"] = path
     return _simulated["studio"]
 
@@ -235,7 +235,8 @@ def test_simulation_is_reproducible_for_a_fixed_seed(tmp_path):
     """Same seed, same capture: bit for bit but for the order in which the parallel renderer sums
     samples into pixels (a float32 rounding, 1e-6 relative); another seed, another capture."""
     mifaces.set_variant(JIT_VARIANTS[0])
-    a, b, c = (simulate(tmp_path / name, seed=seed, **TINY).path for name, seed in (("a", 3), ("b", 3), ("c", 4)))
+    a, b, c = (simulate(tmp_path / name, SimulationOptions(seed=seed, **TINY), progress=False).path
+               for name, seed in (("a", 3), ("b", 3), ("c", 4)))
     files = _files(a)
     assert files.keys() == _files(b).keys()
     for name, path in files.items():
@@ -346,8 +347,15 @@ def test_brdf_overrides_are_validated(overrides, message):
 ])
 def test_simulate_rejects_bad_arguments_before_rendering(tmp_path, kwargs, message):
     with pytest.raises(ValueError, match=message):
-        simulate(tmp_path / "out", **dict(TINY, **kwargs))
+        simulate(tmp_path / "out", SimulationOptions(**dict(TINY, **kwargs)), progress=False)
     assert not (tmp_path / "out").exists()
+
+
+def test_simulation_options_resolve_the_preset_and_the_sizes():
+    options = SimulationOptions(preset="paper", resolution=[64, 48], face_model=Path("face.npz"))
+    assert (options.measurements, options.resolution, options.face_model) == (22, (64, 48), "face.npz")
+    with pytest.raises(ValueError, match="cameras must be an integer from 1 to"):
+        SimulationOptions(cameras=9)
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Simulated captures lit by an environment (``simulate(environment=...)``): the capture
+"""Simulated captures lit by an environment (``SimulationOptions(environment=...)``): the capture
 states its map as one given environment light, the photographs are rendered with exactly
 that map, the sky's map is Mitsuba's sun and sky baked, and the CLI's ``--environment``."""
 
@@ -22,10 +22,11 @@ from mifaces.io.image_files import read_exr
 from mifaces.studio import photograph
 from mifaces.studio.environment_light import ENVIRONMENT_HEIGHT, ENVIRONMENTS
 from mifaces.studio.scene import studio_camera
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 
 #: A small environment-lit capture.
-SMALL = dict(measurements=2, resolution=(48, 48), spp=4, albedo_resolution=64, progress=False)
+SMALL = dict(measurements=2, resolution=(48, 48), spp=4, albedo_resolution=64)
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +43,7 @@ def sky_capture(tmp_path_factory):
     photograph.render = recording
     try:
         path = tmp_path_factory.mktemp("sky") / "capture"
-        simulate(path, environment="sky", seed=2, **SMALL)
+        simulate(path, SimulationOptions(environment="sky", seed=2, **SMALL), progress=False)
     finally:
         photograph.render = original
     return path, scenes
@@ -129,7 +130,7 @@ def test_irradiance_of_a_uniform_map_is_pi_radiance():
 
 def test_a_bad_environment_is_named(tmp_path):
     with pytest.raises(ValueError, match="'moon'") as error:
-        simulate(tmp_path / "out", environment="moon", **SMALL)
+        simulate(tmp_path / "out", SimulationOptions(environment="moon", **SMALL), progress=False)
     assert all(name in str(error.value) for name in ENVIRONMENTS)
     assert not (tmp_path / "out" / MANIFEST).exists()
 

@@ -1,4 +1,4 @@
-"""The glossy fit with an albedo per texel (``fit_region(texel=...)``, ``FitOptions(texel_albedo=True)``):
+"""The glossy fit with an albedo per texel (``RegionFitOptions(texel_albedo=True)``, ``FitOptions(texel_albedo=True)``):
 the per-texel albedo eliminated from the problem (variable projection), so that an albedo texture that
 follows the highlights does not leak into the lobe."""
 
@@ -14,7 +14,7 @@ import pytest
 from mifaces import brdf
 from mifaces.reflectance.fit.parameters import ParameterSpace
 from mifaces.reflectance.fit.problem import Problem
-from mifaces.reflectance.fit.region_fit import fit_region
+from mifaces.reflectance.fit.region_fit import RegionFitOptions, RegionSamples, Uncertainty, fit_region
 
 TRUTH = {"specular_reflectance": [1.3, 1.3, 1.3], "roughness": 0.3, "eta": 1.38}
 
@@ -78,9 +78,10 @@ def test_the_projected_system_is_the_fit_with_each_texels_albedo_eliminated(jit_
 
 def test_a_texture_darker_under_the_highlights_biases_the_one_albedo_fit_not_the_texel_one(jit_variant):
     light, view, r, sigma, texel, albedo = textured_samples()
-    one = fit_region("cooktorrance", light, view, r, sigma, fixed={"eta": 1.38}, uncertainty=None)
-    per_texel = fit_region("cooktorrance", light, view, r, sigma, fixed={"eta": 1.38}, uncertainty=None,
-                           texel=texel, start=one.params)
+    samples, options = RegionSamples(light, view, r, sigma, texel=texel), RegionFitOptions(fixed={"eta": 1.38})
+    one = fit_region("cooktorrance", samples, options=options, uncertainty=None)
+    per_texel = fit_region("cooktorrance", samples, start=one.params, uncertainty=None,
+                           options=RegionFitOptions(fixed={"eta": 1.38}, texel_albedo=True))
     truth_s = TRUTH["specular_reflectance"][0]
     # the one albedo reads the texture's departures from it as part of the lobe
     assert abs(np.mean(one.params["specular_reflectance"]) / truth_s - 1) > 0.15, one.params
@@ -95,12 +96,16 @@ def test_a_texture_darker_under_the_highlights_biases_the_one_albedo_fit_not_the
 
 def test_a_texel_fit_is_refused_bad_texels_the_bootstrap_and_split_texels(jit_variant):
     light, view, r, sigma, texel, _ = textured_samples(texels=100, per_texel=3)
+    samples, per_texel = RegionSamples(light, view, r, sigma, texel=texel), RegionFitOptions(texel_albedo=True)
     with pytest.raises(ValueError, match="no\\s+bootstrap"):
-        fit_region("cooktorrance", light, view, r, sigma, texel=texel, uncertainty="bootstrap")
+        fit_region("cooktorrance", samples, options=per_texel, uncertainty=Uncertainty("bootstrap"))
     with pytest.raises(ValueError, match="texel must have shape"):
-        fit_region("cooktorrance", light, view, r, sigma, texel=texel[:-1], uncertainty=None)
+        RegionSamples(light, view, r, sigma, texel=texel[:-1])
+    with pytest.raises(ValueError, match="needs each sample's texel"):
+        fit_region("cooktorrance", RegionSamples(light, view, r, sigma), options=per_texel, uncertainty=None)
     with pytest.raises(ValueError, match="every texel's samples in one cluster"):  # a cluster splits texels
-        fit_region("cooktorrance", light, view, r, sigma, texel=texel, cluster=np.arange(len(texel)) % 7)
+        fit_region("cooktorrance", samples, options=per_texel,
+                   uncertainty=Uncertainty(cluster=np.arange(len(texel)) % 7))
 
 
 def test_the_texel_fits_intervals_match_refitting_with_each_cluster_left_out(jit_variant):
@@ -110,15 +115,16 @@ def test_the_texel_fits_intervals_match_refitting_with_each_cluster_left_out(jit
     replicates without the glossy part's change: up to 14 % off here)."""
     light, view, r, sigma, texel, _ = textured_samples(texels=150, per_texel=3, seed=1, noise=0.2)
     cluster = texel % 12  # whole texels, each cluster spread over the hemisphere
-    fixed = {"eta": 1.38}
-    fit = fit_region("cooktorrance", light, view, r, sigma, fixed=fixed, texel=texel, cluster=cluster,
-                     uncertainty="jackknife", start={**TRUTH, "diffuse_reflectance": [0.3, 0.2, 0.15]})
+    options = RegionFitOptions(fixed={"eta": 1.38}, texel_albedo=True)
+    fit = fit_region("cooktorrance", RegionSamples(light, view, r, sigma, texel=texel), options=options,
+                     uncertainty=Uncertainty("jackknife", cluster),
+                     start={**TRUTH, "diffuse_reflectance": [0.3, 0.2, 0.15]})
     assert fit.status == "converged", fit.reason
     replicates = []
     for g in range(12):
         keep = cluster != g
-        refit = fit_region("cooktorrance", light[keep], view[keep], r[keep], sigma[keep], fixed=fixed,
-                           texel=texel[keep], uncertainty=None, start=fit.params)
+        kept = RegionSamples(light[keep], view[keep], r[keep], sigma[keep], texel=texel[keep])
+        refit = fit_region("cooktorrance", kept, options=options, uncertainty=None, start=fit.params)
         replicates.append(np.concatenate([refit.params["specular_reflectance"], [refit.params["roughness"]],
                                           refit.params["diffuse_reflectance"]]))
     replicates = np.array(replicates)

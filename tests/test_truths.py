@@ -24,6 +24,7 @@ from mifaces.model.texture_space import rasterize
 from mifaces.brdf.model import rgb
 from mifaces.render import region_bsdf
 from mifaces.studio.detail import span_residual
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 from mifaces.studio.subsurface import SKIN1, dipole_albedo
 from mifaces.studio.truth import COOK_TORRANCE_REGIONS, brdf_with_overrides, default_brdf
@@ -31,8 +32,7 @@ from mifaces.studio.varying import VARYING, texel_regions, zone_weights
 from mifaces.reflectance import FitOptions
 
 #: Small captures: one measurement, a face about 60 pixels high.
-SMALL = dict(measurements=1, resolution=(128, 128), spp=4, companion="diffuse", albedo_resolution=128, seed=3,
-             progress=False)
+SMALL = dict(measurements=1, resolution=(128, 128), spp=4, companion="diffuse", albedo_resolution=128, seed=3)
 _captures: dict[str, Path] = {}
 
 
@@ -44,7 +44,7 @@ def captures(tmp_path_factory):
     def make(name: str, **options) -> Path:
         if name not in _captures:
             out = tmp_path_factory.mktemp(name) / "capture"
-            simulate(out, **SMALL, **options)
+            simulate(out, SimulationOptions(**SMALL, **options), progress=False)
             _captures[name] = out
         return _captures[name]
 
@@ -170,7 +170,7 @@ def test_varying_truth_brightens_the_tzone_highlight(captures):
 
 def test_varying_needs_a_model_with_maps(tmp_path):
     with pytest.raises(ValueError, match="lobe scale and width maps"):
-        simulate(tmp_path / "c", brdf="phong", varying=True, **SMALL)
+        simulate(tmp_path / "c", SimulationOptions(brdf="phong", varying=True, **SMALL), progress=False)
     assert not (tmp_path / "c").exists()
 
 
@@ -198,7 +198,7 @@ def test_measure_runs_on_a_truth_outside_the_fit(tmp_path):
 
     mifaces.set_variant("llvm_ad_rgb")
     capture = tmp_path / "capture"
-    simulate(capture, brdf="roughplastic", detail=True, **dict(SMALL, measurements=2))
+    simulate(capture, SimulationOptions(brdf="roughplastic", detail=True, **dict(SMALL, measurements=2)), progress=False)
     report = measure(tmp_path / "m", capture, models=("cooktorrance",), spp=2, shape_iterations=0.2, progress=False,
                      options=FitOptions(resolution=64))
     entry = report["models"]["cooktorrance"]
@@ -225,7 +225,7 @@ def test_subsurface_truth_renders_translucent_skin(tmp_path):
     boundary's few percent of Fresnel reflection)."""
     mifaces.set_variant("llvm_ad_rgb")
     tiny = dict(SMALL, resolution=(64, 64), spp=4, albedo_resolution=64)
-    simulate(tmp_path / "c", subsurface=True, **tiny)
+    simulate(tmp_path / "c", SimulationOptions(subsurface=True, **tiny), progress=False)
     truth = read_ground_truth(tmp_path / "c")
     model = load_model("builtin")
     assert truth.integrator["type"] == "volpath" and truth.description["subsurface"]["regions"][0] == "skin"
@@ -244,7 +244,7 @@ def test_subsurface_truth_renders_translucent_skin(tmp_path):
     ratio = seen / expected
     assert len(pixels) > 50 and np.all(ratio > 0.9) and np.all(ratio < 2.0), ratio
     with pytest.raises(ValueError, match="subsurface truth"):
-        simulate(tmp_path / "d", subsurface=True, brdf="roughplastic", **tiny)
+        simulate(tmp_path / "d", SimulationOptions(subsurface=True, brdf="roughplastic", **tiny), progress=False)
 
 
 def test_cli_simulate_offers_the_truths_and_names_bad_combinations(tmp_path):

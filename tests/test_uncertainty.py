@@ -18,7 +18,7 @@ from mifaces.reflectance.maps.diffuse import AlbedoOffsets, refine_diffuse
 from mifaces.reflectance.fit.intervals import _value_jacobian
 from mifaces.reflectance.fit.offset_uncertainty import offset_sums
 from mifaces.reflectance.fit.parameters import ParameterSpace
-from mifaces.reflectance.fit.region_fit import FULL_DATA, fit_region
+from mifaces.reflectance.fit.region_fit import FULL_DATA, RegionFitOptions, RegionSamples, Uncertainty, fit_region
 from mifaces.reflectance.fit.regions import prior_fit
 from mifaces.reflectance.fit.uncertainty import TILE_AT_128, cluster_index, covariance, tile_clusters
 from mifaces.reflectance.samples import ReflectanceSamples
@@ -26,6 +26,8 @@ from mifaces.reflectance.samples import ReflectanceSamples
 TRUTH = {"diffuse_reflectance": [0.5, 0.35, 0.25], "specular_reflectance": [0.8, 0.8, 0.8], "roughness": 0.5,
          "eta": 1.4}
 FIXED = {"eta": 1.4}
+#: The region fit with η held, in one stage over all samples.
+ONE_STAGE = RegionFitOptions(fixed=FIXED, schedule=FULL_DATA)
 
 
 def directions(rng, n):
@@ -58,8 +60,8 @@ def draws(method, texels, per_texel, texel_sd, noise_sd, repeats, seed=0):
     rows = []
     for _ in range(repeats):
         r = clean + texel_sd * rng.normal(size=(texels, 3))[cluster] + noise_sd * rng.normal(size=(n, 3))
-        fit = fit_region("cooktorrance", light, view, r, np.ones(n), fixed=FIXED, schedule=FULL_DATA,
-                         cluster=cluster, uncertainty=method)
+        fit = fit_region("cooktorrance", RegionSamples(light, view, r, np.ones(n)), options=ONE_STAGE,
+                         uncertainty=Uncertainty(method, cluster))
         row = []
         for name, true, channel in (("roughness", TRUTH["roughness"], None), ("specular_reflectance", 0.8, 0),
                                     ("diffuse_reflectance", 0.5, 0)):
@@ -129,7 +131,7 @@ def test_bound_fixed_and_prior_parameters_are_flagged():
     n = 1500
     light, view = directions(rng, n), directions(rng, n)
     r = np.array([0.5, 0.35, 0.25]) + 0.01 * rng.normal(size=(n, 3))
-    fit = fit_region("cooktorrance", light, view, r, np.ones(n), fixed=FIXED, schedule=FULL_DATA)
+    fit = fit_region("cooktorrance", RegionSamples(light, view, r, np.ones(n)), options=ONE_STAGE)
     assert fit.uncertainty["specular_reflectance"] == {"status": "at_bound"}
     assert fit.uncertainty["eta"] == {"status": "fixed"}
     # the lobe gone, its width is not identified: no made-up interval
@@ -147,7 +149,7 @@ def test_intervals_stay_inside_the_range():
     light, view = directions(rng, n), directions(rng, n)
     truth = {**TRUTH, "specular_reflectance": [0.02] * 3}
     r = reflectance(truth, light, view) + 0.02 * rng.normal(size=(n, 3))
-    fit = fit_region("cooktorrance", light, view, r, np.ones(n), fixed=FIXED, schedule=FULL_DATA)
+    fit = fit_region("cooktorrance", RegionSamples(light, view, r, np.ones(n)), options=ONE_STAGE)
     u = fit.uncertainty["specular_reflectance"]
     if u.get("status") == "at_bound":
         pytest.fail("the faint lobe was expected inside the range")
@@ -166,12 +168,12 @@ def test_covariance_rejects_bad_input():
         covariance(np.zeros(2), np.eye(2), 1.0, 5, np.zeros((5, 2)), None, np.zeros(2, bool), "jackknife")
     with pytest.raises(ValueError, match="non-negative"):
         cluster_index(np.array([0, -1]))
-    with pytest.raises(ValueError, match="uncertainty"):
-        fit_region("cooktorrance", np.ones((20, 3)) / 3 ** 0.5, np.ones((20, 3)) / 3 ** 0.5, np.ones((20, 3)),
-                   np.ones(20), uncertainty="bayes")
+    with pytest.raises(ValueError, match=r"Uncertainty\.method must be one of"):
+        Uncertainty("bayes")
     with pytest.raises(ValueError, match="cluster"):
-        fit_region("cooktorrance", np.ones((20, 3)) / 3 ** 0.5, np.ones((20, 3)) / 3 ** 0.5, np.ones((20, 3)),
-                   np.ones(20), cluster=np.zeros(3))
+        unit = np.ones((20, 3)) / 3 ** 0.5
+        fit_region("cooktorrance", RegionSamples(unit, unit, np.ones((20, 3)), np.ones(20)),
+                   uncertainty=Uncertainty(cluster=np.zeros(3)))
 
 
 def _linear_problem(rng, samples=40, clusters=6):
@@ -416,16 +418,16 @@ def _alternated(light, view, r, texel, cluster, rounds=6, aware=True, method="ja
     n = len(r)
     sigma, label = np.ones(n), np.ones(n, int)
     side = int(np.ceil(np.sqrt(texel.max() + 1)))
-    fit = fit_region("cooktorrance", light, view, r, sigma, fixed=FIXED, schedule=FULL_DATA, cluster=cluster,
-                     uncertainty=method if rounds == 0 else None, start=start)
+    fit = fit_region("cooktorrance", RegionSamples(light, view, r, sigma), options=ONE_STAGE, start=start,
+                     uncertainty=Uncertainty(method, cluster) if rounds == 0 and method else None)
     for k in range(rounds):
         samples = ReflectanceSamples(light, view, r, sigma, texel, np.zeros(n, np.int16), side, label=label)
         albedo = refine_diffuse("cooktorrance", {1: fit.params}, samples, np.ones((side, side), int), shrinkage=False)
         offsets = AlbedoOffsets.of(albedo, texel, label)
         last = k == rounds - 1
-        fit = fit_region("cooktorrance", light, view, r - offsets.offsets, sigma, fixed=FIXED, schedule=FULL_DATA,
-                         cluster=cluster, uncertainty=method if last else None,
-                         offsets=offsets if last and aware else None, start=fit.params)
+        intervals = Uncertainty(method, cluster, offsets if aware else None) if last and method else None
+        fit = fit_region("cooktorrance", RegionSamples(light, view, r - offsets.offsets, sigma), options=ONE_STAGE,
+                         uncertainty=intervals, start=fit.params)
     return fit
 
 

@@ -227,13 +227,14 @@ def exact(model: str, seed: int, rounds: int, work: Path) -> dict:
     def alternate(keep, method):
         part, cl = skin.select(keep), cluster[keep]
         l, v, rr, sg = part.light, part.view, part.reflectance, part.sigma
-        fit = fitting.fit_region(brdf, l, v, rr, sg, fixed=fixed, cluster=cl, uncertainty=None)
+        options = fitting.RegionFitOptions(fixed=fixed)
+        fit = fitting.fit_region(brdf, fitting.RegionSamples(l, v, rr, sg), options=options, uncertainty=None)
         for k in range(rounds):
             offsets = AlbedoOffsets.of(refine_diffuse(brdf, {1: fit.params}, part, region_map, shrinkage=False),
                                        part.texel, part.label)
             last = k == rounds - 1
-            fit = fitting.fit_region(brdf, l, v, rr - offsets.offsets, sg, fixed=fixed, cluster=cl,
-                                     uncertainty=method if last else None, offsets=offsets if last else None)
+            fit = fitting.fit_region(brdf, fitting.RegionSamples(l, v, rr - offsets.offsets, sg), options=options,
+                                     uncertainty=fitting.Uncertainty(method, cl, offsets) if last and method else None)
         return fit
 
     t = time.perf_counter()

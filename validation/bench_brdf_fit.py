@@ -42,7 +42,7 @@ import scipy.optimize
 from mifaces import brdf
 from mifaces.reflectance.fit.parameters import ParameterSpace, linear_start
 from mifaces.reflectance.fit.problem import Problem
-from mifaces.reflectance.fit.region_fit import FULL_DATA, SubsetSchedule, fit_region
+from mifaces.reflectance.fit.region_fit import FULL_DATA, RegionFitOptions, RegionSamples, SubsetSchedule, fit_region
 from mifaces.io.atomic import save_figure, write_json
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -154,14 +154,16 @@ def main():
         model = brdf.model(name)
         light, view, r, sigma = samples(model, truth, n)
         # one throw-away fit compiles the kernels, for everyone's benefit
-        fit_region(model, light[:1000], view[:1000], r[:1000], sigma[:1000], schedule=FULL_DATA)
+        fit_region(model, RegionSamples(light[:1000], view[:1000], r[:1000], sigma[:1000]),
+                   options=RegionFitOptions(schedule=FULL_DATA))
         runs = {}
         space = ParameterSpace(model, model.fixed_defaults())
         full = Problem(model, space, light, view, r, sigma)
         for label, schedule in [("hierarchical LM", SubsetSchedule()), ("full-data LM", FULL_DATA)]:
             trace = []
             with PassCounter() as passes:
-                fit = fit_region(model, light, view, r, sigma, schedule=schedule, trace=trace)
+                fit = fit_region(model, RegionSamples(light, view, r, sigma),
+                                 options=RegionFitOptions(schedule=schedule), trace=trace)
             # the full-data loss along the way, evaluated after the timed run
             history = [(t, full.loss(space.vector(values))) for t, values in trace]
             pass_s, kernel_s = one_pass(full, space.vector(fit.params))

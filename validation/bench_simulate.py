@@ -41,7 +41,8 @@ import numpy as np
 from mifaces.capture import load_capture, read_ground_truth
 from mifaces.io.atomic import atomic_path, write_json
 from mifaces.io.image_files import read_exr
-from mifaces.studio.simulate import PRESETS, simulate
+from mifaces.studio.options import PRESETS, SimulationOptions
+from mifaces.studio.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "validation" / "results"
@@ -51,7 +52,7 @@ FIGURE = ROOT / "docs" / "images" / "simulated_capture.png"
 def run(path: Path, **kwargs) -> dict:
     """Simulate, then load (calibrating the lights); timings and per-light errors."""
     t0 = time.perf_counter()
-    result = simulate(path, progress=True, **kwargs)
+    result = simulate(path, SimulationOptions(**kwargs), progress=True)
     t_load = time.perf_counter()
     capture = load_capture(path)
     load_seconds = time.perf_counter() - t_load

@@ -29,7 +29,7 @@ import mitsuba as mi
 import numpy as np
 
 from mifaces import brdf
-from mifaces.reflectance.fit.region_fit import fit_region
+from mifaces.reflectance.fit.region_fit import RegionSamples, fit_region
 from mifaces.reflectance.fit.regions import fit_regions
 from mifaces.io.atomic import write_json
 from mifaces.reflectance.samples import ReflectanceSamples, unsaturated
@@ -106,7 +106,7 @@ def main():
         model = brdf.model(name, **options)
         n = extra.pop("n", 200_000)
         light, view, r, sigma = samples(model, truth, n, **extra)
-        fit = fit_region(model, light, view, r, sigma)
+        fit = fit_region(model, RegionSamples(light, view, r, sigma))
         finite = all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in fit.params.values())
         rows.append({"case": label, "model": name, "samples": len(sigma), "status": fit.status,
                      "reason": fit.reason, "finite": finite, "max_relative_error": max_relative_error(fit.params,

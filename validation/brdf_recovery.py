@@ -41,6 +41,7 @@ from mifaces.capture import load_capture, read_ground_truth
 from mifaces.io.atomic import write_json
 from mifaces.model.regions import REGIONS
 from mifaces.render import face_meshes, mitsuba_sensor
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -54,8 +55,8 @@ def same_family(work: Path, args) -> list[dict]:
     for model in MODELS:
         capture_dir = work / f"same_{model}"
         t0 = time.perf_counter()
-        simulate(capture_dir, brdf=model, measurements=6, resolution=(args.image, args.image), spp=args.spp,
-                 seed=11, progress=False)
+        simulate(capture_dir, SimulationOptions(brdf=model, measurements=6, resolution=(args.image, args.image),
+                                                spp=args.spp, seed=11), progress=False)
         t_sim = time.perf_counter() - t0
         truth = read_ground_truth(capture_dir).brdf
         with warnings.catch_warnings():
@@ -110,8 +111,8 @@ def reflectance(model_name: str, options: dict, params: dict, light, view) -> np
 
 def cross_family(work: Path, args) -> list[dict]:
     capture_dir = work / "cross_cooktorrance"
-    simulate(capture_dir, brdf="cooktorrance", measurements=9, resolution=(args.image, args.image), spp=args.spp,
-             seed=5, progress=False)
+    simulate(capture_dir, SimulationOptions(brdf="cooktorrance", measurements=9, resolution=(args.image, args.image),
+                                            spp=args.spp, seed=5), progress=False)
     capture = load_capture(capture_dir)
     face, shapes = load_geometry(capture)
     held_light = capture.measurements[-1].light

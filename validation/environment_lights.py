@@ -48,7 +48,7 @@ from mifaces.io.image_files import read_exr
 from mifaces.shape.io import load_geometry
 from mifaces.light_estimation.unknown import LIGHTS_FOLDER
 from mifaces.pipeline.measure import measure
-from mifaces.studio import simulate
+from mifaces.studio import SimulationOptions, simulate
 from mifaces.studio.environment_light import ENVIRONMENTS
 from mifaces.reflectance import FitOptions, fit_brdf
 from mifaces.refine import RefineSchedule, refine_estimate
@@ -107,8 +107,8 @@ def one(environment: str, seed: int, out: Path) -> dict:
     if folder.exists():
         shutil.rmtree(folder)
     capture = folder / "capture"
-    simulate(capture, environment=environment, seed=seed, measurements=MEASUREMENTS, resolution=(IMAGE, IMAGE),
-             spp=SPP, progress=False)
+    simulate(capture, SimulationOptions(environment=environment, seed=seed, measurements=MEASUREMENTS,
+                                        resolution=(IMAGE, IMAGE), spp=SPP), progress=False)
     hidden = hide_lights(capture, folder / "capture_hidden")
     runs = {}
     for name, source in (("given", capture), ("estimated", hidden)):
@@ -142,8 +142,8 @@ def tuning(environment: str, out: Path) -> dict:
     capture_dir = out / f"tuning_{environment}" / "capture"
     if capture_dir.parent.exists():
         shutil.rmtree(capture_dir.parent)
-    simulate(capture_dir, environment=environment, seed=TUNING_SEED, measurements=MEASUREMENTS,
-             resolution=(IMAGE, IMAGE), spp=SPP, progress=False)
+    simulate(capture_dir, SimulationOptions(environment=environment, seed=TUNING_SEED, measurements=MEASUREMENTS,
+                                            resolution=(IMAGE, IMAGE), spp=SPP), progress=False)
     capture = load_capture(capture_dir)
     truth = read_ground_truth(capture).brdf["regions"]["skin"]
     rows = {"truth": truth}

@@ -32,6 +32,7 @@ from mifaces.model import load_model
 from mifaces.model.regions import REGIONS, texel_regions_of_mesh
 from mifaces.pipeline.measure import measure
 from mifaces.reflectance.io import load_estimate
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 from mifaces.reflectance import FitOptions
 
@@ -49,8 +50,9 @@ def main() -> None:
     mifaces.set_variant("llvm_ad_rgb")
     work = args.work or Path(tempfile.mkdtemp(prefix="mifaces-export-"))
     t0 = time.perf_counter()
-    simulate(work / "capture", progress=False, measurements=args.measurements,
-             resolution=(args.resolution, args.resolution), spp=args.spp, seed=0, force=True)
+    simulate(work / "capture", SimulationOptions(measurements=args.measurements,
+                                                 resolution=(args.resolution, args.resolution), spp=args.spp, seed=0),
+             progress=False, force=True)
     measure(work / "m", work / "capture", geometry="ground-truth", spp=4, progress=False,
             options=FitOptions(resolution=args.texture))
     seconds = {"simulate_and_measure": time.perf_counter() - t0}

@@ -35,7 +35,7 @@ import numpy as np
 from mifaces.io.atomic import write_json
 from mifaces.pipeline.measure import measure
 from mifaces.reflectance import FitOptions
-from mifaces.studio import simulate
+from mifaces.studio import SimulationOptions, simulate
 from roles import SIMULATED, refuse_report_data
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -80,7 +80,7 @@ def main(argv=None) -> int:
     seeds = []
     for seed in args.seeds:
         folder = args.work / f"capture_{seed}"
-        simulate(folder, seed=seed, progress=False, force=True)
+        simulate(folder, SimulationOptions(seed=seed), progress=False, force=True)
         runs = {}
         for setting, balance in SETTINGS.items():
             t = time.perf_counter()

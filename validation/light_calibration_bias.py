@@ -36,7 +36,7 @@ from mifaces.capture import with_true_lights  # noqa: E402
 from mifaces.io.atomic import write_json  # noqa: E402
 from mifaces.reflectance import FitOptions, fit_brdf  # noqa: E402
 from mifaces.reflectance.light_balance import GIVEN_MAX_HALF_COSINE, log_light_errors  # noqa: E402
-from mifaces.reflectance.samples import capture_samples  # noqa: E402
+from mifaces.reflectance.resampling import capture_samples  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Half-vector cosines above which the balance's sweep leaves samples out (None: all samples).

@@ -30,7 +30,7 @@ import mifaces  # noqa: F401  (first: libLLVM)  # isort: skip
 
 import numpy as np
 
-from mifaces import load_capture, simulate
+from mifaces import SimulationOptions, load_capture, simulate
 from mifaces.io.atomic import write_json
 from mifaces.shape.io import load_geometry
 from mifaces.reflectance import fit_brdf
@@ -46,7 +46,8 @@ KEYS = ("world_mm", "aligned_mm", "depth_mm", "similarity_mm")
 
 def rig_run(seed: int, cameras: int, resolution: int, work: Path) -> dict:
     folder = work / f"capture_{seed}_{cameras}"
-    simulate(folder, seed=seed, cameras=cameras, resolution=(resolution, resolution), progress=False, force=True)
+    simulate(folder, SimulationOptions(seed=seed, cameras=cameras, resolution=(resolution, resolution)), progress=False,
+             force=True)
     capture = load_capture(folder)
     face = mifaces.load_model()
     _, truth = load_geometry(capture, "ground-truth")

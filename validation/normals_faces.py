@@ -59,11 +59,11 @@ def prepare(work: Path, model_path: Path):
     """The simulated capture and its fitted shapes (made once, in ``work``)."""
     from mifaces import load_model
     from mifaces.shape import fit_shape
-    from mifaces.studio.simulate import simulate
+    from mifaces.studio import SimulationOptions, simulate
 
     capture_dir, shapes_dir = work / "sfm_512", work / "sfm_512_shapes"
     if not (capture_dir / "capture.json").is_file():
-        simulate(capture_dir, model=str(model_path), progress=False)
+        simulate(capture_dir, SimulationOptions(face_model=str(model_path)), progress=False)
     capture, model = load_capture(capture_dir), load_model(str(model_path))
     if not (shapes_dir / "shapes.json").is_file():
         fit_shape(capture, model, out=shapes_dir, progress=False)

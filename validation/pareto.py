@@ -51,7 +51,7 @@ import numpy as np
 
 from mifaces.io.atomic import save_figure, write_json
 from mifaces.pipeline.measure import measure
-from mifaces.studio import simulate
+from mifaces.studio import SimulationOptions, simulate
 from mifaces.reflectance import FitOptions
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -73,8 +73,8 @@ def point(work: Path, measurements: int, resolution: int, spp: int, seed: int, a
     name = f"{measurements}_{resolution}_{spp}_seed{seed}"
     capture = work / f"capture_{name}"
     t = time.perf_counter()
-    simulate(capture, measurements=measurements, resolution=(resolution, resolution), spp=spp, seed=seed,
-             progress=False, force=True)
+    simulate(capture, SimulationOptions(measurements=measurements, resolution=(resolution, resolution), spp=spp,
+                                        seed=seed), progress=False, force=True)
     simulate_s = time.perf_counter() - t
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -54,7 +54,8 @@ def estimate(obj: diligent.DiligentObject, model: str, rounds: int) -> tuple[np.
     values = obj.images[:, m]
     weights = nm.observation_weights(values, obj.saturated[:, m])
     t0 = time.perf_counter()
-    result = nm.fit_normals_and_brdf(model, values, obj.directions, weights, start[m], albedo[m], rounds=rounds,
+    result = nm.fit_normals_and_brdf(model, nm.LitPixels(values, obj.directions, weights), start[m], albedo[m],
+                                     options=nm.AlternationOptions(rounds=rounds),
                                      progress=lambda e: print(f"    {model} round {e['round']}: E {e['loss']:.2f} "
                                                               f"({e['seconds']:.0f} s)", flush=True))
     print(f"  {model}: {time.perf_counter() - t0:.0f} s", flush=True)

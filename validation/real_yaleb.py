@@ -68,6 +68,7 @@ from mifaces.brdf import NAMES
 from mifaces.capture import Light, load_capture
 from mifaces.io.atomic import save_figure, write_json
 from mifaces.io.image_files import write_exr, write_png
+from mifaces.lights.environment import Environment
 from mifaces.shape.io import load_geometry
 from mifaces.importers.yaleb import default_split, import_subject, read_subject
 from mifaces.pipeline.measure import SHAPES, NoUsableShapeError, measure
@@ -89,8 +90,8 @@ SATURATED = 1.0 - 0.5 / 255
 def face_mask(scene: FaceScene, camera) -> np.ndarray:
     """Pixels the fitted face covers: a white diffuse face under a uniform environment."""
     white = {"model": "phong", "options": {}, "regions": {"skin": {"specular_reflectance": 0.0, "exponent": 1.0}}}
-    image = scene.render(white, np.ones((8, 8, 3), np.float32), camera, envmap=np.ones((8, 16, 3), np.float32),
-                         spp=16, max_depth=2)
+    image = scene.render(white, np.ones((8, 8, 3), np.float32), camera,
+                         environment=Environment(np.ones((8, 16, 3), np.float32)), spp=16, max_depth=2)
     return image.mean(axis=2) > 0.05
 
 

@@ -46,6 +46,7 @@ from mifaces.reflectance import FitOptions, fit_brdf
 from mifaces.refine import RefineSchedule, refine_estimate
 from mifaces.render import FaceScene
 from mifaces.validation.truth_errors import ground_truth_errors
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -138,7 +139,7 @@ def main() -> None:
     t0 = time.perf_counter()
     capture_dir = Path(args.capture) if args.capture else work / "capture"
     if args.capture is None:
-        simulate(capture_dir, resolution=(args.image, args.image), progress=False)
+        simulate(capture_dir, SimulationOptions(resolution=(args.image, args.image)), progress=False)
     t_sim = time.perf_counter() - t0
     capture = load_capture(capture_dir)
     face, shapes = load_geometry(capture, "ground-truth")

@@ -46,6 +46,7 @@ from mifaces.reflectance import FitOptions, fit_brdf
 from mifaces.refine import RefineSchedule
 from mifaces.refine.problem import RefineProblem
 from mifaces.refine.schedule import ALBEDO
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -119,7 +120,7 @@ def main() -> None:
     args = parser.parse_args()
     mifaces.set_variant("llvm_ad_rgb")
     folder = Path(tempfile.mkdtemp(prefix="refine_gradient_")) / "capture"
-    simulate(folder, resolution=(args.image, args.image), seed=args.seed, progress=False)
+    simulate(folder, SimulationOptions(resolution=(args.image, args.image), seed=args.seed), progress=False)
     capture = load_capture(folder)
     face, shapes = load_geometry(capture, "ground-truth")
     truth = truth_estimate(capture, face, shapes, args.resolution)

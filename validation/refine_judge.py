@@ -42,7 +42,7 @@ from mifaces.refine.shape_lit import FIT_SHAPE_BRDF, refine_fits
 from mifaces.shape import fit_shape, shapes_in_world
 from mifaces.validation.shape_errors import capture_shape_errors
 from mifaces.shape.io import load_geometry
-from mifaces.studio import simulate
+from mifaces.studio import SimulationOptions, simulate
 from refine_shape_default import errors
 from roles import SIMULATED, refuse_report_data
 
@@ -83,7 +83,7 @@ def judge_run(capture, fits, face, truth, judged: int) -> dict:
 
 def seed_run(seed: int, resolution: int, work: Path) -> dict:
     folder = work / f"capture_{resolution}_{seed}"
-    simulate(folder, resolution=(resolution, resolution), seed=seed, progress=False, force=True)
+    simulate(folder, SimulationOptions(resolution=(resolution, resolution), seed=seed), progress=False, force=True)
     capture = load_capture(folder)
     face = mifaces.load_model()
     _, truth = load_geometry(capture, "ground-truth")

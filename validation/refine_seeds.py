@@ -48,6 +48,7 @@ from mifaces.io.atomic import write_json
 from mifaces.shape.io import load_geometry
 from mifaces.reflectance import FitOptions, fit_brdf
 from mifaces.refine import RefineSchedule, refine_estimate
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 
 from refine import novel_light_errors, region_errors  # noqa: E402  (validation/refine.py)
@@ -80,7 +81,7 @@ def true_gains(capture, shapes) -> dict:
 def run_seed(seed: int, image: int, resolution: int, variants: list[str], work: Path) -> dict:
     folder = work / f"capture_{seed}"
     t = time.perf_counter()
-    simulate(folder, resolution=(image, image), seed=seed, progress=False)
+    simulate(folder, SimulationOptions(resolution=(image, image), seed=seed), progress=False)
     capture = load_capture(folder)
     face, shapes = load_geometry(capture, "ground-truth")
     with warnings.catch_warnings():

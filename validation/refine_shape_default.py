@@ -42,7 +42,7 @@ from mifaces.brdf import NAMES as BRDF_MODELS
 from mifaces.refine.shape_lit import FIT_SHAPE_BRDF, refine_fits
 from mifaces.shape import fit_shape, shapes_in_world
 from mifaces.validation.shape_errors import capture_shape_errors
-from mifaces.studio import simulate
+from mifaces.studio import SimulationOptions, simulate
 from roles import SIMULATED, refuse_report_data
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -77,7 +77,8 @@ def main(argv=None) -> int:
         refuse_report_data(parser, SIMULATED, [args.seed], "the shape refinement's schedule (--out …tuning…)")
     mifaces.set_variant("llvm_ad_rgb")
     folder = args.work / f"capture_{args.resolution}_{args.seed}"
-    simulate(folder, resolution=(args.resolution, args.resolution), seed=args.seed, progress=False, force=True)
+    simulate(folder, SimulationOptions(resolution=(args.resolution, args.resolution), seed=args.seed), progress=False,
+             force=True)
     capture = load_capture(folder)
     face = mifaces.load_model()
     _, truth = load_geometry(capture, "ground-truth")

@@ -60,7 +60,7 @@ import numpy as np
 from provenance import write_result  # noqa: E402
 from roles import SIMULATED, refuse_report_data  # noqa: E402
 
-import mifaces.reflectance.samples as samples_module  # noqa: E402
+import mifaces.reflectance.resampling as resampling  # noqa: E402
 import mifaces.studio.scene as studio_scene  # noqa: E402
 from mifaces.brdf.materials import REFRACTIVE_INDEX  # noqa: E402
 from mifaces.capture import load_capture, read_ground_truth, with_true_lights  # noqa: E402
@@ -73,6 +73,7 @@ from mifaces.studio.varying import texel_regions  # noqa: E402
 
 #: The simulator's module (``mifaces.studio.simulate`` the attribute is its function).
 simulate_module = importlib.import_module("mifaces.studio.simulate")
+SimulationOptions = simulate_module.SimulationOptions
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: The issue's capture: measurements, photograph side (px), samples per pixel.
@@ -153,29 +154,29 @@ def simulate_capture(folder: Path, seed: int, on: set) -> Path:
         regions = {region: dict(regions.get(region, {}), eta=round(eta + ETA_SHIFT, 4))
                    for region, eta in REFRACTIVE_INDEX.items()}
     with _capture_effects(on):
-        simulate_module.simulate(folder, brdf_params={"model": "cooktorrance", "regions": regions},
-                                 measurements=MEASUREMENTS, resolution=(SIDE, SIDE), spp=SPP, seed=seed,
-                                 progress=False, force=True)
+        simulate_module.simulate(folder, SimulationOptions(brdf_params={"model": "cooktorrance", "regions": regions},
+                                                           measurements=MEASUREMENTS, resolution=(SIDE, SIDE), spp=SPP,
+                                                           seed=seed), progress=False, force=True)
     return folder
 
 
 @contextlib.contextmanager
 def _sampling(variant: str):
     """The sampling as ``variant`` changes it (uniform weights, another erosion), else as it is."""
-    saved = samples_module.confidence_with_distance, samples_module.valid_samples
+    saved = resampling.confidence_with_distance, resampling.valid_samples
     try:
         if variant == "uniform_weights":
-            samples_module.confidence_with_distance = lambda light_z, *_: np.ones(np.shape(light_z))
+            resampling.confidence_with_distance = lambda light_z, *_: np.ones(np.shape(light_z))
         elif variant in ("no_erosion", "erosion_2"):
             erosion = {"no_erosion": 0, "erosion_2": 2}[variant]
 
             def valid_samples(light_z, view_z, lit, visible, _erosion=None, *args, **kwargs):
                 kwargs.pop("erosion", None)
                 return saved[1](light_z, view_z, lit, visible, erosion, *args, **kwargs)
-            samples_module.valid_samples = valid_samples
+            resampling.valid_samples = valid_samples
         yield
     finally:
-        samples_module.confidence_with_distance, samples_module.valid_samples = saved
+        resampling.confidence_with_distance, resampling.valid_samples = saved
 
 
 def fit(folder: Path, variant: str = "default", true_lights: bool = False) -> dict:

@@ -59,6 +59,7 @@ from mifaces.reflectance.fit import intervals  # noqa: E402
 
 #: The simulator's module (``mifaces.studio.simulate`` the attribute is its function).
 simulate_module = importlib.import_module("mifaces.studio.simulate")
+SimulationOptions = simulate_module.SimulationOptions
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: The truths' models, in turn by seed.
@@ -93,9 +94,10 @@ def truth_regions(model: str, skin_ct: dict) -> dict:
 
 def simulate_capture(folder: Path, seed: int, model: str, skin_ct: dict, reuse: bool) -> Path:
     if not (reuse and (folder / "capture.json").exists()):
-        simulate_module.simulate(folder, brdf_params={"model": model, "regions": truth_regions(model, skin_ct)},
-                                 measurements=MEASUREMENTS, resolution=(SIDE, SIDE), spp=SPP, seed=seed,
-                                 progress=False, force=True)
+        simulate_module.simulate(folder, SimulationOptions(brdf_params={"model": model,
+                                                                        "regions": truth_regions(model, skin_ct)},
+                                                           measurements=MEASUREMENTS, resolution=(SIDE, SIDE), spp=SPP,
+                                                           seed=seed), progress=False, force=True)
     return folder
 
 

@@ -38,8 +38,9 @@ import numpy as np
 
 from mifaces.io.atomic import write_json
 from mifaces.reflectance import FitOptions, fit_brdf
-from mifaces.reflectance import samples as samples_module
+from mifaces.reflectance import resampling
 from mifaces.render.blend import hard_borders
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 from mifaces.validation.seams import ALLOWANCE, border_name, border_steps, one_brdf, seam_renders, seams
 
@@ -64,11 +65,11 @@ def _summary(image, true, labels) -> dict:
 
 def measure(seed: int, work: Path) -> dict:
     capture = work / f"seed{seed}"
-    simulate(capture, brdf_params=one_brdf(), measurements=3, resolution=(256, 256), spp=16,
-             albedo_resolution=256, seed=seed, progress=False)
+    simulate(capture, SimulationOptions(brdf_params=one_brdf(), measurements=3, resolution=(256, 256), spp=16,
+                                        albedo_resolution=256, seed=seed), progress=False)
     estimate = _fit(capture)
     out = {"default": _summary(*seam_renders(capture, estimate, spp=SPP))}
-    with mock.patch.object(samples_module, "region_mixed", lambda xy, *args: np.zeros(len(xy), bool)):
+    with mock.patch.object(resampling, "region_mixed", lambda xy, *args: np.zeros(len(xy), bool)):
         kept = _fit(capture)
     out["mixed_kept"] = _summary(*seam_renders(capture, kept, spp=SPP))
     glossy = hard_borders(copy.deepcopy(estimate.to_json()))

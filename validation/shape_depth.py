@@ -44,7 +44,7 @@ from mifaces.io.atomic import write_json
 from mifaces.shape.io import load_geometry
 from mifaces.shape import ShapeOptions, fit_measurement, fit_shape, shapes_in_world
 from mifaces.validation.shape_errors import capture_shape_errors
-from mifaces.studio import simulate
+from mifaces.studio import SimulationOptions, simulate
 from roles import SIMULATED, refuse_report_data
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -64,7 +64,7 @@ def scored(fits, capture, face, truth, seconds) -> dict:
 
 def default_fit(capture, face, truth, fit_focal: bool = True, facing_min: float = ShapeOptions.facing_min) -> dict:
     t = time.perf_counter()
-    fits = fit_shape(capture, face, progress=False, fit_focal=fit_focal, facing_min=facing_min)
+    fits = fit_shape(capture, face, progress=False, options=ShapeOptions(fit_focal=fit_focal, facing_min=facing_min))
     return scored(fits, capture, face, truth, time.perf_counter() - t)
 
 
@@ -81,8 +81,8 @@ def true_fit(capture, face, truth, expression: bool, facing_min: float = ShapeOp
             initial["expression"] = np.array([true.expression[n] for n in face.expression_names])
             fixed.append("expression")
         fits.append(fit_measurement(m, capture.camera, face, light=capture.light(m.light) if m.light else None,
-                                    initial=initial, fixed=tuple(fixed), distances=capture.distances,
-                                    options=ShapeOptions(facing_min=facing_min), progress=False))
+                                    initial=initial, distances=capture.distances,
+                                    options=ShapeOptions(facing_min=facing_min, fixed=tuple(fixed)), progress=False))
     return scored(fits, capture, face, truth, time.perf_counter() - t)
 
 
@@ -91,7 +91,7 @@ def simulated_default(seed: int, work: Path):
     built-in model and the true faces' world-frame vertices per photograph (also for
     ``silhouette_depth.py`` and ``joint_outline.py``)."""
     folder = work / f"capture_{seed}"
-    simulate(folder, seed=seed, progress=False, force=True)
+    simulate(folder, SimulationOptions(seed=seed), progress=False, force=True)
     capture = load_capture(folder)
     _, truth = load_geometry(capture, "ground-truth")
     return capture, mifaces.load_model(), truth

@@ -72,11 +72,11 @@ TARGET_LANDMARK_PX = 2.0
 # Ground truth and metrics
 # --------------------------------------------------------------------------------------------
 def ensure_capture(path: Path, **kw) -> Path:
-    from mifaces.studio.simulate import simulate
+    from mifaces.studio import SimulationOptions, simulate
 
     if not (path / "capture.json").is_file():
         print(f"simulating {path} {kw}", flush=True)
-        simulate(path, progress=False, **kw)
+        simulate(path, SimulationOptions(**kw), progress=False)
     return path
 
 

@@ -63,13 +63,14 @@ from mifaces.io.image_files import read_exr
 from mifaces.model import load_model
 from mifaces.model.regions import REGIONS
 from mifaces.pipeline.measure import measure
+from mifaces.studio.options import SimulationOptions
 from mifaces.studio.simulate import simulate
 from mifaces.studio.varying import texel_regions
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: The ``eta`` truth's indices of refraction lie this far above the published ones the fit holds.
 ETA_SHIFT = 0.06
-#: Truth name -> simulate() options.
+#: Truth name -> the options of its simulation (:class:`mifaces.studio.options.SimulationOptions`).
 TRUTHS = {"cooktorrance": {}, "roughplastic": {"brdf": "roughplastic"}, "principled": {"brdf": "principled"},
           "varying": {"varying": True}, "detail": {"detail": True}, "subsurface": {"subsurface": True},
           "eta": {"brdf_params": {"regions": {region: {"eta": round(eta + ETA_SHIFT, 4)}
@@ -81,7 +82,7 @@ def run_truth(name: str, work: Path, size: int, spp: int) -> dict:
     folder = work / f"{name}_{size}"
     options = dict(TRUTHS[name], resolution=(size, size), spp=spp)
     t0 = time.perf_counter()
-    simulate(folder / "capture", force=True, progress=False, **options)
+    simulate(folder / "capture", SimulationOptions(**options), force=True, progress=False)
     simulated = time.perf_counter() - t0
     report = measure(folder / "measure", folder / "capture", progress=False)
     truth = read_ground_truth(folder / "capture")

@@ -54,7 +54,7 @@ from mifaces.reflectance import FitOptions, capture_samples, fit_brdf
 from mifaces.reflectance.fit import intervals
 from mifaces.reflectance.fit import uncertainty as unc
 from mifaces.runtime.status import DEFAULTS, PRIOR
-from mifaces.studio import photograph, simulate
+from mifaces.studio import SimulationOptions, photograph, simulate
 from roles import SIMULATED, refuse_report_data
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -131,8 +131,8 @@ def _simulate(folder: Path, seed: int, spp: int = SPP, clean: bool = False, **op
     if clean:
         photograph.camera_noise = noise_free
     try:
-        simulate(folder, resolution=IMAGE, measurements=MEASUREMENTS, spp=spp, seed=seed, progress=False,
-                 force=True, **options)
+        simulate(folder, SimulationOptions(resolution=IMAGE, measurements=MEASUREMENTS, spp=spp, seed=seed, **options),
+                 progress=False, force=True)
     finally:
         photograph.camera_noise = original
     capture = load_capture(folder)

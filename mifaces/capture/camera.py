@@ -9,6 +9,33 @@ import numpy as np
 
 from ..model.geometry import camera_frame_direction
 
+
+def distorted(x, y, coefficients):
+    """OpenCV's lens distortion of normalised image coordinates ``x``, ``y``: the one formula of
+    the distortion, written with arithmetic only, so that numpy arrays (:meth:`Camera.distort`) and
+    Dr.Jit Floats (the shape fit's energy, :func:`mifaces.shape.projection.project`) go through it
+    alike.
+
+    Parameters
+    ----------
+    x, y : arrays (numpy or Dr.Jit)
+    coefficients : sequence of 8 float
+        ``k1, k2, p1, p2, k3, k4, k5, k6`` (:attr:`Camera.distortion_coefficients`: Python floats,
+        which a Dr.Jit expression takes as literals).
+
+    Returns
+    -------
+    (xd, yd)
+        The distorted coordinates.
+    """
+    k1, k2, p1, p2, k3, k4, k5, k6 = coefficients
+    r2 = x * x + y * y
+    radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    return xd, yd
+
+
 #: The optics' blur: a photograph's pixel is the image under a Gaussian point spread function of
 #: this standard deviation (pixels). The simulator renders with it; the reflectance fit takes it
 #: for a pixel's footprint (:mod:`mifaces.reflectance.footprint`).
@@ -98,16 +125,16 @@ class Camera:
         d[:len(self.distortion)] = self.distortion
         return d
 
+    @property
+    def distortion_coefficients(self) -> tuple[float, ...]:
+        """The eight OpenCV coefficients ``k1, k2, p1, p2, k3, k4, k5, k6`` (zeros for those
+        :attr:`distortion` leaves out), as Python floats: what :func:`distorted` takes."""
+        return tuple(float(v) for v in self._coefficients())
+
     def distort(self, xy) -> np.ndarray:
-        """Apply lens distortion to normalised image coordinates (..., 2) (OpenCV's model)."""
-        k1, k2, p1, p2, k3, k4, k5, k6 = self._coefficients()
+        """Apply lens distortion to normalised image coordinates (..., 2) (OpenCV's model, :func:`distorted`)."""
         xy = np.asarray(xy, np.float64)
-        x, y = xy[..., 0], xy[..., 1]
-        r2 = x * x + y * y
-        radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-        return np.stack([xd, yd], axis=-1)
+        return np.stack(distorted(xy[..., 0], xy[..., 1], self.distortion_coefficients), axis=-1)
 
     def undistort(self, xy, iterations: int = 20) -> np.ndarray:
         """Invert :meth:`distort` by fixed-point iteration (as OpenCV's ``undistortPoints``)."""

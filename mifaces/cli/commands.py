@@ -9,12 +9,14 @@ other, still works for one release with a deprecation message
 (:func:`mifaces.cli.options.renamed`). The flags of an options value are made from
 its fields, declared once (:func:`mifaces.cli.options.option_flags`): ``fit-brdf``,
 ``measure`` and ``batch`` take the fit's (:class:`~mifaces.reflectance.FitOptions`),
-``measure`` and ``batch`` the main job's (:class:`~mifaces.options.measure.MeasureOptions`).
+``measure`` and ``batch`` the main job's (:class:`~mifaces.options.measure.MeasureOptions`),
+``simulate`` the simulation's (:class:`~mifaces.studio.options.SimulationOptions`) and ``render``
+the render's (:class:`~mifaces.reflectance.RenderOptions`, its light a
+:class:`~mifaces.lights.relighting.Relighting`).
 """
 
 from __future__ import annotations
 
-import json
 import warnings
 from pathlib import Path
 
@@ -22,33 +24,31 @@ import click
 
 import mifaces
 
-from ..brdf import BUILTIN_NAMES, NAMES as BRDF_MODELS
+from ..brdf import NAMES as BRDF_MODELS
 from ..capture import load_capture
 from ..capture.ground_truth import ground_truth_folder
-from ..lights.environment import SKY_SUN_ANGLES, TURBIDITY, sky_emitter
 from ..export import export_face
 from ..io.atomic import write_json
 from ..io.paths import check_writable
-from ..io.result_set import check_result_target
+from ..io.result_set import ResultTarget, check_result_target
 from ..report.gallery import render_gallery
 from ..importers.cli import export_calibration_command, import_
 from ..capture.detector import NoFaceError, detect_landmarks
-from .options import default, option_flags, renamed, width_x_height
+from .options import default, option_flags, renamed
 from ..model import load_model
 from ..options.measure import MeasureOptions
 from ..pipeline.measure import measure as measure_capture
 from ..shape.io import load_geometry
-from ..reflectance import FitOptions, fit_brdf as fit_brdf_model, render_fitted
+from ..reflectance import FitOptions, RenderOptions, fit_brdf as fit_brdf_model, render_fitted
 from ..reflectance.io import KIND as BRDF_KIND, write_fitted
 from ..refine import refine_estimate
 from ..refine.shape_lit import refine_fits
 from ..report.measurement import RANKED, format_value, ranking_sentence
-from ..shape import fit_shape as fit_shapes
+from ..shape import ShapeOptions, fit_shape as fit_shapes
 from ..shape.io import INDEX as SHAPES_INDEX, write_fit, write_index
 from ..runtime.status import CONVERGED
-from ..studio.environment_light import ENVIRONMENTS
-from ..studio.scene import RIG_YAWS
-from ..studio.simulate import COMPANIONS, PRESETS, simulate as simulate_capture
+from ..studio.options import SimulationOptions
+from ..studio.simulate import simulate as simulate_capture
 
 
 
@@ -96,59 +96,12 @@ def gallery(out_dir: str, spp: int, size: tuple[int, int]) -> None:
 @main.command()
 @renamed("--model", "--face-model", "face_model")
 @click.argument("out", type=click.Path(file_okay=False))
-@click.option("--face-model", default=default(simulate_capture, "model"), show_default=True,
-              help="Face model: 'builtin' or a model file (see mifaces.load_model).")
-@click.option("--brdf", "brdf_model", default=default(simulate_capture, "brdf"), show_default=True,
-              type=click.Choice(BRDF_MODELS + BUILTIN_NAMES),
-              help="Ground-truth BRDF: a fitted family's plugin, or a Mitsuba built-in outside them.")
-@click.option("--brdf-params", type=click.Path(exists=True, dir_okay=False), default=None,
-              help='JSON overrides: {"model": ..., "regions": {region: {parameter: value}}} (docs/capture.md).')
-@click.option("--varying", is_flag=True,
-              help="Spatially varying truth: per-texel specular scale and roughness maps (oily T-zone, drier cheeks).")
-@click.option("--detail", is_flag=True,
-              help="Add wrinkles, pores and asymmetry the face model cannot express to the simulated face.")
-@click.option("--subsurface", is_flag=True,
-              help="Translucent skin: a rough dielectric boundary over a scattering medium (volumetric path "
-                   "tracer: slow, use a small --resolution and --spp).")
-@click.option("--measurements", default=default(simulate_capture, "measurements"), show_default=True,
-              type=click.IntRange(1),
-              help="Number of measurements (three poses per light).")
-@click.option("--resolution", default="{}x{}".format(*default(simulate_capture, "resolution")), show_default=True,
-              callback=width_x_height,
-              help="Image size WxH.")
-@click.option("--seed", default=default(simulate_capture, "seed"), show_default=True, type=click.IntRange(0),
-              help="Seed of everything random.")
-@click.option("--preset", type=click.Choice(sorted(PRESETS)), default=None,
-              help="'paper': the paper's 22 measurements (overrides --measurements).")
-@click.option("--spp", default=default(simulate_capture, "spp"), show_default=True, type=click.IntRange(1),
-              help="Samples per pixel.")
-@click.option("--companion", default=default(simulate_capture, "companion"), show_default=True,
-              type=click.Choice(COMPANIONS),
-              help="Companion of each point-light photograph.")
-@click.option("--environment", type=click.Choice(ENVIRONMENTS), default=None,
-              help="Light every photograph by the generated studio or the sun and sky instead of the point lights: "
-                   "the capture states the map as its one environment light; each measurement a head turn.")
-@click.option("--cameras", default=default(simulate_capture, "cameras"), show_default=True,
-              type=click.IntRange(1, len(RIG_YAWS)),
-              help="Calibrated cameras photographing every shot (the studio camera, then others turned "
-                   f"{', '.join(f'{y:g}' for y in RIG_YAWS[1:])} degrees about the head).")
+@option_flags(SimulationOptions)
 @click.option("--force", is_flag=True, help="Replace a simulated capture at OUT (never a real one).")
-def simulate(out: str, face_model: str, brdf_model: str, brdf_params: str | None, varying: bool, detail: bool,
-             subsurface: bool, measurements: int, resolution: tuple[int, int], seed: int, preset: str | None, spp: int, companion: str,
-             environment: str | None, cameras: int, force: bool) -> None:
+def simulate(out: str, force: bool, options: SimulationOptions) -> None:
     """Simulate a capture session with ground truth into folder OUT (paper sec. 3)."""
-    overrides = None
-    if brdf_params is not None:
-        try:
-            with open(brdf_params) as f:
-                overrides = json.load(f)
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise click.BadParameter(f"{brdf_params} is not valid JSON: {e}", param_hint="--brdf-params") from None
-    result = simulate_capture(out, model=face_model, brdf=brdf_model, brdf_params=overrides, measurements=measurements,
-                              resolution=resolution, seed=seed, preset=preset, spp=spp, companion=companion,
-                              force=force, varying=varying, detail=detail,
-                              subsurface=subsurface, environment=environment, cameras=cameras)
-    lights = (f"the {environment} environment" if environment is not None
+    result = simulate_capture(out, options, force=force)
+    lights = (f"the {options.environment} environment" if options.environment is not None
               else f"{result.lights} light{'s' * (result.lights != 1)}")
     click.echo(f"simulated {result.measurements} measurement{'s' * (result.measurements != 1)} under "
                f"{lights} in {result.seconds:.1f} s "
@@ -178,7 +131,7 @@ def fit_shape(capture: str, out_dir: str, face_model: str, measurements: tuple[s
         raise click.ClickException(f"{out_dir} holds fitted shapes already ({SHAPES_INDEX}); use --force to "
                                    "write over them")
     fits = fit_shapes(capture, face_model, measurements=list(measurements) or None, out=out_dir, iterations=iterations,
-               progress=True, use_diffuse=not no_diffuse, fit_focal=not fixed_focal)
+                      progress=True, options=ShapeOptions(use_diffuse=not no_diffuse, fit_focal=not fixed_focal))
     schedule = refinement.refine_shape
     if schedule is not None:
         loaded, model = load_capture(capture), load_model(face_model).truncated(load_model(face_model).fit_shape_modes)
@@ -215,8 +168,8 @@ def fit_brdf(capture: str, brdf_model: str, out_dir: str, geometry: str, face_mo
     """Fit a BRDF model per region to the photographs of CAPTURE (paper sec. 4.3-5.3)."""
     check_result_target(out_dir, BRDF_KIND, force)
     if not refinement.refine:
-        estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, out=out_dir, force=force,
-                                  options=options)
+        estimate = fit_brdf_model(capture, brdf_model, geometry, face_model=face_model, options=options,
+                                  out=ResultTarget(out_dir, force))
     else:  # the refinement, the next stage, before the result is written
         capture = load_capture(capture)
         face, shapes = load_geometry(capture, geometry, face_model)
@@ -269,76 +222,12 @@ def measure(capture: str | None, out_dir: str, options: MeasureOptions) -> None:
 @click.argument("capture", type=click.Path(exists=True))
 @click.option("--out", "out_stem", required=True, type=click.Path(dir_okay=False),
               help="Output image path without suffix: writes OUT.exr and OUT.png.")
-@click.option("--measurement", default=None, help="Measurement whose face geometry to use (default: the first).")
-@click.option("--geometry", default=default(render_fitted, "geometry"), show_default=True,
-              help="'ground-truth' or the folder mifaces fit-shape wrote.")
-@click.option("--yaw", default=default(render_fitted, "yaw"), show_default=True, type=float,
-              help="Turn the face by this many degrees (a novel pose).")
-@click.option("--light", "light_position", default=None, type=(float, float, float),
-              help="Point light position x y z (world, mm; default: the measurement's light).")
-@click.option("--light-direction", default=None, type=(float, float, float),
-              help="A directional light instead: x y z towards the light (world frame).")
-@click.option("--light-angles", default=None, type=(float, float),
-              help="A directional light at azimuth and elevation (degrees) about the camera's axis: 0 0 from the "
-                   "camera, positive azimuth towards the image's left, positive elevation above (as the Yale "
-                   "database names its lights).")
-@click.option("--intensity", default=None, type=float,
-              help="The light's intensity (irradiance for a directional light; default: the measurement light's).")
-@click.option("--envmap", default=None, type=click.Path(exists=True, dir_okay=False),
-              help="Light by this equirectangular environment map (EXR) instead, placed in the camera's frame "
-                   "(its +y the camera's up, its centre column behind the camera).")
-@click.option("--sky", is_flag=True, help="Light by Mitsuba's sun and sky (sunsky) instead; the face looks south.")
-@click.option("--sun-direction", default=None, type=(float, float, float),
-              help="With --sky: x y z from the face towards the sun (world frame).")
-@click.option("--sun-angles", default=None, type=(float, float),
-              help="With --sky: the sun at azimuth and elevation (degrees) about the camera, as --light-angles "
-                   f"[default: {' '.join(f'{x:g}' for x in SKY_SUN_ANGLES)}].")
-@click.option("--sky-time", default=None,
-              help="With --sky: the local date and time that places the sun, ISO 8601 (2024-06-21T08:30).")
-@click.option("--place", default=None, type=(float, float, float),
-              help="With --sky-time: latitude (north), longitude (east) in degrees and the time zone in hours "
-                   "ahead of UTC [default: 0 0 0].")
-@click.option("--turbidity", default=None, type=click.FloatRange(*TURBIDITY),
-              help="With --sky: haze (2 arctic clear, 3 clear, 10 hazy) "
-                   f"[default: {default(sky_emitter, 'turbidity'):g}].")
-@click.option("--envmap-scale", default=default(render_fitted, "envmap_scale"), show_default=True, type=float,
-              help="Scale of the environment map or the sky.")
-@click.option("--spp", default=default(render_fitted, "spp"), show_default=True, type=click.IntRange(1),
-              help="Samples per pixel.")
-def render(brdf_dir: str, capture: str, out_stem: str, measurement: str | None, geometry: str, yaw: float,
-           light_position, light_direction, light_angles, intensity: float | None, envmap: str | None, sky: bool,
-           sun_direction, sun_angles, sky_time: str | None, place, turbidity: float | None, envmap_scale: float,
-           spp: int) -> None:
+@option_flags(RenderOptions)
+def render(brdf_dir: str, capture: str, out_stem: str, options: RenderOptions) -> None:
     """Render the BRDF fitted in BRDF_DIR on a face of CAPTURE, in the capture's camera and units: novel poses,
     point or directional lights, environment maps, a sun and sky, or another person's face (BRDF transfer)."""
-    if sum(x is not None for x in (light_position, light_direction, light_angles)) > 1:
-        raise click.UsageError("give one of --light, --light-direction and --light-angles")
-    sky_options = {"--sun-direction": sun_direction, "--sun-angles": sun_angles, "--sky-time": sky_time,
-                   "--place": place, "--turbidity": turbidity}
-    if not sky and any(v is not None for v in sky_options.values()):
-        raise click.UsageError(f"{', '.join(k for k, v in sky_options.items() if v is not None)} need --sky")
-    if sky and envmap is not None:
-        raise click.UsageError("give --sky or --envmap, not both")
-    if sum(x is not None for x in (sun_direction, sun_angles, sky_time)) > 1:
-        raise click.UsageError("give one of --sun-direction, --sun-angles and --sky-time")
-    if place is not None and sky_time is None:
-        raise click.UsageError("--place needs --sky-time (the sun's position follows from both)")
     check_writable(Path(out_stem).parent)
-    loaded = load_capture(capture)
-    if light_angles is not None:
-        light_direction = loaded.camera.direction(*light_angles)
-    environment = envmap
-    if sky:
-        if sun_angles is not None:
-            sun_direction = loaded.camera.direction(*sun_angles)
-        environment = sky_emitter(loaded.camera, sun_direction, sky_time, place,
-                                  default(sky_emitter, "turbidity") if turbidity is None else turbidity,
-                                  scale=envmap_scale)
-        envmap_scale = 1.0  # the sky carries it
-    paths = render_fitted(brdf_dir, loaded, out_stem, measurement, geometry, yaw=yaw,
-                          light_position=light_position, light_direction=light_direction,
-                          intensity=None if intensity is None else [intensity] * 3, envmap=environment,
-                          envmap_scale=envmap_scale, spp=spp)
+    paths = render_fitted(brdf_dir, capture, out_stem, options)
     click.echo(f"wrote {paths['exr']} and {paths['png']}")
 
 
@@ -403,9 +292,9 @@ main.add_command(export_calibration_command)
 def batch(inputs: tuple[str, ...], out_dir: str, workers: int | None, scheduler: str | None, resume: bool,
           importer: str | None, options: MeasureOptions) -> None:
     """Measure many captures (INPUTS: capture folders or folders of them) on Dask, and write a population report."""
-    from ..pipeline.batch import measure_batch  # Dask's import is slow: only for this command
+    from ..pipeline.batch import Cluster, measure_batch  # Dask's import is slow: only for this command
 
-    record = measure_batch(inputs, out_dir, options, workers=workers, scheduler=scheduler, resume=resume,
+    record = measure_batch(inputs, out_dir, options, cluster=Cluster(workers, scheduler), resume=resume,
                            importer=importer, echo=click.echo)
     counts = {s: sum(e["status"] == s for e in record["captures"].values()) for s in ("done", "skipped", "failed")}
     click.echo(f"{counts['done']} measured, {counts['skipped']} skipped (complete), {counts['failed']} failed in "

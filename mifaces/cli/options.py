@@ -7,10 +7,11 @@ from __future__ import annotations
 import dataclasses
 import functools
 import inspect
+import json
 
 import click
 
-from ..options.fields import default_of, several
+from ..options.fields import Conflict, default_of, several
 
 #: How the command line spells None among an option's choices.
 NONE = "none"
@@ -26,16 +27,21 @@ def option_flags(cls, name: str = "options", only: tuple[str, ...] | None = None
     with ``help``, :func:`mifaces.options.fields.option`; nested options flattened, see there),
     its default, range or choices and help the field's; the command is called with the value
     built from them as keyword ``name`` (a ``ValueError`` of its validation ends the command with
-    its message). ``only``: these fields of ``cls`` (the others at their defaults)."""
+    its message; a :class:`~mifaces.options.fields.Conflict` is a usage error naming the flags).
+    ``only``: these fields of ``cls`` (the others at their defaults)."""
     flags = list(_flags(cls, only))
+    named = {(owner, field): declarations[0].split("/")[0] for owner, field, declarations, _ in flags}
 
     def decorate(command):
         @functools.wraps(command)
         def wrapper(*args, **kwargs):
-            kwargs[name] = _value(cls, kwargs, only)
+            try:
+                kwargs[name] = _value(cls, kwargs, only)
+            except Conflict as conflict:
+                raise click.UsageError(conflict.naming(lambda owner, field: named.get((owner, field), field))) from None
             return command(*args, **kwargs)
 
-        for declarations, attrs in reversed(flags):  # click lists options in the order they decorate
+        for _, _, declarations, attrs in reversed(flags):  # click lists options in the order they decorate
             wrapper = click.option(*declarations, **attrs)(wrapper)
         return wrapper
 
@@ -47,27 +53,49 @@ def _user_fields(cls, only):
 
 
 def _flags(cls, only=None, prefix: str = ""):
-    """(declarations, attributes) of ``click.option`` for each user option of ``cls``."""
+    """(the options class, the field's name, declarations, attributes of ``click.option``) of each
+    user option of ``cls``."""
     for field in _user_fields(cls, only):
         meta, parameter, value = field.metadata, prefix + field.name, default_of(field)
         flag = "--" + (prefix + meta.get("flag", field.name)).replace("_", "-")
-        nested = meta.get("nested")
+        nested, form = meta.get("nested"), meta.get("form")
         if nested is not None and meta.get("switch"):
-            yield (f"{flag}/--no-{flag[2:]}", parameter), dict(default=False, show_default=True, help=meta["help"])
+            yield cls, field.name, (f"{flag}/--no-{flag[2:]}", parameter), dict(default=False, show_default=True,
+                                                                                help=meta["help"])
             yield from _flags(nested, None, parameter + "_")
         elif nested is not None:
             yield from _flags(nested, None, prefix)
+        elif form is not None:
+            yield cls, field.name, (flag, parameter), dict(_written(form, value), help=meta["help"])
         elif several(field):
-            yield (flag, parameter), dict(multiple=True, type=click.Choice(meta["choices"]), help=meta["help"])
+            yield cls, field.name, (flag, parameter), dict(multiple=True, type=click.Choice(meta["choices"]),
+                                                           help=meta["help"])
         elif isinstance(value, bool):
-            yield (f"{flag}/--no-{flag[2:]}", parameter), dict(default=value, show_default=True, help=meta["help"])
+            yield cls, field.name, (f"{flag}/--no-{flag[2:]}", parameter), dict(default=value, show_default=True,
+                                                                                help=meta["help"])
+        elif "choices" in meta and value is None:  # leaving the flag out gives None
+            choices = tuple(c for c in meta["choices"] if c is not None)
+            yield cls, field.name, (flag, parameter), dict(default=None, type=click.Choice(choices), help=meta["help"])
         elif "choices" in meta:
             choices = tuple(NONE if c is None else c for c in meta["choices"])
-            yield (flag, parameter), dict(default=NONE if value is None else value, show_default=True,
-                                          type=click.Choice(choices), help=meta["help"])
+            yield cls, field.name, (flag, parameter), dict(default=value, show_default=True,
+                                                           type=click.Choice(choices), help=meta["help"])
         else:
-            yield (flag, parameter), dict(default=value, show_default=value is not None, type=_type(meta),
-                                          help=meta["help"])
+            yield cls, field.name, (flag, parameter), dict(default=value, show_default=value is not None,
+                                                           type=_type(meta), help=meta["help"])
+
+
+def _written(form, value) -> dict:
+    """The attributes of ``click.option`` of a field of ``form`` (:func:`mifaces.options.fields.option`)
+    and default ``value``."""
+    if form == "flag":
+        return dict(is_flag=True)
+    if form == "WxH":
+        return dict(default="{}x{}".format(*value), show_default=True, callback=width_x_height)
+    if form in ("file", "json"):
+        return dict(default=value, type=click.Path(exists=True, dir_okay=False),
+                    callback=_json_file if form == "json" else None)
+    return dict(default=value, type=form)  # a type, or a tuple of them
 
 
 def _type(meta: dict):
@@ -96,6 +124,17 @@ def _value(cls, kwargs: dict, only=None, prefix: str = ""):
                 continue
             values[field.name] = None if given == NONE and "choices" in field.metadata else given
     return cls(**values)
+
+
+def _json_file(ctx, param, value: str | None):
+    """The Click callback of a JSON file: its content (None for None)."""
+    if value is None:
+        return None
+    try:
+        with open(value) as f:
+            return json.load(f)
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise click.BadParameter(f"{value} is not valid JSON: {e}", param_hint=param.opts[0]) from None
 
 
 def width_x_height(ctx, param, value: str) -> tuple[int, int]:

@@ -21,6 +21,7 @@ import os
 import shutil
 import time
 import uuid
+from dataclasses import dataclass
 from pathlib import Path
 
 from .atomic import write_json
@@ -40,6 +41,30 @@ TEST_PAUSE_ENV = "MIFACES_TEST_PAUSE_IN_WRITE"
 class ResultSetError(ValueError):
     """A result folder whose files do not belong together (a mixed or
     damaged set), or one that is not to be written over."""
+
+
+@dataclass(frozen=True)
+class ResultTarget:
+    """Where a result set goes: its ``folder``, and whether a set of the same kind there is replaced
+    (``force``; :func:`check_result_target`).
+
+    Attributes
+    ----------
+    folder : Path
+    force : bool
+        Replace a set of the same kind that ``folder`` holds (else a ``FileExistsError``).
+    """
+
+    folder: Path
+    force: bool = False
+
+    def __post_init__(self):
+        object.__setattr__(self, "folder", Path(self.folder))
+
+    @classmethod
+    def of(cls, out: str | os.PathLike | ResultTarget) -> ResultTarget:
+        """``out`` as a target: a :class:`ResultTarget` as it is, a path as one that replaces nothing."""
+        return out if isinstance(out, cls) else cls(out)
 
 
 def file_sha256(path: str | os.PathLike) -> str:

@@ -45,7 +45,7 @@ from ..model.texture_space import rasterize, texel_geometry
 from ..runtime.progress import progress as progress_bar
 from ..reflectance.environment import estimate_map, transport
 from ..reflectance.light_balance import log_light_errors
-from ..reflectance.samples import _unoccluded, read_photograph
+from ..reflectance.resampling import read_photograph, unoccluded
 from ..shape.fit import fit_light
 from ..shape.result import ShapeOptions
 from ..shape.targets import light_angles
@@ -257,7 +257,7 @@ def photograph_transport(camera, pixels, saturated, vertices, triangles, uv, ras
     to_camera = camera.position[None, :] - p
     cos_v = np.sum(to_camera / np.linalg.norm(to_camera, axis=1, keepdims=True) * n, axis=1)
     keep = cos_v >= ESTIMATE_MIN_COSINE
-    keep[keep] = _unoccluded(scene, p[keep], np.broadcast_to(camera.position, p[keep].shape), n[keep], offset)
+    keep[keep] = unoccluded(scene, p[keep], np.broadcast_to(camera.position, p[keep].shape), n[keep], offset)
     radiance, ok = read_photograph(camera, pixels, saturated, p[keep])
     index = np.flatnonzero(keep)[ok]
     directions, solid = texel_directions(*size)

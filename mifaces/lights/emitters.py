@@ -6,49 +6,38 @@ frame (:mod:`mifaces.lights.environment`)."""
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 import numpy as np
 
 from ..brdf.model import check_numbers, rgb
-from .environment import environment_emitter
+from .environment import Environment
 
 
-def light_emitters(light, camera, envmap=None, envmap_scale: float = 1.0) -> dict:
+def light_emitters(light, camera, environment: Environment | None = None) -> dict:
     """The emitters of a face scene (its ``light`` and ``environment`` entries).
 
     ``light``: a :class:`~mifaces.capture.Light` -- a point light (``position``, world, mm;
     ``intensity``, radiant intensity), a directional one (``direction``, world frame, towards the
     light; ``intensity``, irradiance in pixel units: a white Lambertian surface facing it shows
     intensity/π) or an environment map (``envmap``); a light that is not a capture's is a ``Light``
-    made for it, e.g. ``Light("held-out", position, intensity)``. ``envmap``: an equirectangular
-    map (path or (H, W, 3) array, linear RGB) scaled by ``envmap_scale``, or an emitter dict such
-    as :func:`mifaces.lights.environment.sky_emitter`'s, instead of or besides a point or directional
+    made for it, e.g. ``Light("held-out", position, intensity)``. ``environment``: an
+    :class:`~mifaces.lights.environment.Environment` (a map and its scale, or an emitter such as
+    :func:`mifaces.lights.environment.sky_emitter`'s), instead of or besides a point or directional
     light. Maps are placed in ``camera``'s frame (:func:`mifaces.lights.environment.environment_emitter`).
     """
     if light is not None and light.environment:
         if light.envmap is None:
             raise ValueError(f"light {light.name!r} is an unknown environment map: estimate it first")
-        if envmap is not None:
+        if environment is not None:
             raise ValueError(f"light {light.name!r} is an environment map: give no other")
-        light, envmap = None, np.asarray(light.envmap, np.float32)
-    if light is None and envmap is None:
+        light, environment = None, Environment(np.asarray(light.envmap, np.float32))
+    if light is None and environment is None:
         raise ValueError("a face scene needs a light: a point light position, a light direction or an "
                          "environment map")
-    check_numbers("environment map scale", envmap_scale, minimum=0.0)
     emitters = {}
     if light is not None:
         emitters["light"] = _light_emitter(light)
-    if isinstance(envmap, dict):  # an emitter, e.g. mifaces.lights.environment.sky_emitter's
-        if envmap_scale != 1.0:
-            raise ValueError("an environment given as an emitter carries its own scale: leave envmap_scale at 1")
-        emitters["environment"] = envmap
-    elif envmap is not None:
-        if isinstance(envmap, (str, os.PathLike)) and not Path(envmap).is_file():
-            raise FileNotFoundError(f"environment map not found: {envmap}")
-        source = str(envmap) if isinstance(envmap, (str, os.PathLike)) else np.asarray(envmap, np.float32)
-        emitters["environment"] = environment_emitter(source, camera, envmap_scale)
+    if environment is not None:
+        emitters["environment"] = environment.emitter(camera)
     return emitters
 
 

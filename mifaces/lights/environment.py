@@ -25,6 +25,10 @@ the same way whatever the capture's world frame is.
 from __future__ import annotations
 
 import datetime as _dt
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
 import mitsuba as mi
 import numpy as np
 
@@ -43,6 +47,8 @@ STUDIO_AMBIENT = (0.06, 0.02)
 STUDIO_HEIGHT = 128
 #: Range of the sky's turbidity that Mitsuba's sun and sky model covers.
 TURBIDITY = (1.0, 10.0)
+#: The sky's turbidity unless one is given (clear).
+SKY_TURBIDITY = 3.0
 #: Default height of a baked map (:func:`bake_environment`; pixels, the width is twice this).
 BAKE_HEIGHT = 256
 #: Sub-samples per texel side of a bake; a texel whose sub-samples differ by more than
@@ -153,8 +159,46 @@ def environment_emitter(envmap, camera, scale: float = 1.0) -> dict:
     return emitter
 
 
+@dataclass(frozen=True, eq=False)
+class Environment:
+    """Light from every direction around a face: an equirectangular map times a scale, or an
+    emitter that carries its own (:func:`sky_emitter`'s), placed in the camera's frame (module
+    docstring). A face scene's environment (:meth:`mifaces.render.FaceScene.render`), beside or
+    instead of a capture's :class:`~mifaces.lights.light.Light`.
+
+    Validated on construction: a ``ValueError`` for a negative or non-finite scale or a scale on
+    an emitter, a ``FileNotFoundError`` for a map file that is not there.
+
+    Attributes
+    ----------
+    source : path, (H, W, 3) array or dict
+        The map (a file, or linear RGB radiance; its local frame as :func:`environment_emitter`
+        places it), or a Mitsuba emitter dict.
+    scale : float
+        Factor on the map's radiance; 1 for an emitter.
+    """
+
+    source: object
+    scale: float = 1.0
+
+    def __post_init__(self):
+        check_numbers("environment map scale", self.scale, minimum=0.0)
+        if isinstance(self.source, dict) and self.scale != 1.0:
+            raise ValueError("an environment given as an emitter carries its own scale: leave the scale at 1")
+        if isinstance(self.source, (str, os.PathLike)) and not Path(self.source).is_file():
+            raise FileNotFoundError(f"environment map not found: {self.source}")
+
+    def emitter(self, camera) -> dict:
+        """The Mitsuba emitter dict lighting a scene ``camera`` sees (:func:`environment_emitter`)."""
+        if isinstance(self.source, dict):
+            return self.source
+        path = isinstance(self.source, (str, os.PathLike))
+        return environment_emitter(str(self.source) if path else np.asarray(self.source, np.float32), camera,
+                                   self.scale)
+
+
 def sky_emitter(camera, sun_direction=None, time: str | _dt.datetime | None = None, place=None,
-                turbidity: float = 3.0, ground_albedo: float = 0.3, scale: float = 1.0) -> dict:
+                turbidity: float = SKY_TURBIDITY, ground_albedo: float = 0.3, scale: float = 1.0) -> dict:
     """Mitsuba's ``sunsky`` emitter dict (Hošek–Wilkie sun and sky) placed in
     ``camera``'s frame (module docstring).
 
@@ -309,6 +353,7 @@ def _time_and_place(time, place) -> dict:
             "minute": float(time.minute), "second": float(time.second)}
 
 
-__all__ = ["STUDIO_PANELS", "STUDIO_AMBIENT", "STUDIO_HEIGHT", "TURBIDITY", "SKY_SUN_ANGLES", "BAKE_HEIGHT",
-           "BAKE_SAMPLES", "BAKE_REFINED", "BAKE_CONTRAST", "map_directions", "studio_environment",
-           "environment_emitter", "sky_emitter", "bake_environment", "irradiance", "peak_irradiance"]
+__all__ = ["STUDIO_PANELS", "STUDIO_AMBIENT", "STUDIO_HEIGHT", "TURBIDITY", "SKY_TURBIDITY", "SKY_SUN_ANGLES",
+           "BAKE_HEIGHT", "BAKE_SAMPLES", "BAKE_REFINED", "BAKE_CONTRAST", "Environment", "map_directions",
+           "studio_environment", "environment_emitter", "sky_emitter", "bake_environment", "irradiance",
+           "peak_irradiance"]

@@ -6,7 +6,10 @@ and :func:`from_record` reads it back, equal; :func:`mifaces.cli.options.option_
 commands' flags.
 
 A field with ``help`` is a user option (it gets a flag); one with only ``bounds`` or ``choices``
-is validated, not offered on the command line. ``nested`` names the options class a field holds
+is validated, not offered on the command line. ``form`` says how the command line writes a value
+that is not one number, word or ``--x/--no-x`` switch (several numbers, an image size, a file).
+Options that contradict each other raise :class:`Conflict`, which names them by field here and by
+flag on the command line. ``nested`` names the options class a field holds
 (:class:`~mifaces.options.measure.MeasureOptions`'s ``fit`` holds a
 :class:`~mifaces.reflectance.FitOptions`), whose own options are then flattened into the flags;
 with ``switch``, the field is None unless ``--<name>`` is given, and its options' flags are
@@ -23,7 +26,7 @@ import numpy as np
 
 
 def option(default=MISSING, *, help: str | None = None, bounds: tuple | None = None, choices: tuple | None = None,
-           flag: str | None = None, factory=MISSING, nested: type | None = None, switch: bool = False):
+           flag: str | None = None, form=None, factory=MISSING, nested: type | None = None, switch: bool = False):
     """A dataclass field described for validation, records and the command line.
 
     Parameters
@@ -36,17 +39,25 @@ def option(default=MISSING, *, help: str | None = None, bounds: tuple | None = N
     bounds : (low, high), optional
         Closed range of a number; None for an open end. An int bound makes an integer option.
     choices : tuple, optional
-        The values it takes (None among them: ``none`` on the command line). A tuple default:
-        the option takes several of them (``--brdf phong --brdf ward``).
+        The values it takes (None among them: ``none`` on the command line, unless None is the
+        default: leaving the flag out gives it). A tuple default: the option takes several of them
+        (``--brdf phong --brdf ward``).
     flag : str, optional
         The long flag, if not ``--`` and the field's name with dashes (``models``: ``--brdf``).
+    form : optional
+        How the command line writes the value, where not as its default's type: a type (``float``
+        for an option whose default is None), a tuple of types (``(float, float, float)``: that many
+        numbers), ``'WxH'`` (an image size, ``512x512``: a (width, height) tuple), ``'file'`` (an
+        existing file's path), ``'json'`` (an existing JSON file, read as the value) or ``'flag'``
+        (a bool that its flag alone sets, no ``--no-`` form).
     nested : type, optional
         The options class the field holds; its options are the flags.
     switch : bool
         With ``nested``: None unless ``--<name>`` is given (its flags then prefixed by the name).
     """
     metadata = {key: value for key, value in (("help", help), ("bounds", bounds), ("choices", choices),
-                                              ("flag", flag), ("nested", nested)) if value is not None}
+                                              ("flag", flag), ("form", form), ("nested", nested))
+                if value is not None}
     if switch:
         metadata["switch"] = True
     if factory is not MISSING:
@@ -98,6 +109,20 @@ def _check_number(where: str, given, bounds: tuple) -> None:
         raise ValueError(f"{where} must be {'an integer' if integer else 'a number'} in {span}, got {given!r}")
 
 
+class Conflict(ValueError):
+    """Options of ``owner`` (an options class) that contradict each other: ``message`` with a
+    ``{}`` for each of ``fields``, their names. Its text names them as fields of ``owner``;
+    :meth:`naming` as the caller names them (the command line: by their flags)."""
+
+    def __init__(self, owner: type, message: str, *fields: str):
+        self.owner, self.message, self.fields = owner, message, fields
+        super().__init__(f"{owner.__name__}: {message.format(*fields)}")
+
+    def naming(self, name) -> str:
+        """The message with each field named ``name(owner, field)``."""
+        return self.message.format(*(name(self.owner, field) for field in self.fields))
+
+
 def record(value) -> dict:
     """Options ``value`` as a JSON object: every field, nested options as objects, tuples as lists."""
     return {field.name: _plain(getattr(value, field.name)) for field in dataclasses.fields(value)}
@@ -142,4 +167,4 @@ def from_record(cls: type, data: dict):
     return cls(**values)
 
 
-__all__ = ["option", "default_of", "several", "check", "record", "from_record"]
+__all__ = ["option", "default_of", "several", "check", "Conflict", "record", "from_record"]

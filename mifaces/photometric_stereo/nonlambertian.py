@@ -26,7 +26,8 @@ on all pixels' samples in their current local frames (r = I / cos θ_i,
 each sample's pixel albedo offset ρ_p - ρ̄ subtracted, so one region albedo
 ρ̄ stands for all), then ρ_p in closed form given the glossy part (as
 :mod:`mifaces.reflectance.maps.diffuse` does per texel), then the normal step;
-repeat until E improves by less than ``tol`` (relative).
+repeat until E improves by less than ``tol`` (relative); :class:`AlternationOptions` holds its
+settings.
 
 Frames: the directions towards the lights and the viewer and the normals
 share the caller's frame (DiLiGenT: x right, y up, z towards the camera).
@@ -35,6 +36,7 @@ Models are isotropic, so the tangent frame's rotation about n is irrelevant.
 
 from __future__ import annotations
 
+import numbers
 import time
 from dataclasses import dataclass, field
 
@@ -42,10 +44,11 @@ import numpy as np
 
 from .. import brdf as brdf_models
 from ..brdf.model import BRDFModel
-from ..reflectance.fit.region_fit import RegionFit, fit_region
-from ..reflectance.maps.normal_fit import (PRIOR_WEIGHT, NormalFit, _check, _unit, loss, predict,
+from ..options.fields import check, option
+from ..reflectance.fit.region_fit import RegionFit, RegionSamples, fit_region
+from ..reflectance.maps.normal_fit import (LitPixels, NormalFit, NormalStepOptions, _check_start, _unit, loss, predict,
                                            refine_normals)
-from ..reflectance.maps.observations import Observations, tangents
+from ..reflectance.maps.observations import tangents
 from . import lambertian
 
 #: Samples of the BRDF fit with cos θ_i below this are left out (r = I / cos θ_i is noise there).
@@ -73,6 +76,42 @@ class NormalsEstimate:
     brdf: RegionFit
     loss: float
     history: list = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class AlternationOptions:
+    """How :func:`fit_normals_and_brdf` alternates (module docstring). Validated on construction: a
+    number out of its range raises a ``ValueError`` naming the field.
+
+    Attributes
+    ----------
+    rounds : int
+        Most rounds of BRDF fit + normal step.
+    tol : float
+        Stop when a round lowers E by less than ``tol`` · E.
+    max_samples : int or None
+        Samples of each BRDF fit (:func:`brdf_samples`; None: all).
+    seed : int
+        Seed of the BRDF fits' random subsets (round ``r`` draws with ``seed + r``).
+    step : NormalStepOptions
+        How each normal step runs (:func:`refine_normals`): the prior's weight, its most
+        Levenberg-Marquardt steps, its tolerance and start search.
+    """
+
+    rounds: int = option(5, bounds=(0, None))
+    tol: float = option(1e-3, bounds=(0.0, None))
+    max_samples: int | None = 200_000
+    seed: int = option(0, bounds=(0, None))
+    step: NormalStepOptions = option(factory=NormalStepOptions, nested=NormalStepOptions)
+
+    def __post_init__(self):
+        check(self)
+        if not isinstance(self.step, NormalStepOptions):
+            raise ValueError(f"AlternationOptions.step must be a NormalStepOptions, got {self.step!r}")
+        if self.max_samples is not None and (isinstance(self.max_samples, bool) or not isinstance(
+                self.max_samples, numbers.Integral) or self.max_samples < 1):
+            raise ValueError(f"AlternationOptions.max_samples must be an integer >= 1 or None, got "
+                             f"{self.max_samples!r}")
 
 
 def observation_weights(values, saturated=None, shadow: float = lambertian.SHADOW_FRACTION) -> np.ndarray:
@@ -126,27 +165,23 @@ def brdf_samples(values, directions, weights, normals, albedo, view=(0.0, 0.0, 1
     return pick(local_light), pick(np.ascontiguousarray(local_view)), pick(reflectance), pick(sigma)
 
 
-def fit_normals_and_brdf(model: BRDFModel | str, values, directions, weights, normals, albedo,
-                         view=(0.0, 0.0, 1.0), prior=None, prior_weight: float = PRIOR_WEIGHT, rounds: int = 5,
-                         tol: float = 1e-3, iterations: int = 30, max_samples: int | None = 200_000,
-                         seed: int = 0, progress=None) -> NormalsEstimate:
+def fit_normals_and_brdf(model: BRDFModel | str, pixels: LitPixels, normals, albedo, prior=None,
+                         options: AlternationOptions | None = None, progress=None) -> NormalsEstimate:
     """Alternate the BRDF fit and the normal step from a Lambertian start (module docstring).
 
     Parameters
     ----------
     model : BRDFModel or str
-    values, directions, weights, view, prior, prior_weight, iterations
-        As for :func:`refine_normals` (``iterations``: per normal step).
+    pixels : LitPixels
+        The observations: values, light directions, weights and view directions, as
+        :func:`refine_normals` takes them; without footprints (the BRDF fit's samples have none).
     normals, albedo : ndarray (P, 3)
         The start, normally :func:`mifaces.photometric_stereo.fit`'s.
-    rounds : int
-        Most rounds of BRDF fit + normal step.
-    tol : float
-        Stop when a round lowers E by less than ``tol`` · E.
-    max_samples : int or None
-        Samples of each BRDF fit (:func:`brdf_samples`).
-    seed : int
-        Seed of the BRDF fits' random subsets.
+    prior : ndarray (P, 3), optional
+        Prior normals n̄ (default: the start normals).
+    options : AlternationOptions, optional
+        The most rounds, the tolerance, the BRDF fits' samples and seed, and how each normal step
+        runs (default ``AlternationOptions()``).
     progress : callable, optional
         Called with each round's history entry.
 
@@ -155,30 +190,32 @@ def fit_normals_and_brdf(model: BRDFModel | str, values, directions, weights, no
     NormalsEstimate
         The best round's state (E never increases).
     """
+    options = options or AlternationOptions()
+    if pixels.footprint is not None:
+        raise ValueError("fit_normals_and_brdf takes pixels without footprints: its BRDF fit's samples have none")
     model = brdf_models.model(model) if isinstance(model, str) else model
-    values = _check(values, directions, weights, normals, albedo)
+    _check_start(pixels, normals, albedo)
+    values, directions, weights, view = pixels.values, pixels.directions, pixels.weights, pixels.view
     normals = _unit(normals, view)
     prior = normals.copy() if prior is None else _unit(prior, view)
     albedo = np.asarray(albedo, np.float64)
-    args = dict(view=view, prior=prior, prior_weight=prior_weight)
     best, history, start = None, [], None
-    for round_ in range(rounds + 1):
+    for round_ in range(options.rounds + 1):
         t0 = time.perf_counter()
-        fit = fit_region(model, *brdf_samples(values, directions, weights, normals, albedo, view, max_samples,
-                                              seed + round_), start=start, uncertainty=None)
+        samples = brdf_samples(values, directions, weights, normals, albedo, view, options.max_samples,
+                               options.seed + round_)
+        fit = fit_region(model, RegionSamples(*samples), start=start, uncertainty=None)
         if round_ == 0:  # the Lambertian normals under the first BRDF fit, their albedo in closed form
-            data, albedo = Observations(model, fit.params, directions, view, len(normals), values,
-                                        weights).losses(normals)
+            data, albedo = pixels.observations(model, fit.params).losses(normals)
             state = NormalFit(normals, albedo, float(data.sum()), 0)
         else:  # from the closed-form albedo given the glossy part
-            state = refine_normals(model, fit.params, values, directions, weights, normals, iterations=iterations,
-                                   **args)
+            state = refine_normals(model, fit.params, pixels, normals, prior=prior, options=options.step)
         entry = {"round": round_, "loss": state.loss, "brdf_loss": fit.loss, "normal_iterations": state.iterations,
                  "seconds": time.perf_counter() - t0}
         history.append(entry)
         if progress is not None:
             progress(entry)
-        if best is not None and state.loss >= best[0].loss * (1 - tol):
+        if best is not None and state.loss >= best[0].loss * (1 - options.tol):
             if state.loss < best[0].loss:
                 best = (state, fit)
             break
@@ -188,5 +225,5 @@ def fit_normals_and_brdf(model: BRDFModel | str, values, directions, weights, no
     return NormalsEstimate(normals=state.normals, albedo=state.albedo, brdf=fit, loss=state.loss, history=history)
 
 
-__all__ = ["MIN_COSINE", "NormalsEstimate", "brdf_samples", "fit_normals_and_brdf", "loss", "observation_weights",
-           "predict", "refine_normals"]
+__all__ = ["MIN_COSINE", "AlternationOptions", "LitPixels", "NormalStepOptions", "NormalsEstimate", "brdf_samples",
+           "fit_normals_and_brdf", "loss", "observation_weights", "predict", "refine_normals"]

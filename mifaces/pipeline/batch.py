@@ -39,6 +39,7 @@ import socket
 import time
 import traceback
 import uuid
+from dataclasses import dataclass
 from pathlib import Path
 
 import mifaces  # noqa: F401  # first: it points Dr.Jit at libLLVM; workers import it once, on unpickling a task
@@ -53,6 +54,7 @@ from tqdm import tqdm
 from ..capture.types import MANIFEST
 from ..io.atomic import write_json
 from ..importers.yaleb import import_subject
+from ..options.fields import check, option
 from ..options.measure import MeasureOptions
 from .measure import measure
 from ..report.population import write_population
@@ -251,6 +253,35 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None, tas
             cluster.close()
 
 
+@dataclass(frozen=True)
+class Cluster:
+    """Where a batch's tasks run (:func:`cluster_client`): a new local Dask cluster, or a running
+    scheduler; and the Mitsuba variant of its workers. Validated on construction (a ``ValueError``
+    naming the field).
+
+    Attributes
+    ----------
+    workers : int, optional
+        Worker processes of the local cluster (default: one per core, at most one per capture).
+    scheduler : str, optional
+        Address (``tcp://host:port``) or scheduler file of a running Dask
+        scheduler to use instead of a local cluster.
+    variant : str, optional
+        Mitsuba variant of the workers (default: the current one).
+    """
+
+    workers: int | None = option(None, bounds=(1, None))
+    scheduler: str | None = None
+    variant: str | None = None
+
+    def __post_init__(self):
+        check(self)
+
+    def client(self, tasks: int):
+        """:func:`cluster_client` of this cluster, for ``tasks`` tasks (a context manager)."""
+        return cluster_client(self.workers, self.scheduler, tasks)
+
+
 def dashboard(client: Client) -> str:
     """The line naming the Dask dashboard's address, or why there is none."""
     if "dashboard" not in client.scheduler_info().get("services", {}):
@@ -260,9 +291,9 @@ def dashboard(client: Client) -> str:
     return f"Dask dashboard: {client.dashboard_link}"
 
 
-def measure_batch(inputs, out, options: MeasureOptions | None = None, *, workers: int | None = None,
-                  scheduler: str | None = None, resume: bool = False, importer: str | None = None,
-                  variant: str | None = None, progress: bool = True, echo=None, **keywords) -> dict:
+def measure_batch(inputs, out, options: MeasureOptions | None = None, *, cluster: Cluster | None = None,
+                  resume: bool = False, importer: str | None = None, progress: bool = True, echo=None,
+                  **keywords) -> dict:
     """Measure many captures on Dask, each as :func:`mifaces.pipeline.measure.measure` would.
 
     Parameters
@@ -274,18 +305,14 @@ def measure_batch(inputs, out, options: MeasureOptions | None = None, *, workers
         (and ``captures/<name>/`` with an importer).
     options : MeasureOptions, optional
         How every capture is measured (:func:`mifaces.pipeline.measure.measure`), sent whole to the workers.
-    workers : int, optional
-        Worker processes of the local cluster (default: one per core, at most one per capture).
-    scheduler : str, optional
-        Address (``tcp://host:port``) or scheduler file of a running Dask
-        scheduler to use instead of a local cluster.
+    cluster : Cluster, optional
+        Where the tasks run (:class:`Cluster`; default: a local cluster of one worker per core, at
+        most one per capture, in the current Mitsuba variant).
     resume : bool
         Skip captures whose results in ``out`` are complete and record ``options``
         (:func:`is_complete`); measure those fitted with other options again.
     importer : {None, 'yaleb'}
         Import raw data first (:data:`IMPORTERS`).
-    variant : str, optional
-        Mitsuba variant of the workers (default: the current one).
     **keywords
         Options as keywords, applied over ``options`` as :func:`mifaces.pipeline.measure.measure` takes them
         (``models=``, ``geometry=``, ``spp=``, ...; :meth:`MeasureOptions.of
@@ -307,6 +334,7 @@ def measure_batch(inputs, out, options: MeasureOptions | None = None, *, workers
     echo = echo or (lambda line: None)
     out = Path(out).resolve()
     options = MeasureOptions.of(options, keywords, "measure_batch")  # validated before any worker starts
+    cluster = Cluster() if cluster is None else cluster
     captures = find_captures(inputs, importer)
     record = {"out": str(out), "importer": importer, "options": options.to_record(),
               "captures": {name: {"source": str(source), "status": PENDING} for name, source in captures.items()}}
@@ -320,7 +348,7 @@ def measure_batch(inputs, out, options: MeasureOptions | None = None, *, workers
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / RECORD, record)
     if todo:
-        _run(todo, out, importer, options, variant or mi.variant(), workers, scheduler, record, progress, echo)
+        _run(todo, out, importer, options, cluster, record, progress, echo)
     record["failed"] = [name for name, entry in record["captures"].items() if entry["status"] != DONE
                         and entry["status"] != SKIPPED]
     record["seconds"] = time.perf_counter() - t0
@@ -333,12 +361,12 @@ def measure_batch(inputs, out, options: MeasureOptions | None = None, *, workers
     return record
 
 
-def _run(todo: dict, out: Path, importer, options: MeasureOptions, variant: str, workers, scheduler, record: dict,
-         progress: bool, echo) -> None:
+def _run(todo: dict, out: Path, importer, options: MeasureOptions, cluster: Cluster, record: dict, progress: bool,
+         echo) -> None:
     """Submit ``todo`` to the cluster; record each capture as it finishes."""
-    with cluster_client(workers, scheduler, len(todo)) as client:
+    with cluster.client(len(todo)) as client:
         echo(dashboard(client))
-        client.register_plugin(WorkerSetup(variant, _slots(client)))
+        client.register_plugin(WorkerSetup(cluster.variant or mi.variant(), _slots(client)))
         run = uuid.uuid4().hex[:8]
         futures = {client.submit(measure_one, name, str(source), str(out), importer, options,
                                  key=f"mifaces-measure-{name}-{run}", pure=False): name
@@ -369,5 +397,5 @@ def _line(name: str, entry: dict) -> str:
     return f"{name}: FAILED: {' '.join(entry['error'].split())}"
 
 
-__all__ = ["measure_batch", "measure_one", "find_captures", "is_complete", "cluster_client", "WorkerSetup",
+__all__ = ["measure_batch", "Cluster", "measure_one", "find_captures", "is_complete", "cluster_client", "WorkerSetup",
            "IMPORTERS", "RECORD"]

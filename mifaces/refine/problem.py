@@ -20,7 +20,7 @@ from ..reflectance.fit.parameters import ParameterSpace
 from ..reflectance.result import BRDFEstimate
 from .albedo_correction import AlbedoCorrection
 from .environment import EnvironmentVariable, padded_envmap
-from .photograph import image_loss, mask_weight, photograph_view
+from .photograph import Appearance, RenderSettings, image_loss, mask_weight, photograph_view
 from .schedule import ALBEDO, LIGHT_GAIN, RefineSchedule, environment_variable, holdout_pixels
 
 #: Fewest pixels (over all photographs, at the render resolution) for a region's parameters to be variables.
@@ -88,11 +88,11 @@ class RefineProblem:
         self.rng = np.random.default_rng([seed, 27])
         self.model = brdf_models.model(estimate.model, **estimate.options)
         # each region's values up to its border: the variables are the regions' values
-        brdf, albedo = hard_borders(estimate.to_json()), estimate.albedo.albedo
+        appearance = Appearance(hard_borders(estimate.to_json()), estimate.albedo.albedo)
         names = list(measurements or estimate.measurements)
         scale = capture.reflectance_scale() / np.pi
         self.light_kinds = set()
-        self.photographs = [self._photograph(capture, m, shapes[m.name], face_model, brdf, albedo, scale,
+        self.photographs = [self._photograph(capture, m, shapes[m.name], face_model, appearance, scale,
                                              lamp_radius)
                             for m in capture.measurements if m.name in names and m.name in shapes]
         if not self.photographs:
@@ -128,7 +128,7 @@ class RefineProblem:
                 self.fitted[f"{region}.{i}"] = float(x_fit)
         self.albedo = None
         if schedule.albedo_learning_rate is not None:
-            self.albedo = AlbedoCorrection(albedo, schedule.albedo_cell)
+            self.albedo = AlbedoCorrection(appearance.albedo, schedule.albedo_cell)
             self.variables[ALBEDO] = self.albedo.start()
         if schedule.light_gain_learning_rate is not None and len(self.lights) > 1:
             self.variables[LIGHT_GAIN] = np.zeros(len(self.lights))
@@ -142,11 +142,12 @@ class RefineProblem:
                     self.environments[name] = EnvironmentVariable.of(log)
                     self.variables[environment_variable(name)] = log
 
-    def _photograph(self, capture, m, vertices, face_model, brdf, albedo, scale, lamp_radius) -> _Photograph:
+    def _photograph(self, capture, m, vertices, face_model, appearance: Appearance, scale,
+                    lamp_radius) -> _Photograph:
         face = FaceScene(face_model, vertices)
-        view = photograph_view(capture, m, face, brdf, albedo, self.estimate.region_map,
-                               scale, lamp_radius, self.schedule.downsample, self.schedule.spp,
-                               {"type": "prb", "max_depth": int(self.schedule.max_depth), "hide_emitters": True})
+        rendering = RenderSettings(self.schedule.downsample, self.schedule.spp, {
+            "type": "prb", "max_depth": int(self.schedule.max_depth), "hide_emitters": True})
+        view = photograph_view(capture, m, face, appearance, self.estimate.region_map, scale, lamp_radius, rendering)
         self.light_kinds.add(view.light_kind)
         free = {p.name for p in self.model.specular_parameters()}
         keys, albedo_keys = {}, []

@@ -67,7 +67,7 @@ from ..runtime.progress import progress as progress_bar
 from ..render import FaceScene
 from ..model.geometry import welded_normals
 from .kernels import kernel_counts, kernel_history
-from .photograph import LAMP_RADIUS_KEY, image_loss, mask_weight, photograph_view
+from .photograph import LAMP_RADIUS_KEY, Appearance, RenderSettings, image_loss, mask_weight, photograph_view
 from .schedule import holdout_pixels
 from .shape_choice import chosen_iteration, judged_photographs, verdict
 from .shape_schedule import RENDER_SIDE, ShapeRefineSchedule
@@ -127,12 +127,6 @@ class _View:
     stop_weight: mi.TensorXf | None
 
 
-def _appearance(estimate) -> dict:
-    """The fitted BRDF as :func:`~mifaces.refine.photograph.photograph_view` takes it."""
-    return {"brdf": estimate.to_json(), "albedo": estimate.albedo.albedo, "normals": estimate.normal_texture(),
-            "specular": estimate.specular_texture()}
-
-
 class ShapeProblem:
     """The photographs as differentiable renders of the displaced faces.
 
@@ -168,7 +162,7 @@ class ShapeProblem:
         self.schedule, self.face_model = schedule, face_model
         self.shapes = {name: np.asarray(shapes[name], np.float32) for name in names}
         scale = capture.reflectance_scale() / np.pi
-        appearance = _appearance(estimate)
+        appearance = Appearance.of(estimate)
         triangles = np.asarray(face_model.triangles, np.int64)
         self.triangles = tuple(mi.UInt32(np.ascontiguousarray(triangles[:, c], np.uint32)) for c in range(3))
         rng = np.random.default_rng([seed, 22])
@@ -178,10 +172,9 @@ class ShapeProblem:
                 continue
             vertices = self.shapes[m.name]
             face = FaceScene(face_model, vertices)
-            view = photograph_view(capture, m, face, appearance["brdf"], appearance["albedo"],
-                                   face_model.region_map, scale, lamp_radius, schedule.factor(capture.camera_of(m)),
-                                   schedule.spp, schedule.integrator(), normals=appearance["normals"],
-                                   specular=appearance["specular"], sample_border=True)
+            rendering = RenderSettings(schedule.factor(capture.camera_of(m)), schedule.spp, schedule.integrator(),
+                                       sample_border=True)
+            view = photograph_view(capture, m, face, appearance, face_model.region_map, scale, lamp_radius, rendering)
             self.light_kinds.add(view.light_kind)
             keys = {key: mi.UInt32(np.ascontiguousarray(part.index, np.uint32)) for key, part in face.meshes.items()}
             held = holdout_pixels(view.mask, schedule.holdout, schedule.holdout_block, rng)

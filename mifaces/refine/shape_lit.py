@@ -12,7 +12,7 @@ import numpy as np
 
 from ..reflectance import FitOptions
 from ..reflectance.estimate import fit_brdf
-from ..reflectance.samples import capture_samples
+from ..reflectance.resampling import capture_samples
 from ..shape import shapes_in_world
 from .shape import ShapeRefinement, ShapeRefineSchedule, refine_shape
 from .shape_choice import judged_photographs

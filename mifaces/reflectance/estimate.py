@@ -5,7 +5,7 @@ geometry to fitted BRDFs (paper sec. 4.3-5.3).
 
 1. per measurement, the photograph resampled into the model's common texture
    parameterization and turned into weighted reflectance samples
-   (:func:`mifaces.reflectance.samples.capture_samples`: eq. 4, 9, 10, shadow
+   (:func:`mifaces.reflectance.resampling.capture_samples`: eq. 4, 9, 10, shadow
    and grazing-angle masks);
 2. each sample labelled with the a-priori material region of its texel, as
    the triangle covering it is labelled
@@ -18,8 +18,9 @@ geometry to fitted BRDFs (paper sec. 4.3-5.3).
 5. the diffuse albedo refitted per texel with the glossy part fixed
    (:func:`mifaces.reflectance.maps.diffuse.refine_diffuse`).
 
-With ``out``, :func:`mifaces.reflectance.io.write_estimate` writes the
-result: ``brdf.json``, the albedo map and ``scene.xml``.
+With ``out`` (a folder, or a :class:`~mifaces.io.result_set.ResultTarget` that may replace a
+result there), :func:`mifaces.reflectance.io.write_estimate` writes the result: ``brdf.json``, the
+albedo map and ``scene.xml``.
 
 The face geometry per measurement is an input: the simulator's ground truth
 (``geometry="ground-truth"``), the shapes written by ``mifaces fit-shape``,
@@ -28,8 +29,11 @@ or any mapping from measurement name to world-space vertices.
 
 from __future__ import annotations
 
+import os
+
 from .. import brdf as brdf_models
 from ..capture import load_capture
+from ..io.result_set import ResultTarget
 from ..shape.io import load_geometry
 from .fitting import fit_samples
 from .io import write_fitted
@@ -41,11 +45,10 @@ from .samples import ReflectanceSamples
 
 def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, face_model=None,
              options: FitOptions | None = None, samples: ReflectanceSamples | None = None, measurements=None,
-             out=None, progress: bool = True, force: bool = False, **deprecated) -> BRDFEstimate:
+             out: str | os.PathLike | ResultTarget | None = None, progress: bool = True, **deprecated) -> BRDFEstimate:
     """Fit a BRDF model per region to the photographs of a capture: the samples stage
     (:func:`~mifaces.reflectance.sample_stage.take_samples`, then ``without_bounced_light`` and
-    ``with_balanced_lights``), then
-    :func:`~mifaces.reflectance.fitting.fit_samples`.
+    ``with_balanced_lights``), then :func:`~mifaces.reflectance.fitting.fit_samples`.
 
     Parameters
     ----------
@@ -58,8 +61,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
         How to fit; ``**deprecated``: its fields as keywords (a :class:`DeprecationWarning`).
     samples : ReflectanceSamples, optional
         Samples taken before, at ``options.resolution``; ``measurements``: fit these only.
-    out : path, optional
-        Write the result there (:func:`~mifaces.reflectance.io.write_fitted`; ``force`` replaces one).
+    out : path or ResultTarget, optional
+        Write the result there (:func:`~mifaces.reflectance.io.write_fitted`); a ``ResultTarget`` may replace one.
 
     Examples
     --------
@@ -76,7 +79,8 @@ def fit_brdf(capture, model: str = "cooktorrance", geometry="ground-truth", *, f
     taken = with_balanced_lights(without_bounced_light(taken, brdf, options, progress=progress), brdf, options)
     estimate = fit_samples(taken, brdf, options, progress=progress)
     if out is not None:
-        write_fitted(estimate, out, taken.capture, face, shapes, force=force)
+        target = ResultTarget.of(out)
+        write_fitted(estimate, target.folder, taken.capture, face, shapes, force=target.force)
     return estimate
 
 

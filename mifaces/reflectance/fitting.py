@@ -29,10 +29,11 @@ import numpy as np
 
 from ..model.regions import REGIONS, regions_present, texel_regions_of_mesh
 from ..runtime.status import AT_BOUND, CONVERGED
+from .fit.region_fit import RegionFitOptions, Uncertainty
 from .fit.regions import fit_regions
 from .fit.uncertainty import TEXEL_TILE_AT_128, tile_clusters
 from .maps.diffuse import AlbedoOffsets, refine_diffuse
-from .maps.normals import MIN_OBSERVATIONS, mitsuba_tangent_normals, refine_texel_normals
+from .maps.normals import MIN_OBSERVATIONS, NormalOptions, mitsuba_tangent_normals, refine_texel_normals
 from .maps.specular import refine_specular
 from .options import FitOptions
 from .result import BRDFEstimate
@@ -49,15 +50,23 @@ class FaceRegions:
     region_map : (R, R) uint8
     names : dict
         Region label -> region name, for the regions the face has.
-    shared : dict
-        The keyword arguments of :func:`fit_regions` every fit of these samples takes: the fixed
-        parameters (per region too), the subset schedule, the seed, the clusters of its intervals.
+    options : RegionFitOptions
+        How every region fit of these samples runs: the fixed parameters, the subset schedule, the seed.
+    fixed_by_region : dict
+        Region name -> parameters fixed there on top (:func:`fit_regions`).
+    cluster : ndarray (N,)
+        Each sample's cluster for the intervals (:func:`~mifaces.reflectance.fit.uncertainty.tile_clusters`).
+    progress : bool
+        Show the region fits' progress.
     """
 
     samples: object
     region_map: np.ndarray
     names: dict
-    shared: dict
+    options: RegionFitOptions
+    fixed_by_region: dict
+    cluster: np.ndarray
+    progress: bool = False
 
     @classmethod
     def of(cls, taken, brdf, options: FitOptions, progress: bool) -> FaceRegions:
@@ -70,21 +79,26 @@ class FaceRegions:
         # parameters with a published value per region (Cook-Torrance's η) are fixed at it unless given
         per_region = {name: {k: v for k, v in brdf.fixed_in_region(name).items() if fixed is None or k not in fixed}
                       for name in names.values()}
-        shared = dict(progress=progress, fixed=fixed, fixed_by_region=per_region, schedule=options.schedule,
-                      seed=options.seed, cluster=tile_clusters(on_face.texel, resolution, label=on_face.label))
-        return cls(on_face, region_map, names, shared)
+        fit_options = RegionFitOptions(fixed=fixed, schedule=options.schedule, seed=options.seed)
+        cluster = tile_clusters(on_face.texel, resolution, label=on_face.label)
+        return cls(on_face, region_map, names, fit_options, per_region, cluster, progress)
 
     def with_samples(self, samples) -> FaceRegions:
         """These regions with other samples of their texels (the samples in per-texel normals' frames):
         the intervals' clusters made of those."""
         cluster = tile_clusters(samples.texel, len(self.region_map), label=samples.label)
-        return FaceRegions(samples, self.region_map, self.names, {**self.shared, "cluster": cluster})
+        return dataclasses.replace(self, samples=samples, cluster=cluster)
 
-    def in_tiles(self) -> dict:
-        """:attr:`shared` with the intervals' clusters tiles of texels (an albedo per texel)."""
+    def in_tiles(self) -> FaceRegions:
+        """These regions with the intervals' clusters tiles of texels (an albedo per texel)."""
         tile = max(1, round(TEXEL_TILE_AT_128 * len(self.region_map) / 128))
-        return {**self.shared, "cluster": tile_clusters(self.samples.texel, len(self.region_map),
-                                                        label=self.samples.label, tile=tile)}
+        return dataclasses.replace(self, cluster=tile_clusters(self.samples.texel, len(self.region_map),
+                                                               label=self.samples.label, tile=tile))
+
+    def uncertainty(self, method: str | None, offsets: AlbedoOffsets | None = None) -> Uncertainty | None:
+        """Intervals by ``method`` (None: none) over these samples' clusters, the reflectance corrected by
+        ``offsets``."""
+        return None if method is None else Uncertainty(method, self.cluster, offsets)
 
 
 def fit_samples(taken, brdf, options: FitOptions, *, progress: bool = True) -> BRDFEstimate:
@@ -95,12 +109,12 @@ def fit_samples(taken, brdf, options: FitOptions, *, progress: bool = True) -> B
     regions = FaceRegions.of(taken, brdf, options, progress)
     normals = None
     if plan.normals:  # normals per texel from one albedo per region; its offsets, with intervals, in their frames
-        start = _refit(brdf, regions.samples, regions.names, **regions.shared, uncertainty=None)  # the next fit warns
+        start = _refit(brdf, regions, None)  # the next fit warns
         normals = _refine_normals(brdf, start, regions, options.normal_options, progress)
     if normals is not None:
         regions = regions.with_samples(normals.samples)
         fits, texel_albedo = _albedo_rounds(brdf, regions, normals.fits, plan.albedo_rounds, plan.uncertainty,
-                                            regions.shared, starts=True), False
+                                            starts=True), False
     else:
         plan = dataclasses.replace(options, normals=False).resolved()
         fits, texel_albedo = GLOSSY_FITS[glossy_strategy(plan)](brdf, regions, plan)
@@ -131,47 +145,56 @@ def glossy_strategy(plan: FitOptions) -> str:
     return "texel_albedo" if plan.texel_albedo else "albedo_rounds" if plan.albedo_rounds else "region"
 
 
-def _refit(brdf, samples, names, **arguments) -> dict:
-    """:func:`fit_regions` of samples that a first fit has fitted, and warned about, already."""
+def _fit(brdf, regions: FaceRegions, method: str | None, *, offsets: AlbedoOffsets | None = None,
+         starts: dict | None = None, texel_albedo: bool = False) -> dict:
+    """:func:`fit_regions` of ``regions``' samples as every fit of them runs, its intervals by ``method``
+    (None: none; :meth:`FaceRegions.uncertainty`), from ``starts``, with an albedo per texel where
+    ``texel_albedo``."""
+    options = dataclasses.replace(regions.options, texel_albedo=True) if texel_albedo else regions.options
+    return fit_regions(brdf, regions.samples, regions.names, options=options,
+                       uncertainty=regions.uncertainty(method, offsets), fixed_by_region=regions.fixed_by_region,
+                       starts=starts, progress=regions.progress)
+
+
+def _refit(brdf, regions: FaceRegions, method: str | None, *, offsets: AlbedoOffsets | None = None,
+           starts: dict | None = None, texel_albedo: bool = False) -> dict:
+    """:func:`_fit` of samples that a first fit has fitted, and warned about, already."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return fit_regions(brdf, samples, names, **arguments)
+        return _fit(brdf, regions, method, offsets=offsets, starts=starts, texel_albedo=texel_albedo)
 
 
 def _region_fits(brdf, regions: FaceRegions, plan: FitOptions) -> tuple[dict, bool]:
     """One albedo per region, as the paper fits it, with its intervals."""
-    fits = fit_regions(brdf, regions.samples, regions.names, **regions.shared, uncertainty=plan.uncertainty)
-    return fits, False
+    return _fit(brdf, regions, plan.uncertainty), False
 
 
 def _rounds_fits(brdf, regions: FaceRegions, plan: FitOptions) -> tuple[dict, bool]:
     """The region fit, refitted ``albedo_rounds`` times with the albedo's per-texel offsets taken out."""
-    fits = fit_regions(brdf, regions.samples, regions.names, **regions.shared, uncertainty=None)
-    return _albedo_rounds(brdf, regions, fits, plan.albedo_rounds, plan.uncertainty, regions.shared), False
+    fits = _fit(brdf, regions, None)
+    return _albedo_rounds(brdf, regions, fits, plan.albedo_rounds, plan.uncertainty), False
 
 
 def _texel_albedo_fits(brdf, regions: FaceRegions, plan: FitOptions) -> tuple[dict, bool]:
     """The glossy parts with an albedo per texel, started from the region fit, their intervals over tiles
     of texels; the region fit kept where skin's lobe is lost (too few photographs per texel to see it)."""
-    fits = fit_regions(brdf, regions.samples, regions.names, **regions.shared, uncertainty=None)
+    fits = _fit(brdf, regions, None)
     refits = plan.uncertainty == "bootstrap"  # which does not refit albedos per texel: a last round does
     tiles = regions.in_tiles()
-    per_texel = _refit(brdf, regions.samples, regions.names, **tiles, texel_albedo=True, starts=_measured(fits),
-                       uncertainty=None if refits else plan.uncertainty)
+    per_texel = _refit(brdf, tiles, None if refits else plan.uncertainty, starts=_measured(fits), texel_albedo=True)
     lost = _lost_skin(fits, per_texel)
     if lost:
         warnings.warn(f"the glossy fit with an albedo per texel measured no lobe on skin ({lost}): every region "
                       "keeps the region fit, one albedo per region", stacklevel=4)
-        return _refit(brdf, regions.samples, regions.names, **regions.shared, uncertainty=plan.uncertainty,
-                      starts=_measured(fits)), False
-    return _albedo_rounds(brdf, regions, per_texel, int(refits), plan.uncertainty, tiles, starts=True), True
+        return _refit(brdf, regions, plan.uncertainty, starts=_measured(fits)), False
+    return _albedo_rounds(brdf, tiles, per_texel, int(refits), plan.uncertainty, starts=True), True
 
 
-def _albedo_rounds(brdf, regions: FaceRegions, fits: dict, rounds: int, uncertainty, shared: dict, *,
+def _albedo_rounds(brdf, regions: FaceRegions, fits: dict, rounds: int, method: str | None, *,
                    starts: bool = False) -> dict:
     """``fits`` refitted ``rounds`` times with the albedo's per-texel offsets taken out, each round from the
-    last one's parameters where ``starts``; the last round's intervals re-estimate the offsets per
-    replicate."""
+    last one's parameters where ``starts``; the last round's intervals (by ``method``, over ``regions``'
+    clusters) re-estimate the offsets per replicate."""
     samples = regions.samples
     for round_ in range(rounds):
         by_label = {REGIONS[name]: fit.params for name, fit in fits.items()}
@@ -181,7 +204,7 @@ def _albedo_rounds(brdf, regions: FaceRegions, fits: dict, rounds: int, uncertai
                                    samples.texel, samples.label)
         corrected = dataclasses.replace(samples, reflectance=samples.reflectance - offsets.offsets)
         last = round_ == rounds - 1
-        fits = _refit(brdf, corrected, regions.names, **shared, uncertainty=uncertainty if last else None,
+        fits = _refit(brdf, dataclasses.replace(regions, samples=corrected), method if last else None,
                       offsets=offsets if last else None, starts=_measured(fits) if starts else None)
     return fits
 
@@ -209,20 +232,22 @@ def _measured(fits: dict) -> dict:
 
 # ------------------------------------------------------------------------------------------------- maps
 
-def _refine_normals(brdf, fits, regions: FaceRegions, options, progress):
-    """:func:`refine_texel_normals` on the face's samples, each round's region fit as the first's (without
-    its progress, clusters or intervals), or None (with a warning) where no texel has
+def _refine_normals(brdf, fits, regions: FaceRegions, options: dict | None, progress):
+    """:func:`refine_texel_normals` on the face's samples with ``options`` (``FitOptions.normal_options``,
+    the fields of :class:`~mifaces.reflectance.maps.normals.NormalOptions`), each round's region fit as the
+    first's (without its progress or intervals), or None (with a warning) where no texel has
     :data:`MIN_OBSERVATIONS` samples (one light per texel: nothing to tell a normal from)."""
     samples = regions.samples
-    shared = {k: v for k, v in regions.shared.items() if k not in ("progress", "cluster")}
+    quiet = dataclasses.replace(regions, progress=False)
     if not np.any(np.bincount(samples.texel) >= MIN_OBSERVATIONS):
         warnings.warn(f"per-texel normals left out: no texel has the {MIN_OBSERVATIONS} samples (lights and "
                       "poses) a normal needs", stacklevel=4)
         return None
     report = (lambda e: print(f"normals round {e['round']}: E {e['loss']:.6g}, {e['texels']} texels, "
                               f"mean tilt {e['mean_tilt_deg']:.2f} deg", flush=True)) if progress else None
-    return refine_texel_normals(brdf, lambda rotated: _refit(brdf, rotated, regions.names, **shared, uncertainty=None),
-                                fits, samples, regions.names, progress=report, **(options or {}))
+    return refine_texel_normals(brdf, lambda rotated: _refit(brdf, dataclasses.replace(quiet, samples=rotated), None),
+                                fits, samples, regions.names, options=NormalOptions(**(options or {})),
+                                progress=report)
 
 
 def _specular_map(brdf, by_label: dict, samples, region_map):

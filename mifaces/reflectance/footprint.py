@@ -12,7 +12,7 @@ inside the fit's kernels: in the region fit (:class:`~mifaces.reflectance.fit.pr
 and in the normal step (:class:`~mifaces.reflectance.maps.observations.Observations`).
 
 The footprint is the photograph's pixel filter (:data:`~mifaces.capture.camera.PIXEL_BLUR_STD`,
-a Gaussian) and the bilinear read of :func:`~mifaces.reflectance.samples.read_photograph` at the
+a Gaussian) and the bilinear read of :func:`~mifaces.reflectance.resampling.read_photograph` at the
 sample's position (a tent whose variance per axis is f(1 - f), f the fractional pixel position).
 """
 
@@ -161,4 +161,28 @@ def tilted(wi, wo, spread) -> list:
     return out
 
 
-__all__ = ["POINTS", "MAX_STEP_PX", "MAX_TILT", "normal_spread", "tilts", "tilted"]
+def seen_by_pixel(evaluate, wi, wo, spread):
+    """What each sample's pixel saw of a BRDF: ``evaluate(wi', wo')`` summed over the normals
+    tilted by :func:`tilted` of ``spread``, weighted; ``evaluate(wi, wo)`` itself where ``spread``
+    is empty (points). The one average of the footprint that the region fit
+    (:class:`~mifaces.reflectance.fit.problem.Problem`) and the glossy part taken out of the
+    albedo map (:func:`~mifaces.reflectance.maps.diffuse.specular_reflectance_factor`) share."""
+    if not spread:
+        return evaluate(wi, wo)
+    f = None
+    for a, b, weight in tilted(wi, wo, spread):
+        term = evaluate(a, b) * weight
+        f = term if f is None else f + term
+    return f
+
+
+def spread_arrays(footprint, samples: int) -> tuple:
+    """Each sample's footprint (``samples``, 3) (tt, tb, bb; :func:`normal_spread`) as the three
+    Dr.Jit arrays :func:`tilts` takes; a footprint of another shape is refused, naming both."""
+    if np.shape(footprint) != (samples, 3):
+        raise ValueError(f"footprint must have shape ({samples}, 3), got {np.shape(footprint)}")
+    return tuple(mi.Float(np.ascontiguousarray(c)) for c in np.asarray(footprint, np.float32).T)
+
+
+__all__ = ["POINTS", "MAX_STEP_PX", "MAX_TILT", "normal_spread", "tilts", "tilted", "seen_by_pixel",
+           "spread_arrays"]

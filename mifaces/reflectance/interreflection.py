@@ -14,7 +14,7 @@ regions and albedo map, under the photograph's camera and light at a coarse reso
 (:data:`INDIRECT_WIDTH`: the bounced light is smooth): with the path tracer's depth
 :data:`INDIRECT_DEPTH` and with direct light only (depth 2), the same random numbers, so that
 the direct light cancels in their difference. The difference, blurred and brought to the
-photograph's size, is the bounced light in each pixel; :func:`~mifaces.reflectance.samples.capture_samples`
+photograph's size, is the bounced light in each pixel; :func:`~mifaces.reflectance.resampling.capture_samples`
 (``indirect=``) subtracts it before turning radiance into reflectance.
 ``fit_brdf(..., options=FitOptions(interreflection=True))`` fits, renders, samples again and fits
 again, in the rounds :data:`INDIRECT_ROUNDS` lists

@@ -31,7 +31,7 @@ from .. import brdf as brdf_models
 from ..io.atomic import atomic_write, write_json
 from ..io.image_files import read_exr, write_exr, write_png
 from ..io.result_set import ResultSetError, result_set, verify_set
-from ..lights.environment import environment_emitter
+from ..lights.environment import Environment, environment_emitter
 from ..render import FaceScene, scene_xml
 from ..model.regions import REGIONS
 from .fit.region_fit import RegionFit
@@ -73,8 +73,8 @@ def write_estimate(estimate: BRDFEstimate, out, face: FaceScene, camera, light, 
     normals, specular = estimate.normal_texture(), estimate.specular_texture()
     lamp = estimate.fitted_light(light)
     envmap = lamp.radiance_map
-    environment = None if envmap is None else environment_emitter(FILES["environment"], camera)  # named by file
-    scene = face.description(document, camera, lamp if envmap is None else None, envmap=environment,
+    environment = None if envmap is None else Environment(environment_emitter(FILES["environment"], camera))  # by file
+    scene = face.description(document, camera, lamp if envmap is None else None, environment=environment,
                              spp=SCENE_SPP, albedo=FILES["albedo"],
                              normals=None if normals is None else FILES["normals"],
                              specular=None if specular is None else FILES["specular"])

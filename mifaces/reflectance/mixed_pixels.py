@@ -5,7 +5,7 @@ eyebrows on skin) is read from pixels that show both: the bilinear read takes
 the neighbouring pixels, and each pixel integrates its own footprint. Its
 sample then carries the neighbour's light, and the fitted albedo map would
 outline the region (a bright rim round the eyebrows). Such samples are
-dropped (:func:`mifaces.reflectance.samples.measurement_samples`), and their
+dropped (:func:`mifaces.reflectance.resampling.measurement_samples`), and their
 texels take their region's local mean
 (:data:`mifaces.reflectance.maps.diffuse.FILL_TEXELS`).
 """

@@ -50,7 +50,8 @@ class FitOptions:
         stereo's (``docs/results.md``). Left out, with a warning, when no texel has the
         samples it needs.
     normal_options : dict, optional
-        Keyword arguments of ``refine_texel_normals`` (``prior_weight``, ``rounds``, ``tol``).
+        Fields of :class:`~mifaces.reflectance.maps.normals.NormalOptions`, the options of
+        ``refine_texel_normals`` (``prior_weight``, ``rounds``, ``tol``, ...).
     specular_maps : bool
         Estimate the specular reflectance per texel, shrunk towards each
         region's (:func:`mifaces.reflectance.maps.specular.refine_specular`;
@@ -74,7 +75,7 @@ class FitOptions:
         than they say on simulated faces (``docs/uncertainty.md``): off by default.
     texel_albedo : bool
         Fit each region's glossy part with an albedo of its own for every texel, eliminated
-        from the problem (``fit_region(texel=...)``): the glossy part is then measured from
+        from the problem (``RegionFitOptions(texel_albedo=True)``): the glossy part is then measured from
         how each texel changes between photographs, and the albedo texture no longer leaks
         into it. The same optimum as ``albedo_rounds`` alternated to convergence, reached in
         one fit; its intervals come from its own projected sums, each texel's albedo

@@ -23,7 +23,8 @@ from .light_balance import BALANCE_FIT_ROUNDS, balance_given_lights
 from ..model.regions import REGIONS
 from .maps.diffuse import specular_reflectance_factor
 from .options import FitOptions
-from .samples import ReflectanceSamples, capture_samples
+from .resampling import capture_samples
+from .samples import ReflectanceSamples
 
 
 @dataclass(frozen=True)

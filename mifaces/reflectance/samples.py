@@ -17,26 +17,21 @@ Lambertian target (f = 1/π) have r = 1, as the paper requires: s = π when
 R and I are in consistent physical units, or the value the capture's white
 target calibration gives. So r = π f for every model, and the fitters
 compare r with π f(l̂, v̂).
+
+Here are the sample's formulas (eq. 4, 9, 10), the masks that drop unusable
+ones and :class:`ReflectanceSamples`, the value that holds them;
+:mod:`mifaces.reflectance.resampling` takes them from the photographs.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-import drjit as dr
-import mitsuba as mi
 import numpy as np
 import scipy.ndimage
 import skimage.morphology
 
 from ..io.atomic import atomic_path
-from ..model.mesh import mitsuba_mesh
-from ..runtime.progress import progress as progress_bar
-from .environment import LUMINANCE, equivalent_lights
-from .footprint import normal_spread
-from .mixed_pixels import region_mixed
-from ..model.regions import texel_regions_of_mesh
-from ..model.texture_space import rasterize, texel_geometry
 
 #: Samples seen or lit at cos θ below this are dropped (θ > 80°).
 MIN_COSINE = np.cos(np.radians(80.0))
@@ -136,7 +131,8 @@ def valid_samples(light_z, view_z, lit, visible, erosion: int = 1, min_cosine: f
 
 
 # ---------------------------------------------------------------------------
-# Resampling a photograph into the common texture parameterization (sec. 4.3)
+# The samples, in the common texture parameterization (sec. 4.3;
+# :mod:`mifaces.reflectance.resampling` takes them from the photographs)
 
 @dataclass
 class ReflectanceSamples:
@@ -259,218 +255,5 @@ class ReflectanceSamples:
                                       footprint=d["footprint"] if "footprint" in d.files else None)
 
 
-def _unoccluded(scene, origin, target, normal, offset: float) -> np.ndarray:
-    """True where the segment from ``origin`` (pushed ``offset`` along the
-    normal) to ``target`` hits nothing in ``scene``."""
-    if len(origin) == 0:
-        return np.zeros(0, bool)
-    start = origin + offset * normal
-    d = target - start
-    dist = np.linalg.norm(d, axis=1)
-    d = d / np.maximum(dist, 1e-30)[:, None]
-    ray = mi.Ray3f(mi.Point3f(start.T.astype(np.float32)), mi.Vector3f(d.T.astype(np.float32)))
-    ray.maxt = mi.Float((dist * (1 - 1e-4)).astype(np.float32))
-    hit = scene.ray_test(ray)
-    return ~np.array(hit, dtype=bool) if dr.is_jit_v(mi.Float) else np.array([not hit])
-
-
-def read_photograph(camera, pixels, saturated, points) -> tuple[np.ndarray, np.ndarray]:
-    """The photograph ``pixels`` (H, W, 3) at the projections of world ``points`` (N, 3): bilinear,
-    pixel centres at integers; (N, 3) radiance, and (N,) whether the point projects inside the
-    image and away from ``saturated`` pixels ((H, W) bool or None; dilated by one pixel, since
-    the bilinear taps touch the neighbours)."""
-    xy = camera.project(points)
-    ok = (xy[:, 0] >= 0) & (xy[:, 0] <= camera.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= camera.height - 1)
-    coords = [xy[:, 1], xy[:, 0]]
-    pixels = np.asarray(pixels, np.float32)
-    radiance = np.stack([scipy.ndimage.map_coordinates(pixels[..., c], coords, order=1, mode="nearest")
-                         for c in range(3)], axis=1)
-    if saturated is not None:
-        near = scipy.ndimage.binary_dilation(np.asarray(saturated, bool))
-        ok &= ~scipy.ndimage.map_coordinates(near.astype(np.uint8), coords, order=0, mode="nearest").astype(bool)
-    return radiance, ok
-
-
-def measurement_samples(camera, light, pixels, vertices, triangles, uv, raster, *, saturated=None,
-                        scale: float = np.pi, erosion: int = 1, min_cosine: float = MIN_COSINE, name: str = "",
-                        offset: float | None = None, indirect=None, regions=None) -> ReflectanceSamples:
-    """Reflectance samples of one photograph (paper sec. 4.3, 5.3).
-
-    Parameters
-    ----------
-    camera : mifaces.capture.Camera
-        Calibrated camera (world frame in mm, OpenCV pixel conventions).
-    light : mifaces.capture.Light
-        The photograph's light: a point light (``position``, world frame, mm; ``intensity``,
-        its radiant intensity in the units of ``pixels``·mm²), a directional one (``direction``,
-        the unit vector in the world frame towards the light; ``intensity``, its irradiance in the
-        units of ``pixels``) or an environment map (``envmap``, (H, 2H, 3): each texel is read as
-        lit by the directional light that stands for the map there,
-        :func:`mifaces.reflectance.environment.equivalent_lights`).
-    pixels : (H, W, 3) linear radiance image.
-    vertices : (V, 3) the face in world coordinates for this measurement.
-    triangles, uv : the model's triangles and texture coordinates.
-    raster : :class:`mifaces.model.texture_space.TextureRaster` of ``uv`` at R × R.
-    saturated : (H, W) bool, optional; saturated pixels give no sample.
-    scale : float
-        Scale of eq. 4 (π: a white Lambertian target has r = 1).
-    erosion : int
-        Texels eroded from the borders of the valid region.
-    indirect : (H, W, 3) array, optional
-        Light bounced off the face, units of ``pixels`` (:mod:`mifaces.reflectance.interreflection`): subtracted.
-    regions : (R, R) int array, optional
-        Region label of every texel: no sample from a texel that reads another region's pixels (:func:`region_mixed`).
-
-    Returns
-    -------
-    ReflectanceSamples
-        Valid texels only (seen, lit, not grazing, in the image, unsaturated, unmixed); σ by eq. 10.
-    """
-    pixels = np.asarray(pixels, np.float32)
-    if pixels.shape != (camera.height, camera.width, 3):
-        raise ValueError(f"image of shape {pixels.shape} does not match the camera's "
-                         f"{camera.height}x{camera.width}x3")
-    if not np.all(np.isfinite(pixels)):
-        raise ValueError(f"image contains {np.count_nonzero(~np.isfinite(pixels))} NaN or infinite values")
-    resolution = raster.triangle.shape[0]
-    geo = texel_geometry(vertices, triangles, uv, raster)
-    p, n = geo.position, geo.normal
-    size = float(np.ptp(np.asarray(vertices), axis=0).max())
-    offset = 1e-4 * size if offset is None else offset
-    scene = mi.load_dict({"type": "scene", "face": mitsuba_mesh(vertices, triangles, uv)})
-    to_camera = camera.position[None, :] - p
-    envmap, light_direction, intensity = light.envmap, light.direction, light.intensity
-    if envmap is not None:  # per texel the directional light that stands for the map
-        l_world, e = equivalent_lights(scene, p, n, envmap, camera, offset, 10.0 * size)
-        dist_light = np.full(len(p), np.inf)
-        light_target = None
-    elif light_direction is not None:  # a distant light: one direction, no falloff
-        l_world = np.broadcast_to(np.asarray(light_direction, np.float64) /
-                                  np.linalg.norm(light_direction), p.shape).copy()
-        dist_light = np.full(len(p), np.inf)
-        light_target = p + l_world * (10.0 * size)  # far beyond the face: shadow rays leave it
-    else:
-        to_light = np.asarray(light.position, np.float64)[None, :] - p
-        dist_light = np.linalg.norm(to_light, axis=1)
-        l_world = to_light / dist_light[:, None]
-        light_target = np.broadcast_to(np.asarray(light.position, np.float64), p.shape)
-    v_world = to_camera / np.linalg.norm(to_camera, axis=1, keepdims=True)
-    cos_l, cos_v = np.sum(l_world * n, 1), np.sum(v_world * n, 1)
-    front = (cos_l > 0) & (cos_v > 0)
-    visible, lit = np.zeros(len(p), bool), np.zeros(len(p), bool)
-    visible[front] = _unoccluded(scene, p[front], np.broadcast_to(camera.position, p[front].shape), n[front], offset)
-    if light_target is None:  # the map's light arrives unoccluded along its irradiance vector, by construction
-        lit[front] = (e[front] @ LUMINANCE) > 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            intensity = e / np.where(cos_l > 0, cos_l, np.nan)[:, None]  # irradiance at normal incidence
-    else:
-        lit[front] = _unoccluded(scene, p[front], light_target[front], n[front], offset)
-    radiance, ok = read_photograph(camera, pixels, saturated, p)
-    if indirect is not None:  # the bounced light out: eq. 4 reads direct light
-        if np.shape(indirect) != pixels.shape:
-            raise ValueError(f"bounced light of shape {np.shape(indirect)} does not match the image's {pixels.shape}")
-        radiance = radiance - read_photograph(camera, indirect, None, p)[0]
-    r = reflectance(radiance, dist_light, intensity, cos_l, scale)
-
-    def image(values, fill):
-        out = np.full(resolution * resolution, fill, dtype=np.asarray(values).dtype)
-        out[geo.texel] = values
-        return out.reshape(resolution, resolution)
-
-    valid = valid_samples(image(cos_l, 0.0), image(cos_v, 0.0), image(lit & ok, False),
-                          image(visible & np.all(np.isfinite(r), axis=1), False), erosion, min_cosine)
-    xy = camera.project(p)
-    if regions is not None:  # after the erosion: a region border is no hole in the valid region
-        mixed = region_mixed(xy, np.ravel(regions)[geo.texel], visible & ok, pixels.shape[:2])
-        valid &= ~image(mixed, False)
-    keep = valid.ravel()[geo.texel]
-    distance = distance_to_missing(valid).ravel()[geo.texel[keep]]
-    frame = np.stack([geo.tangent[keep], geo.bitangent[keep], n[keep]], axis=1)  # (M, 3 axes, 3)
-    light_local = np.einsum("mij,mj->mi", frame, l_world[keep])
-    view_local = np.einsum("mij,mj->mi", frame, v_world[keep])
-    sigma = confidence_with_distance(light_local[:, 2], view_local[:, 2], distance, d_max(resolution))
-    spread = normal_spread(xy, n, geo.tangent, geo.bitangent, geo.texel, resolution)[keep]
-    m = int(keep.sum())
-    return ReflectanceSamples(light=light_local.astype(np.float32), view=view_local.astype(np.float32),
-                              reflectance=r[keep].astype(np.float32), sigma=sigma.astype(np.float32),
-                              texel=geo.texel[keep].astype(np.int32), measurement=np.zeros(m, np.int16),
-                              resolution=resolution, measurement_names=(name,),
-                              footprint=spread.astype(np.float32))
-
-
-def capture_samples(capture, geometry, face_model, resolution: int = 512, *, measurements=None,
-                    erosion: int = 1, min_cosine: float = MIN_COSINE, progress: bool = True,
-                    indirect: dict | None = None) -> ReflectanceSamples:
-    """Reflectance samples of every measurement of a capture (sec. 4.3).
-
-    Parameters
-    ----------
-    capture : mifaces.capture.Capture
-        The photographs, their lights and the white target. Each point-light
-        photograph is turned into reflectance by eq. 4 with the scale the
-        white target gives (:meth:`~mifaces.capture.WhiteTarget.reflectance_scale`;
-        without one, π: reflectance relative to the lights' intensities);
-        its saturated pixels give no sample. Directional lights give every
-        texel the same direction and no falloff.
-    geometry : mapping
-        Measurement name -> (V, 3) vertices of ``face_model``'s topology in
-        the capture's world frame (mm): fitted shapes, or the simulator's
-        ground truth.
-    face_model : mifaces.model.MorphableModel
-        Supplies the triangles and the common texture parameterization.
-    resolution : int
-        R of the R × R texture the samples live in (the paper used 1000).
-    measurements : sequence of str, optional
-        The measurements to use (default: all that ``geometry`` has).
-    indirect : mapping, optional
-        Measurement name -> its light bounced off the face (``measurement_samples``' ``indirect``).
-
-    Returns
-    -------
-    ReflectanceSamples
-        All measurements' samples, in the order of ``capture.measurements``,
-        each labelled with the region of the triangle it lies on.
-
-    Raises
-    ------
-    ValueError
-        A measurement without geometry, geometry of another model (wrong
-        vertex count), an uncalibrated light, a light nobody measured (``unknown``).
-    """
-    if resolution < 8:
-        raise ValueError(f"texture resolution must be at least 8, got {resolution}")
-    names = [m.name for m in capture.measurements]
-    wanted = list(measurements) if measurements is not None else [n for n in names if n in geometry]
-    unknown = [n for n in wanted if n not in names]
-    if unknown:
-        raise ValueError(f"no measurement(s) {unknown} in the capture; it has {names}")
-    missing = [n for n in wanted if n not in geometry]
-    if missing:
-        raise ValueError(f"no geometry for measurement(s) {missing}")
-    if not wanted:
-        raise ValueError(f"the geometry names none of the capture's measurements {names}")
-    shape = (face_model.vertex_count, 3)
-    for name in wanted:
-        if np.shape(geometry[name]) != shape:
-            raise ValueError(f"geometry of measurement {name!r} has shape {np.shape(geometry[name])}, but the "
-                             f"face model {face_model.name!r} has {shape[0]} vertices: geometry of another model?")
-        if not np.all(np.isfinite(geometry[name])):
-            raise ValueError(f"geometry of measurement {name!r} has NaN or infinite vertices")
-    raster = rasterize(face_model.uv, face_model.triangles, (resolution, resolution))
-    region_map = texel_regions_of_mesh(face_model.region_map, face_model.uv, face_model.triangles, resolution,
-                                       raster)
-    scale = capture.reflectance_scale()
-    parts = []
-    chosen = [m for m in capture.measurements if m.name in wanted]
-    for m in progress_bar(chosen, desc="reflectance samples", unit="photo", enabled=progress):
-        light = capture.light(m.light)
-        light.require_incidence(f"measurement {m.name!r}")
-        parts.append(measurement_samples(capture.camera_of(m), light, m.image.pixels, geometry[m.name],
-                                         face_model.triangles, face_model.uv, raster, saturated=m.image.saturated,
-                                         scale=scale, erosion=erosion, min_cosine=min_cosine, name=m.name,
-                                         indirect=None if indirect is None else indirect.get(m.name),
-                                         regions=region_map))
-    samples = ReflectanceSamples.concatenate(parts)
-    samples.label = samples.region(region_map).astype(np.uint8)
-    samples.region_map = region_map
-    return samples
+__all__ = ["MIN_COSINE", "D_MAX_AT_1000", "reflectance", "confidence", "d_max", "distance_to_missing",
+           "confidence_with_distance", "unsaturated", "valid_samples", "ReflectanceSamples"]

@@ -11,6 +11,7 @@ import numpy as np
 from .. import brdf as brdf_models
 from ..io.atomic import atomic_path
 from ..lights.emitters import light_emitters
+from ..lights.environment import Environment
 from .blend import blended_parameters, region_maps
 from .materials import ALBEDO, ALBEDO_REF, NORMALS, SPECULAR, region_bsdf, with_textures
 from .meshes import MESH_FOLDER, region_meshes
@@ -74,7 +75,7 @@ class FaceScene:
         """The file of parameter ``name``'s blended texture, relative to the scene's folder."""
         return f"region_maps/{name}.exr"
 
-    def description(self, brdf: dict, camera, light=None, *, envmap=None, envmap_scale: float = 1.0,
+    def description(self, brdf: dict, camera, light=None, *, environment: Environment | None = None,
                     spp: int = 64, max_depth: int = 4, albedo: str = "albedo.exr", normals: str | None = None,
                     specular: str | None = None) -> dict:
         """The Mitsuba scene dict of the face with a per-region BRDF over an
@@ -86,9 +87,11 @@ class FaceScene:
         brdf : dict
             The ``brdf.json`` layout: ``model``, ``options``, ``regions``.
         camera : mifaces.capture.Camera
-        light, envmap, envmap_scale : optional
-            A :class:`~mifaces.capture.Light` and an environment instead of it or besides it
-            (:func:`mifaces.lights.emitters.light_emitters`): a scene holds only the emitters it is given.
+        light : mifaces.capture.Light, optional
+            A point, directional or environment-map light.
+        environment : mifaces.lights.environment.Environment, optional
+            An environment (a map and its scale, or a sky's emitter) instead of ``light`` or besides
+            it (:func:`mifaces.lights.emitters.light_emitters`): a scene holds only the emitters it is given.
         spp, max_depth : int
             Samples per pixel and the path tracer's depth (shadows and
             interreflection).
@@ -112,7 +115,7 @@ class FaceScene:
         """
         brdf = brdf_models.validate_brdf(brdf)
         check_render_size(camera.width, camera.height, spp, "face scene")
-        emitters = light_emitters(light, camera, envmap, envmap_scale)
+        emitters = light_emitters(light, camera, environment)
         scene = {"type": "scene", "integrator": {"type": "path", "max_depth": int(max_depth)},
                  "sensor": mitsuba_sensor(camera, spp),
                  ALBEDO: {"type": "bitmap", "filename": albedo, "raw": True, "filter_type": "bilinear",
@@ -134,14 +137,14 @@ class FaceScene:
         scene.update(emitters)
         return scene
 
-    def scene(self, brdf: dict, albedo: np.ndarray, camera, light=None, *, envmap=None, envmap_scale: float = 1.0,
+    def scene(self, brdf: dict, albedo: np.ndarray, camera, light=None, *, environment: Environment | None = None,
               spp: int = 64, max_depth: int = 4, normals: np.ndarray | None = None,
               specular: np.ndarray | None = None) -> dict:
         """:meth:`description` with the meshes, the ``albedo`` array (R, R, 3), the
         tangent-space ``normals`` texture (R', R', 3, encoded, or None) and the ``specular``
         reflectance map (R', R', 3 or None) in memory in place of their files: a dict for
         ``mi.load_dict``."""
-        scene = self.description(brdf, camera, light, envmap=envmap, envmap_scale=envmap_scale, spp=spp,
+        scene = self.description(brdf, camera, light, environment=environment, spp=spp,
                                  max_depth=max_depth, normals=None if normals is None else NORMALS,
                                  specular=None if specular is None else SPECULAR)
         textures = {}
@@ -155,10 +158,12 @@ class FaceScene:
             scene[key] = part.mesh(with_textures(scene[key]["bsdf"], textures))
         return scene
 
-    def render(self, brdf: dict, albedo: np.ndarray, camera, light=None, *, envmap=None, envmap_scale: float = 1.0,
+    def render(self, brdf: dict, albedo: np.ndarray, camera, light=None, *, environment: Environment | None = None,
                spp: int = 64, seed: int = 0, max_depth: int = 4, normals: np.ndarray | None = None,
                specular: np.ndarray | None = None) -> np.ndarray:
-        """Render :meth:`scene`: (H, W, 3) float32 linear radiance.
+        """Render :meth:`scene`: (H, W, 3) float32 linear radiance, at Monte Carlo ``seed``; the
+        arguments as :meth:`description` takes them (``light`` and/or ``environment``), the maps
+        (``albedo``, ``normals``, ``specular``) as :meth:`scene` does.
 
         Examples
         --------
@@ -176,8 +181,16 @@ class FaceScene:
         ((96, 96, 3), dtype('float32'))
         >>> bool(image.max() > 0)  # lit
         True
+
+        The same face in the generated studio instead of the capture's light:
+
+        >>> from mifaces.lights.environment import Environment, studio_environment
+        >>> studio = scene.render(truth.brdf, truth.albedo, capture.camera,
+        ...                       environment=Environment(studio_environment(32)), spp=4)
+        >>> bool(studio.max() > 0)
+        True
         """
-        scene = self.scene(brdf, albedo, camera, light, envmap=envmap, envmap_scale=envmap_scale, spp=spp,
+        scene = self.scene(brdf, albedo, camera, light, environment=environment, spp=spp,
                            max_depth=max_depth, normals=normals, specular=specular)
         return np.array(mi.render(mi.load_dict(scene), spp=spp, seed=seed), dtype=np.float32)[..., :3]
 
@@ -192,20 +205,21 @@ class FaceScene:
 
 
 def face_scene(brdf: dict, albedo: np.ndarray, face_model, vertices: np.ndarray, camera, light=None, *,
-               envmap=None, envmap_scale: float = 1.0, spp: int = 64, max_depth: int = 4) -> dict:
+               environment: Environment | None = None, spp: int = 64, max_depth: int = 4) -> dict:
     """The Mitsuba scene (a dict for ``mi.load_dict``) of a face with a
     per-region BRDF over an albedo map, as ``camera`` sees it: a
     :class:`FaceScene` of ``face_model`` and ``vertices`` (world, mm) built
     for one scene; see :meth:`FaceScene.description` for the arguments."""
-    return FaceScene(face_model, vertices).scene(brdf, albedo, camera, light, envmap=envmap,
-                                                 envmap_scale=envmap_scale, spp=spp, max_depth=max_depth)
+    return FaceScene(face_model, vertices).scene(brdf, albedo, camera, light, environment=environment, spp=spp,
+                                                 max_depth=max_depth)
 
 
 def render_face(brdf: dict, albedo: np.ndarray, face_model, vertices: np.ndarray, camera, light=None, *,
-                envmap=None, envmap_scale: float = 1.0, spp: int = 64, seed: int = 0, max_depth: int = 4) -> np.ndarray:
+                environment: Environment | None = None, spp: int = 64, seed: int = 0,
+                max_depth: int = 4) -> np.ndarray:
     """Render :func:`face_scene`: (H, W, 3) float32 linear radiance."""
-    return FaceScene(face_model, vertices).render(brdf, albedo, camera, light, envmap=envmap,
-                                                  envmap_scale=envmap_scale, spp=spp, seed=seed, max_depth=max_depth)
+    return FaceScene(face_model, vertices).render(brdf, albedo, camera, light, environment=environment, spp=spp,
+                                                  seed=seed, max_depth=max_depth)
 
 
 __all__ = ["FaceScene", "face_scene", "render_face"]

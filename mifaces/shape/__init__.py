@@ -1,8 +1,9 @@
 """Shape estimation: the morphable model fitted to each photograph (paper sec. 4.2).
 
 :mod:`.result` (what a fit is asked for and returns), :mod:`.targets` (feature
-points, metric distances, the start), :mod:`.energy` (E = E_I + E_F + E_P),
-:mod:`.fitter` (the optimiser), :mod:`.poses` (measurements grouped by pose,
+points, metric distances, the start), :mod:`.energy` (E = E_I + E_F + E_P, of
+:mod:`.sampled_model`'s rows of the model, :mod:`.shading`'s illumination model and
+:mod:`.projection`'s camera), :mod:`.fitter` (the optimiser), :mod:`.poses` (measurements grouped by pose,
 the fits a pose's measurements share), :mod:`.io` (hand-off to the next stage,
 in memory or on disk), :mod:`.fit` (:func:`fit_measurement`, :func:`fit_shape`).
 """

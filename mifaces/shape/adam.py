@@ -11,8 +11,6 @@ the host-side optimiser they replace kept them; E is evaluated in float32 as bef
 
 from __future__ import annotations
 
-import copy
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -39,8 +37,7 @@ class DeviceAdam:
         self.energy = energy
         self._frozen = dr.freeze(self._step, enabled=freeze, warn_after=20,
                                  state_fn=lambda arrays, state, use_image: (
-                                     dr.width(arrays["dr_mean"]), energy.n_samples, dr.width(state["table"]),
-                                     dr.width(state["theta"])))
+                                     *energy.widths(arrays), dr.width(state["table"]), dr.width(state["theta"])))
 
     def start(self, theta: np.ndarray, scale: np.ndarray, nonnegative: np.ndarray, table: np.ndarray):
         """A new stage from ``theta``: moments zero; ``scale`` (units times the stage's mask),
@@ -56,8 +53,7 @@ class DeviceAdam:
 
     def step(self, use_image: bool):
         """One step (queued on the device; nothing is read back)."""
-        arrays = {k: v for k, v in vars(self.energy).items() if k.startswith("dr_")}
-        self.state = self._frozen(arrays, self.state, use_image)
+        self.state = self._frozen(self.energy.arrays(), self.state, use_image)
 
     def read(self):
         """``(theta, terms, failed)``: theta (numpy float64), the packed values of every step of
@@ -68,8 +64,7 @@ class DeviceAdam:
                 int(np.asarray(s["failed"])[0]))
 
     def _step(self, arrays: dict, state: dict, use_image: bool) -> dict:
-        energy_of = copy.copy(self.energy)
-        vars(energy_of).update(arrays)
+        energy_of = self.energy.bound(arrays)
         it, table = state["it"], state["table"]
 
         def column(c):

@@ -3,9 +3,10 @@ Dr.Jit side and differentiable (reverse mode).
 
 * ``E_I``: squared RGB differences between the photograph and a Phong
   rendering of the model in the model's domain -- sample vertices projected
-  into the image, the image sampled bilinearly there, compared with ambient +
-  directed light (cast shadow) + a specular lobe, then colour contrast, gain
-  and offset (Blanz and Vetter 1999, sec. 4); one term per photograph.
+  into the image (:mod:`mifaces.shape.projection`), the image sampled
+  bilinearly there, compared with ambient + directed light (cast shadow) + a
+  specular lobe, then colour contrast, gain and offset (Blanz and Vetter 1999,
+  sec. 4; :mod:`mifaces.shape.shading`); one term per photograph.
 * ``E_F``: squared image distances between the model's feature points and the
   clicked ones.
 * ``E_P``: the Mahalanobis norm of the coefficients (Blanz and Vetter 1999,
@@ -13,9 +14,11 @@ Dr.Jit side and differentiable (reverse mode).
   distances on the identity shape, and for a model without colour model the
   per-vertex albedo's deviation from its mean.
 
-One evaluation (E, its terms and dE/dtheta) is a few kernels, frozen with
-``dr.freeze`` and reused across iterations and photographs (see
-:class:`Energy`); ``validation/bench_shape_kernels.py`` counts them.
+The model enters through the rows a sample set needs
+(:class:`~mifaces.shape.sampled_model.SampledModel`), the camera through
+:mod:`mifaces.shape.projection`, the photographs' lighting through :mod:`mifaces.shape.shading`. One evaluation (E, its terms and dE/dtheta) is a few kernels, frozen
+with ``dr.freeze`` and reused across iterations and photographs (see :class:`Energy`);
+``validation/bench_shape_kernels.py`` counts them.
 """
 
 from __future__ import annotations
@@ -32,28 +35,9 @@ from .layout import Layout
 from .projection import bilinear, moved, project
 from .layout import adjacency as triangle_adjacency
 from .result import Weights
+from .sampled_model import SAMPLES, SampledModel, lanes
+from .shading import directed, lamp, phong, response, towards_light
 from .targets import FRONTAL, blurred
-
-#: Phong exponent of the specular lobe (fixed; its strength is fitted).
-PHONG_EXPONENT = 16.0
-#: The needed vertices' rows on the Dr.Jit side are padded to a multiple of this.
-ROWS = 1024
-#: Rec. 601 luminance weights of the colour-contrast operator (Blanz and Vetter 1999).
-LUMINANCE = (0.3, 0.59, 0.11)
-#: The photographs of one fit, by key: the measurement's photograph under its directed light, the
-#: other photographs of its pose under theirs (:func:`lit_key`), and its diffuse-light companion.
-POINT, DIFFUSE = "point", "diffuse"
-
-
-def lit_key(index: int) -> str:
-    """The key of the ``index``-th photograph (0: the measurement's own) lit by a directed light."""
-    return POINT if index == 0 else f"{POINT}_{index}"
-
-
-def directed(key: str) -> bool:
-    """Whether photograph ``key`` is lit by a directed light (with a cast shadow): all but the
-    diffuse-light companion."""
-    return key != DIFFUSE
 
 
 class Energy:
@@ -74,8 +58,8 @@ class Energy:
     centre : (3,) float
         The rotation centre (model space, mm).
     light_distance : dict
-        Per photograph lit by a directed light (:func:`directed`): the distance (mm) of its lamp
-        from the face centre; inf (or absent) for a directional light.
+        Per photograph lit by a directed light (:func:`~mifaces.shape.shading.directed`): the
+        distance (mm) of its lamp from the face centre; inf (or absent) for a directional light.
     adjacency : (N, D) int array, optional
         The model's vertex-triangle adjacency (:func:`~mifaces.shape.layout.adjacency`), if
         already at hand.
@@ -96,13 +80,14 @@ class Energy:
     One evaluation is a handful of kernels, one per array width (the needed vertices, the
     samples, the feature points, the distances, the prior's coefficients), forward and
     backward. Every parameter is gathered from ``theta`` at the width of the array it enters
-    (:meth:`_param`), never broadcast from a single value, so its gradient is a scatter-add
-    inside the backward kernel instead of a reduction of its own; the sums of E are
-    scatter-adds into one accumulator (:data:`SLOTS`), read back with the gradient once per
+    (:func:`~mifaces.shape.sampled_model.lanes`), never broadcast from a single value, so its
+    gradient is a scatter-add inside the backward kernel instead of a reduction of its own; the sums of E are
+    scatter-adds into one accumulator (:attr:`slots`), read back with the gradient once per
     evaluation. What differs between the photographs of a capture (the number of feature
     points and distances, the lamp's distance) enters as opaque values, so a second
     photograph of the same size reuses the first one's kernels. The Dr.Jit arrays are the
-    attributes named ``dr_*``: the frozen evaluation takes them as its input.
+    attributes named ``dr_*`` and the sample set's (:meth:`arrays`): the frozen evaluation takes
+    them as its input and reads them through :meth:`bound`.
     """
 
     def __init__(self, model, camera, layout: Layout, weights: Weights, images: dict, feature_vertices,
@@ -140,9 +125,10 @@ class Energy:
         if len(distances):  # (an empty array cannot enter a frozen function)
             self.dr_distance_mm = device_array(np.float32, [d for _, _, d in distances])
         self._prior_weights()
+        self.sampled = None  # the sample set (set_samples)
         # the widths are literals of the recorded kernels: a new sample set records anew
         self._frozen = dr.freeze(self._evaluate, enabled=freeze, warn_after=20,
-                                 state_fn=lambda arrays, *args: (dr.width(arrays["dr_mean"]), self.n_samples))
+                                 state_fn=lambda arrays, *args: self.widths(arrays))
 
     def _prior_weights(self):
         """Indices into theta and weights of the quadratic prior: the Mahalanobis norms of the
@@ -159,59 +145,38 @@ class Energy:
 
     # ---- the sample set and the image level ---------------------------------------------------
     def set_samples(self, samples: np.ndarray):
-        """Move the model rows the sample vertices ``samples``, their one-rings, the feature points
-        and the metric distances need to the Dr.Jit side; every sample visible and lit."""
-        m = self.model
-        adj = self.adjacency[samples]  # (S, D)
-        valid = adj >= 0
-        ring_tris = m.triangles[np.where(valid, adj, 0)]  # (S, D, 3)
-        needed = np.unique(np.concatenate([samples, ring_tris[valid].ravel(), self.feature_vertices,
-                                           self.distance_vertices.ravel()]
-                                          + [np.asarray(view[3], np.int64) for view in self.view_features]))
-        local = np.full(m.vertex_count, -1, np.int64)
-        local[needed] = np.arange(len(needed))
-        self.n_samples, self.degree = len(samples), adj.shape[1]
-        rows = (3 * needed[:, None] + np.arange(3)).ravel()
-        sigma = np.sqrt(m.shape_variance).astype(np.float64)
-        columns = [m.shape_basis[rows] * sigma]
-        if m.has_expressions:
-            columns.append(m.expression_basis[rows] * np.sqrt(m.expression_variance))
-        # rows padded with zeros to a multiple of ROWS: the backward kernels' scatter into the
-        # positions' gradient has their number as a literal, the same for most sample draws
-        pad = (-len(needed)) % ROWS
-        basis = np.pad(np.concatenate(columns, axis=1).astype(np.float32), ((0, 3 * pad), (0, 0)))
-        self.n_modes = basis.shape[1]
-        self.dr_mean = device_array(np.float32, np.pad(m.shape_mean[needed], ((0, pad), (0, 0))))
-        columns = np.ascontiguousarray(basis.T)  # one contiguous row per mode: no strided copies
-        self.dr_basis = [device_array(np.float32, columns[k]) for k in range(self.n_modes)]
-        self.dr_sample_local = device_array(np.uint32, local[samples])
-        self.dr_feature_local = device_array(np.uint32, local[self.feature_vertices])
-        self.dr_view_feature_local = [device_array(np.uint32, local[np.asarray(view[3], np.int64)])
-                                      for view in self.view_features]
-        if len(self.distances):
-            self.dr_distance_local = [device_array(np.uint32, local[self.distance_vertices[:, k]])
-                                      for k in range(2)]
-        corners = np.where(valid[..., None], local[ring_tris], 0).astype(np.uint32)  # (S, D, 3)
-        corners = np.ascontiguousarray(corners.transpose(1, 2, 0))  # (D, 3, S): contiguous rows
-        self.dr_corners = [[device_array(np.uint32, corners[j, c]) for c in range(3)]
-                           for j in range(self.degree)]
-        self.dr_slot_valid = [device_array(np.float32, valid[:, j]) for j in range(self.degree)]
-        if m.has_texture:
-            crow = (3 * samples[:, None] + np.arange(3)).ravel()
-            cbasis = (m.color_basis[crow] * np.sqrt(m.color_variance)).astype(np.float32).reshape(len(samples), 3, -1)
-            cmean = m.color_mean[samples].astype(np.float32)
-            self.dr_color_mean = [device_array(np.float32, cmean[:, c]) for c in range(3)]
-            self.dr_color_basis = [[device_array(np.float32, cbasis[:, c, k]) for c in range(3)]
-                                   for k in range(m.color_dim)]
-        self.dr_sample_vertex = device_array(np.uint32, samples)
-        self.dr_inv_samples = dr.opaque(mi.Float, 1.0 / len(samples))
-        ones = np.ones(len(samples), np.float32)
-        self.set_visibility(ones)
+        """The sample vertices ``samples`` of E_I: the model rows they, their one-rings, the feature
+        points and the metric distances need on the Dr.Jit side (:class:`SampledModel`); every
+        sample visible and lit."""
+        vertices = {"features": self.feature_vertices, "distances.0": self.distance_vertices[:, 0],
+                    "distances.1": self.distance_vertices[:, 1],
+                    **{f"view.{i}": view[3] for i, view in enumerate(self.view_features)}}
+        self.sampled = SampledModel(self.model, self.adjacency, samples, vertices)
+        self.set_visibility(np.ones(len(samples), np.float32))
+
+    def arrays(self) -> dict:
+        """The Dr.Jit arrays of E: the attributes named ``dr_*``, and the sample set's
+        (:meth:`SampledModel.arrays`) as ``'sampled'``; the input of a frozen evaluation."""
+        return {**{k: v for k, v in vars(self).items() if k.startswith("dr_")}, "sampled": self.sampled.arrays()}
+
+    def bound(self, arrays: dict) -> Energy:
+        """This energy reading ``arrays`` (:meth:`arrays`' layout) in place of its own: what a frozen
+        function evaluates."""
+        energy = copy.copy(self)
+        vars(energy).update({k: v for k, v in arrays.items() if k != "sampled"})
+        energy.sampled = self.sampled.bound(arrays["sampled"])
+        return energy
+
+    def widths(self, arrays: dict) -> tuple:
+        """What the recorded kernels of :meth:`arrays` hold as literals: the needed rows and the
+        samples (a new sample set records anew)."""
+        return dr.width(arrays["sampled"]["dr_mean"]), self.sampled.n_samples
 
     def set_visibility(self, seen: np.ndarray, lit: dict | None = None, seen_by: dict | None = None):
         """Per sample: seen by the camera (every image but those of :attr:`views`, each seen as
-        ``seen_by`` says), and per photograph with a directed light (:func:`directed`), lit by its
-        lamp (0 or 1; 1 for every sample where ``lit`` or ``seen_by`` lacks it)."""
+        ``seen_by`` says), and per photograph with a directed light
+        (:func:`~mifaces.shape.shading.directed`), lit by its lamp (0 or 1; 1 for every sample where
+        ``lit`` or ``seen_by`` lacks it)."""
         self.dr_visible = device_array(np.float32, seen)
         ones = np.ones(len(seen), np.float32)
         self.dr_visible_by = {key: device_array(np.float32, (seen_by or {}).get(key, ones)) for key in self.views}
@@ -225,16 +190,11 @@ class Energy:
             b = blurred(image, blur * self.scale_px)
             self.dr_images[key] = device_array(np.float32, b)
 
-    # ---- parameters and geometry ---------------------------------------------------------------
-    @staticmethod
-    def _param(theta, i: int, width: int):
-        """``theta[i]`` on ``width`` lanes: its gradient is a scatter-add in the kernel that uses it,
-        not a reduction of its own as a broadcast single value's would be."""
-        return dr.gather(mi.Float, theta, dr.full(mi.UInt32, i, width))
-
+    # ---- parameters and pose -------------------------------------------------------------------
     def _block(self, theta, name: str, width: int):
+        """Parameter block ``name`` of ``theta`` on ``width`` lanes (:func:`~mifaces.shape.sampled_model.lanes`)."""
         s = self.layout[name]
-        return [self._param(theta, i, width) for i in range(s.start, s.stop)]
+        return [lanes(theta, i, width) for i in range(s.start, s.stop)]
 
     def _rotation(self, theta, width: int):
         """Rows of ``R0 R_y R_x R_z`` on ``width`` lanes (row-major 3x3 list)."""
@@ -246,32 +206,10 @@ class Energy:
              [-sy * cr + cy * sp * sr, sy * sr + cy * sp * cr, cy * cp]]
         return [[float(FRONTAL[i, i]) * r[i][j] for j in range(3)] for i in range(3)]
 
-    def positions(self, theta):
-        """Model-space positions of the needed vertices (flat Float ``x0, y0, z0, ...``), with
-        expression; evaluated, as the samples, their rings and the feature points gather from it."""
-        p = self.dr_mean
-        s, width = self.layout["shape"].start, dr.width(self.dr_mean)
-        for k in range(self.n_modes):  # the expression block follows the shape block, as its columns do
-            p = p + self.dr_basis[k] * self._param(theta, s + k, width)
-        dr.eval(p)
-        return p
-
-    def identity_positions(self, theta, end: int):
-        """Model-space positions of the ``end``-th (0, 1) vertices of the metric distances on the
-        identity shape (without expression), as a Vector3f."""
-        s, width, idx = self.layout["shape"].start, len(self.distances), self.dr_distance_local[end]
-        p = []
-        for c in range(3):
-            x = dr.gather(mi.Float, self.dr_mean, 3 * idx + c)
-            for k in range(self.model.shape_dim):
-                x = x + dr.gather(mi.Float, self.dr_basis[k], 3 * idx + c) * self._param(theta, s + k, width)
-            p.append(x)
-        return mi.Vector3f(*p)
-
     def _pose(self, theta, width: int):
         """Rotation, translation and focal-length factor of ``theta`` on ``width`` lanes."""
         return (self._rotation(theta, width), self._block(theta, "translation", width),
-                dr.exp(self._param(theta, self.layout["log_focal"].start, width)))
+                dr.exp(lanes(theta, self.layout["log_focal"].start, width)))
 
     def _to_camera(self, p, R, t):
         """Camera-space coordinates ``R (p - c) + t`` of model-space points ``p`` (3 Floats)."""
@@ -292,8 +230,7 @@ class Energy:
         size = len(theta_np)
         inputs = device_array(np.float32, np.concatenate([theta_np, [feature_weight * self.weights.feature,
                                                                      image_weight]]))
-        arrays = {k: v for k, v in vars(self).items() if k.startswith("dr_")}
-        out = self._frozen(arrays, inputs, image_weight > 0, grad)
+        out = self._frozen(self.arrays(), inputs, image_weight > 0, grad)
         values = np.asarray(out[0], np.float64)
         g = np.asarray(out[1], np.float64)[:size] if grad else None
         return self.terms(values, image_weight > 0), g
@@ -303,7 +240,7 @@ class Energy:
         key -> (sum of weighted squared RGB residuals, sum of weights)."""
         theta = device_array(np.float32, theta_np)
         acc = dr.zeros(mi.Float, len(self.slots))
-        self._image_sums(acc, theta, self.positions(theta))
+        self._image_sums(acc, theta, self.sampled.positions(theta, self.layout["shape"].start))
         sums = np.asarray(acc, np.float64)
         return {key: (sums[self.slots[f"{key}.num"]], sums[self.slots[f"{key}.den"]]) for key in self.image_names}
 
@@ -319,8 +256,7 @@ class Energy:
         """The packed terms (see :meth:`energy`) and, with ``grad``, dE/d(inputs), evaluated, for
         ``inputs``: theta followed by the fading weights ``[feature, image]``; the Dr.Jit arrays
         read from ``arrays`` (the input of the frozen function)."""
-        energy_of = copy.copy(self)
-        vars(energy_of).update(arrays)
+        energy_of = self.bound(arrays)
         if grad:
             dr.enable_grad(inputs)
         fade = [dr.gather(mi.Float, inputs, i) for i in energy_of.dr_fade_index]
@@ -338,7 +274,7 @@ class Energy:
         (``[feature, image]``, single values), and the detached terms packed as ``E, E_I, E_F, E_P, E_D, sum of
         squared feature distances, sum of weighted image residuals, sum of image weights``."""
         acc = dr.zeros(mi.Float, len(self.slots))
-        pos = self.positions(theta)
+        pos = self.sampled.positions(theta, self.layout["shape"].start)
         self._feature_sums(acc, theta, pos)
         self._prior_sums(acc, theta)
         if len(self.distances):
@@ -355,8 +291,8 @@ class Energy:
         # the albedo's squared deviations from its mean, sum |a - mean|^2 = sum |a|^2 - |sum a|^2 / n:
         # both sums accumulate in the samples' kernel (a mean gathered back would split it)
         spread = slot("albedo") - (dr.square(slot("albedo.r")) + dr.square(slot("albedo.g"))
-                                   + dr.square(slot("albedo.b"))) * self.dr_inv_samples
-        e_p = slot("prior") + e_d + spread * (w.albedo * self.dr_inv_samples)
+                                   + dr.square(slot("albedo.b"))) * self.sampled.dr_inv_samples
+        e_p = slot("prior") + e_d + spread * (w.albedo * self.sampled.dr_inv_samples)
         e_i, num, den = mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)
         if use_image:
             for key in self.image_names:
@@ -375,14 +311,14 @@ class Energy:
         ones into slot ``features`` (E_F is their mean over ``feature_sigma``^2)."""
         width = len(self.feature_vertices)
         R, t, focal = self._pose(theta, width)
-        fp = dr.gather(mi.Vector3f, pos, self.dr_feature_local)
+        fp = dr.gather(mi.Vector3f, pos, self.sampled.dr_local["features"])
         fu, fv = project(self._to_camera(fp, R, t), focal, self.camera)
         f_sq = (dr.square(fu - self.dr_feature_u) + dr.square(fv - self.dr_feature_v)) / (self.scale_px ** 2)
         dr.scatter_add(acc, f_sq, dr.full(mi.UInt32, self.slots["features"], width))
         for i, (cam, A, b, vertices, _) in enumerate(self.view_features):  # other cameras' clicks, their pixels
             width = len(vertices)
             R, t, _ = self._pose(theta, width)
-            fp = dr.gather(mi.Vector3f, pos, self.dr_view_feature_local[i])
+            fp = dr.gather(mi.Vector3f, pos, self.sampled.dr_local[f"view.{i}"])
             fu, fv = project(moved(self._to_camera(fp, R, t), A, b), 1.0, cam)
             f_sq = (dr.square(fu - self.dr_view_feature_u[i]) + dr.square(fv - self.dr_view_feature_v[i])) / (
                 self.scale_px ** 2)
@@ -398,17 +334,19 @@ class Energy:
         """The metric distances between feature points (the capture's tape measurements, mm),
         measured on the face at rest (the identity shape, without expression): squared errors
         into slot ``distances``."""
-        length = dr.norm(self.identity_positions(theta, 0) - self.identity_positions(theta, 1))
+        start = self.layout["shape"].start
+        a, b = (self.sampled.identity_positions(theta, start, f"distances.{k}") for k in range(2))
+        length = dr.norm(a - b)
         dr.scatter_add(acc, dr.square(length - self.dr_distance_mm),
                        dr.full(mi.UInt32, self.slots["distances"], len(self.distances)))
 
     def _image_sums(self, acc, theta, pos):
         """E_I's sums per photograph (weighted squared residuals and weights) and, for a model
         without colour model, the sums of the albedo prior (see :meth:`energy`)."""
-        width = self.n_samples
+        width = self.sampled.n_samples
         R, t, focal = self._pose(theta, width)
-        sp = dr.gather(mi.Vector3f, pos, self.dr_sample_local)
-        n = self._normals(pos)
+        sp = dr.gather(mi.Vector3f, pos, self.sampled.dr_local[SAMPLES])
+        n = self.sampled.normals(pos)
         pc = self._to_camera(sp, R, t)
         nc = mi.Vector3f(*[R[i][0] * n[0] + R[i][1] * n[1] + R[i][2] * n[2] for i in range(3)])
         pcv = mi.Vector3f(*pc)
@@ -432,68 +370,36 @@ class Energy:
             dr.scatter_add(acc, weight * residual, dr.full(mi.UInt32, self.slots[f"{key}.num"], width))
             dr.scatter_add(acc, weight, dr.full(mi.UInt32, self.slots[f"{key}.den"], width))
 
-    def _normals(self, pos):
-        """Model-space unit normals of the samples from their one-rings (area weighted)."""
-        n = mi.Vector3f(0.0)
-        for j in range(self.degree):
-            a, b, c = (dr.gather(mi.Vector3f, pos, self.dr_corners[j][k]) for k in range(3))
-            n = n + dr.cross(b - a, c - a) * self.dr_slot_valid[j]
-        return dr.normalize(n)
-
     def _albedo(self, acc, theta):
-        """The samples' albedo: the colour model's (texture coefficients beta), or the fitted
-        per-vertex albedo, whose squared norms and channel sums go into slots ``albedo`` and
-        ``albedo.r/g/b`` (the prior on its deviations from its mean)."""
-        width = self.n_samples
-        if self.model.has_texture:
-            s = self.layout["color"].start
-            alb = list(self.dr_color_mean)
-            for k in range(self.model.color_dim):
-                beta = self._param(theta, s + k, width)
-                alb = [alb[c] + self.dr_color_basis[k][c] * beta for c in range(3)]
-            return mi.Vector3f(*alb)
-        s = self.layout["albedo"].start
-        albedo = mi.Vector3f(*[dr.gather(mi.Float, theta, 3 * self.dr_sample_vertex + (s + k)) for k in range(3)])
-        dr.scatter_add(acc, dr.squared_norm(albedo), dr.full(mi.UInt32, self.slots["albedo"], width))
-        for k, channel in enumerate("rgb"):
-            dr.scatter_add(acc, albedo[k], dr.full(mi.UInt32, self.slots[f"albedo.{channel}"], width))
+        """The samples' albedo (:meth:`SampledModel.albedo`); a fitted per-vertex albedo's squared
+        norms and channel sums go into slots ``albedo`` and ``albedo.r/g/b`` (the prior on its
+        deviations from its mean)."""
+        width, has_texture = self.sampled.n_samples, self.model.has_texture
+        albedo = self.sampled.albedo(theta, self.layout["color" if has_texture else "albedo"].start)
+        if not has_texture:
+            dr.scatter_add(acc, dr.squared_norm(albedo), dr.full(mi.UInt32, self.slots["albedo"], width))
+            for k, channel in enumerate("rgb"):
+                dr.scatter_add(acc, albedo[k], dr.full(mi.UInt32, self.slots[f"albedo.{channel}"], width))
         return albedo
 
     def _shade(self, theta, key: str, albedo, nc, view, pcv, t):
-        """Phong colour of the samples in photograph ``key`` (Blanz and Vetter 1999, sec. 4): ambient
-        + directed light with cast shadow + specular lobe, then colour contrast, gain and offset."""
-        L, width = self.layout, self.n_samples
+        """The samples' value in photograph ``key``: its lighting gathered from ``theta`` and rendered
+        as :mod:`mifaces.shape.shading` says (Blanz and Vetter 1999, sec. 4), its lamp at its
+        calibrated distance where it has one."""
+        L, width = self.layout, self.sampled.n_samples
 
         def block(name):
             return self._block(theta, f"{key}.{name}", width)
 
-        el, az = block("light_angles")
-        ld = mi.Vector3f(dr.cos(el) * dr.sin(az), -dr.sin(el), -dr.cos(el) * dr.cos(az))
-        lc = mi.Color3f(*block("light_color"))
+        ld, lc = towards_light(*block("light_angles")), mi.Color3f(*block("light_color"))
         if math.isfinite(self.light_distance.get(key, math.inf)):
-            # the lamp at its calibrated distance in the fitted direction: per-point
-            # direction and inverse-square falloff (relative to the face centre)
-            distance = self.dr_light_distance[key]
-            to_light = mi.Vector3f(*t) + distance * ld - pcv
-            dist2 = dr.squared_norm(to_light)
-            ld = to_light / dr.sqrt(dist2)
-            lc = lc * (dr.square(distance) / dist2)
+            ld, lc = lamp(ld, lc, self.dr_light_distance[key], t, pcv)
         amb = mi.Color3f(*block("ambient"))
-        ks = self._param(theta, L[f"{key}.specular"].start, width)
-        contrast = self._param(theta, L[f"{key}.contrast"].start, width)
-        gain = mi.Color3f(*block("gain"))
-        offset = mi.Color3f(*block("offset"))
+        ks = lanes(theta, L[f"{key}.specular"].start, width)
+        contrast = lanes(theta, L[f"{key}.contrast"].start, width)
+        gain, offset = mi.Color3f(*block("gain")), mi.Color3f(*block("offset"))
         grey = getattr(self, "greyscale", False)  # issue 12: set by fit.fit_measurement for grey photographs
         if grey:  # one light colour, ambient, gain and offset: channel 0 of each block, so none can tint
             lc, amb, gain, offset = (mi.Color3f(c.x) for c in (lc, amb, gain, offset))
-        shadow = self.dr_shadow.get(key, 1.0)
-        ndl = dr.dot(nc, ld)
-        refl = 2 * ndl * nc - ld
-        spec = ks * dr.power(dr.maximum(dr.dot(refl, view), 0.0), PHONG_EXPONENT)
-        lit = shadow * dr.select(ndl > 0, 1.0, 0.0)
-        colour = albedo * (amb + lc * dr.maximum(ndl, 0.0) * shadow) + lc * spec * lit
-        lum = LUMINANCE[0] * colour.x + LUMINANCE[1] * colour.y + LUMINANCE[2] * colour.z
-        if grey:  # the photograph's grey value against the rendering's luminance (contrast plays no part)
-            return mi.Color3f(gain.x * lum + offset.x)
-        colour = lum + contrast * (colour - lum)
-        return gain * colour + offset
+        colour = phong(albedo, nc, view, ld, lc, amb, ks, self.dr_shadow.get(key, 1.0))
+        return response(colour, contrast, gain, offset, grey)

@@ -16,12 +16,12 @@ from ..capture import load_capture
 from ..model import load_model
 from ..runtime.progress import progress as progress_bar
 from ..runtime.status import CONVERGED, DIVERGED, NOT_CONVERGED
-from .energy import DIFFUSE, POINT, directed, lit_key
+from .shading import DIFFUSE, POINT, directed, lit_key
 from .fitter import Fitter
 from .io import model_source, write_fit, write_index
 from .poses import companions, one_face, own_lights, pose_groups, seen_by, shared_fit
 from .result import (FEATURE_NOISE, MAX_FEATURE_ERROR, MAX_IMAGE_RMS, ShapeFit, ShapeFitError, ShapeOptions,
-                     ShapeSchedule, Weights)
+                     ShapeSchedule)
 from .targets import (eye_distance_px, feature_targets, light_angles, normalised, reference_measurement,
                       rotation_centre)
 
@@ -50,9 +50,8 @@ def estimated_quantities(camera, distances, fit_focal: bool = True, views: int =
 
 
 def fit_measurement(measurement, camera, model="builtin", light=None, *, schedule: ShapeSchedule | None = None,
-                    weights: Weights | None = None, options: ShapeOptions | None = None, initial: dict | None = None,
-                    fixed=(), distances=(), companions=(), progress=True,
-                    camera_of=None) -> ShapeFit:
+                    options: ShapeOptions | None = None, initial: dict | None = None, distances=(), companions=(),
+                    progress=True) -> ShapeFit:
     """Fit the morphable model to one measurement (paper sec. 4.2), from the mean face.
 
     Parameters
@@ -62,7 +61,7 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
         rendering's luminance against the photograph's value, with one light colour,
         ambient, gain and offset (no tint), the model's albedo still coloured.
     camera : mifaces.capture.Camera
-        The camera; its focal length is the start and prior of the fitted one, with
+        The camera; its focal length is the start and prior of the fitted one, with the options'
         :attr:`Weights.focal` for a calibrated camera and :attr:`Weights.focal_uncalibrated`
         where ``camera.calibrated`` is False (the principal point stays where it is: one
         view cannot tell it from the face's position).
@@ -71,10 +70,10 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
     light : mifaces.capture.Light, optional
         The point image's light: a directional light's direction (camera frame) or a point
         light's position starts the directed light.
-    schedule, weights, options : optional
-        :class:`ShapeSchedule`, :class:`Weights` and :class:`ShapeOptions` (the images used,
-        the focal length fitted or not, the seed, the convergence limits, Adam's steps);
-        defaults as documented there.
+    schedule, options : optional
+        :class:`ShapeSchedule` and :class:`ShapeOptions` (the images used, the focal length fitted
+        or not, the seed, the convergence limits, Adam's steps, the :class:`Weights` of E's terms,
+        the parameter blocks held); defaults as documented there.
     initial : dict, optional
         Start values of parameter blocks by name, overriding the defaults:
         ``'rotation'`` (yaw, pitch, roll in radians), ``'translation'`` (camera-space
@@ -82,22 +81,20 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
         ``'shape'``, ``'expression'``, ``'color'`` (texture coefficients: the paper starts every fit
         from the texture of a frontal, frontally lit view), and per image (``'point.'``/``'diffuse.'``)
         ``light_angles``, ``light_color``, ``ambient``, ``specular``, ``contrast``, ``gain``, ``offset``.
-    fixed : iterable of str
-        Parameter blocks held at their start values.
+        The blocks :attr:`ShapeOptions.fixed` names are held at these start values.
     distances : iterable of mifaces.capture.Distance
         Metric distances between feature points (mm) that fix the face's scale
         (``Capture.distances``); a term of E_P with :attr:`Weights.distance_sigma`.
         Without them the scale comes from the prior (the mean face's size).
-    companions : sequence of (Measurement, Light or None)
+    companions : sequence of (Measurement, Light or None, Camera)
         Other photographs of the same pose under other directed lights, fitted jointly: one
         geometry, each photograph with its own light, ambient, gain and offset (and cast
-        shadow), as image ``point_1``, ``point_2``, ... (:func:`~mifaces.shape.energy.lit_key`).
-        Their lights start from their calibration where the capture has one.
-    camera_of : callable, optional
-        A companion measurement's camera (:meth:`~mifaces.capture.Capture.camera_of`), where the
-        shot's photographs come from several calibrated cameras: a companion taken by another
-        camera is compared with the face seen through that camera, and its feature points join
-        E_F in its pixels, which fixes the face's depth. Default: every companion by ``camera``.
+        shadow), as image ``point_1``, ``point_2``, ... (:func:`~mifaces.shape.shading.lit_key`).
+        Their lights start from their calibration where the capture has one. Each comes with the
+        camera that took it (:meth:`~mifaces.capture.Capture.camera_of`;
+        :func:`~mifaces.shape.poses.companions` gives them so): a companion taken by another
+        calibrated camera of the shot than ``camera`` is compared with the face seen through that
+        camera, and its feature points join E_F in its pixels, which fixes the face's depth.
     progress : bool or progress bar
         Show a progress bar (or update the one given).
 
@@ -109,8 +106,8 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
     model = load_model(model)
     model = model.truncated(model.fit_shape_modes)
     schedule = schedule or ShapeSchedule()
-    weights = weights or Weights()
     options = options or ShapeOptions()
+    weights = options.weights
     if not getattr(camera, "calibrated", True):
         weights = replace(weights, focal=weights.focal_uncalibrated)
     targets = feature_targets(measurement, model)
@@ -120,9 +117,8 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
     if options.use_diffuse and measurement.diffuse is not None:
         used[DIFFUSE] = measurement.diffuse
     views = {}
-    for index, (companion, companion_light) in enumerate(companions, start=1):
+    for index, (companion, companion_light, view) in enumerate(companions, start=1):
         used[lit_key(index)], lights[lit_key(index)] = companion.image, companion_light
-        view = camera_of(companion) if camera_of is not None else camera
         if view is not camera:
             views[lit_key(index)] = (view, *feature_targets(companion, model)[1:])
     images = {key: image.pixels for key, image in used.items()}
@@ -141,10 +137,11 @@ def fit_measurement(measurement, camera, model="builtin", light=None, *, schedul
             initial.setdefault(f"{key}.light_angles", light_angles(camera.rotation @ start))
         elif source.held_position is not None:
             positions[key] = source.held_position
+    fixed = options.fixed
     if not options.ambient:  # no light but the photographs' own: each directed light's ambient held at zero
         held = [f"{key}.ambient" for key in images if directed(key)]
         initial.update(dict.fromkeys(held, 0.0))
-        fixed = tuple(fixed) + tuple(held)
+        fixed = fixed + tuple(held)
     fitter = Fitter(model, camera, images, targets, weights, schedule, np.random.default_rng(options.seed),
                     light_world=positions, fit_focal=options.fit_focal and not views,
                     initial=initial, fixed=fixed, distances=distances,
@@ -207,12 +204,9 @@ def _status(theta, terms: dict, history: list, limit_px: float, max_image_rms: f
 
 
 def fit_shape(capture, model="builtin", measurements=None, out=None,
-              iterations: float | ShapeSchedule | None = None, progress: bool = True, weights: Weights | None = None,
-              use_diffuse: bool = True, fit_focal: bool = True, seed: int = 0,
-              max_feature_error: float = MAX_FEATURE_ERROR, fixed=(), feature_noise: float = FEATURE_NOISE,
-              shape_modes: int | None = None, one_identity: bool = True,
-              max_image_rms: float = MAX_IMAGE_RMS,
-              facing_min: float = ShapeOptions.facing_min) -> list[ShapeFit]:
+              iterations: float | ShapeSchedule | None = None, progress: bool = True, *,
+              options: ShapeOptions | None = None, shape_modes: int | None = None,
+              one_identity: bool = True) -> list[ShapeFit]:
     """Fit the morphable model to every pose of a capture, independently (paper sec. 4.2).
 
     Measurements sharing a ``pose`` label (one pose of the subject photographed
@@ -248,21 +242,14 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
         A :class:`ShapeSchedule`, or a factor on the default schedule's iteration counts.
     progress : bool
         Show progress (:func:`mifaces.runtime.progress.progress`).
-    weights : Weights, optional
-    use_diffuse : bool
-        Use the companion diffuse-light image where present.
-    fit_focal : bool
-        Optimise the focal length.
-    seed : int
-    max_feature_error, feature_noise : float
-        The convergence limit of the feature points (see :func:`feature_limit`).
-    max_image_rms : float
-        The convergence limit of the photometric residual (:func:`fit_measurement`).
-    facing_min : float
-        Samples the camera sees at a cosine below this are left out of the image term
-        (:attr:`ShapeOptions.facing_min`).
-    fixed : iterable of str
-        Parameter blocks held at their start values (see :func:`fit_measurement`).
+    options : ShapeOptions, optional
+        How every fit runs and when it has converged, as :func:`fit_measurement` takes them: the
+        diffuse-light image used or not (``use_diffuse``), the focal length fitted or not
+        (``fit_focal``), the seed, the convergence limits of the feature points (``max_feature_error``,
+        ``feature_noise``: :func:`feature_limit`) and of the photometric residual
+        (``max_image_rms``), the cut of E_I (``facing_min``), the :class:`Weights` and the parameter
+        blocks held (``fixed``). Default ``ShapeOptions()``. Its ``ambient`` is the capture's
+        (``Capture.ambient_light``), whatever it says.
     shape_modes : int, optional
         Identity modes fitted, the leading ones (default: the model's
         :attr:`~mifaces.model.MorphableModel.fit_shape_modes`, 50 of the built-in's 100).
@@ -311,16 +298,13 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     joint = one_identity and len(groups) > 1
     bar = progress_bar(total=len(todo) + (len(groups) if joint else 0), desc="fit-shape", unit="image",
                        enabled=bool(progress))
-    shared = dict(weights=weights, distances=capture.distances, progress=progress,
-                  options=ShapeOptions(use_diffuse=use_diffuse, fit_focal=fit_focal, seed=seed,
-                                       max_feature_error=max_feature_error, feature_noise=feature_noise,
-                                       max_image_rms=max_image_rms, ambient=capture.ambient_light,
-                                       facing_min=facing_min))
+    options = replace(options or ShapeOptions(), ambient=capture.ambient_light)
     for leader, *others in groups:
         light = capture.light(leader.light) if leader.light else None
         fit = fit_measurement(leader, capture.camera_of(leader), model, light=light, schedule=schedule,
-                              initial=None if initial_color is None else {"color": initial_color}, fixed=fixed,
-                              companions=companions(capture, others, leader), camera_of=capture.camera_of, **shared)
+                              options=options, initial=None if initial_color is None else {"color": initial_color},
+                              distances=capture.distances, companions=companions(capture, others, leader),
+                              progress=progress)
         if leader.name == reference and fit.converged:
             initial_color = fit.color
         leaders[leader.name] = fit
@@ -328,15 +312,15 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
         bar.set_postfix(last=leader.name, status=fit.status)
     identity = one_face(list(leaders.values())) if joint else None
     if identity is not None:  # every photograph again, its pose, expression and lighting on the one face
-        second = schedule.scaled_by(SECOND_PASS)
+        second, held = schedule.scaled_by(SECOND_PASS), replace(options, fixed=options.fixed + ("shape",))
         for leader, *others in groups:
             first = leaders[leader.name]
             light = capture.light(leader.light) if leader.light else None
             together = companions(capture, others, leader)
             fit = fit_measurement(leader, capture.camera_of(leader), model, light=light, schedule=second,
-                                  fixed=tuple(fixed) + ("shape",),
+                                  options=held,
                                   initial=dict(_start_from(first, model, leader, together), shape=identity),
-                                  companions=together, camera_of=capture.camera_of, **shared)
+                                  distances=capture.distances, companions=together, progress=progress)
             leaders[leader.name] = replace(fit, seconds=fit.seconds + first.seconds,
                                            message=(fit.message + "; " if fit.message else "")
                                            + f"identity shared by {len(groups)} poses")
@@ -344,9 +328,9 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
             bar.set_postfix(last=leader.name, status=fit.status)
     for leader, *others in groups:
         fit = leaders[leader.name]
-        keys = {m.name: lit_key(i) for i, (m, _) in enumerate(companions(capture, others, leader), start=1)}
-        for fit_m in [own_lights(fit)] + [_member_fit(fit, m, capture, model, schedule, shared, keys.get(m.name))
-                                          for m in others]:
+        keys = {m.name: lit_key(i) for i, (m, *_) in enumerate(companions(capture, others, leader), start=1)}
+        for fit_m in [own_lights(fit)] + [_member_fit(fit, m, capture, model, schedule, options, progress,
+                                                      keys.get(m.name)) for m in others]:
             fits[fit_m.measurement] = fit_m
             if out is not None:
                 write_fit(out, fit_m, model)
@@ -357,32 +341,32 @@ def fit_shape(capture, model="builtin", measurements=None, out=None,
     return result
 
 
-def _member_fit(fit: ShapeFit, measurement, capture, model, schedule: ShapeSchedule, shared: dict,
-                key: str | None = None) -> ShapeFit:
+def _member_fit(fit: ShapeFit, measurement, capture, model, schedule: ShapeSchedule, options: ShapeOptions,
+                progress, key: str | None = None) -> ShapeFit:
     """The fit of a pose group's ``measurement`` on its leader's ``fit``: with the light fitted for it
     where it was the joint fit's photograph ``key``; its own light fitted on the shared face where the
-    capture does not know it (:func:`fit_light`); else :func:`~mifaces.shape.poses.shared_fit`.
-    ``shared``: :func:`fit_measurement`'s ``weights``, ``distances``, ``progress`` and ``options``."""
+    capture does not know it (:func:`fit_light`, with ``options`` and ``progress``); else
+    :func:`~mifaces.shape.poses.shared_fit`."""
     light = capture.light(measurement.light) if measurement.light else None
     leader, own = capture.camera_of(fit.measurement), capture.camera_of(measurement)
     if own is not leader:  # another camera of the shot: the face seen from there
         return seen_by(shared_fit(fit, measurement, capture, key), leader, own)
     if key is not None or light is None or not light.fitted_on_face or not fit.converged:
         return shared_fit(fit, measurement, capture, key)
-    return fit_light(fit, measurement, own, model, light, schedule, **shared)
+    return fit_light(fit, measurement, own, model, light, schedule, options=options, distances=capture.distances,
+                     progress=progress)
 
 
 def fit_light(fit: ShapeFit, measurement, camera, model, light, schedule: ShapeSchedule | None = None, *,
-              weights: Weights | None = None, options: ShapeOptions | None = None, distances=(),
-              progress=True) -> ShapeFit:
+              options: ShapeOptions | None = None, distances=(), progress=True) -> ShapeFit:
     """The lighting of ``measurement``'s photograph on the face of ``fit`` (same pose): the
     directed light's angles, colour, ambient, specular strength, gain and offset of the
     photograph fitted by the shape fit's energy and optimiser (:func:`fit_measurement`), with
     every block of the geometry and texture held (:data:`GEOMETRY_BLOCKS`) at ``fit``'s values,
     the photograph alone (not its companion). The light starts from ``light.guess`` (world frame)
     where stated, else frontal; the cast shadows follow the light as it moves (ray cast on the
-    held face every ``visibility_interval`` steps). ``weights``, ``options`` (but its
-    ``use_diffuse``), ``distances`` and ``progress`` as :func:`fit_measurement` takes them.
+    held face every ``visibility_interval`` steps). ``options`` (but its ``use_diffuse`` and
+    ``fixed``), ``distances`` and ``progress`` as :func:`fit_measurement` takes them.
 
     Returns
     -------
@@ -399,9 +383,9 @@ def fit_light(fit: ShapeFit, measurement, camera, model, light, schedule: ShapeS
     schedule = schedule or ShapeSchedule()
     schedule = replace(schedule, pose_iterations=1)  # the feature points do not move: the face is held
     fixed = tuple(b for b in GEOMETRY_BLOCKS if b != ("albedo" if model.has_texture else "color"))
-    result = fit_measurement(measurement, camera, model, light, schedule=schedule, weights=weights,
-                             options=replace(options or ShapeOptions(), use_diffuse=False), initial=start,
-                             fixed=fixed, distances=distances, progress=progress)
+    result = fit_measurement(measurement, camera, model, light, schedule=schedule,
+                             options=replace(options or ShapeOptions(), use_diffuse=False, fixed=fixed),
+                             initial=start, distances=distances, progress=progress)
     light_fit = f"light fitted on the face of {fit.measurement!r} (same pose): {result.status}" + \
         (f" ({result.message})" if result.message else "")
     return replace(fit, measurement=measurement.name, light=result.light, loss=result.loss,
@@ -414,7 +398,7 @@ def _start_from(fit: ShapeFit, model, measurement, companions=()) -> dict:
     (and its ``companions``): its pose, expression, albedo or colour, lighting (gain and offset back
     in the normalised photograph's units the fit works in: :func:`~mifaces.shape.targets.normalised`)."""
     photographs = {POINT: measurement.image, DIFFUSE: measurement.diffuse}
-    photographs.update({lit_key(i): m.image for i, (m, _) in enumerate(companions, start=1)})
+    photographs.update({lit_key(i): m.image for i, (m, *_) in enumerate(companions, start=1)})
     start = {"rotation": np.radians(fit.yaw_pitch_roll),
              "translation": fit.translation + fit.rotation @ rotation_centre(model)}
     if len(fit.expression):

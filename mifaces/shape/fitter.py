@@ -21,7 +21,8 @@ from ..model.geometry import rotation_matrix
 from ..model.mesh import mitsuba_mesh
 from ..runtime.status import DIVERGED, NOT_CONVERGED
 from .adam import COLUMNS, DeviceAdam
-from .energy import POINT, Energy, directed
+from .energy import Energy
+from .shading import POINT, directed
 from .layout import Layout, adjacency
 from .result import ShapeFit, ShapeOptions, ShapeSchedule, Weights
 from .targets import (FRONTAL, light_direction, metric_distances, normalised, rotation_centre, start_light,
@@ -125,7 +126,7 @@ class Fitter:
                                                 self.centre, view_features) if view_features else None
         self.start_translation = triangulated if triangulated is not None else start_translation(
             model, camera, self.feature_vertices, self.feature_pixels, self.centre)
-        #: per photograph with a directed light (:func:`~mifaces.shape.energy.directed`): its start
+        #: per photograph with a directed light (:func:`~mifaces.shape.shading.directed`): its start
         #: angles and its lamp's distance (mm) from the face centre, infinite (a directional light)
         #: unless the capture's calibration gives the lamp's position
         if light_world is not None and not isinstance(light_world, dict):

@@ -12,7 +12,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..capture.camera import relative_pose
-from .energy import DIFFUSE, POINT
+from .shading import DIFFUSE, POINT
 from .result import ShapeFit
 from .targets import FRONTAL, light_direction, reference_measurement, start_light_angles
 
@@ -71,12 +71,13 @@ def companions(capture, others, leader=None) -> list:
     """The photographs of a pose fitted with its ``leader``: every one another camera took (the
     shot's views, which fix the face's depth), then those whose light the capture gives (an unknown
     light is fitted afterwards on the pose's face, :func:`~mifaces.shape.fit.fit_light`),
-    :data:`JOINT_PHOTOGRAPHS` at most with the leader, in the capture's order, each with its light."""
+    :data:`JOINT_PHOTOGRAPHS` at most with the leader, in the capture's order, each with its light
+    and its camera (:meth:`~mifaces.capture.Capture.camera_of`): ``(measurement, light, camera)``."""
     camera = None if leader is None else leader.camera
-    given = [(m, capture.light(m.light) if m.light else None) for m in others]
-    views = [(m, light) for m, light in given if camera is not None and m.camera != camera]
-    seen = {m.name for m, _ in views}
-    lit = [(m, light) for m, light in given
+    given = [(m, capture.light(m.light) if m.light else None, capture.camera_of(m)) for m in others]
+    views = [photograph for photograph in given if camera is not None and photograph[0].camera != camera]
+    seen = {m.name for m, *_ in views}
+    lit = [(m, light, view) for m, light, view in given
            if m.name not in seen and (light is None or not light.direction_fitted)]
     return (views + lit)[:JOINT_PHOTOGRAPHS - 1]
 
@@ -103,7 +104,7 @@ def own_lights(fit: ShapeFit) -> ShapeFit:
 def shared_fit(fit: ShapeFit, measurement, capture, key: str | None = None) -> ShapeFit:
     """The fit of ``measurement`` that shares ``fit``'s geometry, pose and texture (same pose),
     0 iterations, 0 seconds. Its light is the one fitted for it where ``measurement`` was the
-    joint fit's photograph ``key`` (:func:`~mifaces.shape.energy.lit_key`); otherwise only the
+    joint fit's photograph ``key`` (:func:`~mifaces.shape.shading.lit_key`); otherwise only the
     capture's light direction, in camera space, where known."""
     light = {}
     fitted = (fit.light or {}).get(key) if key else None

@@ -1,12 +1,15 @@
 """The camera geometry of the shape fit's energy on the Dr.Jit side (:mod:`mifaces.shape.energy`):
-points moved into another camera's frame, projected through a camera's lens (OpenCV's model), and
-a photograph read bilinearly where they land."""
+points moved into another camera's frame, projected through a camera's lens (OpenCV's model, the
+distortion :func:`mifaces.capture.camera.distorted`, the numpy camera's own), and a photograph read
+bilinearly where they land."""
 
 from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+
+from ..capture.camera import distorted
 
 
 def moved(pc, A, b):
@@ -17,17 +20,11 @@ def moved(pc, A, b):
 
 def project(pc, focal, cam):
     """Pixel coordinates of camera-space points ``pc`` (3 Floats) in camera ``cam`` (OpenCV model with
-    distortion), its focal lengths times ``focal``."""
+    distortion, :func:`~mifaces.capture.camera.distorted`), its focal lengths times ``focal``."""
     z = dr.maximum(pc[2], 1.0)
     x, y = pc[0] / z, pc[1] / z
     if np.any(cam.distortion):
-        d = np.zeros(8)
-        d[:len(cam.distortion)] = cam.distortion
-        k1, k2, p1, p2, k3, k4, k5, k6 = (float(v) for v in d)
-        r2 = x * x + y * y
-        radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-        x, y = (x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
-                y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
+        x, y = distorted(x, y, cam.distortion_coefficients)
     return focal * cam.fx * x + cam.cx, focal * cam.fy * y + cam.cy
 
 

@@ -5,10 +5,12 @@ one measurement."""
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..options.fields import check, option
 from ..runtime.status import CONVERGED
 
 #: Default convergence limit of the feature points: RMS distance from their targets as a fraction of
@@ -97,10 +99,21 @@ class Weights:
 class ShapeOptions:
     """How one shape fit runs and when it has converged (paper sec. 4.2), the choices that travel
     unchanged from :func:`~mifaces.shape.fit.fit_shape` to every
-    :func:`~mifaces.shape.fit.fit_measurement`.
+    :func:`~mifaces.shape.fit.fit_measurement`. Validated on construction: a number out of its
+    range raises a ``ValueError`` naming the field.
 
     Attributes
     ----------
+    weights : Weights
+        The weights of E's terms (:class:`Weights`). A fit on an uncalibrated camera
+        (``Camera.calibrated`` False) puts :attr:`Weights.focal_uncalibrated` in place of
+        :attr:`Weights.focal`.
+    fixed : tuple of str
+        Parameter blocks held at their start values (:func:`~mifaces.shape.fit.fit_measurement`'s
+        ``initial``, or the defaults): ``'rotation'``, ``'translation'``, ``'log_focal'``,
+        ``'shape'``, ``'expression'``, ``'color'`` or ``'albedo'``, and per photograph
+        ``'<key>.<block>'`` (``'point.ambient'``); an unknown name raises a ``ValueError`` when the
+        fit starts. A list is taken as a tuple.
     use_diffuse, use_point : bool
         Use the companion diffuse-light image / the point-light image in E_I.
     fit_focal : bool
@@ -138,14 +151,27 @@ class ShapeOptions:
     use_diffuse: bool = True
     use_point: bool = True
     fit_focal: bool = True
-    seed: int = 0
-    max_feature_error: float = MAX_FEATURE_ERROR
-    feature_noise: float = FEATURE_NOISE
-    max_image_rms: float = MAX_IMAGE_RMS
+    seed: int = option(0, bounds=(0, None))
+    max_feature_error: float = option(MAX_FEATURE_ERROR, bounds=(0.0, None))
+    feature_noise: float = option(FEATURE_NOISE, bounds=(0.0, None))
+    max_image_rms: float = option(MAX_IMAGE_RMS, bounds=(0.0, None))
     lr: tuple = (0.1, 0.01)
-    visibility_interval: int = 50
+    visibility_interval: int = option(50, bounds=(1, None))
     ambient: bool = True
-    facing_min: float = 0.0
+    facing_min: float = option(0.0, bounds=(-1.0, 1.0))
+    weights: Weights = field(default_factory=Weights)
+    fixed: tuple = ()
+
+    def __post_init__(self):
+        check(self)
+        if not isinstance(self.weights, Weights):
+            raise ValueError(f"ShapeOptions.weights must be a Weights, got {self.weights!r}")
+        if (len(self.lr) != 2 or not all(isinstance(v, numbers.Real) and not isinstance(v, bool) and v > 0
+                                         for v in self.lr)):
+            raise ValueError(f"ShapeOptions.lr must be two numbers > 0 (start, end), got {self.lr!r}")
+        if isinstance(self.fixed, str) or not all(isinstance(name, str) for name in self.fixed):
+            raise ValueError(f"ShapeOptions.fixed must be parameter block names, got {self.fixed!r}")
+        object.__setattr__(self, "fixed", tuple(self.fixed))
 
 
 @dataclass

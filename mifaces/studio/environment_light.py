@@ -1,5 +1,5 @@
 """The environment that lights every photograph of an environment-lit simulated
-capture (``simulate(environment=...)``), instead of the point lights.
+capture (``SimulationOptions(environment=...)``), instead of the point lights.
 
 The capture states it as one given environment light (``docs/capture.md``): a
 latitude-longitude OpenEXR map in pixel value (radiance times the

@@ -20,6 +20,7 @@ import numpy as np
 from ..brdf.model import rgb
 from ..capture import Camera, Light
 from ..lights.emitters import light_emitters
+from ..lights.environment import Environment
 from ..render import mitsuba_sensor
 from .environment_light import EnvironmentLight, environment_light
 
@@ -41,7 +42,7 @@ POSES = [(0.0, 0.0, 0.0), (-25.0, 0.0, 0.0), (25.0, 0.0, 0.0)]
 #: The head turns of an environment-lit capture spread over these yaw and pitch ranges (degrees).
 TURN_YAW = (-35.0, 35.0)
 TURN_PITCH = (-12.0, 12.0)
-#: Yaw (degrees, about the head's vertical axis) of each camera of a simulated rig (``simulate(cameras=N)``
+#: Yaw (degrees, about the head's vertical axis) of each camera of a simulated rig (``SimulationOptions(cameras=N)``
 #: takes the first N): the studio camera in front, then others turned to either side.
 RIG_YAWS = (0.0, -30.0, 30.0, -50.0, 50.0)
 #: Mitsuba's path tracer: shadows and one-bounce-and-more interreflection.
@@ -230,7 +231,7 @@ def face_light(studio: Studio, light: int) -> dict:
     """What lights the face photographs of condition ``light``: the studio's environment
     (its map in pixel value: the photographs' exposure is 1), or the point light."""
     if studio.environment is not None:
-        return light_emitters(None, studio.camera, studio.environment.map)
+        return light_emitters(None, studio.camera, Environment(studio.environment.map))
     return point_light(studio, light)
 
 

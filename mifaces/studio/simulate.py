@@ -11,7 +11,7 @@ room (no geometry but the subject: the walls return no light). With
 ``environment``, every photograph is lit instead by the generated studio or
 by the sun and sky, which the capture states as one given environment light
 (:mod:`mifaces.studio.environment_light`), and the head turns differently in
-each measurement.
+each measurement. What to simulate is one value, :class:`~mifaces.studio.options.SimulationOptions`.
 
 The steps: :mod:`mifaces.studio.subject` (the face, its albedo, its poses),
 :mod:`mifaces.studio.scene` (the studio and its Mitsuba scenes),
@@ -70,8 +70,6 @@ import numpy as np
 
 from ..brdf.cooktorrance import DIGITS
 from ..capture import write_ground_truth
-from ..io.image_files import MAX_IMAGE_SIDE, check_image_size
-from ..render import check_render_size
 from ..io.result_set import check_result_target, result_set
 from ..model import load_model
 from ..runtime.progress import progress as progress_bar
@@ -79,20 +77,16 @@ from ..render import face_meshes, mitsuba_sensor, region_bsdf, region_meshes
 from .photograph import albedo_texture, annotate, photograph_face, photograph_spheres, visible_feature_points
 from . import subsurface as translucent
 from .detail import fine_detail, span_residual
-from .environment_light import check_environment
-from .scene import RIG_YAWS, rig_cameras, set_up_studio
+from .options import SimulationOptions
+from .scene import rig_cameras, set_up_studio
 from .subject import head_pose, make_subject, with_detail
 from .truth import brdf_with_overrides
 from .varying import VARYING, map_textures, region_means, varying_maps
 from .write import (camera_id, ground_truth, light_names, pose_name, true_measurement, view_name, write_environment,
                     write_manifest, write_photographs, write_sphere_photographs)
 
-PRESETS = {"paper": {"measurements": 22}}
-#: Most measurements one simulated capture holds.
-MAX_MEASUREMENTS = 300
 #: The result-set kind of a simulated capture's folder.
 KIND = "capture"
-COMPANIONS = ("diffuse", "exposures", "both")
 
 
 @dataclass
@@ -111,12 +105,8 @@ class SimulationResult:
         return float(np.mean(self.render_seconds)) if self.render_seconds else float("nan")
 
 
-def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance", brdf_params: dict | None = None,
-             measurements: int = 6, resolution: tuple[int, int] = (512, 512), seed: int = 0,
-             preset: str | None = None, spp: int = 64, companion: str = "diffuse",
-             albedo_resolution: int = 1024, progress: bool = True, force: bool = False, varying: bool = False,
-             detail: bool = False, subsurface: bool = False, environment: str | None = None,
-             cameras: int = 1) -> SimulationResult:
+def simulate(out: str | os.PathLike, options: SimulationOptions | None = None, *, progress: bool = True,
+             force: bool = False) -> SimulationResult:
     """Simulate a capture session and write it, with ground truth, to ``out``.
 
     Parameters
@@ -125,66 +115,15 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
         Capture folder to write, as one result set
         (:func:`mifaces.io.result_set.result_set`): the photographs, the manifest and
         the ground truth appear together, or not at all.
-    model : str, path or MorphableModel
-        ``'builtin'``, a model file for :func:`mifaces.load_model`, or a model.
-    brdf : str
-        Ground-truth plugin: ``'cooktorrance'`` (default), ``'phong'``, ``'ward'``, ``'lafortune'``,
-        or a Mitsuba built-in outside the fitted families: ``'roughplastic'``, ``'principled'``
-        (:mod:`mifaces.brdf.builtin`, defaults mapped from the same published skin values).
-    brdf_params : dict, optional
-        Overrides in the ``brdf.json`` layout (``{"model", "regions": {region: {param: value}}}``),
-        with the plugin's (or built-in's) parameter names.
-    measurements : int
-        Number of measurements K: ceil(K / 3) light conditions with up to three poses each
-        (under an ``environment``: K head turns).
-    resolution : (width, height)
-    seed : int
-        Identity, albedo detail, lights, poses, expressions, noise and Monte Carlo
-        seeds all derive from it: a fixed seed reproduces the capture.
-    preset : {'paper'}, optional
-        ``'paper'``: the paper's 22 measurements (8 lights, 3 poses each for 6, 2 for 2).
-    spp : int
-        Samples per pixel of the point-light renders (companions use half).
-    companion : {'diffuse', 'exposures', 'both'}
-        Diffuse-light picture (8-bit sRGB), exposure series (three 8-bit sRGB
-        pictures at 1/4, 1 and 4 times the point-light exposure), or both.
-    albedo_resolution : int
-        Size of the square albedo map.
+    options : SimulationOptions, optional
+        What to simulate (:class:`mifaces.studio.options.SimulationOptions`: the face model, the
+        true BRDF and how far it lies from what a fit represents, the measurements, lights and
+        cameras, the photographs' size and samples, the seed); default: its defaults.
     progress : bool
         Show a progress bar.
     force : bool
         Replace a simulated capture that ``out`` holds. A folder holding
         anything else (a real capture) is never written over.
-    varying : bool
-        A spatially varying truth: per-texel lobe scale and width maps
-        (oily T-zone, drier cheeks), for ``brdf`` in
-        :data:`mifaces.studio.varying.VARYING`; ``ground_truth/maps/``.
-    detail : bool
-        Add fine geometry the face model cannot express (wrinkles, pores,
-        asymmetry) to the face; the ground truth's vertices are the detailed ones.
-    subsurface : bool
-        Translucent skin: the skin regions as a rough dielectric boundary
-        over a scattering medium with measured skin coefficients
-        (:mod:`mifaces.studio.subsurface`), rendered with Mitsuba's
-        volumetric path tracer: much slower, use few pixels and samples.
-        Needs the Cook–Torrance truth (the boundary's reflection).
-    environment : {'studio', 'sky'}, optional
-        Light every photograph by an environment instead of the point lights
-        (:data:`mifaces.studio.environment_light.ENVIRONMENTS`): the generated studio
-        (:func:`mifaces.lights.environment.studio_environment`) or Mitsuba's sun and sky with the
-        sun at :data:`mifaces.lights.environment.SKY_SUN_ANGLES` about the camera, baked into a map
-        (:func:`mifaces.lights.environment.bake_environment`). The capture states that map as its one
-        given environment light (``lights/<name>.exr``, pixel value, the frame of
-        :func:`mifaces.lights.environment.environment_emitter`), the photographs are rendered with
-        exactly it; no steel spheres, no point lights, no white target; each measurement
-        its own head turn (:func:`mifaces.studio.scene.head_turns`).
-
-    cameras : int
-        Calibrated cameras photographing every shot (:func:`mifaces.studio.scene.rig_cameras`: the
-        studio camera, then others turned by :data:`mifaces.studio.scene.RIG_YAWS` about the head):
-        each measurement is then one photograph per camera, ``m00`` from the first, ``m00_c1``,
-        ``m00_c2``, ... from the others, sharing a ``shot`` (one head pose). The steel spheres and
-        the lights' calibration use the first camera.
 
     Returns
     -------
@@ -194,9 +133,9 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
     --------
     A small capture of the built-in face (``out``: a folder to write into):
 
-    >>> from mifaces import load_capture, simulate
-    >>> result = simulate(out / "capture", measurements=2, resolution=(64, 64), spp=4, albedo_resolution=128,
-    ...                   progress=False)
+    >>> from mifaces import SimulationOptions, load_capture, simulate
+    >>> options = SimulationOptions(measurements=2, resolution=(64, 64), spp=4, albedo_resolution=128)
+    >>> result = simulate(out / "capture", options, progress=False)
     >>> result.measurements, result.path.name
     (2, 'capture')
     >>> capture = load_capture(result.path)
@@ -205,77 +144,78 @@ def simulate(out: str | os.PathLike, model="builtin", brdf: str = "cooktorrance"
 
     Raises
     ------
+    ValueError
+        A true BRDF that the overrides (``brdf_params``), ``varying`` or ``subsurface`` do not fit.
     FileExistsError
         ``out`` holds a simulated capture and ``force`` is False.
     mifaces.io.result_set.ResultSetError
         ``out`` holds files mifaces did not write (a real capture).
     """
     t_start = time.perf_counter()
-    measurements, (width, height) = _check_arguments(measurements, resolution, preset, companion, spp,
-                                                     albedo_resolution, seed)
-    check_environment(environment)
-    cameras = _integer("cameras", cameras, 1, len(RIG_YAWS))
+    options = SimulationOptions() if options is None else options
+    if not isinstance(options, SimulationOptions):
+        raise TypeError(f"simulate() takes its options as a SimulationOptions, got {type(options).__name__}")
     out = check_result_target(out, KIND, force)  # before the work: writable, and nothing to lose
-    face_model = load_model(model)
-    truth = brdf_with_overrides(brdf, brdf_params)
-    if subsurface and (truth["model"] != "cooktorrance" or varying):
+    face_model = load_model(options.face_model)
+    truth = brdf_with_overrides(options.brdf, options.brdf_params)
+    if options.subsurface and (truth["model"] != "cooktorrance" or options.varying):
         raise ValueError("a subsurface truth (subsurface=True) takes the Cook–Torrance truth's reflection for its "
                          f"boundary: brdf='cooktorrance' without varying maps; got {truth['model']!r}"
-                         + (" with varying=True" if varying else ""))
-    if varying and truth["model"] not in VARYING:
+                         + (" with varying=True" if options.varying else ""))
+    if options.varying and truth["model"] not in VARYING:
         raise ValueError(f"a spatially varying truth (varying=True) needs a BRDF with lobe scale and width maps: "
                          f"{sorted(VARYING)}; got {truth['model']!r}")
     # what the photographs show stays in ground_truth/: the set manifest records only the set's shape
-    info = {"measurements": measurements, "resolution": [width, height], "companion": companion}
-    if environment is not None:
-        info["environment"] = environment
-    if cameras > 1:
-        info["cameras"] = cameras
+    info = {"measurements": options.measurements, "resolution": list(options.resolution),
+            "companion": options.companion}
+    if options.environment is not None:
+        info["environment"] = options.environment
+    if options.cameras > 1:
+        info["cameras"] = options.cameras
     with result_set(out, KIND, force=force, info=info) as folder:
-        lights, render_seconds = _simulate_into(folder, face_model, truth, measurements, width, height, seed, spp, companion,
-                                                albedo_resolution, progress, {"varying": varying, "detail": detail,
-                                                                           "subsurface": subsurface},
-                                                environment, cameras)
-    return SimulationResult(out, measurements, lights, time.perf_counter() - t_start, render_seconds)
+        lights, render_seconds = _simulate_into(folder, face_model, truth, options, progress)
+    return SimulationResult(out, options.measurements, lights, time.perf_counter() - t_start, render_seconds)
 
 
-def _truth_subject(face_model, truth: dict, rng: np.random.Generator, seed: int, albedo_resolution: int,
-                   variation: dict):
-    """The subject, its parameter maps (empty unless ``variation['varying']``), the ``brdf.json``
+def _truth_subject(face_model, truth: dict, rng: np.random.Generator, options: SimulationOptions):
+    """The subject, its parameter maps (empty unless ``options.varying``), the ``brdf.json``
     the ground truth records, and the truth's description. Detail and maps draw from their own
     generators, so that a capture with them shows the same face, lights and noise as one without."""
+    seed, albedo_resolution = options.seed, options.albedo_resolution
     subject = make_subject(face_model, rng, albedo_resolution)
-    description = {"brdf": truth["model"], "varying": bool(variation["varying"]), "detail": bool(variation["detail"])}
-    if variation["detail"]:
+    description = {"brdf": truth["model"], "varying": bool(options.varying), "detail": bool(options.detail)}
+    if options.detail:
         subject = with_detail(subject, fine_detail(face_model, subject.neutral, np.random.default_rng([seed, 1])))
         description["span_residual_mm"] = round(span_residual(face_model, subject.neutral), 4)
     maps, recorded = {}, truth
-    if variation["varying"]:
+    if options.varying:
         maps = varying_maps(face_model, subject.neutral, truth, np.random.default_rng([seed, 2]), albedo_resolution)
         recorded = region_means(face_model, maps, truth, DIGITS)
-    if variation["subsurface"]:
+    if options.subsurface:
         subject = replace(subject, albedo=translucent.subsurface_albedo(face_model, subject.albedo, truth))
         description["subsurface"] = translucent.description(truth)
     return subject, maps, recorded, description
 
 
-def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width: int, height: int, seed: int,
-                   spp: int, companion: str, albedo_resolution: int, progress: bool,
-                   variation: dict, environment: str | None = None, cameras: int = 1) -> tuple[int, list[float]]:
+def _simulate_into(out: Path, face_model, truth: dict, options: SimulationOptions,
+                   progress: bool) -> tuple[int, list[float]]:
     """The simulation of :func:`simulate`, written into folder ``out``: the number of light
     conditions and each measurement's render time."""
+    seed, spp, companion, cameras = options.seed, options.spp, options.companion, options.cameras
+    width, height = options.resolution
     rng = np.random.default_rng(seed)  # one generator, drawn from in a fixed order: subject, lights, frames
-    subject, maps, recorded, description = _truth_subject(face_model, truth, rng, seed, albedo_resolution, variation)
+    subject, maps, recorded, description = _truth_subject(face_model, truth, rng, options)
     texture, textures = albedo_texture(subject.albedo), map_textures(maps)
-    studio = set_up_studio(width, height, subject.head, measurements, rng, spp, environment)
+    studio = set_up_studio(width, height, subject.head, options.measurements, rng, spp, options.environment)
     if cameras > 1:
         studio = replace(studio, rig=rig_cameras(studio.camera, subject.head, cameras))
     if studio.environment is not None:
         description.update(studio.environment.description)
-    if variation["subsurface"]:
+    if options.subsurface:
         studio = replace(studio, integrator=translucent.INTEGRATOR)
     seeds = itertools.count(seed * 1000 + 1)  # Monte Carlo seed of each render, in order
-    frames = measurements * cameras * (1 + (companion in ("diffuse", "both")) + (companion in ("exposures", "both")))
+    frames = options.measurements * cameras * (1 + (companion in ("diffuse", "both"))
+                                               + (companion in ("exposures", "both")))
     spheres = 0 if studio.environment is not None else 2 * len(studio.per_light)
     bar = progress_bar(total=frames + spheres, desc="simulating", unit="frame", enabled=progress)
 
@@ -294,7 +234,7 @@ def _simulate_into(out: Path, face_model, truth: dict, measurements: int, width:
         name = f"m{index:02d}"
         pose = head_pose(face_model, subject, studio.poses[pi], rng)
         vertices = pose.vertices.astype(np.float32)
-        meshes = true_face_meshes(face_model, vertices, truth, texture, textures, variation["subsurface"])
+        meshes = true_face_meshes(face_model, vertices, truth, texture, textures, options.subsurface)
         for view, camera in enumerate(studio.views):  # one shot: every camera, the same head pose
             seen_by = replace(studio, sensor=mitsuba_sensor(camera, spp)) if view else studio
             photographs = photograph_face(seen_by, meshes, li, companion, spp, seeds, rng)
@@ -325,36 +265,3 @@ def true_face_meshes(face_model, vertices: np.ndarray, truth: dict, texture, map
         return translucent.subsurface_meshes(region_meshes(face_model, vertices, normals), truth,
                                              lambda region: region_bsdf(truth, region, texture))
     return face_meshes(face_model, vertices, truth, texture, normals, maps=maps)
-
-
-def _integer(name: str, value, lowest: int, highest: int) -> int:
-    """``value`` if it is an integer (not a bool) in [lowest, highest]; a ValueError naming ``name`` otherwise."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lowest <= value <= highest:
-        raise ValueError(f"{name} must be an integer from {lowest} to {highest}, got {value!r}")
-    return int(value)
-
-
-def _check_arguments(measurements: int, resolution, preset: str | None, companion: str, spp: int = 64,
-                     albedo_resolution: int = 1024, seed: int = 0) -> tuple[int, tuple[int, int]]:
-    """The number of measurements and the resolution; a ValueError naming a bad argument (sizes
-    within :func:`mifaces.render.check_render_size`'s limits, before anything is allocated)."""
-    if preset is not None:
-        if preset not in PRESETS:
-            raise ValueError(f"unknown preset {preset!r}; presets: {sorted(PRESETS)}")
-        measurements = PRESETS[preset]["measurements"]
-    if isinstance(measurements, (int, np.integer)) and not isinstance(measurements, bool) and measurements < 1:
-        raise ValueError(f"measurements must be >= 1, got {measurements}")
-    measurements = _integer("measurements", measurements, 1, MAX_MEASUREMENTS)
-    if companion not in COMPANIONS:
-        raise ValueError(f"companion must be 'diffuse', 'exposures' or 'both', got {companion!r}")
-    try:
-        width, height = (_integer("resolution", r, 1, 2 ** 31 - 1) for r in resolution)
-    except TypeError:
-        raise ValueError(f"resolution must be (width, height), got {resolution!r}") from None
-    if width < 16 or height < 16:
-        raise ValueError(f"resolution must be at least 16x16, got {width}x{height}")
-    check_render_size(width, height, _integer("spp", spp, 1, 1 << 20), "simulate")
-    check_image_size(_integer("albedo_resolution", albedo_resolution, 16, MAX_IMAGE_SIDE),
-                     albedo_resolution, "albedo map")
-    _integer("seed", seed, 0, 2 ** 32 - 1)
-    return measurements, (width, height)

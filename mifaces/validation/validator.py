@@ -56,7 +56,7 @@ from skimage.transform import resize
 
 from ..capture import Camera, read_ground_truth
 from ..lights.emitters import light_record
-from ..lights.environment import LUMINANCE, SKY_SUN_ANGLES, sky_emitter, studio_environment
+from ..lights.environment import LUMINANCE, SKY_SUN_ANGLES, Environment, sky_emitter, studio_environment
 from ..render.face_pixels import front_of_face_pixels
 from ..shape.io import load_geometry
 from ..model.geometry import turned
@@ -136,15 +136,16 @@ class Validator:
     lights : int
         Number of held-out point lights (:func:`held_out_lights`).
     environments : dict, optional
-        Name -> environment (an equirectangular map or an emitter dict, as
-        :meth:`mifaces.render.FaceScene.description` takes them); default the
+        Name -> environment (an equirectangular map or an emitter dict, the source of a
+        :class:`mifaces.lights.environment.Environment`); default the
         generated studio and a sunsky with the sun at :data:`SKY_SUN_ANGLES`.
 
     Attributes
     ----------
     conditions : dict
         Name -> the light keyword arguments of :meth:`FaceScene.render`: ``{'light': Light}`` for a
-        held-out light (:func:`held_out_lights`), ``{'envmap': environment}`` for an environment.
+        held-out light (:func:`held_out_lights`), ``{'environment': Environment}`` for an environment
+        (:class:`mifaces.lights.environment.Environment`).
     truth : dict
         Name -> the true face's image (H, W, 3).
     mask, truth_mask : (H, W) bool
@@ -178,7 +179,7 @@ class Validator:
         if environments is None:
             environments = {"studio": studio_environment(), "sky": sky_emitter(self.camera)}
         self.environments = tuple(environments)
-        self.conditions.update({name: {"envmap": value} for name, value in environments.items()})
+        self.conditions.update({name: {"environment": Environment(value)} for name, value in environments.items()})
         self.truth_mask = front_of_face_pixels(truth_model, turned(true_vertices, rotation, centre), self.camera)
         self.mask = self.truth_mask | front_of_face_pixels(face_model, turned(fit_vertices, rotation, centre),
                                                            self.camera)

@@ -16,7 +16,7 @@ import mitsuba as mi
 import numpy as np
 
 from ...runtime.arrays import device_array
-from ..footprint import tilted
+from ..footprint import seen_by_pixel
 from .parameters import ParameterSpace
 
 
@@ -171,13 +171,7 @@ def _model(space: ParameterSpace, wi, wo, spread: tuple, u: list):
     """f at the free variables ``u`` for directions ``wi``, ``wo``; with a ``spread`` per sample
     (:mod:`mifaces.reflectance.footprint`), what the pixel saw: f over the tilted normals, weighted."""
     params = space.drjit_params(u)
-    if not spread:
-        return space.model.eval(wi, wo, params)
-    f = None
-    for a, b, weight in tilted(wi, wo, spread):
-        term = space.model.eval(a, b, params) * weight
-        f = term if f is None else f + term
-    return f
+    return seen_by_pixel(lambda a, b: space.model.eval(a, b, params), wi, wo, spread)
 
 
 def _signature(space: ParameterSpace) -> tuple:

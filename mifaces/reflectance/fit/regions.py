@@ -14,11 +14,10 @@ from ... import brdf as brdf_models
 from ...brdf.model import BRDFModel
 from ...runtime.progress import progress as progress_bar
 from ...runtime.status import AT_BOUND, AT_START, CONVERGED, DEFAULTS, PRIOR
-from ..maps.diffuse import AlbedoOffsets
 from ..samples import ReflectanceSamples
 from .intervals import prior_intervals
 from .lobes import PEAK_FACTOR, SPIKE, glossy_peak, no_lobe
-from .region_fit import RegionFit, fit_region, min_samples
+from .region_fit import RegionFit, RegionFitOptions, RegionSamples, Uncertainty, fit_region, min_samples
 
 
 def prior_fit(model: BRDFModel, params: dict, samples: int, reason: str, status: str = PRIOR) -> RegionFit:
@@ -35,13 +34,20 @@ NEIGHBOURS = {"lips": ["skin"], "nostrils": ["skin"], "beard": ["skin"], "eyes":
               "eyebrows": ["hair", "beard"], "hair": ["eyebrows", "beard"]}
 
 
-def fit_regions(model: BRDFModel | str, samples: ReflectanceSamples, region_names: dict,
-                neighbours: dict | None = None, progress: bool = False, fixed_by_region: dict | None = None,
-                cluster=None, offsets: AlbedoOffsets | None = None, texel_albedo: bool = False,
-                starts: dict | None = None, **options) -> dict[str, RegionFit]:
+def fit_regions(model: BRDFModel | str, samples: ReflectanceSamples, region_names: dict, *,
+                options: RegionFitOptions | None = None, uncertainty: Uncertainty | None = Uncertainty(),
+                fixed_by_region: dict | None = None, starts: dict | None = None, neighbours: dict | None = None,
+                progress: bool = False) -> dict[str, RegionFit]:
     """Fit ``model`` separately in every region (paper sec. 4.4, 5.2).
 
     ``samples.label`` gives each sample's region label, ``region_names`` label -> name.
+    Each region with enough samples is fitted on its own, by :func:`fit_region` with ``options``
+    (with :attr:`~RegionFitOptions.texel_albedo`, every texel, ``samples.texel``, has its own
+    albedo) and ``uncertainty`` (its clusters and albedo offsets, one per sample, taken for the
+    region's samples). ``fixed_by_region`` (name -> parameters) holds parameters fixed in one
+    region on top of ``options.fixed``; ``starts`` (name -> parameters) are the regions' start
+    values. ``progress`` shows a bar over the regions fitted.
+
     A region with fewer than :func:`min_samples` samples gets a warning and
     the parameters of its first fitted neighbour in ``neighbours`` (name ->
     names; default :data:`NEIGHBOURS`), else of ``skin``, else the model's
@@ -49,23 +55,18 @@ def fit_regions(model: BRDFModel | str, samples: ReflectanceSamples, region_name
     with fewer than 10x that many samples whose own fit ended at a bound of
     the parameters' range (status ``'at_bound'``); a larger region keeps such
     a fit, with a warning. Regions without samples are not
-    fitted either. ``progress`` shows a bar over the regions fitted.
-    ``fixed_by_region`` (name -> parameters) holds parameters fixed in one
-    region on top of ``fixed``. A region that takes the model's defaults
+    fitted either. A region that takes the model's defaults
     because no region has a fit to lend (skin's own fit a spike, say) has
     status ``'defaults'``, and a warning says so; a fit whose glossy
     parameters stayed at their start values measured nothing of them: it takes
     its neighbour's glossy part (status ``'prior'``, the reason says so) and
-    lends nothing. ``cluster`` (N,) is each sample's cluster for the
-    uncertainty, ``offsets`` the albedo offsets the reflectance was corrected by
-    (:func:`~mifaces.reflectance.fit.region_fit.fit_region`). With ``texel_albedo`` every
-    texel (``samples.texel``) has its own albedo in the fit (``fit_region(texel=...)``).
-    ``starts`` (name -> parameters) are the regions' start values.
+    lends nothing.
     """
     model = brdf_models.model(model) if isinstance(model, str) else model
+    options = options or RegionFitOptions()
     neighbours = NEIGHBOURS if neighbours is None else neighbours
     region = samples.labels()
-    fixed = options.get("fixed")
+    fixed = options.fixed
     needed = min_samples(model, model.fixed_defaults() if fixed is None else fixed)
     counts = {name: int(np.count_nonzero(region == label)) for label, name in region_names.items()}
     fits: dict[str, RegionFit] = {}
@@ -75,17 +76,15 @@ def fit_regions(model: BRDFModel | str, samples: ReflectanceSamples, region_name
     for label, name in bar:
         bar.set_postfix_str(f"{name}: {counts[name]} samples")
         mask = region == label
-        region_options = dict(options)
+        region_options = options
         held[name] = model.fixed_defaults() if fixed is None else fixed
         if fixed_by_region and name in fixed_by_region:
-            held[name] = region_options["fixed"] = {**held[name], **fixed_by_region[name]}
+            held[name] = {**held[name], **fixed_by_region[name]}
+            region_options = dataclasses.replace(options, fixed=held[name])
         part = samples.select(mask)
-        if starts and name in starts:
-            region_options["start"] = starts[name]
-        fits[name] = fit_region(model, part.light, part.view, part.reflectance, part.sigma,
-                                texel=part.texel if texel_albedo else None, footprint=part.footprint,
-                                cluster=None if cluster is None else np.asarray(cluster)[mask],
-                                offsets=None if offsets is None else offsets[mask], **region_options)
+        fits[name] = fit_region(model, RegionSamples.of(part), start=starts.get(name) if starts else None,
+                                options=region_options,
+                                uncertainty=None if uncertainty is None else uncertainty.select(mask))
         peak = glossy_peak(model, fits[name].params)
         seen = float(np.max(part.reflectance)) if mask.any() else 0.0
         if fits[name].status in (CONVERGED, AT_BOUND) and SPIKE not in fits[name].reason \

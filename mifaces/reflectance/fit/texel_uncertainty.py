@@ -1,4 +1,4 @@
-"""The uncertainty of a fit with an albedo per texel (``fit_region(texel=...)``), from the fit itself.
+"""The uncertainty of a fit with an albedo per texel (``RegionFitOptions(texel_albedo=True)``), from the fit itself.
 
 The fit eliminates each texel's albedo a_t (variable projection,
 :meth:`mifaces.reflectance.fit.problem.Problem.system`): its sums are JᵀJ − Σ_t S_t S_tᵀ/W_t and

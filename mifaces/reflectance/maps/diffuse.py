@@ -49,7 +49,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from ... import brdf as brdf_models
-from ..footprint import tilted
+from ..footprint import seen_by_pixel, spread_arrays
 from ..samples import ReflectanceSamples
 from .shrinkage import empirical_bayes
 
@@ -151,15 +151,8 @@ def specular_reflectance_factor(model, params_by_region: dict[int, dict], light,
             params[p.name] = dr.gather(mi.Float, mi.Float(table), idx)
     wi = mi.Vector3f(np.ascontiguousarray(np.asarray(light, np.float32).T))
     wo = mi.Vector3f(np.ascontiguousarray(np.asarray(view, np.float32).T))
-    if footprint is None:
-        return np.pi * np.array(model.eval(wi, wo, params, diffuse=False)).T
-    if np.shape(footprint) != (len(index), 3):
-        raise ValueError(f"footprint must have shape ({len(index)}, 3), got {np.shape(footprint)}")
-    spread = tuple(mi.Float(np.ascontiguousarray(c)) for c in np.asarray(footprint, np.float32).T)
-    f = dr.zeros(mi.Color3f, len(index))
-    for a, b, weight in tilted(wi, wo, spread):
-        f += model.eval(a, b, params, diffuse=False) * weight
-    return np.pi * np.array(f).T
+    spread = () if footprint is None else spread_arrays(footprint, len(index))
+    return np.pi * np.array(seen_by_pixel(lambda a, b: model.eval(a, b, params, diffuse=False), wi, wo, spread)).T
 
 
 def noise_and_spread(residual, w, texel, region, mean, total, counts, labels) -> dict:
@@ -204,7 +197,7 @@ def albedo_offsets(albedo, texel, label, where=None) -> np.ndarray:
 #: A texel without samples takes the mean of its region's sampled texels around
 #: it, Gaussian-weighted with this σ (texels), where they are near (a thin band
 #: along a region border, whose samples mixed in the neighbour's light:
-#: :func:`mifaces.reflectance.samples.region_mixed`); further away, its region's albedo.
+#: :func:`mifaces.reflectance.mixed_pixels.region_mixed`); further away, its region's albedo.
 FILL_TEXELS = 2.0
 
 

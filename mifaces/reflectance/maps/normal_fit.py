@@ -38,6 +38,7 @@ import numpy as np
 
 from ... import brdf as brdf_models
 from ...brdf.model import BRDFModel
+from ...options.fields import check, option
 from .observations import Observations, tangents
 
 #: Default weight of the prior normal, in observations (see the module docstring).
@@ -47,6 +48,84 @@ MAX_STEP = 0.3
 #: The start search of :func:`refine_normals`: a grid of tilts up to RADIUS degrees in steps of STEP, then
 #: LEVELS - 1 finer 3 x 3 grids (each a third of the step) around the best.
 SEARCH = (12.0, 3.0, 3)
+
+
+@dataclass(frozen=True, eq=False)
+class LitPixels:
+    """P pixels (or texels) seen under K lights: what the normal step fits. Validated on construction
+    (shapes agree, values and weights finite, weights non-negative; a ``ValueError`` names the array).
+
+    Attributes
+    ----------
+    values : ndarray (K, P, 3) float64
+        Pixel values per unit light intensity under each of K lights.
+    directions : ndarray (K, 3) or (K, P, 3)
+        Unit directions towards the lights.
+    weights : ndarray (K, P)
+        Confidence of each observation; 0 leaves it out
+        (:func:`~mifaces.photometric_stereo.nonlambertian.observation_weights`).
+    view : ndarray (3,), (P, 3) or (K, P, 3)
+        Unit direction towards the viewer (orthographic camera: one for all; texels of a face seen in
+        several poses: one per observation).
+    footprint : ndarray (K, P, 3), optional
+        Each observation's pixel footprint (:class:`~mifaces.reflectance.maps.observations.Observations`):
+        the glossy part is averaged over it.
+    """
+
+    values: np.ndarray
+    directions: np.ndarray
+    weights: np.ndarray
+    view: np.ndarray = (0.0, 0.0, 1.0)
+    footprint: np.ndarray | None = None
+
+    def __post_init__(self):
+        values = np.asarray(self.values, np.float64)
+        if values.ndim != 3 or values.shape[2] != 3:
+            raise ValueError(f"values must have shape (K, P, 3), got {values.shape}")
+        k, p, _ = values.shape
+        if np.shape(self.directions) not in ((k, 3), (k, p, 3)):
+            raise ValueError(f"directions must have shape ({k}, 3) or ({k}, {p}, 3), got {np.shape(self.directions)}")
+        if np.shape(self.weights) != (k, p):
+            raise ValueError(f"weights must have shape ({k}, {p}), got {np.shape(self.weights)}")
+        if not (np.all(np.isfinite(values)) and np.all(np.isfinite(self.weights))
+                and np.all(np.asarray(self.weights) >= 0)):
+            raise ValueError("values and weights must be finite, and weights non-negative")
+        object.__setattr__(self, "values", values)
+
+    def __len__(self) -> int:
+        """P, the pixels."""
+        return self.values.shape[1]
+
+    def observations(self, model: BRDFModel, params: dict) -> Observations:
+        """These pixels on the Dr.Jit side, shaded by ``model`` with glossy parameters ``params``."""
+        return Observations(model, params, self.directions, self.view, len(self), self.values, self.weights,
+                            self.footprint)
+
+
+@dataclass(frozen=True)
+class NormalStepOptions:
+    """How :func:`refine_normals` runs, validated on construction (a number out of its range raises a
+    ``ValueError`` naming the field).
+
+    Attributes
+    ----------
+    prior_weight : float
+        The prior's weight in observations (module docstring).
+    iterations : int
+        Most Levenberg-Marquardt steps.
+    tol : float
+        Stop when a step lowers E by less than ``tol`` · E.
+    search : (radius, step, levels) or None
+        The start search of :func:`search_start` (None: start at the normals as given).
+    """
+
+    prior_weight: float = option(PRIOR_WEIGHT, bounds=(0.0, None))
+    iterations: int = option(30, bounds=(0, None))
+    tol: float = option(1e-7, bounds=(0.0, None))
+    search: tuple | None = SEARCH
+
+    def __post_init__(self):
+        check(self)
 
 
 @dataclass
@@ -137,21 +216,11 @@ def _damped_steps(h, grad, damping) -> np.ndarray:
     return delta
 
 
-def _check(values, directions, weights, normals, albedo):
-    values = np.asarray(values, np.float64)
-    if values.ndim != 3 or values.shape[2] != 3:
-        raise ValueError(f"values must have shape (K, P, 3), got {values.shape}")
-    k, p, _ = values.shape
-    if np.shape(directions) not in ((k, 3), (k, p, 3)):
-        raise ValueError(f"directions must have shape ({k}, 3) or ({k}, {p}, 3), got {np.shape(directions)}")
-    if np.shape(weights) != (k, p):
-        raise ValueError(f"weights must have shape ({k}, {p}), got {np.shape(weights)}")
+def _check_start(pixels: LitPixels, normals, albedo) -> None:
+    """``normals`` and ``albedo`` (if given) are (P, 3) for ``pixels``; a ``ValueError`` names the one that is not."""
     for name, a in (("normals", normals), ("albedo", albedo)):
-        if a is not None and np.shape(a) != (p, 3):
-            raise ValueError(f"{name} must have shape ({p}, 3), got {np.shape(a)}")
-    if not (np.all(np.isfinite(values)) and np.all(np.isfinite(weights)) and np.all(np.asarray(weights) >= 0)):
-        raise ValueError("values and weights must be finite, and weights non-negative")
-    return values
+        if a is not None and np.shape(a) != (len(pixels), 3):
+            raise ValueError(f"{name} must have shape ({len(pixels)}, 3), got {np.shape(a)}")
 
 
 def _unit(normals, view) -> np.ndarray:
@@ -165,9 +234,8 @@ def _unit(normals, view) -> np.ndarray:
     return normals / np.linalg.norm(normals, axis=1, keepdims=True)
 
 
-def refine_normals(model: BRDFModel | str, params: dict, values, directions, weights, normals, albedo=None,
-                   view=(0.0, 0.0, 1.0), prior=None, prior_weight: float = PRIOR_WEIGHT, iterations: int = 30,
-                   tol: float = 1e-7, search=SEARCH, footprint=None) -> NormalFit:
+def refine_normals(model: BRDFModel | str, params: dict, pixels: LitPixels, normals, *, albedo=None, prior=None,
+                   options: NormalStepOptions | None = None) -> NormalFit:
     """The normal step: n_p and ρ_p per pixel minimising E with the glossy part θ fixed.
 
     Parameters
@@ -176,53 +244,40 @@ def refine_normals(model: BRDFModel | str, params: dict, values, directions, wei
         A model of :mod:`mifaces.brdf`.
     params : dict
         Its glossy parameters θ (as in ``RegionFit.params``; the diffuse one is not used).
-    values : ndarray (K, P, 3)
-        Pixel values per unit light intensity under each of K lights.
-    directions : ndarray (K, 3) or (K, P, 3)
-        Unit directions towards the lights.
-    weights : ndarray (K, P)
-        Confidence of each observation; 0 leaves it out (see :func:`observation_weights`).
+    pixels : LitPixels
+        The observations: values, light directions, weights, view directions (and footprints).
     normals : ndarray (P, 3)
-        Start normals (Lambertian photometric stereo); zero rows start at ``view``.
+        Start normals (Lambertian photometric stereo); zero rows start at ``pixels.view``.
     albedo : ndarray (P, 3), optional
         Start albedo; default the closed form at the start normals.
-    view : ndarray (3,), (P, 3) or (K, P, 3)
-        Unit direction towards the viewer (orthographic camera: one for all; texels of a face seen in
-        several poses: one per observation).
     prior : ndarray (P, 3), optional
         Prior normals n̄ (default: the start normals).
-    prior_weight : float
-        The prior's weight in observations (module docstring).
-    iterations : int
-        Most Levenberg-Marquardt steps.
-    tol : float
-        Stop when a step lowers E by less than ``tol`` · E.
-    search : (radius, step, levels) or None
-        The start search of :func:`search_start` (None: start at ``normals`` as given).
-    footprint : ndarray (K, P, 3), optional
-        Each observation's pixel footprint (:class:`~mifaces.reflectance.maps.observations.Observations`):
-        the glossy part is averaged over it.
+    options : NormalStepOptions, optional
+        The prior's weight, the most steps, the tolerance, the start search (default
+        ``NormalStepOptions()``).
 
     Returns
     -------
     NormalFit
     """
     model = brdf_models.model(model) if isinstance(model, str) else model
-    values = _check(values, directions, weights, normals, albedo)
+    options = options or NormalStepOptions()
+    _check_start(pixels, normals, albedo)
+    values, weights, view = pixels.values, pixels.weights, pixels.view
     normals = _unit(normals, view)
     prior = normals.copy() if prior is None else _unit(prior, view)
-    lam = prior_strength(values, weights, prior_weight)
-    obs = Observations(model, params, directions, view, len(normals), values, weights, footprint)
+    lam = prior_strength(values, weights, options.prior_weight)
+    obs = pixels.observations(model, params)
     pixel_loss, albedo = obs.losses(normals, None if albedo is None else np.asarray(albedo, np.float64))
     pixel_loss += _prior_term(normals, prior, lam)
-    if search is not None:
-        found, found_albedo, found_loss = search_start(obs, normals, prior, lam, search)
+    if options.search is not None:
+        found, found_albedo, found_loss = search_start(obs, normals, prior, lam, options.search)
         better = found_loss < pixel_loss
         normals[better], albedo[better], pixel_loss[better] = found[better], found_albedo[better], \
             found_loss[better]
     damping = np.full(len(normals), 1e-3)
     history = [float(pixel_loss.sum())]
-    for _ in range(iterations):
+    for _ in range(options.iterations):
         t1, t2 = tangents(normals)
         h, grad, _ = obs.system(normals, albedo, t1, t2)
         h[:, :2, :2] += lam * np.eye(2)  # the prior λ|n - n̄|², n ≈ n₀ + a t₁ + b t₂
@@ -237,23 +292,26 @@ def refine_normals(model: BRDFModel | str, params: dict, values, directions, wei
             trial_loss[better]
         damping = np.where(better, np.maximum(damping / 3.0, 1e-9), np.minimum(damping * 4.0, 1e12))
         history.append(float(pixel_loss.sum()))
-        if history[-2] - history[-1] <= tol * history[-1]:
+        if history[-2] - history[-1] <= options.tol * history[-1]:
             break
     return NormalFit(normals=normals, albedo=albedo, loss=history[-1], iterations=len(history) - 1,
                      history=history)
 
 
-def loss(model: BRDFModel | str, params: dict, values, directions, weights, normals, albedo=None,
-         view=(0.0, 0.0, 1.0), prior=None, prior_weight: float = PRIOR_WEIGHT) -> float:
-    """E of the module docstring at unit ``normals`` (P, 3) and ``albedo`` (default: the closed form);
-    the prior term is 0 where ``prior`` is None."""
+def loss(model: BRDFModel | str, params: dict, pixels: LitPixels, normals, albedo=None, prior=None,
+         prior_weight: float = PRIOR_WEIGHT) -> float:
+    """E of the module docstring for ``pixels`` (their glossy part averaged over their footprints, where
+    they have them) at unit ``normals`` (P, 3) and ``albedo`` (default: the closed form); the prior term is
+    0 where ``prior`` is None."""
     model = brdf_models.model(model) if isinstance(model, str) else model
+    _check_start(pixels, normals, albedo)
     normals = np.asarray(normals, np.float64)
-    obs = Observations(model, params, directions, view, len(normals), values, weights)
+    obs = pixels.observations(model, params)
     data, _ = obs.losses(normals, None if albedo is None else np.asarray(albedo, np.float64))
     if prior is None:
         return float(data.sum())
-    return float(data.sum() + _prior_term(normals, prior, prior_strength(values, weights, prior_weight)).sum())
+    return float(data.sum() + _prior_term(normals, prior, prior_strength(pixels.values, pixels.weights,
+                                                                         prior_weight)).sum())
 
 
 def predict(model: BRDFModel | str, params: dict, albedo, normals, directions, view=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -270,5 +328,5 @@ def predict(model: BRDFModel | str, params: dict, albedo, normals, directions, v
     return (np.asarray(albedo, np.float64)[None] * s[..., None] + g) * solved[None, :, None]
 
 
-__all__ = ["MAX_STEP", "PRIOR_WEIGHT", "SEARCH", "NormalFit", "loss", "predict", "prior_strength", "refine_normals",
-           "search_start"]
+__all__ = ["MAX_STEP", "PRIOR_WEIGHT", "SEARCH", "LitPixels", "NormalStepOptions", "NormalFit", "loss", "predict",
+           "prior_strength", "refine_normals", "search_start"]

@@ -8,7 +8,7 @@ they hold its normal: the non-Lambertian photometric stereo of
 :mod:`mifaces.photometric_stereo.nonlambertian`, run in texture space.
 
 **Frame.** A sample's l̂ and v̂ are in its measurement's local shading frame at
-the texel (:func:`mifaces.reflectance.samples.measurement_samples`: tangent
+the texel (:func:`mifaces.reflectance.resampling.measurement_samples`: tangent
 along +u, normal the model's). The face moves rigidly between poses, so one
 texel's frames differ between measurements only by the shape fit's errors,
 and a normal given in that frame, n = (a, b, c) with (0, 0, 1) the model's,
@@ -59,8 +59,9 @@ import numpy as np
 import scipy.ndimage
 
 from ...model.texture_space import rasterize, texel_geometry
+from ...options.fields import check, option
 from .diffuse import albedo_offsets
-from .normal_fit import NormalFit, refine_normals
+from .normal_fit import LitPixels, NormalFit, NormalStepOptions, refine_normals
 from ..samples import MIN_COSINE, ReflectanceSamples
 
 #: Default weight of the model's normal in a texel's normal step, in observations of mean weight.
@@ -76,6 +77,37 @@ SEARCH = (9.0, 3.0, 3)
 #: capture (which bench_pipeline.json also reports) three rounds came within 1 % of eight in Cook-Torrance's
 #: held-out relative RMSE, at about half the fit's time.
 NORMAL_ROUNDS = 3
+
+
+@dataclass(frozen=True)
+class NormalOptions:
+    """How :func:`refine_texel_normals` alternates (module docstring): ``FitOptions.normal_options``'
+    fields. Validated on construction: a number out of its range raises a ``ValueError`` naming the field.
+
+    Attributes
+    ----------
+    prior_weight : float
+        Weight of the model's normal in each normal step, in observations.
+    rounds : int
+        Most rounds of normal step + BRDF fit.
+    tol : float
+        Stop when a round lowers E by less than ``tol`` · E.
+    search : (radius, step, levels) or None
+        The normal step's start search (:func:`~mifaces.reflectance.maps.normal_fit.search_start`; None:
+        none).
+    smooth : float
+        After each normal step, average the normals over the texture with a Gaussian of this many
+        texels (:func:`smooth_normals`; 0: not at all).
+    """
+
+    prior_weight: float = option(PRIOR_WEIGHT, bounds=(0.0, None))
+    rounds: int = option(NORMAL_ROUNDS, bounds=(0, None))
+    tol: float = option(1e-3, bounds=(0.0, None))
+    search: tuple | None = SEARCH
+    smooth: float = option(0.0, bounds=(0.0, None))
+
+    def __post_init__(self):
+        check(self)
 
 
 @dataclass
@@ -175,32 +207,31 @@ def rotate_samples(light, view, reflectance, sigma, normals, min_cosine: float =
 
 
 class _Region:
-    """One region's texels with enough samples, as the normal step's (K, P) arrays."""
+    """One region's texels with enough samples, as the normal step's (K, P) observations."""
 
     def __init__(self, samples: ReflectanceSamples, select):
         self.texels, index = texel_table(samples.texel, samples.measurement, select)
         count = (index >= 0).sum(axis=0)
         enough = count >= MIN_OBSERVATIONS
         self.texels, index = self.texels[enough], index[:, enough]
-        self.light, self.view, self.values, self.weights = _observations(samples.light, samples.view,
-                                                                         samples.reflectance, samples.sigma, index)
-        self.footprint = None  # each observation's footprint (K, P, 3), where the samples have one
+        light, view, values, weights = _observations(samples.light, samples.view, samples.reflectance, samples.sigma,
+                                                     index)
+        footprint = None  # each observation's footprint (K, P, 3), where the samples have one
         if samples.footprint is not None:
-            self.footprint = np.where((index >= 0)[..., None], np.asarray(samples.footprint)[np.maximum(index, 0)], 0.0)
+            footprint = np.where((index >= 0)[..., None], np.asarray(samples.footprint)[np.maximum(index, 0)], 0.0)
+        self.pixels = LitPixels(values, light, weights, view=view, footprint=footprint)
 
-    def step(self, model, params, normals, prior_weight, search, iterations=30):
+    def step(self, model, params, normals, options: NormalStepOptions):
         """The normal step from ``normals`` (P, 3), a NormalFit; with ``iterations=0`` and no search,
         E and the closed-form albedo at them."""
         if len(self.texels) == 0:
             return NormalFit(normals, np.zeros_like(normals), 0.0, 0)
-        return refine_normals(model, params, self.values, self.light, self.weights, normals, view=self.view,
-                             prior=np.tile([0.0, 0.0, 1.0], (len(self.texels), 1)), prior_weight=prior_weight,
-                             search=search, iterations=iterations, footprint=self.footprint)
+        prior = np.tile([0.0, 0.0, 1.0], (len(self.texels), 1))  # the model's normal
+        return refine_normals(model, params, self.pixels, normals, prior=prior, options=options)
 
 
 def refine_texel_normals(model, fit, fits: dict, samples: ReflectanceSamples, names: dict, *,
-                         prior_weight: float = PRIOR_WEIGHT, rounds: int = NORMAL_ROUNDS, tol: float = 1e-3, search=SEARCH,
-                         smooth: float = 0.0, progress=None) -> TexelNormals:
+                         options: NormalOptions | None = None, progress=None) -> TexelNormals:
     """Alternate the per-texel normal step with the region BRDF fit (module docstring).
 
     Parameters
@@ -215,17 +246,9 @@ def refine_texel_normals(model, fit, fits: dict, samples: ReflectanceSamples, na
         The face's samples, with their region labels (``label``).
     names : dict
         Region label -> name, of the regions fitted.
-    prior_weight : float
-        Weight of the model's normal, in observations.
-    rounds : int
-        Most rounds of normal step + BRDF fit.
-    tol : float
-        Stop when a round lowers E by less than ``tol`` · E.
-    search : (radius, step, levels) or None
-        The normal step's start search.
-    smooth : float
-        After each normal step, average the normals over the texture with a Gaussian of this many
-        texels (:func:`smooth_normals`; 0: not at all).
+    options : NormalOptions, optional
+        The prior's weight, the most rounds and their tolerance, the start search, the smoothing
+        (default ``NormalOptions()``).
     progress : callable, optional
         Called with each round's history entry.
 
@@ -235,6 +258,9 @@ def refine_texel_normals(model, fit, fits: dict, samples: ReflectanceSamples, na
         The best round's state (lowest E).
     """
     t0 = time.perf_counter()
+    options = options or NormalOptions()
+    step = NormalStepOptions(prior_weight=options.prior_weight, search=options.search)
+    measure = NormalStepOptions(prior_weight=options.prior_weight, iterations=0, search=None)  # E where they are
     texel, label, resolution = np.asarray(samples.texel), samples.labels(), samples.resolution
     regions = {lab: _Region(samples, label == lab) for lab in names}
     size = resolution * resolution
@@ -243,20 +269,19 @@ def refine_texel_normals(model, fit, fits: dict, samples: ReflectanceSamples, na
     refined = np.zeros(size, bool)
     for region in regions.values():
         refined[region.texels] = True
-    loss, albedo = _evaluate(model, regions, fits, names, normals, prior_weight)
+    loss, albedo = _evaluate(model, regions, fits, names, normals, measure)
     history = [{"round": 0, "loss": loss, "seconds": time.perf_counter() - t0, "texels": 0, "mean_tilt_deg": 0.0}]
     if progress is not None:
         progress(history[-1])
     best = (loss, normals.copy(), fits, samples)
-    for round_ in range(1, rounds + 1):
+    for round_ in range(1, options.rounds + 1):
         t0 = time.perf_counter()
         for lab, region in regions.items():
-            normals[region.texels] = region.step(model, fits[names[lab]].params, normals[region.texels],
-                                                 prior_weight, search).normals
-        if smooth:
+            normals[region.texels] = region.step(model, fits[names[lab]].params, normals[region.texels], step).normals
+        if options.smooth:
             normals = smooth_normals(normals.reshape(resolution, resolution, 3),
-                                     refined.reshape(resolution, resolution), smooth).reshape(-1, 3)
-        loss, albedo = _evaluate(model, regions, fits, names, normals, prior_weight)
+                                     refined.reshape(resolution, resolution), options.smooth).reshape(-1, 3)
+        loss, albedo = _evaluate(model, regions, fits, names, normals, measure)
         rotated = _rotated(samples, normals[texel])
         use = _fitted_samples(refined, rotated.texel, rotated.label)
         offsets = albedo_offsets(albedo, rotated.texel, rotated.label, where=refined[rotated.texel])
@@ -266,7 +291,7 @@ def refine_texel_normals(model, fit, fits: dict, samples: ReflectanceSamples, na
                         "texels": int(refined.sum()), "mean_tilt_deg": float(tilt.mean()) if tilt.size else 0.0})
         if progress is not None:
             progress(history[-1])
-        improved = loss < best[0] * (1 - tol)
+        improved = loss < best[0] * (1 - options.tol)
         if loss < best[0]:
             best = (loss, normals.copy(), fits, rotated)
         if not improved:
@@ -285,12 +310,13 @@ def _rotated(samples: ReflectanceSamples, normals) -> ReflectanceSamples:
     return replace(samples.select(keep), light=light, view=view, reflectance=reflectance, sigma=sigma)
 
 
-def _evaluate(model, regions, fits, names, normals, prior_weight):
-    """E at ``normals`` (all texels, (R², 3)) and each refined texel's closed-form albedo (R², 3)."""
+def _evaluate(model, regions, fits, names, normals, measure: NormalStepOptions):
+    """E at ``normals`` (all texels, (R², 3)) and each refined texel's closed-form albedo (R², 3), by the
+    normal step ``measure`` (no iterations, no search)."""
     loss, albedo = 0.0, np.zeros_like(normals)
     for lab, region in regions.items():
         if len(region.texels):
-            state = region.step(model, fits[names[lab]].params, normals[region.texels], prior_weight, None, 0)
+            state = region.step(model, fits[names[lab]].params, normals[region.texels], measure)
             loss += state.loss
             albedo[region.texels] = state.albedo
     return loss, albedo
@@ -375,5 +401,5 @@ def decode(texture) -> np.ndarray:
     return n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-30)
 
 
-__all__ = ["PRIOR_WEIGHT", "MIN_OBSERVATIONS", "TexelNormals", "texel_table", "frames_of", "rotate_samples",
-           "refine_texel_normals", "mitsuba_frames", "mitsuba_tangent_normals", "encode", "decode"]
+__all__ = ["PRIOR_WEIGHT", "MIN_OBSERVATIONS", "NormalOptions", "TexelNormals", "texel_table", "frames_of",
+           "rotate_samples", "refine_texel_normals", "mitsuba_frames", "mitsuba_tangent_normals", "encode", "decode"]

@@ -9,7 +9,7 @@ import mitsuba as mi
 import numpy as np
 
 from ...brdf.model import BRDFModel
-from ..footprint import tilts
+from ..footprint import spread_arrays, tilts
 
 
 def tangents(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -67,8 +67,7 @@ class Observations:
         self.tilts = ()
         if footprint is not None:
             spread = np.transpose(np.asarray(footprint, np.float32), (1, 0, 2)).reshape(pixels * k, 3)
-            self.tilts = tuple((mi.Vector3f(x, y, 0.0), w) for x, y, w in tilts(
-                tuple(mi.Float(np.ascontiguousarray(c)) for c in spread.T)))
+            self.tilts = tuple((mi.Vector3f(x, y, 0.0), w) for x, y, w in tilts(spread_arrays(spread, pixels * k)))
             dr.eval([t for t, _ in self.tilts])
         if values is not None:
             self.value = mi.Color3f(np.ascontiguousarray(
