@@ -381,12 +381,13 @@ MUTATIONS = [
 
 def scratch_copy(root: Path) -> Path:
     """The package, its plugins (as ``mifaces/plugins``, where the import finds them first), the
-    validation scripts (without their results), the tests and the example scenes, copied under ``root``."""
+    validation scripts (with their results' JSON, not their pictures), the tests and the example scenes, copied under ``root``."""
     skip = shutil.ignore_patterns("__pycache__")
     shutil.copytree(REPO / "mifaces", root / "mifaces", ignore=skip)  # (reproduce.py's copy holds mifaces/plugins)
     shutil.copytree(REPO / "plugins", root / "mifaces" / "plugins", ignore=skip, dirs_exist_ok=True)
     shutil.copytree(REPO / "plugins", root / "plugins", ignore=skip)
-    shutil.copytree(REPO / "validation", root / "validation", ignore=shutil.ignore_patterns("__pycache__", "results"))
+    # the results' JSON too: some tests hold the library to a study's choice (the systematic terms)
+    shutil.copytree(REPO / "validation", root / "validation", ignore=shutil.ignore_patterns("__pycache__", "*.png"))
     shutil.copytree(REPO / "tests", root / "tests", ignore=skip)
     shutil.copytree(REPO / "scenes", root / "scenes", ignore=skip)  # (scenes the tests load)
     shutil.copy(REPO / "pyproject.toml", root / "pyproject.toml")

@@ -59,7 +59,8 @@ TIMING = re.compile(r"(^|_)(seconds|wall|wall_s|time_s|elapsed|ms|per_second|thr
 class Entry:
     """One command and the result files it writes.
 
-    ``argv`` is run from the scratch copy's root; ``{work}`` stands for a scratch folder of its own.
+    ``argv`` is run from the scratch copy's root; ``{work}`` stands for a scratch folder of its own,
+    ``{repo}`` for the checkout the copy was made from (its git history).
     ``quick``: reruns in about a minute or less on 2 cores (``--quick``, and so CI).
     ``kind``: ``deterministic`` (exact unless ``rtol``/``atol`` say otherwise), ``seeded`` (Monte Carlo
     renders and fits, repeatable on one machine up to float32 sums) or ``benchmark`` (timings: only the
@@ -130,6 +131,9 @@ REGISTRY: tuple[Entry, ...] = (
     Entry("bench_shape_kernels", _py("bench_shape_kernels"), ("bench_shape_kernels.json",), kind="benchmark",
           minutes=15),
     Entry("bench_pipeline", _py("bench_pipeline"), ("bench_pipeline.json",), kind="benchmark", minutes=10),
+    # the main job's warm time at this tree and at the commit before the options refactor (issue 49), in turns
+    Entry("bench_commits", _py("bench_commits", "--base", "74ca5cd", "--repo", "{repo}"), ("bench_commits.json",),
+          kind="benchmark", minutes=13),
     Entry("bench_pipeline_uncorrected", _py("bench_pipeline", "--args", "--no-interreflection --no-balance-lights",
                                             "--name", "bench_pipeline_uncorrected"),
           ("bench_pipeline_uncorrected.json",), kind="benchmark", minutes=10),
@@ -330,7 +334,7 @@ def scratch_copy(root: Path, repo: Path = REPO) -> Path:
 def rerun(entry: Entry, main: Path, log) -> tuple[int, float]:
     """Run ``entry``'s command in the scratch tree ``main``; its exit code and wall time."""
     work = Path(tempfile.mkdtemp(prefix=f"{entry.name}-", dir=main.parent))
-    argv = [a.replace("{work}", str(work)) for a in entry.argv]
+    argv = [a.replace("{work}", str(work)).replace("{repo}", str(REPO)) for a in entry.argv]
     argv = [sys.executable, *argv[1:]] if argv[0] == "python" else argv
     env = dict(os.environ, PYTHONPATH=str(main), PYTHONDONTWRITEBYTECODE="1")
     start = time.perf_counter()
