@@ -50,7 +50,7 @@ from results_tables_fits import (  # noqa: E402  (one function per result layout
     sec_truths, sec_uncertainty_cost, sec_uncertainty_measure, sec_uncertainty_texel_albedo, sec_unknown,
 )
 from results_tables_pipeline import (  # noqa: E402  (one function per result layout)
-    sec_bench_brdf_fit, sec_bench_bsdf, sec_bench_face_render, sec_bench_pipeline, sec_bench_shape_kernels,
+    sec_bench_brdf_fit, sec_bench_bsdf, sec_bench_commits, sec_bench_face_render, sec_bench_pipeline, sec_bench_shape_kernels,
     sec_bench_simulate, sec_brdf_energy, sec_brdf_fit_stiff, sec_brdf_recovery, sec_environment_lights,
     sec_environment_lights_tuning, sec_export, sec_model_span, sec_mutations, sec_normals_faces, sec_pareto,
     sec_real_diligent, sec_real_yaleb, sec_unknown_lights, sec_unknown_lights_simulated,
@@ -166,6 +166,8 @@ LAYOUTS = {
                             sec_albedo_rounds_exact),
     "bench_brdf_fit": ("The BRDF fit against scipy", "SIMULATED (synthetic reflectance samples)", sec_bench_brdf_fit),
     "bench_bsdf": ("BSDF plugins and the BRDF array API: speed", "timing (synthetic scene)", sec_bench_bsdf),
+    "bench_commits": ("The main job at two commits, side by side", "timing (SIMULATED default capture)",
+                      sec_bench_commits),
     "bench_face_render": ("The face photograph: plugin against built-in BSDFs", "timing (SIMULATED face)",
                           sec_bench_face_render),
     "bench_pipeline": ("The main job: time and memory", "SIMULATED (the built-in default capture)",

@@ -46,6 +46,26 @@ def sec_bench_face_render(d):
     return lines
 
 
+def sec_bench_commits(d):
+    summary = d.get("summary") or {}
+    lines = [f"This tree against `{text(d.get('base'))}`, warm runs in turns ({text(d.get('order'))}; "
+             f"{text(d.get('rounds'))} round(s)). The report's figures agree between the two within "
+             f"{fixed(d.get('figure_atol'), 3)}: {text(d.get('figures_agree'))}.", ""]
+    lines += table(["", "runs (s)", "mean (s)", "spread (s)"],
+                   [[side, ", ".join(fixed(w, 1) for w in (get(summary, side, "wall_s") or [])),
+                     fixed(get(summary, side, "mean_s"), 1), fixed(get(summary, side, "spread_s"), 1)]
+                    for side in ("this", "base")])
+    lines += [f"Ratio of the means, this tree over the base: {fixed(d.get('ratio_this_over_base'), 3)}."]
+    runs = d.get("runs") or {}
+    stages = list((get((runs.get("this") or [{}])[0], "stages_s") or {}))
+    if stages:
+        lines += ["", "Mean time per stage (s):", ""]
+        lines += table(["stage", "this", "base"],
+                       [[stage, *[fixed(mean([get(r, "stages_s", stage) for r in runs.get(side) or []]), 1)
+                                  for side in ("this", "base")]] for stage in stages])
+    return lines
+
+
 def sec_bench_pipeline(d):
     runs = items(d.get("runs"))
     machine = d.get("machine") or {}
