@@ -5,13 +5,14 @@ run to run and day to day by more than such a change could cost: two warm runs o
 minutes apart, took 172 s and 189 s (a development look, 2026-12-07). So the two commits are timed
 in turns on one machine, in the order ABBA (this tree, the base, the base, this tree; ``--rounds`` such
 quadruples), each run a warm ``validation/bench_pipeline.py --no-cold --warm 1`` (the caches of the
-runs before it; with ``--warm-up``, one untimed run of each side first). The base's library is ``git
+runs before it; with ``--warm-up``, one untimed run of each side first) or, with ``--cold``, a cold
+``validation/bench_pipeline.py --warm 0`` (empty caches: a new HOME and MIFACES_CACHE per run). The base's library is ``git
 archive`` of ``--base`` in a temporary folder, put first on ``PYTHONPATH``; the measuring script and
 the BSDF plugins are this tree's (the plugins must be the same at both commits).
 
-    python validation/bench_commits.py --base 74ca5cd [--rounds 1] [--warm-up] [--args "..."]
+    python validation/bench_commits.py --base 74ca5cd [--rounds 1] [--warm-up | --cold] [--args "..."] [--name NAME]
 
-Writes ``validation/results/bench_commits.json``: each run's wall time and stages, each side's mean
+Writes ``validation/results/<NAME>.json`` (default ``bench_commits``; ``bench_commits_cold`` for the cold runs): each run's wall time and stages, each side's mean
 and spread, the ratio of the means (this tree over the base) and whether the report's figures (the
 held-out relative RMSE per model, the ranking) agree between the sides within ``FIGURE_ATOL``.
 """
@@ -48,18 +49,19 @@ def base_tree(repo: Path, commit: str, into: Path) -> Path:
     return into
 
 
-def warm_run(library: Path | None, name: str, work: Path, extra: str) -> dict:
-    """One warm ``bench_pipeline.py`` run with ``library`` first on the path (None: this tree's)."""
+def timed_run(library: Path | None, name: str, work: Path, extra: str, cold: bool = False) -> dict:
+    """One ``bench_pipeline.py`` run, warm (or ``cold``: empty caches), with ``library`` first on the
+    path (None: this tree's)."""
     env = dict(os.environ)
     if library is not None:  # the base's package first; else this tree's (the editable install, or the
         # scratch copy that validation/reproduce.py puts on PYTHONPATH)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(library), env.get("PYTHONPATH")]))
-    argv = [sys.executable, str(REPO / "validation" / "bench_pipeline.py"), "--no-cold", "--warm", "1",
-            "--results", str(work), "--name", name]
+    argv = [sys.executable, str(REPO / "validation" / "bench_pipeline.py"),
+            *(["--warm", "0"] if cold else ["--no-cold", "--warm", "1"]), "--results", str(work), "--name", name]
     if extra:
         argv += ["--args", extra]
     subprocess.run(argv, cwd=work, env=env, check=True, stdout=subprocess.DEVNULL)
-    run = json.loads((work / f"{name}.json").read_text())["runs"]["warm"]
+    run = json.loads((work / f"{name}.json").read_text())["runs"]["cold" if cold else "warm"]
     return {"wall_s": run["wall_s"], "stages_s": run["stages_s"], "ranking": run["ranking"],
             "heldout_rmse": {m: v["heldout_rmse"] for m, v in run["models"].items()}}
 
@@ -76,22 +78,25 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repo", type=Path, default=REPO, help="the git checkout holding --base (default: this one)")
     parser.add_argument("--rounds", type=int, default=1, help="ABBA rounds: each times both sides twice")
     parser.add_argument("--warm-up", action="store_true", help="one untimed run of each side first")
+    parser.add_argument("--cold", action="store_true", help="cold runs (empty caches) instead of warm ones")
     parser.add_argument("--args", default="", help="extra arguments of mifaces measure")
-    parser.add_argument("--out", type=Path, default=RESULTS / "bench_commits.json")
+    parser.add_argument("--name", default="bench_commits", help="stem of the result file in validation/results/")
     args = parser.parse_args(argv)
     if args.rounds < 1:
         parser.error("--rounds must be at least 1")
+    if args.cold and args.warm_up:
+        parser.error("--warm-up is for warm runs: a cold run starts from empty caches")
     with tempfile.TemporaryDirectory(prefix="mifaces-bench-commits-") as tmp:
         tmp = Path(tmp)
         base = base_tree(args.repo, args.base, Path(tempfile.mkdtemp(dir=tmp, prefix="base-")))
         sides = {"this": None, "base": base}
         for side, library in sides.items() if args.warm_up else ():
             print(f"warm-up: {side}", flush=True)
-            warm_run(library, f"warmup_{side}", tmp, args.args)
+            timed_run(library, f"warmup_{side}", tmp, args.args)
         runs: dict[str, list] = {"this": [], "base": []}
         for r in range(args.rounds):
             for i, side in enumerate(("this", "base", "base", "this")):
-                run = warm_run(sides[side], f"{side}_{r}_{i}", tmp, args.args)
+                run = timed_run(sides[side], f"{side}_{r}_{i}", tmp, args.args, args.cold)
                 runs[side].append(run)
                 print(f"round {r + 1}: {side} {run['wall_s']:.1f} s", flush=True)
     means = {side: summary(found) for side, found in runs.items()}
@@ -101,10 +106,10 @@ def main(argv: list[str] | None = None) -> int:
         for run in runs["this"] + runs["base"])
     ratio = means["this"]["mean_s"] / means["base"]["mean_s"]
     data = {"base": args.base, "order": "ABBA per round: this, base, base, this", "rounds": args.rounds,
-            "warm_up": args.warm_up,
+            "caches": "cold" if args.cold else "warm", "warm_up": args.warm_up,
             "measure_args": shlex.split(args.args), "runs": runs, "summary": means, "ratio_this_over_base": ratio,
             "figures_agree": figures_agree, "figure_atol": FIGURE_ATOL}
-    write_result(args.out, data, argv=argv and [sys.argv[0], *argv])
+    write_result(RESULTS / f"{args.name}.json", data, argv=argv and [sys.argv[0], *argv])
     print(f"this tree {means['this']['mean_s']:.1f} s, base {args.base} {means['base']['mean_s']:.1f} s: "
           f"ratio {ratio:.3f}; the report's figures {'agree' if figures_agree else 'DIFFER'}")
     return 0

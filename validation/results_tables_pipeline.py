@@ -48,7 +48,9 @@ def sec_bench_face_render(d):
 
 def sec_bench_commits(d):
     summary = d.get("summary") or {}
-    lines = [f"This tree against `{text(d.get('base'))}`, warm runs in turns ({text(d.get('order'))}; "
+    caches = d.get("caches") or "warm"
+    how = "cold runs (empty caches: a new HOME and MIFACES_CACHE each)" if caches == "cold" else "warm runs"
+    lines = [f"This tree against `{text(d.get('base'))}`, {how} in turns ({text(d.get('order'))}; "
              f"{text(d.get('rounds'))} round(s)). The report's figures agree between the two within "
              f"{fixed(d.get('figure_atol'), 3)}: {text(d.get('figures_agree'))}.", ""]
     lines += table(["", "runs (s)", "mean (s)", "spread (s)"],
