@@ -59,6 +59,13 @@ def sec_bench_commits(d):
                     for side in ("this", "base")])
     lines += [f"Ratio of the means, this tree over the base: {fixed(d.get('ratio_this_over_base'), 3)}."]
     runs = d.get("runs") or {}
+    models = list(get((runs.get("base") or [{}])[0], "heldout_rmse") or {})
+    if models:
+        lines += ["", "The report's figures in each run: the held-out lights' relative RMSE on the fitted faces, and the "
+                      "ranking by it.", ""]
+        lines += table(["side", "wall (s)", *models, "ranking"],
+                       [[side, fixed(get(r, "wall_s"), 1), *[pct(get(r, "heldout_rmse", m), 2) for m in models],
+                         ", ".join(get(r, "ranking") or [])] for side in ("this", "base") for r in runs.get(side) or []])
     stages = list((get((runs.get("this") or [{}])[0], "stages_s") or {}))
     if stages:
         lines += ["", "Mean time per stage (s):", ""]
