@@ -231,6 +231,23 @@ def test_fitting_reuses_compiled_kernels(jit_variant):
     assert len(misses) <= 2, [k["ir"].getvalue()[:300] if "ir" in k else k for k in misses]
 
 
+def test_glossy_peak_reuses_its_kernel(jit_variant):
+    """The peak a fitted lobe predicts (checked after every region fit) takes the parameters as opaque
+    values: another fit's parameters launch the kernel compiled for the first, compiling nothing."""
+    from mifaces.reflectance.fit.lobes import glossy_peak
+
+    model = brdf.model("cooktorrance")
+    first = {"specular_reflectance": [0.4, 0.5, 0.6], "roughness": 0.3, "eta": 1.4}
+    glossy_peak(model, first)  # compiled for these parameters' types
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        dr.kernel_history()  # clear
+        peaks = [glossy_peak(model, {"specular_reflectance": [s, s, s], "roughness": a, "eta": 1.38})
+                 for s, a in ((0.9, 0.21), (0.2, 0.47))]
+        history = dr.kernel_history([dr.KernelType.JIT])
+    assert peaks[0] > peaks[1] > 0  # a sharper, brighter lobe peaks higher
+    assert history and not [k for k in history if not k["cache_hit"]]
+
+
 def test_lafortune_lobes_stay_energy_bounded(jit_variant):
     """Lafortune fitted to a Fresnel-brightened Cook-Torrance seen only away
     from grazing angles: every lobe keeps |C| <= ((n+2)/2π)^(1/n), so the

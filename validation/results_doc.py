@@ -41,7 +41,7 @@ from pathlib import Path
 import doc_figures  # noqa: E402  (the figures of the hand-written docs, checked with --check)
 from results_format import DASH, get  # noqa: E402  (the formatting helpers)
 from results_tables_design import sec_design_metrics  # noqa: E402  (the redesign issue's measuring stick)
-from results_tables_studies import (sec_interreflection_rounds, sec_reflectance_bias,  # noqa: E402
+from results_tables_studies import (sec_interreflection_rounds, sec_normal_step_tol, sec_reflectance_bias,  # noqa: E402
                                     sec_reflectance_coverage, sec_refine_judge, sec_region_seams)
 from results_tables_fits import (  # noqa: E402  (one function per result layout)
     sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_depth_cameras, sec_floor_depth, sec_multi_camera,
@@ -168,6 +168,8 @@ LAYOUTS = {
     "bench_bsdf": ("BSDF plugins and the BRDF array API: speed", "timing (synthetic scene)", sec_bench_bsdf),
     "bench_commits": ("The main job at two commits, side by side", "timing (SIMULATED default capture)",
                       sec_bench_commits),
+    "bench_commits_normal_step": ("The main job before and after the normal step's tolerance, side by side",
+                                  "timing (SIMULATED default capture)", sec_bench_commits),
     "bench_face_render": ("The face photograph: plugin against built-in BSDFs", "timing (SIMULATED face)",
                           sec_bench_face_render),
     "bench_pipeline": ("The main job: time and memory", "SIMULATED (the built-in default capture)",
@@ -188,6 +190,8 @@ LAYOUTS = {
                      sec_region_seams),
     "interreflection_rounds": ("How the bounced light is taken out: rounds and render sizes", "SIMULATED",
                                sec_interreflection_rounds),
+    "normal_step_tol": ("The per-texel normal step's tolerance: time and figures", "SIMULATED",
+                        sec_normal_step_tol),
     "pareto": ("Error against run time of the whole pipeline", "SIMULATED", sec_pareto),
     "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
     "real_yaleb": ("Held-out relighting on the Yale face database", "real photographs", sec_real_yaleb),

@@ -164,6 +164,30 @@ def sec_reflectance_coverage(d):
     return lines
 
 
+def sec_normal_step_tol(d):
+    """Per tolerance of the normal step: the four models' fit time against 1e-7's, and the largest change
+    of a model's figures against 1e-7's."""
+    lines = [f"The main job's default capture at development seeds {text(d.get('seeds'))}, fitted shapes; each "
+             "model fitted with the defaults (per-texel normals on) at each tolerance of the normal step's "
+             f"iterations, the fits timed in turns. The library's is {text(d.get('chosen'))}. Changes are against "
+             "1e-7, the largest over seeds and models (held-out lights and environments in points of relative "
+             "image RMSE; skin's BRDF error in its own units).", ""]
+    rows = [[f"{tol}", fixed(get(row, "seconds"), 1), fixed(get(row, "time_ratio"), 3),
+             fixed(get(row, "max_change_heldout_rmse_points"), 3), fixed(get(row, "max_change_environment_rmse_points"), 3),
+             fixed(get(row, "max_change_skin_brdf_rmse"), 5)] for tol, row in items(d.get("summary"))]
+    lines += table(["tolerance", "fits (s)", "time / 1e-7's", "held-out change (points)",
+                    "environments change (points)", "skin BRDF change"], rows)
+    detail = []
+    for run in d.get("runs") or []:
+        for model, fits in items(run.get("fits")):
+            detail.append([text(run.get("seed")), model] + [f"{fixed(get(f, 'seconds'), 1)} s, {pct(get(f, 'heldout_rmse'), 2)}"
+                                                            for f in fits.values()])
+    if detail:
+        lines += ["", "Per seed and model: the fit's time and held-out error at each tolerance.", ""]
+        lines += table(["seed", "model", *[str(t) for t in d.get("tolerances") or []]], detail)
+    return lines
+
+
 def sec_interreflection_rounds(d):
     """Per way of taking the bounced light out: skin's and the lips' glossy errors over the seeds and
     channels (mean, largest magnitude)."""

@@ -4,6 +4,7 @@ lobe-less parameters of a region nothing can lend a glossy part to (:func:`no_lo
 
 from __future__ import annotations
 
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 
@@ -68,8 +69,9 @@ def glossy_peak(model: BRDFModel, params: dict) -> float:
     theta = np.radians(np.asarray(PEAK_ANGLES))
     wi = np.stack([np.sin(theta), np.zeros_like(theta), np.cos(theta)])
     wo = wi * np.array([[-1.0], [-1.0], [1.0]])
-    values = {k: (mi.Color3f(*(float(c) for c in np.broadcast_to(np.asarray(v, np.float64), 3))) if np.ndim(v)
-                  else mi.Float(float(v)))
+    # opaque: one kernel for every fit's parameters (literals would compile one per value)
+    values = {k: (mi.Color3f(*(dr.opaque(mi.Float, float(c)) for c in np.broadcast_to(np.asarray(v, np.float64), 3)))
+                  if np.ndim(v) else dr.opaque(mi.Float, float(v)))
               for k, v in params.items()}
     f = np.array(model.eval(mi.Vector3f(wi.astype(np.float32)), mi.Vector3f(wo.astype(np.float32)), values,
                             diffuse=False))
