@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import mifaces  # first: it points Dr.Jit at a working libLLVM  # isort: skip
 
+import json
 import warnings
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +16,7 @@ import pytest
 from mifaces import brdf as brdf_models
 from mifaces.capture import load_capture, with_true_lights
 from mifaces.reflectance import FitOptions, fit_brdf
+from mifaces.reflectance.light_balance import FAILED_LIGHT_FACTOR, failed_lights
 from mifaces.reflectance.sample_stage import take_samples, with_balanced_lights
 from mifaces.shape.io import load_geometry
 
@@ -93,3 +96,60 @@ def test_samples_balanced_once_are_shared_not_balanced_again(lamp_off):
     assert with_balanced_lights(balanced, brdf_models.model("cooktorrance"), options) is balanced
     assert not np.array_equal(balanced.samples.reflectance, taken.samples.reflectance)
     assert balanced.capture.lights[0].intensity[0] != off.lights[0].intensity[0]
+
+
+def _a_light_per_photograph(capture):
+    """``capture`` with a light of its own for each photograph (a copy of its lamp), as a dome's strobes."""
+    lights, measurements = [], []
+    for m in capture.measurements:
+        light = replace(capture.light(m.light), name=f"{m.light}_{m.name}")
+        lights.append(light)
+        measurements.append(replace(m, light=light.name))
+    return replace(capture, lights=tuple(lights), measurements=tuple(measurements))
+
+
+def test_failed_lights_are_read_against_the_median_light():
+    """A light 2 times or more from the median light's factor, either way, has failed; two lights have no median."""
+    log_s = {"a": 0.0, "b": np.log(1.3), "c": np.log(0.8), "d": np.log(60.0)}
+    assert set(failed_lights(log_s)) == {"d"}
+    assert failed_lights(log_s)["d"] == pytest.approx(60.0 / np.exp(np.median(list(log_s.values()))))
+    assert set(failed_lights({**log_s, "d": np.log(1 / 60)})) == {"d"}
+    assert failed_lights({"a": 0.0, "b": np.log(1.9), "c": np.log(1 / 1.9)}) == {}
+    assert failed_lights({"a": 0.0, "b": np.log(60.0)}) == {}
+    assert FAILED_LIGHT_FACTOR == 2.0
+
+
+def test_a_lamp_that_did_not_fire_is_left_out_not_balanced(lamp_off):
+    """A lamp whose photographs are 30 times darker than the capture states (a strobe that did not fire)
+    is named in a warning and in ``metadata['failed_lights']``, its photographs' samples are left out,
+    and the other lamps, stated as they are, come out balanced to within 0.5 % (its factor, left in,
+    moves them by a sixth of its log: 43 % with six lamps). A strobe per photograph, as a dome has
+    (the capture's two lamps have no median light)."""
+    true, _, face, shapes = lamp_off
+    strobes = _a_light_per_photograph(true)
+    dark = strobes.lights[0]
+    failed = replace(strobes, lights=(dark.with_intensity(30 * np.asarray(dark.intensity, np.float64)),
+                                      *strobes.lights[1:]))
+    options = FitOptions(resolution=TEXTURE, uncertainty=None, balance_lights=True, interreflection=False)
+    taken = take_samples(failed, shapes, face, options, progress=False)
+    with pytest.warns(UserWarning, match=f"light '{dark.name}'.*left out of the fit"):
+        balanced = with_balanced_lights(taken, brdf_models.model("phong"), options)
+    assert set(balanced.capture.metadata["failed_lights"]) == {dark.name}
+    assert balanced.capture.metadata["failed_lights"][dark.name] == pytest.approx(30, rel=0.05)
+    under = {m.name for m in failed.measurements if m.light == dark.name}
+    names = np.array(balanced.samples.measurement_names)[balanced.samples.measurement]
+    assert under and not set(names) & under and set(names) == {m for m in taken.samples.measurement_names} - under
+    assert dark.name not in balanced.light_balance
+    assert max(abs(np.log(v)) for v in balanced.light_balance.values()) < 0.005, balanced.light_balance
+
+
+def test_the_failed_light_factor_is_the_one_the_study_chose():
+    """:data:`FAILED_LIGHT_FACTOR` is the limit ``validation/light_balance_limit.py`` chose on the
+    development Yale subjects, and there it lay clear of every sound photograph's factor and of the
+    failed strobe's, with the study's margin either way."""
+    result = json.loads((Path(__file__).parents[1] / "validation/results/light_balance_limit.json").read_text())
+    assert result["chosen"] == FAILED_LIGHT_FACTOR and result["separates"]
+    assert result["largest_sound_deviation"] * result["margin"] <= FAILED_LIGHT_FACTOR
+    assert result["smallest_failed_deviation"] >= result["margin"] * FAILED_LIGHT_FACTOR
+    measured = [run for run in result["runs"].values() if "factors" in run]
+    assert len(measured) >= 8

@@ -34,7 +34,7 @@ Writes ``DIR/<subject>/capture`` (with ``split.json``), ``DIR/<subject>/measure`
 Real photographs: these figures are not simulated.
 
     python validation/real_yaleb.py --data ../shared/data/yaleb --out out/real_yaleb [--subjects yaleB01] [--train 8]
-        [--refine] [--refine-shape] [--normals] [--interreflection] [--texel-albedo]
+        [--refine] [--refine-shape] [--normals] [--interreflection] [--texel-albedo] [--balance-lights]
 
 With ``--refine-shape``, the fitted faces are refined by differentiable rendering against the
 training photographs (``mifaces measure --refine-shape``) before the BRDFs are fitted, and the
@@ -48,7 +48,10 @@ written to ``validation/results/real_yaleb_normals.{json,png}`` (:func:`comparis
 with ``--interreflection`` likewise without and with the bounced light taken out
 (``mifaces measure --interreflection``): ``real_yaleb_interreflection.{json,png}``; with
 ``--texel-albedo``, without and with an albedo per texel in the glossy fit (``mifaces measure
---texel-albedo``): ``real_yaleb_texel_albedo.{json,png}``.
+--texel-albedo``): ``real_yaleb_texel_albedo.{json,png}``; with ``--balance-lights``, without and with the
+given lights balanced by the face's one albedo (``mifaces measure --no-balance-lights`` and the default),
+failed lamps left out (``mifaces.reflectance.light_balance.FAILED_LIGHT_FACTOR``):
+``real_yaleb_balance_lights.{json,png}``.
 """
 
 from __future__ import annotations
@@ -164,11 +167,13 @@ def refine_models(capture, face, shapes, models, out: Path, resolution: int) -> 
 
 def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shadow_angle: float,
                 resolution: int, normals: bool | None = None, refine: bool = False, refine_shape=False,
-                unknown_lights: bool = False, interreflection: bool = False, texel_albedo: bool | None = None) -> dict:
+                unknown_lights: bool = False, interreflection: bool = False, texel_albedo: bool | None = None,
+                balance_lights: bool | None = None) -> dict:
     """Import, measure and relight one subject; its errors and timings. With ``unknown_lights`` the
     capture hides its light directions (``mifaces import yaleb --unknown-lights``) and ``measure``
     estimates them (``validation/unknown_lights.py``); the held-out lights are rendered as known.
-    ``normals`` and ``texel_albedo`` None: :class:`FitOptions`' defaults (per-texel normals on)."""
+    ``normals``, ``texel_albedo`` and ``balance_lights`` None: :class:`FitOptions`' defaults (per-texel normals
+    on, the lights balanced)."""
     t0 = time.perf_counter()
     name = subject_dir.name
     capture_dir = import_subject(subject_dir, out / "capture", train=train, force=True, unknown_lights=unknown_lights)
@@ -177,8 +182,8 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     t_measure = time.perf_counter()
     report = measure(out / "measure", capture_dir, models=models, progress=True, refine_shape=refine_shape,
                      options=FitOptions(resolution=resolution, interreflection=interreflection,
-                                        **{k: v for k, v in (("normals", normals), ("texel_albedo", texel_albedo))
-                                           if v is not None}))
+                                        **{k: v for k, v in (("normals", normals), ("texel_albedo", texel_albedo),
+                                                             ("balance_lights", balance_lights)) if v is not None}))
     seconds = {"import": t_measure - t0, "measure": time.perf_counter() - t_measure}
     capture = load_capture(capture_dir, detect=False)
     # the faces the BRDFs were fitted on: the refined ones where this run kept a refinement
@@ -346,30 +351,38 @@ def figure(results: list[dict], out: Path, data_dir: Path, run_dir: Path, best: 
 def comparison(args, subjects, models, argv, option: str = "normals") -> int:
     """Each subject measured without and with ``option`` of :class:`FitOptions` (``normals``: per-texel
     normals; ``interreflection``: the bounced light taken out; ``texel_albedo``: an albedo per texel in the glossy
-    fit; ``measure(..., options=FitOptions(<option>=True))``,
+    fit; ``balance_lights``: the given lights balanced; ``measure(..., options=FitOptions(<option>=True))``,
     into ``DIR/<subject>`` and ``DIR/<subject>_<option>``): held-out relative RMSE of both, pooled and per
-    subject, in ``real_yaleb_<option>.{json,png}``."""
+    subject, in ``real_yaleb_<option>.{json,png}``. A subject with no usable face shape is left out of both
+    (``failed_subjects``)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    runs = {}
+    runs, failed = {}, {}
     for label, on in (("without", False), ("with", True)):
         results = []
-        for subject in subjects:
+        for subject in [s for s in subjects if s not in failed]:
             print(f"== {subject} ({label} {option})", flush=True)
             folder = args.out / (subject + (f"_{option}" if on else ""))
-            results.append(subject_run(args.data / subject, folder, args.train, models, args.spp, args.shadow_angle,
-                                       args.resolution, **{option: on}))
+            try:
+                results.append(subject_run(args.data / subject, folder, args.train, models, args.spp,
+                                           args.shadow_angle, args.resolution, **{option: on}))
+            except NoUsableShapeError as error:  # one subject's failure is recorded; the others go on
+                failed[subject] = str(error).split("; ")[0][:400]
+                print(f"{subject}: no usable face shape, left out: {failed[subject]}", flush=True)
+        results = [r for r in results if r["subject"] not in failed]
         runs[label] = {"overall": summary(results, models),
                        "subjects": {r["subject"]: r["relative_rmse"] for r in results},
                        "seconds": {r["subject"]: r["seconds"] for r in results}}
+    subjects = [s for s in subjects if s not in failed]
     best = runs["without"]["overall"]["best_model"]
     document = {"data": "Extended Yale Face Database B (cropped), real photographs", "train_lights": args.train,
                 "models": list(models), "spp": args.spp, "texture_resolution": args.resolution, "option": option,
                 "command": "python validation/real_yaleb.py " + " ".join(argv if argv is not None else sys.argv[1:]),
                 "best_model_without": best, "runs": runs,
+                "failed_subjects": [{"subject": s, "error": e} for s, e in failed.items()],
                 "best_model_error": {k: runs[k]["overall"]["relative_rmse"][best]["all"] for k in runs}}
     write_json(args.results / f"real_yaleb_{option}.json", document)
     fig, ax = plt.subplots(figsize=(8, 4))
@@ -412,6 +425,9 @@ def main(argv=None) -> int:
     parser.add_argument("--texel-albedo", action="store_true",
                         help="measure without and with an albedo per texel in the glossy fit; write "
                              "real_yaleb_texel_albedo.{json,png}")
+    parser.add_argument("--balance-lights", action="store_true",
+                        help="measure without and with the given lights balanced; write "
+                             "real_yaleb_balance_lights.{json,png}")
     parser.add_argument("--refine", action="store_true",
                         help="also refine each fit by differentiable rendering and score it beside the unrefined")
     parser.add_argument("--refine-shape", action="store_true",
@@ -434,6 +450,8 @@ def main(argv=None) -> int:
         return comparison(args, subjects, models, argv, "interreflection")
     if args.texel_albedo:
         return comparison(args, subjects, models, argv, "texel_albedo")
+    if args.balance_lights:
+        return comparison(args, subjects, models, argv, "balance_lights")
     results, failed = [], []
     for subject in subjects:
         print(f"== {subject}", flush=True)

@@ -266,6 +266,8 @@ REGISTRY: tuple[Entry, ...] = (
     # real photographs (../shared/data)
     Entry("real_diligent", _py("real_diligent", "--data", _DILIGENT, "--out", "{work}"),
           ("real_diligent.json",), minutes=15, inputs=(_DILIGENT,), **_FIT),
+    Entry("light_balance_limit", _py("light_balance_limit", "--data", _YALE, "--work", "{work}"),
+          ("light_balance_limit.json",), minutes=5, inputs=(_YALE,), **_FIT),
     Entry("unknown_lights", _py("unknown_lights", "--data", _YALE, "--out", "{work}"),
           ("unknown_lights.json",), minutes=30, inputs=(_YALE,), **_FIT),
     *(Entry(f"real_yaleb{suffix}", _py("real_yaleb", "--data", _YALE, "--out", "{work}", *flags),
@@ -273,7 +275,9 @@ REGISTRY: tuple[Entry, ...] = (
             **(_REFINE if "--refine-shape" in flags else _FIT))
       for suffix, flags in (("", ()), ("_train4", ("--train", "4")), ("_refine", ("--refine",)),
                             ("_normals", ("--normals",)), ("_interreflection", ("--interreflection",)),
-                            ("_texel_albedo", ("--texel-albedo",)), ("_refine_shape", ("--refine-shape",)),
+                            ("_texel_albedo", ("--texel-albedo",)),
+                            ("_balance_lights", ("--balance-lights", "--models", "phong,lafortune")),
+                            ("_refine_shape", ("--refine-shape",)),
                             ("_refine_shape_judged", ("--refine-shape", "--refine-shape-judged", "1")),
                             ("_refine_shape_early_stop", ("--refine-shape", "--refine-shape-early-stop")))),
 )

@@ -41,8 +41,9 @@ from pathlib import Path
 import doc_figures  # noqa: E402  (the figures of the hand-written docs, checked with --check)
 from results_format import DASH, get  # noqa: E402  (the formatting helpers)
 from results_tables_design import sec_design_metrics  # noqa: E402  (the redesign issue's measuring stick)
-from results_tables_studies import (sec_interreflection_rounds, sec_normal_step_tol, sec_reflectance_bias,  # noqa: E402
-                                    sec_reflectance_coverage, sec_refine_judge, sec_region_seams)
+from results_tables_studies import (sec_interreflection_rounds, sec_light_balance_limit,  # noqa: E402
+                                    sec_normal_step_tol, sec_reflectance_bias, sec_reflectance_coverage,
+                                    sec_refine_judge, sec_region_seams)
 from results_tables_fits import (  # noqa: E402  (one function per result layout)
     sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_depth_cameras, sec_floor_depth, sec_multi_camera,
     sec_joint_outline, sec_light_balance_measure, sec_light_calibration_bias, sec_refine, sec_refine_gradient,
@@ -192,6 +193,8 @@ LAYOUTS = {
                                sec_interreflection_rounds),
     "normal_step_tol": ("The per-texel normal step's tolerance: time and figures", "SIMULATED",
                         sec_normal_step_tol),
+    "light_balance_limit": ("When a given light counts as failed: the balance factors of real photographs",
+                            "real photographs", sec_light_balance_limit),
     "pareto": ("Error against run time of the whole pipeline", "SIMULATED", sec_pareto),
     "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
     "real_yaleb": ("Held-out relighting on the Yale face database", "real photographs", sec_real_yaleb),

@@ -406,7 +406,8 @@ def _yale_by_elevation(subjects, best):
 
 def sec_real_yaleb(d):
     if isinstance(d.get("runs"), dict):  # --normals, --interreflection: runs without and with
-        what = {"normals": "per-texel normals", "interreflection": "the bounced light taken out (interreflection)"}
+        what = {"normals": "per-texel normals", "interreflection": "the bounced light taken out (interreflection)",
+                "balance_lights": "the given lights balanced, failed lamps left out (balance_lights)"}
         option = what.get(d.get("option", "normals"), text(d.get("option")))
         lines = [f"Training lights {text(d.get('train_lights'))}, models {text(d.get('models'))}, texture "
                  f"{text(d.get('texture_resolution'))}². Relative RMSE over the face pixels, without and with "
@@ -414,6 +415,10 @@ def sec_real_yaleb(d):
         for name, run in items(d.get("runs")):
             lines += [f"*{name} {option}* (best model {text(get(run, 'overall', 'best_model'))}):", ""]
             lines += _yale_table(get(run, "overall"), items(get(run, "subjects")))
+        failed = rows_of(d.get("failed_subjects"))
+        if failed:
+            lines += ["Left out of both, their faces not fitted: "
+                      + "; ".join(f"{text(f.get('subject'))}: {text(f.get('error'))}" for f in failed) + ".", ""]
         return lines
     subjects = [(str(i), s) for i, s in enumerate(rows_of(d.get("subjects")))]
     overall = d.get("overall") or {}

@@ -4,7 +4,7 @@ outlines in fitted renders (``region_seams.json``, ``validation/region_seams.py`
 
 from __future__ import annotations
 
-from results_format import fixed, get, items, pct, rows_of, table, text
+from results_format import DASH, fixed, get, items, pct, rows_of, table, text
 
 
 def sec_refine_judge(d):
@@ -204,3 +204,24 @@ def sec_interreflection_rounds(d):
                     + [f"{pct(get(row, c, 'mean'), 1)} ({pct(get(row, c, 'max_abs'), 1)})" for c in columns])
     lines += table(["variant", "rounds", "skin ρs", "skin roughness", "lips ρs", "lips roughness"], rows)
     return lines
+
+
+def sec_light_balance_limit(d):
+    """Per development Yale subject: its lights' balance factors against its median light's, the largest
+    either way, and the failed photographs'."""
+    lines = [f"The development Yale subjects ({text(d.get('train_lights'))} training lights each, measured as "
+             "`validation/real_yaleb.py` measures them, Phong balancing the lights) with no light taken for failed; "
+             "each light's factor against its subject's median light's (above 1: the photograph darker than the "
+             f"capture states). The library's limit: {text(d.get('chosen'))}; the largest sound factor, either way, "
+             f"{fixed(d.get('largest_sound_deviation'), 3)}, the smallest failed one "
+             f"{fixed(d.get('smallest_failed_deviation'), 1)} (failed by eye: {text(d.get('failed_photographs'))}); "
+             f"the limit clears both by {text(d.get('margin'))} times: {text(d.get('separates'))}.", ""]
+    rows = []
+    for subject, run in items(d.get("runs")):
+        factors = run.get("factors") or {}
+        if not factors:
+            rows.append([subject, DASH, DASH, text(run.get("error"))[:80]])
+            continue
+        rows.append([subject, fixed(min(factors.values()), 3), fixed(max(factors.values()), 3),
+                     ", ".join(f"{k} {fixed(v, 1)}" for k, v in factors.items() if max(v, 1 / v) >= 2) or DASH])
+    return lines + table(["subject", "smallest factor", "largest factor", "beyond 2 either way"], rows)

@@ -54,6 +54,7 @@ CHOOSERS = {
     "validation/reflectance_coverage.py": "the intervals' systematic term per model and parameter (--tune)",
     "validation/interreflection_rounds.py": "the bounced light's rounds and render sizes (seeds 120, 124, 128)",
     "validation/normal_step_tol.py": "the per-texel normal step's tolerance (seeds 101, 102)",
+    "validation/light_balance_limit.py": "the factor at which a given light counts as failed (yaleB01-yaleB10)",
     "validation/refine_judge.py": "the shape refinement's judge: the pixel loss or held-out photographs (seeds 11, "
                                   "12, 100-103)",
 }

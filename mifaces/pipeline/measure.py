@@ -258,6 +258,8 @@ def measure(out, capture=None, options: MeasureOptions | FitOptions | None = Non
         t = time.perf_counter()
         taken = with_balanced_lights(taken, brdf_models.model(models[0], **options.fit.brdf_options()), options.fit)
         report["light_balance"] = taken.light_balance
+        if taken.capture.metadata.get("failed_lights"):  # lamps that did not fire: their photographs left out
+            report["failed_lights"] = taken.capture.metadata["failed_lights"]
         timings["light_balance"] = time.perf_counter() - t
     for model in models:
         entry, result = _fit_model(out, taken, model, scene, first, novel, timings, progress, options)

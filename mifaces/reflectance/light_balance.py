@@ -17,6 +17,7 @@ sample and reads the albedo of what is left; the sample stage
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -36,6 +37,12 @@ GIVEN_MAX_HALF_COSINE = 0.8
 #: Chosen on development seed 100 (its ideal capture of ``validation/reflectance_bias.py``, the steel
 #: spheres' lamps; a look, not kept): the factors stopped moving (to 0.01 %) after the third round.
 BALANCE_FIT_ROUNDS = 3
+#: A light whose factor lies this many times or more from the median light's, either way, has failed
+#: (a strobe that did not fire, a photograph under another lamp), not drifted: a calibrated lamp is off
+#: by percents. :func:`balance_given_lights` leaves its photographs' samples out of the fit. Chosen on the
+#: development Yale subjects (``validation/light_balance_limit.py``: their sound photographs' factors lie
+#: within a third of the median; yaleB10's strobe that did not fire gives about 60 times).
+FAILED_LIGHT_FACTOR = 2.0
 
 
 def log_light_errors(capture, samples, lights, anchors=(), max_half_cosine: float | None = None) -> dict | None:
@@ -82,6 +89,17 @@ def log_light_errors(capture, samples, lights, anchors=(), max_half_cosine: floa
     return {name: float(log_s[k]) for name, k in index.items() if k in present}
 
 
+def failed_lights(log_s: dict) -> dict:
+    """The lights of ``log_s`` (:func:`log_light_errors`) whose factor lies at least
+    :data:`FAILED_LIGHT_FACTOR` times from the median light's, either way: each one's factor against
+    that median."""
+    if len(log_s) < 3:  # two lights: no median to tell which one failed
+        return {}
+    middle = float(np.median(list(log_s.values())))
+    return {name: float(np.exp(value - middle)) for name, value in log_s.items()
+            if abs(value - middle) >= np.log(FAILED_LIGHT_FACTOR)}
+
+
 def balance_given_lights(capture, samples, glossy=None):
     """``capture`` and its reflectance ``samples`` with each given light's intensity corrected by
     the face's one albedo (:func:`log_light_errors`), their mean log intensity kept (the overall
@@ -89,6 +107,11 @@ def balance_given_lights(capture, samples, glossy=None):
     irradiance by twice that, which the glossy parameters otherwise absorb
     (``docs/uncertainty.md``). Captures of fewer than two given point or directional lights come
     back unchanged.
+
+    A light whose factor says it failed (:func:`failed_lights`: a strobe that did not fire) is not
+    balanced: its photographs' samples are left out, with a warning that names them, the others
+    balanced without them, and ``capture.metadata['failed_lights']`` has its factor against the
+    median light's.
 
     ``glossy`` (N, 3), the glossy part a fit of these samples predicts for each (π f_s), is taken
     out of them before their albedos are read. A capture balanced before is balanced again from
@@ -107,6 +130,10 @@ def balance_given_lights(capture, samples, glossy=None):
     log_s = log_light_errors(capture, read, names, max_half_cosine=GIVEN_MAX_HALF_COSINE) if len(names) >= 2 else None
     if not log_s:
         return capture, samples
+    failed = failed_lights(log_s)
+    if failed:
+        capture, samples = _without_failed(capture, samples, failed)
+        return balance_given_lights(capture, samples, None if glossy is None else glossy[_kept(capture, read)])
     factor = {name: float(np.exp(value)) for name, value in log_s.items()}
     light_of = {m.name: m.light for m in capture.measurements}
     per_measurement = np.array([factor.get(light_of[name], 1.0) for name in samples.measurement_names])
@@ -120,5 +147,27 @@ def balance_given_lights(capture, samples, glossy=None):
     return replace(capture, lights=lights, metadata=dict(capture.metadata, light_balance=total)), balanced
 
 
-__all__ = ["BALANCE_FIT_ROUNDS", "BALANCE_MIN_COSINE", "BALANCE_ROUNDS", "GIVEN_MAX_HALF_COSINE", "log_light_errors",
-           "balance_given_lights"]
+def _kept(capture, samples) -> np.ndarray:
+    """Which of ``samples`` were taken under a light that has not failed (``capture.metadata['failed_lights']``)."""
+    failed = capture.metadata.get("failed_lights") or {}
+    light_of = {m.name: m.light for m in capture.measurements}
+    ok = np.array([light_of[name] not in failed for name in samples.measurement_names], bool)
+    return ok[samples.measurement]
+
+
+def _without_failed(capture, samples, failed: dict):
+    """``capture`` with ``failed`` (light name: factor) added to its ``metadata['failed_lights']``,
+    and ``samples`` without those lights' photographs; a warning names them."""
+    light_of = {m.name: m.light for m in capture.measurements}
+    for name, factor in failed.items():
+        photographs = [m for m in samples.measurement_names if light_of[m] == name]
+        warnings.warn(f"light {name!r}: its photographs ({', '.join(photographs)}) read the face {1 / factor:.3g} "
+                      "times as bright as the other lights' do (the median light's); a lamp that failed, not one a "
+                      "calibration puts a few percent off: left out of the fit", stacklevel=3)
+    before = capture.metadata.get("failed_lights") or {}
+    capture = replace(capture, metadata=dict(capture.metadata, failed_lights={**before, **failed}))
+    return capture, samples.select(_kept(capture, samples))
+
+
+__all__ = ["BALANCE_FIT_ROUNDS", "BALANCE_MIN_COSINE", "BALANCE_ROUNDS", "FAILED_LIGHT_FACTOR",
+           "GIVEN_MAX_HALF_COSINE", "balance_given_lights", "failed_lights", "log_light_errors"]

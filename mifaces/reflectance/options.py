@@ -95,7 +95,9 @@ class FitOptions:
         (``docs/reflectance.md``, "Where skin's bias comes from"). On by default, with
         ``interreflection``: the two together take skin's glossy bias from -6.6 % to
         +0.8 % over 20 development captures (``validation/results/reflectance_bias.json``);
-        either alone does not.
+        either alone does not. A light whose factor lies 2 times or more from the median
+        light's has failed (a strobe that did not fire): its photographs are left out, with a
+        warning (:data:`~mifaces.reflectance.light_balance.FAILED_LIGHT_FACTOR`).
     interreflection : bool
         Take the light bounced between parts of the face out of the samples: fit, render
         that light with the fit (:func:`mifaces.reflectance.interreflection.bounced_light`),

@@ -133,6 +133,10 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
             lines.append(f"| {model} | {region} | {fit['samples']} | {fit['status']} | {text} | "
                          f"{format_value(fit['loss'])} | {err_text} |")
     lines += fit_notes(report)
+    if report.get("failed_lights"):
+        lines += ["", "Lights left out of the fits, their photographs far darker or brighter than the face under the "
+                  "other lights says (lamps that failed; factor against the median light's, >1: too dark): "
+                  + ", ".join(f"{name} {factor:.3g}" for name, factor in report["failed_lights"].items()) + "."]
     if "environment_note" in report:
         lines += ["", f"Note: {report['environment_note']}."]
     lines += shapes_markdown(report)
