@@ -407,7 +407,8 @@ def _yale_by_elevation(subjects, best):
 def sec_real_yaleb(d):
     if isinstance(d.get("runs"), dict):  # --normals, --interreflection: runs without and with
         what = {"normals": "per-texel normals", "interreflection": "the bounced light taken out (interreflection)",
-                "balance_lights": "the given lights balanced, failed lamps left out (balance_lights)"}
+                "balance_lights": ("the given lights balanced whatever their factors' spread, failed lamps left "
+                                   "out (balance_lights)")}
         option = what.get(d.get("option", "normals"), text(d.get("option")))
         lines = [f"Training lights {text(d.get('train_lights'))}, models {text(d.get('models'))}, texture "
                  f"{text(d.get('texture_resolution'))}². Relative RMSE over the face pixels, without and with "

@@ -208,7 +208,7 @@ def sec_interreflection_rounds(d):
 
 def sec_light_balance_limit(d):
     """Per development Yale subject: its lights' balance factors against its median light's, the largest
-    either way, and the failed photographs'."""
+    either way, and the failed photographs'; the simulated captures' lamps' factors, and the spread limit."""
     lines = [f"The development Yale subjects ({text(d.get('train_lights'))} training lights each, measured as "
              "`validation/real_yaleb.py` measures them, Phong balancing the lights) with no light taken for failed; "
              "each light's factor against its subject's median light's (above 1: the photograph darker than the "
@@ -224,4 +224,14 @@ def sec_light_balance_limit(d):
             continue
         rows.append([subject, fixed(min(factors.values()), 3), fixed(max(factors.values()), 3),
                      ", ".join(f"{k} {fixed(v, 1)}" for k, v in factors.items() if max(v, 1 / v) >= 2) or DASH])
-    return lines + table(["subject", "smallest factor", "largest factor", "beyond 2 either way"], rows)
+    lines += table(["subject", "smallest factor", "largest factor", "beyond 2 either way"], rows)
+    spread = d.get("spread") or {}
+    lines += ["", f"The balance's limit: where the sound lights spread farther than {text(spread.get('chosen'))} "
+              "from their median light's, either way, the lights are left as given. The default capture's calibrated "
+              f"lamps at development seeds {text(d.get('seeds'))} (measured with the defaults, Phong first) spread "
+              f"up to {fixed(spread.get('calibrated_largest'), 4)}; the Yale subjects' sound lights from "
+              f"{fixed(spread.get('real_smallest'), 4)}; the limit clears both by {text(spread.get('margin'))} times: "
+              f"{text(spread.get('separates'))}.", ""]
+    sims = [[text(seed), ", ".join(f"{k} {fixed(v, 4)}" for k, v in items(run.get("factors"))) or text(run.get("error"))]
+            for seed, run in items(d.get("simulated"))]
+    return lines + table(["seed", "lamps' factors against the median lamp's"], sims)

@@ -258,8 +258,9 @@ def measure(out, capture=None, options: MeasureOptions | FitOptions | None = Non
         t = time.perf_counter()
         taken = with_balanced_lights(taken, brdf_models.model(models[0], **options.fit.brdf_options()), options.fit)
         report["light_balance"] = taken.light_balance
-        if taken.capture.metadata.get("failed_lights"):  # lamps that did not fire: their photographs left out
-            report["failed_lights"] = taken.capture.metadata["failed_lights"]
+        for key in ("failed_lights", "light_balance_refused"):  # lamps that did not fire; a balance not applied
+            if taken.capture.metadata.get(key):
+                report[key] = taken.capture.metadata[key]
         timings["light_balance"] = time.perf_counter() - t
     for model in models:
         entry, result = _fit_model(out, taken, model, scene, first, novel, timings, progress, options)

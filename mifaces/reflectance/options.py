@@ -97,7 +97,9 @@ class FitOptions:
         +0.8 % over 20 development captures (``validation/results/reflectance_bias.json``);
         either alone does not. A light whose factor lies 2 times or more from the median
         light's has failed (a strobe that did not fire): its photographs are left out, with a
-        warning (:data:`~mifaces.reflectance.light_balance.FAILED_LIGHT_FACTOR`).
+        warning (:data:`~mifaces.reflectance.light_balance.FAILED_LIGHT_FACTOR`); where the
+        others spread beyond a calibration's error (real faces, whose model misses the
+        photographs by more), the lights are left as given (``BALANCE_LIMIT``).
     interreflection : bool
         Take the light bounced between parts of the face out of the samples: fit, render
         that light with the fit (:func:`mifaces.reflectance.interreflection.bounced_light`),

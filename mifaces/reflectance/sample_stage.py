@@ -120,7 +120,8 @@ def with_balanced_lights(taken: SampleSet, brdf, options: FitOptions) -> SampleS
     """``taken``, and where ``options.balance_lights``, its given lights' relative intensities corrected
     (:func:`balance_given_lights`): :data:`BALANCE_FIT_ROUNDS` times, a quick fit of ``brdf`` (no
     normals, intervals or specular maps) predicts each sample's glossy part, and the lights are balanced
-    on what is left. Samples balanced before come back as they are (:func:`mifaces.measure` balances
+    on what is left (or, where the factors spread beyond a calibration's, left as given:
+    ``light_balance`` then empty). Samples balanced before come back as they are (:func:`mifaces.measure` balances
     once, with its first model, for every model's fit: a lamp's error is the capture's, not a model's)."""
     if not options.balance_lights or taken.light_balance is not None:
         return taken
@@ -133,6 +134,8 @@ def with_balanced_lights(taken: SampleSet, brdf, options: FitOptions) -> SampleS
         glossy = specular_reflectance_factor(brdf, {REGIONS[name]: f.params for name, f in fit.fits.items()},
                                              samples.light, samples.view, samples.labels(), samples.footprint)
         capture, samples = balance_given_lights(capture, samples, glossy)
+        if capture.metadata.get("light_balance_refused"):  # factors beyond a calibration's: left as given
+            break
     seconds = time.perf_counter() - t
     return dataclasses.replace(taken, capture=capture, samples=samples,
                                light_balance=capture.metadata.get("light_balance") or {},

@@ -137,6 +137,10 @@ def write_markdown(path: Path, report: dict, photo_name: str) -> None:
         lines += ["", "Lights left out of the fits, their photographs far darker or brighter than the face under the "
                   "other lights says (lamps that failed; factor against the median light's, >1: too dark): "
                   + ", ".join(f"{name} {factor:.3g}" for name, factor in report["failed_lights"].items()) + "."]
+    if report.get("light_balance_refused"):
+        lines += ["", f"The given lights were not balanced: their factors spread {report['light_balance_refused']:.3g} "
+                  "times from the median light's, more than a calibration is off (the face's model misses the "
+                  "photographs; `mifaces.reflectance.light_balance.BALANCE_LIMIT`)."]
     if "environment_note" in report:
         lines += ["", f"Note: {report['environment_note']}."]
     lines += shapes_markdown(report)
