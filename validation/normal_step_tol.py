@@ -83,11 +83,15 @@ def fit(taken, validator, model: str, tol: float) -> dict:
 
 def summarise(runs: list) -> dict:
     """Per tolerance, over seeds and models: the fits' total time against 1e-7's, and the largest change
-    of a model's held-out and environment error against 1e-7's (in points of relative RMSE)."""
+    of a model's held-out and environment error against 1e-7's (in points of relative RMSE). Only the
+    models a seed fitted at every tolerance count (a seed that failed part-way keeps what it finished)."""
     out = {}
+    done = [(r, m) for r in runs for m in MODELS if len((r.get("fits") or {}).get(m) or {}) == len(TOLERANCES)]
+    if not done:
+        return out
     for tol in TOLERANCES:
         key, base = str(tol), str(TOLERANCES[0])
-        pairs = [(r["fits"][m][key], r["fits"][m][base]) for r in runs if "fits" in r for m in MODELS]
+        pairs = [(r["fits"][m][key], r["fits"][m][base]) for r, m in done]
         out[key] = {"seconds": round(sum(a["seconds"] for a, _ in pairs), 1),
                     "time_ratio": round(sum(a["seconds"] for a, _ in pairs) / sum(b["seconds"] for _, b in pairs), 3),
                     **{f"max_change_{f}_points": round(100 * max(abs(a[f] - b[f]) for a, b in pairs), 3)
