@@ -105,6 +105,9 @@ _REFINE = dict(rtol=2e-2, atol=1e-3, ignore=("reason",))
 #: captures simulated again) moved skin's ρs error from -0.6371 % to -0.6352 % and a std by 0.3 %
 #: (reflectance_coverage_heldout.json at 0d196db), within these.
 _COVERAGE = dict(rtol=1e-2, atol=1e-4)
+#: A file that measures the run-to-run spread itself (``real_yaleb_repeat.json``): a rerun moves each figure by
+#: up to that spread (Phong's held-out error on yaleB04 was 0.312 in one run and 0.419 in another).
+_RUN_TO_RUN = dict(rtol=0.5, atol=0.05, ignore=("subject_of_largest_change",))
 
 #: Every result file's command. ``tests/test_reproduce.py`` checks that each JSON in
 #: ``validation/results/`` is some entry's output.
@@ -270,6 +273,8 @@ REGISTRY: tuple[Entry, ...] = (
           ("light_balance_limit.json",), minutes=12, inputs=(_YALE,), **_FIT),
     Entry("unknown_lights", _py("unknown_lights", "--data", _YALE, "--out", "{work}"),
           ("unknown_lights.json",), minutes=30, inputs=(_YALE,), **_FIT),
+    Entry("real_yaleb_repeat", _py("real_yaleb_repeat", "--data", _YALE, "--out", "{work}"),
+          ("real_yaleb_repeat.json",), minutes=25, inputs=(_YALE,), **_RUN_TO_RUN),
     *(Entry(f"real_yaleb{suffix}", _py("real_yaleb", "--data", _YALE, "--out", "{work}", *flags),
             (f"real_yaleb{suffix}.json",), minutes=30, inputs=(_YALE,),
             **(_REFINE if "--refine-shape" in flags else _FIT))

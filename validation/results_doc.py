@@ -42,8 +42,8 @@ import doc_figures  # noqa: E402  (the figures of the hand-written docs, checked
 from results_format import DASH, get  # noqa: E402  (the formatting helpers)
 from results_tables_design import sec_design_metrics  # noqa: E402  (the redesign issue's measuring stick)
 from results_tables_studies import (sec_interreflection_rounds, sec_light_balance_limit,  # noqa: E402
-                                    sec_normal_step_tol, sec_reflectance_bias, sec_reflectance_coverage,
-                                    sec_refine_judge, sec_region_seams)
+                                    sec_normal_step_tol, sec_real_yaleb_repeat, sec_reflectance_bias,
+                                    sec_reflectance_coverage, sec_refine_judge, sec_region_seams)
 from results_tables_fits import (  # noqa: E402  (one function per result layout)
     sec_albedo_rounds, sec_albedo_rounds_cost, sec_albedo_rounds_exact, sec_depth_cameras, sec_floor_depth, sec_multi_camera,
     sec_joint_outline, sec_light_balance_measure, sec_light_calibration_bias, sec_refine, sec_refine_gradient,
@@ -198,6 +198,8 @@ LAYOUTS = {
     "pareto": ("Error against run time of the whole pipeline", "SIMULATED", sec_pareto),
     "real_diligent": ("Normals with the fitted BRDF: the DiLiGenT ball", "real photographs", sec_real_diligent),
     "real_yaleb": ("Held-out relighting on the Yale face database", "real photographs", sec_real_yaleb),
+    "real_yaleb_repeat": ("Held-out relighting on the Yale face database, run twice: run-to-run spread",
+                          "real photographs", sec_real_yaleb_repeat),
     "refine": ("Refinement by differentiable rendering", "SIMULATED", sec_refine),
     "refine_judge": ("The shape refinement's judges on development seeds", "SIMULATED", sec_refine_judge),
     "light_calibration_bias": ("The texture-space fit with calibrated and true lights", "SIMULATED",

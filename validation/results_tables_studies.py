@@ -235,3 +235,21 @@ def sec_light_balance_limit(d):
     sims = [[text(seed), ", ".join(f"{k} {fixed(v, 4)}" for k, v in items(run.get("factors"))) or text(run.get("error"))]
             for seed, run in items(d.get("simulated"))]
     return lines + table(["seed", "lamps' factors against the median lamp's"], sims)
+
+
+def sec_real_yaleb_repeat(d):
+    """Per model, the pooled held-out error of each run and the largest change on one subject; per subject and
+    run, each model's error."""
+    runs = d.get("runs") or []
+    lines = [f"The default run of `validation/real_yaleb.py` repeated {text(d.get('repeats'))} times on the development "
+             f"subjects {text(d.get('subjects'))} ({text(d.get('train_lights'))} training lights, texture "
+             f"{text(d.get('texture_resolution'))}²): pooled held-out relative RMSE per run, and the largest change "
+             "between runs on one subject.", ""]
+    rows = [[m, *[fixed(get(r, "pooled", m), 4) for r in runs], fixed(get(sp, "largest_subject_change"), 4),
+             text(get(sp, "subject_of_largest_change"))] for m, sp in items(d.get("spread"))]
+    rows.append(["photometric stereo", *[fixed(get(r, "pooled", "photometric_stereo"), 4) for r in runs], DASH, DASH])
+    lines += table(["predictor", *[f"run {k + 1}" for k in range(len(runs))], "largest change on a subject",
+                    "on"], rows)
+    detail = [[s, *[", ".join(f"{m} {fixed(get(r, 'subjects', s, m), 3)}" for m in d.get("models") or []) for r in runs]]
+              for s in d.get("subjects") or []]
+    return lines + [""] + table(["subject", *[f"run {k + 1}" for k in range(len(runs))]], detail)
