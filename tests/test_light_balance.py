@@ -108,6 +108,18 @@ def _a_light_per_photograph(capture):
     return replace(capture, lights=tuple(lights), measurements=tuple(measurements))
 
 
+def _strobes_first_stated(lamp_off, times: float):
+    """The true capture with a strobe per photograph (:func:`_a_light_per_photograph`), its first stated
+    ``times`` as bright as it is; its samples on the true shapes, and the balancing fit's options."""
+    true, _, face, shapes = lamp_off
+    strobes = _a_light_per_photograph(true)
+    first = strobes.lights[0]
+    capture = replace(strobes, lights=(first.with_intensity(times * np.asarray(first.intensity, np.float64)),
+                                       *strobes.lights[1:]))
+    options = FitOptions(resolution=TEXTURE, uncertainty=None, balance_lights=True, interreflection=False)
+    return capture, take_samples(capture, shapes, face, options, progress=False), options
+
+
 def test_failed_lights_are_read_against_the_median_light():
     """A light 2 times or more from the median light's factor, either way, has failed; two lights have no median."""
     log_s = {"a": 0.0, "b": np.log(1.3), "c": np.log(0.8), "d": np.log(60.0)}
@@ -125,13 +137,8 @@ def test_a_lamp_that_did_not_fire_is_left_out_not_balanced(lamp_off):
     and the other lamps, stated as they are, come out balanced to within 0.5 % (its factor, left in,
     moves them by a sixth of its log: 43 % with six lamps). A strobe per photograph, as a dome has
     (the capture's two lamps have no median light)."""
-    true, _, face, shapes = lamp_off
-    strobes = _a_light_per_photograph(true)
-    dark = strobes.lights[0]
-    failed = replace(strobes, lights=(dark.with_intensity(30 * np.asarray(dark.intensity, np.float64)),
-                                      *strobes.lights[1:]))
-    options = FitOptions(resolution=TEXTURE, uncertainty=None, balance_lights=True, interreflection=False)
-    taken = take_samples(failed, shapes, face, options, progress=False)
+    failed, taken, options = _strobes_first_stated(lamp_off, 30)
+    dark = failed.lights[0]
     with pytest.warns(UserWarning, match=f"light '{dark.name}'.*left out of the fit"):
         balanced = with_balanced_lights(taken, brdf_models.model("phong"), options)
     assert set(balanced.capture.metadata["failed_lights"]) == {dark.name}
@@ -161,13 +168,7 @@ def test_lights_whose_factors_spread_beyond_a_calibration_are_left_as_given(lamp
     """Where one of six strobes reads 25 % off (no calibration is; a face the model misses by that much
     is), the balance leaves every light as given, warns, and says why in ``light_balance_refused`` (the
     spread, 1.25 within 0.5 %); ``light_balance`` is empty and the samples are those taken."""
-    true, _, face, shapes = lamp_off
-    strobes = _a_light_per_photograph(true)
-    off = strobes.lights[0]
-    spread_out = replace(strobes, lights=(off.with_intensity(1.25 * np.asarray(off.intensity, np.float64)),
-                                          *strobes.lights[1:]))
-    options = FitOptions(resolution=TEXTURE, uncertainty=None, balance_lights=True, interreflection=False)
-    taken = take_samples(spread_out, shapes, face, options, progress=False)
+    spread_out, taken, options = _strobes_first_stated(lamp_off, 1.25)
     with pytest.warns(UserWarning, match="left as given"):
         balanced = with_balanced_lights(taken, brdf_models.model("phong"), options)
     assert balanced.capture.metadata["light_balance_refused"] == pytest.approx(1.25, rel=0.005)
