@@ -59,17 +59,21 @@ def test_summary_pools_subjects_and_picks_the_best_model_by_its_training_error(r
     rng = np.random.default_rng(1)
     models = ["phong", "ward"]
     results, sums = [], {}
-    for subject, training in (("a", {"phong": 0.10, "ward": 0.12}), ("b", {"phong": 0.11, "ward": 0.12})):
+    # the first photograph's training_rmse favours ward; every training photograph pooled, phong
+    for subject, training in (("a", {"phong": 0.12, "ward": 0.10}), ("b", {"phong": 0.12, "ward": 0.11})):
         photos, predictions, valid = _held_out(rng, count=2)
-        errors = real_yaleb.Errors()
+        errors, training_errors = real_yaleb.Errors(), real_yaleb.Errors()
         for key, scale in (("phong", 2.0), ("ward", 1.0), ("photometric_stereo", 1.5)):
             for prediction, photo, v in zip(predictions, photos, valid):
                 prediction = photo + scale * (prediction - photo)  # phong's held-out error the largest
                 errors.add(key, "small_shadows", prediction, photo, v)
                 e, p = sums.get(key, (0.0, 0.0))
                 sums[key] = (e + np.sum((prediction[v] - photo[v]) ** 2), p + np.sum(photo[v] ** 2))
+                fitted = photo + (0.25 if key == "phong" else 1.0) * (prediction - photo)  # half ward's
+                training_errors.add(key, "training", fitted, photo, v)
         detail = {"phong": 0.6 if subject == "a" else 0.8, "ward": float("nan")}  # ward's map constant per region
-        results.append({"subject": subject, "errors": errors, "training_rmse": training,
+        results.append({"subject": subject, "errors": errors, "training_errors": training_errors,
+                        "training_rmse": training,
                         "fitted_yaw_pitch_roll_deg": {}, "relative_rmse": errors.relative_rmse(),
                         "training_rmse_photometric_stereo": 0.05 if subject == "a" else 0.07,
                         "albedo_detail_r": detail})
@@ -84,6 +88,8 @@ def test_summary_pools_subjects_and_picks_the_best_model_by_its_training_error(r
     for key, (e, p) in sums.items():
         assert out["relative_rmse"][key]["all"] == pytest.approx(np.sqrt(e / p), rel=1e-12)
     assert out["best_model"] == "phong" and out["lowest_heldout_model"] == "ward"
+    assert out["best_model_by_first_photograph"] == "ward"
+    assert out["training_relative_rmse"]["phong"] == pytest.approx(0.5 * out["training_relative_rmse"]["ward"])
     assert out["best_vs_photometric_stereo"] == pytest.approx(np.sqrt(sums["phong"][0] / sums["phong"][1])
                                                              / np.sqrt(sums["photometric_stereo"][0]
                                                                        / sums["photometric_stereo"][1]))

@@ -51,8 +51,10 @@ def main() -> None:
                 failed[subject] = str(error).split("; ")[0][:300]
             print(f"run {k} {subject} ({time.perf_counter() - t0:.0f} s)", flush=True)
         results = [r for r in results if r["subject"] not in failed]
-        overall = summary(results, MODELS)["relative_rmse"]
+        chosen = summary(results, MODELS)
+        overall = chosen["relative_rmse"]
         runs.append({"pooled": {m: overall[m]["all"] for m in (*MODELS, "photometric_stereo")},
+                     "best_model": chosen["best_model"], "training_relative_rmse": chosen["training_relative_rmse"],
                      "subjects": {r["subject"]: {m: r["relative_rmse"][m]["all"] for m in MODELS} for r in results}})
         print(f"run {k}: " + ", ".join(f"{m} {v:.4f}" for m, v in runs[-1]["pooled"].items()), flush=True)
     common = sorted(set.intersection(*(set(r["subjects"]) for r in runs)))

@@ -378,11 +378,17 @@ def _yale_albedo_and_training(overall):
         return []
     lines = ["Albedo maps: Pearson r of each map's detail (seen through the fitted face in the frontal view, each "
              "region's mean removed) with photometric stereo's per-pixel albedo, over the subjects:", ""]
-    lines += table(["model", "mean r", "sd", "least", "largest", "training RMSE (first photograph)"],
+    lines += table(["model", "mean r", "sd", "least", "largest", "training RMSE (first photograph)",
+                    "training RMSE (every training photograph, pooled)"],
                    [[m, fixed(get(v, "mean"), 3), fixed(get(v, "sd"), 3), fixed(get(v, "min"), 3),
-                     fixed(get(v, "max"), 3), pct(get(overall, "training_rmse", m))] for m, v in detail])
+                     fixed(get(v, "max"), 3), pct(get(overall, "training_rmse", m)),
+                     pct(get(overall, "training_relative_rmse", m))] for m, v in detail])
     lines += [f"Photometric stereo's own residual on the same first training photograph: "
-              f"{pct(overall.get('training_rmse_photometric_stereo'))}.", ""]
+              f"{pct(overall.get('training_rmse_photometric_stereo'))}; on every training photograph, pooled: "
+              f"{pct(get(overall, 'training_relative_rmse', 'photometric_stereo'))}. The best model is the one "
+              f"with the lowest {text(overall.get('best_model_chosen_by'))}"
+              + (f" (by the first photograph alone: {text(overall['best_model_by_first_photograph'])})"
+                 if overall.get("best_model_by_first_photograph") else "") + ".", ""]
     return lines
 
 

@@ -250,6 +250,11 @@ def sec_real_yaleb_repeat(d):
     rows.append(["photometric stereo", *[fixed(get(r, "pooled", "photometric_stereo"), 4) for r in runs], DASH, DASH])
     lines += table(["predictor", *[f"run {k + 1}" for k in range(len(runs))], "largest change on a subject",
                     "on"], rows)
+    if any(get(r, "best_model") for r in runs):  # the model each run chooses by its training photographs
+        lines += ["Chosen by the pooled relative RMSE over every training photograph (`real_yaleb.summary`): "
+                  + "; ".join(f"run {k + 1} {text(get(r, 'best_model'))} ("
+                              + ", ".join(f"{m} {pct(v)}" for m, v in items(get(r, "training_relative_rmse")))
+                              + ")" for k, r in enumerate(runs)) + "."]
     detail = [[s, *[", ".join(f"{m} {fixed(get(r, 'subjects', s, m), 3)}" for m in d.get("models") or []) for r in runs]]
               for s in d.get("subjects") or []]
     return lines + [""] + table(["subject", *[f"run {k + 1}" for k in range(len(runs))]], detail)

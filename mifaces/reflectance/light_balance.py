@@ -41,7 +41,7 @@ BALANCE_FIT_ROUNDS = 3
 #: (a strobe that did not fire, a photograph under another lamp), not drifted: a calibrated lamp is off
 #: by percents. :func:`balance_given_lights` leaves its photographs' samples out of the fit. Chosen on the
 #: development Yale subjects (``validation/light_balance_limit.py``: their sound photographs' factors lie
-#: within a third of the median; yaleB10's strobe that did not fire gives about 60 times).
+#: within a third of the median; yaleB10's strobe that did not fire gives about 54 times).
 FAILED_LIGHT_FACTOR = 2.0
 #: The balance corrects a calibration, which is off by a percent or two. Where the lights' factors (the
 #: failed ones left out) spread farther than this from the median light's, either way, they measure how

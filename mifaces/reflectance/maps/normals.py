@@ -81,7 +81,7 @@ NORMAL_ROUNDS = 3
 #: fraction of it (:class:`~mifaces.reflectance.maps.normal_fit.NormalStepOptions`' ``tol``, whose
 #: default, 1e-7, photometric stereo keeps). Chosen on development captures
 #: (``validation/normal_step_tol.py``, ``normal_step_tol.json``: seeds 101 and 102, fitted shapes):
-#: against 1e-7 it takes about a third off the fits' time and moves no model's held-out error by more
+#: against 1e-7 it takes about a quarter off the fits' time and moves no model's held-out error by more
 #: than the renders' noise.
 STEP_TOL = 1e-5
 
