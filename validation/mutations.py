@@ -240,7 +240,7 @@ MUTATIONS = [
      "float(np.sum((prediction - photo) ** 2))", "errors over every pixel, not the face's unsaturated ones"),
     ("yale-last-subject", "yale", "validation/real_yaleb.py", "[s[0] + e, s[1] + p, s[2] + n]",
      "[e, p, s[2] + n]", "summary: the last subject's sums, not pooled"),
-    ("yale-best-by-heldout", "yale", "validation/real_yaleb.py", "best = min(models, key=lambda m: training[m])",
+    ("yale-best-by-heldout", "yale", "validation/real_yaleb.py", "best = min(models, key=lambda m: pooled[m][\"all\"])",
      "best = min(models, key=lambda m: overall[m][\"all\"])",
      "best model chosen by the held-out error it is scored on"),
     ("yale-ratio-inverted", "yale", "validation/real_yaleb.py",
