@@ -135,6 +135,21 @@ def test_directional_light_lights_a_white_face_at_e_over_pi(face):
         scene.description(brdf, front_camera(), None)
 
 
+def test_render_seeds_gives_each_seeds_own_render_from_one_loaded_scene(face):
+    """One scene loaded for several Monte Carlo seeds (the validation renders each condition twice)
+    gives, per seed, the image a render of its own at that seed gives (to float32 rounding: the kernels
+    Dr.Jit compiles for a scene's first and later renders may round differently); the seeds differ."""
+    model, scene = face
+    brdf = {"model": "phong", "options": {}, "regions": {"skin": {"specular_reflectance": 0.2, "exponent": 10.0}}}
+    albedo = np.full((16, 16, 3), 0.5, np.float32)
+    lamp = Light("lamp", np.array([100.0, 200.0, 600.0]), np.full(3, 2e5))
+    both = scene.render_seeds(brdf, albedo, front_camera(), lamp, spp=2, seeds=(0, 5))
+    for seed, image in zip((0, 5), both):
+        np.testing.assert_allclose(image, scene.render(brdf, albedo, front_camera(), lamp, spp=2, seed=seed),
+                                   rtol=1e-5, atol=1e-7)
+    assert np.abs(both[0] - both[1]).max() > 100 * 1e-5 * np.abs(both[0]).max()
+
+
 @pytest.mark.parametrize("cx, cy", [(20.0, 50.0), (49.5, 39.5), (70.0, 10.0)])
 def test_sensor_puts_a_point_where_the_camera_projects_it(cx, cy):
     """An off-centre principal point: the render of a small sphere is centred where

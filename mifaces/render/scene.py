@@ -190,9 +190,17 @@ class FaceScene:
         >>> bool(studio.max() > 0)
         True
         """
-        scene = self.scene(brdf, albedo, camera, light, environment=environment, spp=spp,
-                           max_depth=max_depth, normals=normals, specular=specular)
-        return np.array(mi.render(mi.load_dict(scene), spp=spp, seed=seed), dtype=np.float32)[..., :3]
+        return self.render_seeds(brdf, albedo, camera, light, environment=environment, spp=spp, seeds=(seed,),
+                                 max_depth=max_depth, normals=normals, specular=specular)[0]
+
+    def render_seeds(self, brdf: dict, albedo: np.ndarray, camera, light=None, *,
+                     environment: Environment | None = None, spp: int = 64, seeds=(0,), max_depth: int = 4,
+                     normals: np.ndarray | None = None, specular: np.ndarray | None = None) -> list[np.ndarray]:
+        """:meth:`render` at each Monte Carlo seed of ``seeds``, the scene loaded once for all of them: a
+        list of (H, W, 3) float32 images, each the image :meth:`render` gives at that seed."""
+        scene = mi.load_dict(self.scene(brdf, albedo, camera, light, environment=environment, spp=spp,
+                                        max_depth=max_depth, normals=normals, specular=specular))
+        return [np.array(mi.render(scene, spp=spp, seed=seed), dtype=np.float32)[..., :3] for seed in seeds]
 
     def write_meshes(self, folder: str | os.PathLike) -> dict[str, Path]:
         """Write each region mesh as ``<folder>/``:meth:`mesh_file` (PLY), atomically."""

@@ -185,11 +185,12 @@ class Validator:
                                                            self.camera)
         truth = self.ground_truth.brdf
         true_meshes = self._true_face(truth_model, self.truth_scene, turned(true_vertices, rotation, centre))
-        self.truth = {name: self._render_truth(true_meshes, light) for name, light in self.conditions.items()}
         # the Monte Carlo noise of these renders: the truth against itself rendered with another seed; every
         # fit is compared with that second render too (``replicate``), which tells a ranking's ties
-        self.truth_replicate = {name: self._render_truth(true_meshes, light, NOISE_SEED)
-                                for name, light in self.conditions.items()}
+        renders = {name: self._render_truth(true_meshes, light, (SEED, NOISE_SEED))
+                   for name, light in self.conditions.items()}
+        self.truth = {name: images[0] for name, images in renders.items()}
+        self.truth_replicate = {name: images[1] for name, images in renders.items()}
         noise = {name: relative_rmse(self.truth_replicate[name], self.truth[name], self.truth_mask)
                  for name in self.conditions}
         floor = self._shape_floor(truth_model, face_model, true_vertices, fit_vertices, rotation, centre)
@@ -221,16 +222,18 @@ class Validator:
     def _subsurface(self) -> bool:
         return "subsurface" in self.ground_truth.description
 
-    def _render_truth(self, meshes: dict, light: dict, seed: int = SEED) -> np.ndarray:
-        """An image of the true face ``meshes`` (:meth:`_true_face`) under condition ``light``: the
-        validation's camera and emitters, the simulator's integrator for a translucent truth."""
+    def _render_truth(self, meshes: dict, light: dict, seeds=(SEED,)) -> list[np.ndarray]:
+        """Images of the true face ``meshes`` (:meth:`_true_face`) under condition ``light``, one per Monte
+        Carlo seed of ``seeds`` (the scene loaded once): the validation's camera and emitters, the
+        simulator's integrator for a translucent truth."""
         scene = self.truth_scene.description(self.ground_truth.brdf, self.camera, spp=self.spp, **light)
         for key in (ALBEDO, *self.truth_scene.meshes):
             scene.pop(key)
         scene.update(meshes)
         if self._subsurface:
             scene["integrator"] = translucent.INTEGRATOR
-        return np.array(mi.render(mi.load_dict(scene), spp=self.spp, seed=seed), dtype=np.float32)[..., :3]
+        scene = mi.load_dict(scene)
+        return [np.array(mi.render(scene, spp=self.spp, seed=seed), dtype=np.float32)[..., :3] for seed in seeds]
 
     def _shape_floor(self, truth_model, face_model, true_vertices, fit_vertices, rotation, centre) -> dict | None:
         """Per condition, the error of the true reflectance on the fitted
@@ -242,7 +245,7 @@ class Validator:
         if np.array_equal(np.asarray(true_vertices, np.float64), np.asarray(fit_vertices, np.float64)):
             return {name: 0.0 for name in self.conditions}
         meshes = self._true_face(face_model, self.fit_scene, turned(fit_vertices, rotation, centre))
-        return {name: relative_rmse(self._render_truth(meshes, light), self.truth[name], self.mask)
+        return {name: relative_rmse(self._render_truth(meshes, light)[0], self.truth[name], self.mask)
                 for name, light in self.conditions.items()}
 
     def _pooled(self, per_condition: dict) -> dict:
@@ -303,23 +306,25 @@ class Validator:
         errors = ground_truth_errors(estimate, self.capture, self.ground_truth, albedo_scale=scale)
         images, per_condition, replicate = {}, {}, {}
 
-        def error(scene, name, light, seed, mask):
-            image = scale * scene.render(fit, albedo, self.camera, spp=self.spp, seed=seed, **light, **maps)
-            truth = self.truth if seed == SEED else self.truth_replicate
-            return image, relative_rmse(image, truth[name], mask)
+        def error(scene, name, light, mask):
+            """The image at :data:`SEED`, its error and the error of the image at :data:`NOISE_SEED`
+            (against the truth's replicate), from one loaded scene."""
+            image, again = (scale * im for im in scene.render_seeds(fit, albedo, self.camera, spp=self.spp,
+                                                                      seeds=(SEED, NOISE_SEED), **light, **maps))
+            return image, relative_rmse(image, self.truth[name], mask), relative_rmse(again,
+                                                                                    self.truth_replicate[name], mask)
 
         for name, light in self.conditions.items():
-            images[name], per_condition[name] = error(self.fit_scene, name, light, SEED, self.mask)
-            replicate[name] = error(self.fit_scene, name, light, NOISE_SEED, self.mask)[1]
+            images[name], per_condition[name], replicate[name] = error(self.fit_scene, name, light, self.mask)
         entry = {"brdf_rmse": regions, "albedo_rmse": errors["albedo"]["rmse_sampled"], **self._pooled(per_condition),
                  "per_condition": per_condition, "reflectance_scale": scale, "replicate": self._pooled(replicate)}
         if self._true_shape is not None:
             on_truth, again = per_condition, replicate
             if self._true_shape:
-                on_truth = {name: error(self.truth_scene, name, light, SEED, self.truth_mask)[1]
-                            for name, light in self.conditions.items()}
-                again = {name: error(self.truth_scene, name, light, NOISE_SEED, self.truth_mask)[1]
-                         for name, light in self.conditions.items()}
+                both = {name: error(self.truth_scene, name, light, self.truth_mask)[1:]
+                        for name, light in self.conditions.items()}
+                on_truth = {name: errors[0] for name, errors in both.items()}
+                again = {name: errors[1] for name, errors in both.items()}
             entry.update({f"{k}{TRUE_SHAPE}": v for k, v in self._pooled(on_truth).items()})
             entry[f"per_condition{TRUE_SHAPE}"] = on_truth
             entry["replicate"].update({f"{k}{TRUE_SHAPE}": v for k, v in self._pooled(again).items()})

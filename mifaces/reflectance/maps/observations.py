@@ -110,6 +110,7 @@ class Observations:
         where None the closed form ρ_c = Σ_k w s (I_c - g_c) / Σ_k w s² (0 where no usable
         observation is lit), as :mod:`mifaces.reflectance.maps.diffuse` does per texel."""
         s, g = self._terms(self._expand(normals))
+        dr.eval(s, g)  # shaded once: each block sum below would otherwise run the shading again
         rho = self._albedo(s, g) if albedo is None else mi.Color3f(vectors(albedo))
         r = self.value - dr.gather(mi.Color3f, rho, self.pixel) * s - g
         loss = dr.block_sum(self.weight * (dr.square(r.x) + dr.square(r.y) + dr.square(r.z)), self.k)
