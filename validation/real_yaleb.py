@@ -217,6 +217,16 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     training_ps = relative_rmse(photometric_stereo.predict(albedo_ps, normals_ps, first_photo.direction)[..., None],
                                 first_photo.pixels[..., None], mask & (first_photo.pixels < SATURATED))
     estimates.update({f"{m}_refined": load_estimate(out / "refined" / m) for m in refined})
+
+    def lamp(image) -> Light:
+        """The photograph's light, in the capture's frame and units."""
+        return Light(image.stem, None, irradiance, direction=camera.rotation.T @ image.direction)
+
+    def relit(data: dict, light: Light, brdf: dict | None = None) -> np.ndarray:
+        """A fitted face (``brdf``, default its own) rendered under ``light``, grey (channels averaged)."""
+        return scene.render(data if brdf is None else brdf, data["albedo"], camera, light, spp=spp,
+                            normals=data.get("normals"), specular=data.get("specular")).mean(axis=2)
+
     t_render = time.perf_counter()
     for model in estimates:
         write_png(out / "heldout" / model / "mask.png", np.repeat(mask[:, :, None], 3, axis=2).astype(np.float32),
@@ -226,19 +236,16 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
         valid = mask & (photo < SATURATED)
         angle = np.degrees(np.arccos(np.clip(-image.direction[2], -1, 1)))
         group = "large_shadows" if angle > shadow_angle else "small_shadows"
-        held_out = Light(image.stem, None, irradiance, direction=camera.rotation.T @ image.direction)
+        held_out = lamp(image)
         predictions = {"photometric_stereo": photometric_stereo.predict(albedo_ps, normals_ps, image.direction)}
         for model, data in estimates.items():
-            rendered = scene.render(data, data["albedo"], camera, held_out, spp=spp, normals=data.get("normals"),
-                                    specular=data.get("specular")).mean(axis=2)
+            rendered = relit(data, held_out)
             rendered[~mask] = 0.0
             write_exr(out / "heldout" / model / f"{image.stem}.exr", rendered[:, :, None].repeat(3, axis=2))
             predictions[model] = rendered
             if model.endswith("_refined"):
                 continue
-            predictions[f"{model}_diffuse_only"] = scene.render(
-                diffuse_only(data), data["albedo"], camera, held_out, spp=spp, normals=data.get("normals"),
-                specular=data.get("specular")).mean(axis=2)
+            predictions[f"{model}_diffuse_only"] = relit(data, held_out, diffuse_only(data))
         for key, prediction in predictions.items():
             errors.add(key, group, prediction, photo, valid)
         per_light[image.stem] = {"azimuth": image.azimuth, "elevation": image.elevation, "group": group,
@@ -249,14 +256,11 @@ def subject_run(subject_dir: Path, out: Path, train: int, models, spp: int, shad
     # model is chosen (the first photograph alone, report.json's training_rmse, favours a frontal light)
     training = Errors()
     for image in train_images:
-        light = Light(image.stem, None, irradiance, direction=camera.rotation.T @ image.direction)
+        valid = mask & (image.pixels < SATURATED)
         training.add("photometric_stereo", "training",
-                     photometric_stereo.predict(albedo_ps, normals_ps, image.direction), image.pixels,
-                     mask & (image.pixels < SATURATED))
+                     photometric_stereo.predict(albedo_ps, normals_ps, image.direction), image.pixels, valid)
         for model, data in estimates.items():
-            rendered = scene.render(data, data["albedo"], camera, light, spp=spp, normals=data.get("normals"),
-                                    specular=data.get("specular")).mean(axis=2)
-            training.add(model, "training", rendered, image.pixels, mask & (image.pixels < SATURATED))
+            training.add(model, "training", relit(data, lamp(image)), image.pixels, valid)
     seconds["relight"] = time.perf_counter() - t_render
     seconds["total"] = time.perf_counter() - t0
     poses = {}

@@ -151,11 +151,12 @@ def balance_given_lights(capture, samples, glossy=None):
     if failed:
         capture, samples = _without_failed(capture, samples, failed)
         return balance_given_lights(capture, samples, None if glossy is None else glossy[_kept(capture, read)])
-    if spread(log_s) > BALANCE_LIMIT:
-        warnings.warn(f"the given lights' balance factors spread {spread(log_s):.3g} times from the median light's, "
-                      f"more than a calibration is off ({BALANCE_LIMIT}): they measure how far the face's model misses "
-                      "the photographs, not the lamps; the lights are left as given", stacklevel=2)
-        return replace(capture, metadata=dict(capture.metadata, light_balance_refused=spread(log_s))), samples
+    spread_of_lights = spread(log_s)
+    if spread_of_lights > BALANCE_LIMIT:
+        warnings.warn(f"the given lights' balance factors spread {spread_of_lights:.3g} times from the median "
+                      f"light's, more than a calibration is off ({BALANCE_LIMIT}): they measure how far the face's "
+                      "model misses the photographs, not the lamps; the lights are left as given", stacklevel=2)
+        return replace(capture, metadata=dict(capture.metadata, light_balance_refused=spread_of_lights)), samples
     factor = {name: float(np.exp(value)) for name, value in log_s.items()}
     light_of = {m.name: m.light for m in capture.measurements}
     per_measurement = np.array([factor.get(light_of[name], 1.0) for name in samples.measurement_names])

@@ -125,13 +125,12 @@ class Observations:
         a, b = dr.zeros(mi.Float, n), dr.zeros(mi.Float, n)
         dr.enable_grad(a, b)
         s, g = self._terms(self._expand(normals), self._expand(t1), self._expand(t2), a, b)
-        dr.eval(s, g)
         rho = dr.gather(mi.Color3f, mi.Color3f(vectors(albedo)), self.pixel)
         tangent = []
         for u in (a, b):
             dr.forward_from(u, flags=dr.ADFlag.ClearVertices)
             tangent.append(rho * dr.grad(s) + dr.grad(g))  # dÎ/du, Î = ρ s + g
-            dr.eval(tangent[-1])
+            dr.eval(tangent[-1], *(() if tangent[1:] else (s, g)))  # s and g in the first pass's kernel
             dr.clear_grad(s)
             dr.clear_grad(g)
         s, g = dr.detach(s), dr.detach(g)
