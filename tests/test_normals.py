@@ -140,3 +140,36 @@ def test_shapes_are_checked(sphere):
     pixels = nm.LitPixels(sphere["values"], sphere["lights"], sphere["weights"])
     with pytest.raises(ValueError, match="normals"):
         nm.refine_normals("ward", {"specular_reflectance": 0.1, "alpha": 0.2}, pixels, sphere["ps_normals"][:5])
+
+
+def test_the_normal_step_shades_each_observation_once_per_loss_and_per_system(jit_variant):
+    """The shading of an observation (the BRDF at every tilt of its footprint) is the step's cost: a loss
+    evaluates it in one kernel, not once more in each block sum that reads it, and the Gauss-Newton
+    system in its two forward-mode passes alone (the first one also gives s and g)."""
+    import drjit as dr
+    from mifaces.reflectance.maps.normal_fit import LitPixels
+    from mifaces.reflectance.maps.observations import tangents
+
+    rng = np.random.default_rng(3)
+    pixels, lights = 500, _lights(8)
+    normals = np.tile([0.0, 0.0, 1.0], (pixels, 1)) + rng.normal(scale=0.05, size=(pixels, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    footprint = np.abs(rng.normal(scale=0.01, size=(len(lights), pixels, 3)))
+    obs = LitPixels(rng.uniform(0.1, 0.5, (len(lights), pixels, 3)), lights, np.ones((len(lights), pixels)),
+                    footprint=footprint).observations(brdf.model("cooktorrance"), GLOSSY)
+    t1, t2 = tangents(normals)
+    albedo = np.full((pixels, 3), 0.3)
+
+    def kernels(call):
+        call()  # compiled once
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+            dr.kernel_history()  # clear
+            call()
+            return [k["operation_count"] for k in dr.kernel_history([dr.KernelType.JIT])
+                    if k["size"] == pixels * len(lights)]
+
+    # a kernel that shades has about as many operations as s and g alone (one kernel); the others a few dozen
+    heavy = max(kernels(lambda: obs.shading(normals))) / 2
+    assert sum(n >= heavy for n in kernels(lambda: obs.losses(normals))) == 1
+    assert sum(n >= heavy for n in kernels(lambda: obs.losses(normals, albedo))) == 1
+    assert sum(n >= heavy for n in kernels(lambda: obs.system(normals, albedo, t1, t2))) == 2
