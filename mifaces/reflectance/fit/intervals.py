@@ -28,9 +28,9 @@ NOT_IDENTIFIED = "not_identified"
 #: (``validation/results/reflectance_coverage_tuning.json``; ``tests/test_uncertainty.py`` holds the two
 #: equal); a parameter not named here has none.
 SYSTEMATIC: dict[str, dict[str, float]] = {
-    "cooktorrance": {"specular_reflectance": 0.02, "roughness": 0.005},
-    "ward": {"specular_reflectance": 0.04, "alpha": 0.005},
-    "phong": {"specular_reflectance": 0.025, "exponent": 0.005},
+    "cooktorrance": {"specular_reflectance": 0.015, "roughness": 0.01},
+    "ward": {"specular_reflectance": 0.04, "alpha": 0.01},
+    "phong": {"specular_reflectance": 0.02, "exponent": 0.01},
     "lafortune": {"cxy": 0.01, "cz": 0.08, "exponent": 0.025},
 }
 
