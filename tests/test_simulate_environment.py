@@ -36,9 +36,9 @@ def sky_capture(tmp_path_factory):
     scenes = []
     original = photograph.render
 
-    def recording(scene_dict, spp, seed):
+    def recording(scene_dict, spp, seed, shown=None):
         scenes.append(scene_dict)
-        return original(scene_dict, spp, seed)
+        return original(scene_dict, spp, seed, shown)
 
     photograph.render = recording
     try:

@@ -351,6 +351,38 @@ def test_cluster_sums_match_the_per_sample_jacobian():
         np.testing.assert_allclose(hg[g], np.einsum("ncp,ncq->pq", jac[members], jac[members]), rtol=1e-4, atol=1e-6)
 
 
+def test_regions_with_different_numbers_of_clusters_share_one_kernel():
+    """The per-cluster sums' accumulator is padded to a power of two: 37 and 45 clusters run the same
+    compiled kernel (its per-thread copies' size is a literal of the kernel), with the right sums."""
+    import drjit as dr
+
+    from mifaces.reflectance.fit.problem import Problem
+    from mifaces.reflectance.fit.parameters import ParameterSpace
+
+    rng = np.random.default_rng(8)
+    n = 400
+    light, view = directions(rng, n), directions(rng, n)
+    r = reflectance(TRUTH, light, view) + 0.02 * rng.normal(size=(n, 3))
+    space = ParameterSpace(brdf_models.model("cooktorrance"), FIXED)
+    problem = Problem(space.model, space, light.astype(np.float32), view.astype(np.float32), r.astype(np.float32),
+                      np.full(n, 0.5, np.float32))
+    x = space.vector(TRUTH) + 0.1
+    jtj = problem.system(x)[0]
+    hashes = []
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        for groups in (37, 45):
+            dr.kernel_history()
+            _, hg, _ = problem.cluster_sums(x, np.arange(n) % groups, groups)
+            launched = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+            hashes.append(max(launched, key=lambda k: k["operation_count"])["hash"])
+            assert hg.shape[0] == groups
+            np.testing.assert_allclose(hg.sum(axis=0), jtj, rtol=1e-5)
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert hashes[0] == hashes[1]
+
+
 def test_tile_clusters():
     """Texels (row · R + column) fall into tiles of ``tile`` texels a side, numbered row by row."""
     r = 8

@@ -1,9 +1,11 @@
 """The main job as a user meets it: ``mifaces measure`` cold and warm.
 
-Runs ``mifaces measure`` in fresh processes, first **cold** (an empty model
+Runs ``mifaces measure`` in fresh processes, first **cold** (an empty mifaces
 cache, ``MIFACES_CACHE``, and an empty Dr.Jit kernel cache: ``HOME`` points
 at an empty folder, so ``~/.drjit`` is new), then **warm** (the same caches,
-filled by the cold run). Records the wall time of the command, the time of
+filled by the cold run: the built-in default capture is then copied from
+mifaces' cache, :mod:`mifaces.runtime.disk_cache`, and its ``simulate`` stage
+is that copy). Records the wall time of the command, the time of
 each stage from its ``report.json``, and the peak resident memory. Writes
 ``validation/results/bench_pipeline.json`` and ``bench_pipeline.png``.
 
@@ -128,7 +130,8 @@ def main(argv=None) -> int:
     document = {"command": f"mifaces measure {' '.join(extra)}".strip(),
                 "machine": {"cores": os.cpu_count(), "platform": platform.platform(),
                             "python": platform.python_version()},
-                "note": ("cold: empty MIFACES_CACHE and empty Dr.Jit kernel cache (a new HOME); warm: both filled"
+                "note": ("cold: empty MIFACES_CACHE and empty Dr.Jit kernel cache (a new HOME); warm: both filled "
+                         "(the simulated default capture copied from MIFACES_CACHE, not rendered again)"
                          if args.cold else "warm only: the caller's MIFACES_CACHE and Dr.Jit kernel cache, filled"),
                 "load_average_1min_at_end": os.getloadavg()[0], "runs": results}
     write_json(args.results / f"{args.name}.json", document)

@@ -293,7 +293,7 @@ def measure(out, capture=None, options: MeasureOptions | FitOptions | None = Non
 def _capture(out: Path, capture, timings: dict, progress: bool) -> Capture:
     """The capture to measure: loaded, or simulated into ``out/capture`` when none is given."""
     if capture is None:
-        simulated = simulate(out / "capture", progress=progress, force=True)  # measure's own folder
+        simulated = simulate(out / "capture", progress=progress, force=True, cache=True)  # measure's own folder
         timings["simulate"] = simulated.seconds
         capture = out / "capture"
     return load_capture(capture)

@@ -83,11 +83,11 @@ def bounced_light(capture, geometry, face_model, estimate, *, measurements=None,
     for m in progress_bar(chosen, desc="interreflection", unit="photo", enabled=progress):
         camera = capture.camera_of(m)
         small = coarse_camera(camera, width)
-        scene = mi.load_dict(FaceScene(face_model, geometry[m.name]).scene(brdf, albedo, small, capture.light(m.light),
-                                                                          spp=spp, max_depth=INDIRECT_DEPTH))
+        face = FaceScene(face_model, geometry[m.name])
+        scene = face.cropped(face.scene(brdf, albedo, small, capture.light(m.light), spp=spp,
+                                        max_depth=INDIRECT_DEPTH), small)
         direct_only = mi.load_dict({"type": "path", "max_depth": 2})  # the same scene loaded once, two integrators
-        full, direct = (np.array(mi.render(scene, spp=spp, seed=0, integrator=integrator), np.float32)[..., :3]
-                        for integrator in (scene.integrator(), direct_only))
+        full, direct = (scene.render(spp, 0, integrator) for integrator in (scene.scene.integrator(), direct_only))
         bounced = np.clip(full - direct, 0.0, None)
         bounced = np.stack([scipy.ndimage.gaussian_filter(bounced[..., c], INDIRECT_BLUR) for c in range(3)], axis=-1)
         out[m.name] = (bounced if small is camera else _upsample(bounced, small, camera)).astype(np.float32)

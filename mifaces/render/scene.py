@@ -13,6 +13,7 @@ from ..io.atomic import atomic_path
 from ..lights.emitters import light_emitters
 from ..lights.environment import Environment
 from .blend import blended_parameters, region_maps
+from .crop import CroppedScene, dark_background
 from .materials import ALBEDO, ALBEDO_REF, NORMALS, SPECULAR, region_bsdf, with_textures
 from .meshes import MESH_FOLDER, region_meshes
 from .sensor import check_render_size, mitsuba_sensor
@@ -36,10 +37,13 @@ class FaceScene:
         ``face_<region>_<label>`` -> :class:`RegionMesh`. Only arrays: a
         scene's Mitsuba objects (meshes, BSDFs, emitters) live as long as
         that scene does.
+    vertices : (V, 3) float64 array
+        The face's vertices (world, mm): where a render can show it.
     """
 
     def __init__(self, face_model, vertices: np.ndarray, normals: np.ndarray | None = None):
         self.meshes = region_meshes(face_model, vertices, normals)
+        self.vertices = np.asarray(vertices, np.float64)
 
     @staticmethod
     def mesh_file(key: str) -> str:
@@ -197,10 +201,18 @@ class FaceScene:
                      environment: Environment | None = None, spp: int = 64, seeds=(0,), max_depth: int = 4,
                      normals: np.ndarray | None = None, specular: np.ndarray | None = None) -> list[np.ndarray]:
         """:meth:`render` at each Monte Carlo seed of ``seeds``, the scene loaded once for all of them: a
-        list of (H, W, 3) float32 images, each the image :meth:`render` gives at that seed."""
-        scene = mi.load_dict(self.scene(brdf, albedo, camera, light, environment=environment, spp=spp,
-                                        max_depth=max_depth, normals=normals, specular=specular))
-        return [np.array(mi.render(scene, spp=spp, seed=seed), dtype=np.float32)[..., :3] for seed in seeds]
+        list of (H, W, 3) float32 images, each the image :meth:`render` gives at that seed. Lit by point
+        or directional lights only, only the face's window of the image is rendered
+        (:mod:`mifaces.render.crop`): nothing else can show."""
+        scene = self.cropped(self.scene(brdf, albedo, camera, light, environment=environment, spp=spp,
+                                        max_depth=max_depth, normals=normals, specular=specular), camera)
+        return [scene.render(spp, seed) for seed in seeds]
+
+    def cropped(self, scene: dict, camera) -> CroppedScene:
+        """Scene dict ``scene`` of this face (:meth:`scene`, perhaps with other meshes of the same face)
+        loaded to render only the face's window of ``camera``'s image where nothing else can show
+        (:func:`~mifaces.render.crop.dark_background`), else the whole image."""
+        return CroppedScene(scene, camera, [self.vertices] if dark_background(scene) else None)
 
     def write_meshes(self, folder: str | os.PathLike) -> dict[str, Path]:
         """Write each region mesh as ``<folder>/``:meth:`mesh_file` (PLY), atomically."""

@@ -17,7 +17,8 @@ import numpy as np
 
 from ..capture import Camera
 from ..model.landmarks import FEATURE_POINTS
-from .scene import DIFFUSE_LIGHT, Studio, face_light, lamp, scene, steel_spheres
+from ..render.crop import CroppedScene, box_corners, dark_background
+from .scene import DIFFUSE_LIGHT, LAMP_RADIUS, STEEL_SPHERE_RADIUS, Studio, face_light, lamp, scene, steel_spheres
 
 #: Sensor model: electrons at full scale (shot noise) and read noise (full-scale units).
 FULL_WELL = 20000.0
@@ -65,8 +66,12 @@ def camera_noise(values: np.ndarray, rng: np.random.Generator, full_well: float 
     return np.clip(noisy, 0.0, 1.0).astype(np.float32)
 
 
-def render(scene_dict: dict, spp: int, seed: int) -> np.ndarray:
-    """Linear RGB radiance (H, W, 3) float32 of a scene dict, ``spp`` samples per pixel."""
+def render(scene_dict: dict, spp: int, seed: int, shown: tuple | None = None) -> np.ndarray:
+    """Linear RGB radiance (H, W, 3) float32 of a scene dict, ``spp`` samples per pixel. With
+    ``shown``, the camera of the scene's sensor and the point sets of the objects that can show
+    (:class:`~mifaces.render.crop.CroppedScene`), only their windows are rendered: the rest is 0."""
+    if shown is not None:
+        return CroppedScene(scene_dict, *shown).render(spp, seed)
     return np.array(mi.render(mi.load_dict(scene_dict), spp=spp, seed=seed), dtype=np.float32)[..., :3]
 
 
@@ -80,7 +85,11 @@ def photograph_spheres(studio: Studio, light: int, spp: int, seeds: Iterator[int
                        rng: np.random.Generator) -> SpherePhotographs:
     """The steel spheres under the lamp of condition ``light`` and under the diffuse light."""
     spp_hl = max(4 * spp, 256)  # the lamp's reflection is a few pixels wide: sample it well
-    hl = render(scene(studio, steel_spheres(studio), lamp(studio, light), spp_hl), spp_hl, next(seeds))
+    # in the dark studio only the spheres and the lamp can show: only their windows are rendered
+    shown = [box_corners(c, STEEL_SPHERE_RADIUS) for c in studio.sphere_centers]
+    shown.append(box_corners(studio.light_positions[light], LAMP_RADIUS))
+    hl = render(scene(studio, steel_spheres(studio), lamp(studio, light), spp_hl), spp_hl, next(seeds),
+                (studio.camera, shown))
     t_hl = HIGHLIGHT_LEVEL / max(float(hl.max()), 1e-12)
     hl = camera_noise(hl * t_hl, rng)
     spp_ol = max(spp // 2, 4)
@@ -90,12 +99,16 @@ def photograph_spheres(studio: Studio, light: int, spp: int, seeds: Iterator[int
 
 
 def photograph_face(studio: Studio, meshes: dict, light: int, companion: str, spp: int, seeds: Iterator[int],
-                    rng: np.random.Generator) -> Photographs:
+                    rng: np.random.Generator, shown: tuple | None = None) -> Photographs:
     """The face (Mitsuba meshes ``meshes``) under point light ``light`` (or the studio's environment,
     :func:`~mifaces.studio.scene.face_light`), and its companions: ``'diffuse'`` (a picture under
     the diffuse light, half the samples), ``'exposures'`` (the same render at
-    :data:`EXPOSURE_FACTORS` times the exposure) or ``'both'``."""
-    radiance = render(scene(studio, meshes, face_light(studio, light), spp), spp, next(seeds))
+    :data:`EXPOSURE_FACTORS` times the exposure) or ``'both'``. With ``shown``, the camera of
+    ``studio``'s sensor and the face's vertices (world, mm), a picture in which nothing else can show
+    renders only the face's window (:mod:`mifaces.render.crop`)."""
+    lit = scene(studio, meshes, face_light(studio, light), spp)
+    crop = None if shown is None or not dark_background(lit) else (shown[0], [shown[1]])
+    radiance = render(lit, spp, next(seeds), crop)
     point = camera_noise(radiance * studio.exposure, rng)
     diffuse, exposures = None, []
     if companion in ("diffuse", "both"):

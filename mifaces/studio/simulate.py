@@ -61,7 +61,10 @@ incidence, computed with the array API of :mod:`mifaces.brdf`.
 from __future__ import annotations
 
 import itertools
+import json
 import os
+import shutil
+import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -69,9 +72,11 @@ from pathlib import Path
 import numpy as np
 
 from ..brdf.cooktorrance import DIGITS
-from ..capture import write_ground_truth
-from ..io.result_set import check_result_target, result_set
+from ..capture import MANIFEST, write_ground_truth
+from ..io.result_set import SET_MANIFEST, ResultSetError, check_result_target, result_set, verify_set
+from ..options.fields import record
 from ..model import load_model
+from ..runtime import disk_cache
 from ..runtime.progress import progress as progress_bar
 from ..render import face_meshes, mitsuba_sensor, region_bsdf, region_meshes
 from .photograph import albedo_texture, annotate, photograph_face, photograph_spheres, visible_feature_points
@@ -91,13 +96,15 @@ KIND = "capture"
 
 @dataclass
 class SimulationResult:
-    """What :func:`simulate` wrote and how long it took."""
+    """What :func:`simulate` wrote and how long it took; ``cached``: copied from mifaces' disk cache
+    (no renders)."""
 
     path: Path
     measurements: int
     lights: int
     seconds: float
     render_seconds: list[float] = field(default_factory=list)
+    cached: bool = False
 
     @property
     def seconds_per_measurement(self) -> float:
@@ -106,7 +113,7 @@ class SimulationResult:
 
 
 def simulate(out: str | os.PathLike, options: SimulationOptions | None = None, *, progress: bool = True,
-             force: bool = False) -> SimulationResult:
+             force: bool = False, cache: bool = False) -> SimulationResult:
     """Simulate a capture session and write it, with ground truth, to ``out``.
 
     Parameters
@@ -124,6 +131,10 @@ def simulate(out: str | os.PathLike, options: SimulationOptions | None = None, *
     force : bool
         Replace a simulated capture that ``out`` holds. A folder holding
         anything else (a real capture) is never written over.
+    cache : bool
+        Take the capture from mifaces' disk cache (:mod:`mifaces.runtime.disk_cache`) where the
+        same options and the same code made it before, and keep it there otherwise
+        (``mifaces measure`` does, for the built-in default capture).
 
     Returns
     -------
@@ -156,6 +167,13 @@ def simulate(out: str | os.PathLike, options: SimulationOptions | None = None, *
     if not isinstance(options, SimulationOptions):
         raise TypeError(f"simulate() takes its options as a SimulationOptions, got {type(options).__name__}")
     out = check_result_target(out, KIND, force)  # before the work: writable, and nothing to lose
+    inputs = {"options": record(options)}
+    if cache and (kept := _from_cache(out, inputs, force)) is not None:
+        seconds = time.perf_counter() - t_start
+        if progress:
+            print(f"simulating: the same capture as before, copied from mifaces' cache ({disk_cache.cache_root()}) "
+                  f"in {seconds:.1f} s", file=sys.stderr, flush=True)
+        return SimulationResult(out, options.measurements, kept, seconds, cached=True)
     face_model = load_model(options.face_model)
     truth = brdf_with_overrides(options.brdf, options.brdf_params)
     if options.subsurface and (truth["model"] != "cooktorrance" or options.varying):
@@ -174,7 +192,29 @@ def simulate(out: str | os.PathLike, options: SimulationOptions | None = None, *
         info["cameras"] = options.cameras
     with result_set(out, KIND, force=force, info=info) as folder:
         lights, render_seconds = _simulate_into(folder, face_model, truth, options, progress)
+    if cache:
+        disk_cache.store(KIND, inputs, out)
     return SimulationResult(out, options.measurements, lights, time.perf_counter() - t_start, render_seconds)
+
+
+def _from_cache(out: Path, inputs: dict, force: bool) -> int | None:
+    """Copy the cached capture made from ``inputs`` into ``out``, as one result set; its number of
+    light conditions, or None where the cache has none (or a damaged one, then discarded)."""
+    kept = disk_cache.lookup(KIND, inputs)
+    if kept is None:
+        return None
+    try:
+        manifest = verify_set(kept, KIND)
+        lights = len(json.loads((kept / MANIFEST).read_text())["lights"])
+    except (ResultSetError, OSError, ValueError, KeyError, TypeError):
+        disk_cache.discard(kept)
+        return None
+    if manifest is None:
+        disk_cache.discard(kept)
+        return None
+    with result_set(out, KIND, force=force, info=manifest["info"]) as folder:
+        shutil.copytree(kept, folder, dirs_exist_ok=True, ignore=shutil.ignore_patterns(SET_MANIFEST))
+    return lights
 
 
 def _truth_subject(face_model, truth: dict, rng: np.random.Generator, options: SimulationOptions):
@@ -237,7 +277,7 @@ def _simulate_into(out: Path, face_model, truth: dict, options: SimulationOption
         meshes = true_face_meshes(face_model, vertices, truth, texture, textures, options.subsurface)
         for view, camera in enumerate(studio.views):  # one shot: every camera, the same head pose
             seen_by = replace(studio, sensor=mitsuba_sensor(camera, spp)) if view else studio
-            photographs = photograph_face(seen_by, meshes, li, companion, spp, seeds, rng)
+            photographs = photograph_face(seen_by, meshes, li, companion, spp, seeds, rng, (camera, vertices))
             bar.update(1 + (photographs.diffuse is not None) + bool(photographs.exposures))
             taken = view_name(name, view)
             entry = write_photographs(out, taken, light_name[li], pose_name(studio, li, pi), photographs)

@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import time
 
-import mitsuba as mi
 import numpy as np
 from scipy.spatial.transform import Rotation
 from skimage.transform import resize
@@ -232,8 +231,8 @@ class Validator:
         scene.update(meshes)
         if self._subsurface:
             scene["integrator"] = translucent.INTEGRATOR
-        scene = mi.load_dict(scene)
-        return [np.array(mi.render(scene, spp=self.spp, seed=seed), dtype=np.float32)[..., :3] for seed in seeds]
+        scene = self.truth_scene.cropped(scene, self.camera)
+        return [scene.render(self.spp, seed) for seed in seeds]
 
     def _shape_floor(self, truth_model, face_model, true_vertices, fit_vertices, rotation, centre) -> dict | None:
         """Per condition, the error of the true reflectance on the fitted

@@ -145,7 +145,7 @@ class Problem:
         arrays = {"wi": self.wi, "wo": self.wo, "spread": self.spread, "r": self.r, "w": self.w,
                   "c": device_array(np.uint32, np.asarray(group, np.uint32))}
         sums = _FROZEN[key](arrays, [dr.opaque(mi.Float, float(v)) for v in x], int(groups))
-        return np.asarray(sums, np.float64).reshape(groups, width)
+        return np.asarray(sums, np.float64)[:groups * width].reshape(groups, width)  # the padding's rows off
 
     def residuals_and_jacobian(self, x):
         """The residuals (M,) and their Jacobian (M, P), float32, on the host (for solvers that
@@ -220,10 +220,14 @@ def _residual_tangents(space: ParameterSpace, arrays: dict, u: list, tangents: b
 
 def _group_scatter(terms: list, group, groups: int):
     """``terms`` (per-sample float64 arrays) summed per group ``group`` into one array of ``groups``
-    rows of ``len(terms)``. Neighbouring samples share a group: per-thread copies of a small array,
-    else atomics reduced per packet. One kernel."""
+    rows of ``len(terms)`` (and zero rows after them: see below). Neighbouring samples share a group:
+    per-thread copies of a small array (``dr.ReduceMode.Expand``), else atomics reduced per packet.
+    The copies' size is a literal of the kernel, so the rows are padded to a power of two: the
+    regions of a fit, with their different numbers of texels or clusters, share a few kernels
+    rather than compiling one each. One kernel."""
     k = len(terms)
-    acc = dr.zeros(mi.Float64, groups * k)
+    rows = 1 << max(0, int(groups) - 1).bit_length()
+    acc = dr.zeros(mi.Float64, rows * k)
     base = group * k
     mode = dr.ReduceMode.Expand if groups * k <= EXPAND_LIMIT else dr.ReduceMode.Local
     for j, value in enumerate(terms):
