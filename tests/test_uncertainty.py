@@ -324,20 +324,25 @@ def test_the_systematic_terms_are_those_the_tuning_chose():
     assert SYSTEMATIC == {model: params for model, params in chosen.items() if params}
 
 
-def test_cluster_sums_match_the_per_sample_jacobian():
-    """The kernel's per-cluster u_g and H_g equal sums of the host-side residuals and Jacobian; they
-    add up to the fit's own JᵀJ, and its loss is the fit's."""
+def _cooktorrance_problem(rng, n: int):
+    """The LM problem of ``n`` noisy samples of the Cook–Torrance :data:`TRUTH`, and a point near it."""
     from mifaces.reflectance.fit.problem import Problem
     from mifaces.reflectance.fit.parameters import ParameterSpace
 
-    rng = np.random.default_rng(7)
-    n = 300
     light, view = directions(rng, n), directions(rng, n)
     r = reflectance(TRUTH, light, view) + 0.02 * rng.normal(size=(n, 3))
     space = ParameterSpace(brdf_models.model("cooktorrance"), FIXED)
     problem = Problem(space.model, space, light.astype(np.float32), view.astype(np.float32), r.astype(np.float32),
-                       np.full(n, 0.5, np.float32))
-    x = space.vector(TRUTH) + 0.1
+                      np.full(n, 0.5, np.float32))
+    return problem, space.vector(TRUTH) + 0.1
+
+
+def test_cluster_sums_match_the_per_sample_jacobian():
+    """The kernel's per-cluster u_g and H_g equal sums of the host-side residuals and Jacobian; they
+    add up to the fit's own JᵀJ, and its loss is the fit's."""
+    rng = np.random.default_rng(7)
+    n = 300
+    problem, x = _cooktorrance_problem(rng, n)
     index, groups = cluster_index(rng.integers(0, 40, n) * 3)
     u, hg, loss = problem.cluster_sums(x, index, groups)
     jtj, _, fit_loss = problem.system(x)
@@ -356,17 +361,8 @@ def test_regions_with_different_numbers_of_clusters_share_one_kernel():
     compiled kernel (its per-thread copies' size is a literal of the kernel), with the right sums."""
     import drjit as dr
 
-    from mifaces.reflectance.fit.problem import Problem
-    from mifaces.reflectance.fit.parameters import ParameterSpace
-
-    rng = np.random.default_rng(8)
     n = 400
-    light, view = directions(rng, n), directions(rng, n)
-    r = reflectance(TRUTH, light, view) + 0.02 * rng.normal(size=(n, 3))
-    space = ParameterSpace(brdf_models.model("cooktorrance"), FIXED)
-    problem = Problem(space.model, space, light.astype(np.float32), view.astype(np.float32), r.astype(np.float32),
-                      np.full(n, 0.5, np.float32))
-    x = space.vector(TRUTH) + 0.1
+    problem, x = _cooktorrance_problem(np.random.default_rng(8), n)
     jtj = problem.system(x)[0]
     hashes = []
     dr.set_flag(dr.JitFlag.KernelHistory, True)
